@@ -1,0 +1,52 @@
+//! Shared fixtures of the benchmarks: the paper's grid and model, reduced grids, and
+//! deterministic pseudo-random tables.
+#![allow(missing_docs)] // benchmark support
+
+use fuzzyq_core::Real;
+use fuzzyq_core::solver::Grid;
+use fuzzyq_sim::PointMass;
+use fuzzyq_sim::config::TrainConfig;
+
+/// The paper's initial state.
+pub const X0: [f64; 8] = [-4.0, -6.0, -2.0, 2.0, 5.0, 3.0, 2.0, -1.0];
+
+/// The paper's two-agent model.
+#[must_use]
+pub fn model() -> PointMass {
+    PointMass::paper()
+}
+
+/// The paper's grid (4,100,625 cores).
+#[must_use]
+pub fn paper_grid<T: Real>() -> Grid<T> {
+    fuzzyq_sim::train::build_grid(&TrainConfig::default()).expect("paper grid")
+}
+
+/// A reduced two-agent grid: 5 position and 3 velocity cores (50,625 cores).
+#[must_use]
+pub fn reduced_grid<T: Real>() -> Grid<T> {
+    let mut c = TrainConfig::default();
+    c.grid.position_cores = vec![-6.0, -0.5, 0.0, 0.5, 6.0];
+    c.grid.velocity_cores = vec![-3.0, 0.0, 3.0];
+    fuzzyq_sim::train::build_grid(&c).expect("reduced grid")
+}
+
+/// `n` deterministic pseudo-random values in `[0, scale)`.
+#[must_use]
+pub fn values<T: Real>(n: usize, scale: f64) -> Vec<T> {
+    let mut s: u64 = 0x2545_F491_4F6C_DD1D;
+    (0..n)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            T::from_f64(scale * ((s >> 11) as f64 / (1u64 << 53) as f64))
+        })
+        .collect()
+}
+
+/// The state in precision `T`.
+#[must_use]
+pub fn x0<T: Real>() -> Vec<T> {
+    X0.iter().map(|&v| T::from_f64(v)).collect()
+}

@@ -1,0 +1,63 @@
+//! A controller's view of fuzzyq-core: static tables, no std, no heap.
+#![no_std]
+
+use core::panic::PanicInfo;
+
+use fuzzyq_core::{ActionSet, JointActions, ProductPartition, q};
+
+#[panic_handler]
+fn panic(_: &PanicInfo<'_>) -> ! {
+    loop {}
+}
+
+static POSITION: [f32; 9] = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
+static VELOCITY: [f32; 5] = [-3.0, -1.0, 0.0, 1.0, 3.0];
+static FORCES: [f32; 10] = [-2.0, 0.0, -0.2, 0.0, 0.0, 0.0, 0.2, 0.0, 2.0, 0.0];
+/// theta for one agent on (s_x, v_x): 45 cores x 5 actions.
+static THETA: [f32; 225] = {
+    let mut t = [0.0f32; 225];
+    let mut i = 0;
+    while i < 225 {
+        t[i] = ((i * 37) % 101) as f32;
+        i += 1;
+    }
+    t
+};
+static GREEDY: [u32; 45] = {
+    let mut g = [0u32; 45];
+    let mut i = 0;
+    while i < 45 {
+        g[i] = (i % 5) as u32;
+        i += 1;
+    }
+    g
+};
+
+/// Memberships, Q evaluation, the greedy and the interpolated decision; returns the greedy
+/// action index (or `u32::MAX` on error) and writes the interpolated force.
+#[unsafe(no_mangle)]
+pub extern "C" fn fuzzyq_decide(s: f32, v: f32, force: &mut f32) -> u32 {
+    let Ok(grid) = ProductPartition::try_new(&[&POSITION[..], &VELOCITY[..]]) else {
+        return u32::MAX;
+    };
+    let mut mu = [0.0f32; 9];
+    if grid.dim(0).memberships(s, &mut mu).is_err() {
+        return u32::MAX;
+    }
+    let Ok(set) = ActionSet::try_new(&FORCES, 2) else {
+        return u32::MAX;
+    };
+    let Ok(joint) = JointActions::try_new(&[set]) else {
+        return u32::MAX;
+    };
+    let mut qx = [0.0f32; 5];
+    let Ok(u) = q::greedy_action(&grid, &THETA, &[s, v], &mut qx) else {
+        return u32::MAX;
+    };
+    let mut h = [0.0f32; 2];
+    if q::interpolated_action(&grid, &joint, &GREEDY, &[s, v], &mut h).is_err() {
+        return u32::MAX;
+    }
+    *force = h[0] + mu[0];
+    u as u32
+}

@@ -1,0 +1,242 @@
+//! End-to-end tests of the `fuzzyq` binary: a small train + rollout, and bad input of every
+//! kind giving one clear line and exit code 2 without touching existing files.
+#![allow(missing_docs)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn fuzzyq(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fuzzyq"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run fuzzyq")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Asserts a failed run: exit code 2 and one `error:` line on stderr containing `needle`.
+#[track_caller]
+fn assert_fails(o: &Output, needle: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "stderr: {err}");
+    assert_eq!(err.lines().count(), 1, "one line expected: {err}");
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(err.contains(needle), "{needle:?} not in {err:?}");
+}
+
+/// The paper's config with one agent: trains in milliseconds.
+fn one_agent_config(dir: &Path) -> PathBuf {
+    let o = fuzzyq(&["config", "--env", "pointmass"], dir);
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(text.contains("position_cores = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0]"));
+    let path = dir.join("one.toml");
+    std::fs::write(&path, text.replace("agents = 2 ", "agents = 1 ")).unwrap();
+    path
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn train_and_rollout_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let o = fuzzyq(
+        &[
+            "train",
+            "--env",
+            "pointmass",
+            "--config",
+            "one.toml",
+            "--out",
+            "p.fzq",
+            "--json",
+            "train.json",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let t = json(&d.join("train.json"));
+    for key in [
+        "sweeps",
+        "converged",
+        "delta_inf",
+        "seconds",
+        "cores",
+        "joint_actions",
+    ] {
+        assert!(t.get(key).is_some(), "summary lacks {key}");
+    }
+    assert_eq!(t["cores"], 2025);
+    assert_eq!(t["joint_actions"], 25);
+    assert_eq!(t["converged"], true);
+    assert_eq!(t["sweeps"], 114);
+    assert!(t["delta_inf"].as_f64().unwrap() <= 0.05);
+
+    for (kind, plot) in [("greedy", "r.png"), ("interpolated", "r.svg")] {
+        let o = fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                "p.fzq",
+                "--x0",
+                "-4,-6,-2,2",
+                "--policy-kind",
+                kind,
+                "--csv",
+                "r.csv",
+                "--plot",
+                plot,
+                "--json",
+                "m.json",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let m = json(&d.join("m.json"));
+        for key in [
+            "reach_step",
+            "reach_time_s",
+            "arrival_time_s",
+            "final_error_m",
+            "return",
+            "value_x0",
+        ] {
+            assert!(m.get(key).is_some(), "metrics lack {key}");
+        }
+        assert!(m["reach_time_s"].as_f64().unwrap() <= 12.0, "{m}");
+        assert!(m["final_error_m"][0].as_f64().unwrap() < 0.08, "{m}");
+        let csv = std::fs::read_to_string(d.join("r.csv")).unwrap();
+        assert_eq!(csv.lines().count(), 1 + 76);
+        assert!(csv.starts_with("t,sx1,sy1,vx1,vy1,ux1,uy1,reward\n"));
+        let img = std::fs::read(d.join(plot)).unwrap();
+        if plot.ends_with(".png") {
+            assert_eq!(&img[..8], b"\x89PNG\r\n\x1a\n");
+        } else {
+            assert!(String::from_utf8_lossy(&img).contains("<svg"));
+        }
+    }
+    // Only the requested files: no temporaries left behind.
+    let mut names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "m.json",
+            "one.toml",
+            "p.fzq",
+            "r.csv",
+            "r.png",
+            "r.svg",
+            "train.json"
+        ]
+    );
+}
+
+#[test]
+fn bad_input_fails_cleanly_without_touching_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    std::fs::write(d.join("keep.fzq"), b"precious").unwrap();
+
+    // Invalid settings, from flags and from the file.
+    assert_fails(
+        &fuzzyq(&["train", "--gamma", "1.5", "--out", "keep.fzq"], d),
+        "solver.gamma: must be in [0, 1), got 1.5",
+    );
+    let text = std::fs::read_to_string(d.join("one.toml")).unwrap();
+    std::fs::write(d.join("bad.toml"), text.replace("mass = 0.5", "mass = -2")).unwrap();
+    assert_fails(
+        &fuzzyq(&["train", "--config", "bad.toml", "--out", "keep.fzq"], d),
+        "env.mass: must be a positive number, got -2",
+    );
+    std::fs::write(d.join("typo.toml"), text.replace("gamma =", "gama =")).unwrap();
+    assert_fails(
+        &fuzzyq(&["train", "--config", "typo.toml", "--out", "keep.fzq"], d),
+        "gama",
+    );
+    assert_fails(
+        &fuzzyq(
+            &["train", "--config", "missing.toml", "--out", "keep.fzq"],
+            d,
+        ),
+        "cannot read config missing.toml",
+    );
+    assert_eq!(std::fs::read(d.join("keep.fzq")).unwrap(), b"precious");
+
+    // An unwritable destination is refused before any training.
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train",
+                "--config",
+                "one.toml",
+                "--out",
+                "no/such/dir/p.fzq",
+            ],
+            d,
+        ),
+        "does not exist",
+    );
+
+    // Policies that are not policies.
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "keep.fzq"], d),
+        "is not a fuzzyq policy file",
+    );
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "nothing.fzq"], d),
+        "cannot read nothing.fzq",
+    );
+    let o = fuzzyq(
+        &["train", "--config", "one.toml", "--out", "p.fzq", "-q"],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bytes = std::fs::read(d.join("p.fzq")).unwrap();
+    std::fs::write(d.join("cut.fzq"), &bytes[..bytes.len() / 2]).unwrap();
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "cut.fzq"], d),
+        "is truncated",
+    );
+
+    // Bad rollout arguments.
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "p.fzq"], d),
+        "give --x0 with 4 values",
+    );
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "p.fzq", "--x0", "1,2,x,4"], d),
+        "--x0: value 3",
+    );
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "p.fzq", "--x0", "1,2,30,4"], d),
+        "x0[2] = 30 is outside the state range [-3, 3]",
+    );
+    assert_fails(
+        &fuzzyq(
+            &[
+                "rollout", "--policy", "p.fzq", "--x0", "1,2,0,0", "--plot", "f.jpg",
+            ],
+            d,
+        ),
+        "must end in .png or .svg",
+    );
+
+    // Usage errors exit with 2; help with 0.
+    let o = fuzzyq(&["train", "--no-such-flag"], d);
+    assert_eq!(o.status.code(), Some(2));
+    let o = fuzzyq(&["--help"], d);
+    assert_eq!(o.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("rollout"));
+}

@@ -1,0 +1,99 @@
+//! The deterministic model a fuzzy Q-iteration solves: `x' = f(x, u)`, `r = rho(x, u)`.
+//!
+//! The trait lives in the core, not in `fuzzyq-sim`, because its consumers live here: the
+//! solver driver and the model-based greedy policy need it, and the core must not depend on the
+//! crate of concrete models. It uses slices only, so a controller without an allocator can
+//! implement it too.
+//!
+//! # Independent dynamics blocks
+//! A model may declare **blocks**: a partition of the state variables into groups whose next
+//! value depends only on the group itself and on some components of the joint action vector.
+//! A point mass with constant friction separates per agent and per axis: the block
+//! `(s_1x, v_1x)` moves with `u_1x` alone. The solver then factors each transition into small
+//! per-block tables and computes a backup as a sequence of per-block products instead of
+//! `2^E` corner look-ups per core and action (see `solver`). A declaration is a promise; the
+//! solver spot-checks it and tests compare the block and generic backups.
+//!
+//! For the gather-free fast path, declare blocks in the order of the joint action's mixed
+//! radix, slowest first (for point masses: agent 1 x, agent 1 y, agent 2 x, ...).
+
+use crate::action::{ActionSet, JointActions, MAX_AGENTS};
+use crate::error::EvalError;
+use crate::real::Real;
+
+/// A group of state variables that evolves independently of the rest of the state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Block<'a> {
+    /// The state variables of the block (indices into the state vector), in increasing order.
+    pub state_dims: &'a [usize],
+    /// The joint-action-vector components the block's next value depends on.
+    pub action_components: &'a [usize],
+}
+
+/// A deterministic multi-agent model with discrete per-agent action sets.
+pub trait Model<T: Real> {
+    /// Length `E` of the state vector.
+    fn state_dim(&self) -> usize;
+
+    /// Number of agents `n` (1 to [`MAX_AGENTS`]).
+    fn n_agents(&self) -> usize;
+
+    /// The discrete action set of agent `agent` (`0 <= agent < n_agents()`).
+    fn action_set(&self, agent: usize) -> ActionSet<'_, T>;
+
+    /// The range `[lo, hi]` that state variable `dim` stays in.
+    fn state_bounds(&self, dim: usize) -> (T, T);
+
+    /// The transition `f`: writes the successor of state `x` under joint action vector `u` into
+    /// `next`. `x` and `next` have length `E`; `u` has the joint action vector's length. The
+    /// action need not be one of the discrete actions (the interpolated policy produces
+    /// weighted averages of them).
+    fn step(&self, x: &[T], u: &[T], next: &mut [T]);
+
+    /// The reward `rho(x, u)`, evaluated at the current state.
+    fn reward(&self, x: &[T], u: &[T]) -> T;
+
+    /// Whether `reward` depends on the action. When it does not, the solver evaluates it once
+    /// per core instead of once per core and joint action.
+    fn reward_depends_on_action(&self) -> bool {
+        true
+    }
+
+    /// Whether `x` is a goal state. With the absorbing-goal option of the solver, a goal state
+    /// collects its reward and then nothing (zero future value). Rollout metrics also use it.
+    fn is_goal(&self, x: &[T]) -> bool {
+        let _ = x;
+        false
+    }
+
+    /// Number of declared independent dynamics blocks (0: none; see the [module docs](self)).
+    fn n_blocks(&self) -> usize {
+        0
+    }
+
+    /// Block `b` (`0 <= b < n_blocks()`).
+    ///
+    /// The default has no blocks, so it is never called; models that declare blocks override it.
+    fn block(&self, b: usize) -> Block<'_> {
+        let _ = b;
+        Block {
+            state_dims: &[],
+            action_components: &[],
+        }
+    }
+}
+
+/// The joint action set of a model.
+pub fn joint_actions<T: Real, M: Model<T> + ?Sized>(
+    model: &M,
+) -> Result<JointActions<'_, T>, EvalError> {
+    let n = model.n_agents();
+    if n == 0 || n > MAX_AGENTS {
+        return Err(EvalError::Agents { found: n });
+    }
+    let mut sets = [ActionSet::default(); MAX_AGENTS];
+    for (i, s) in sets.iter_mut().enumerate().take(n) {
+        *s = model.action_set(i);
+    }
+    JointActions::try_new(&sets[..n])
+}

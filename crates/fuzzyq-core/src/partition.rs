@@ -1,0 +1,499 @@
+//! Triangular fuzzy partitions of one state variable and their product over a state vector.
+//!
+//! # One variable
+//! A [`Partition`] is a strictly increasing list of cores `c_0 < ... < c_{n-1}`. Membership `k`
+//! is the triangle that is 1 at `c_k` and 0 at the neighbouring cores; for any value at most two
+//! memberships are non-zero and they sum to 1. Values outside `[c_0, c_{n-1}]` saturate: they
+//! belong to the edge core with degree 1.
+//!
+//! # Product grid
+//! A [`ProductPartition`] combines one partition per state variable. Its joint cores are
+//! numbered in **row-major (C) order**: with per-variable core indices `(i_0, ..., i_{E-1})` the
+//! flat index is `((i_0 * n_1 + i_1) * n_2 + ...) * n_{E-1} + i_{E-1}`, so the last variable
+//! varies fastest. A numpy array of shape `(n_0, ..., n_{E-1})` in C order has the same layout.
+//!
+//! The joint membership of a core is the product of its per-variable memberships, so at most
+//! `2^E` joint cores are active for any state. [`ProductPartition::active`] finds them without
+//! allocating and returns an [`ActiveCores`] that visits them with a callback.
+//!
+//! # Why a callback and not an iterator
+//! Visiting the active cores is the innermost loop of every backup and policy. A callback
+//! (`for_each(|index, weight| ...)`) lets the visit run as one tight loop over a bit mask with
+//! the per-variable offsets in registers, and lets the caller fuse its work (a dot product, a
+//! weighted action) into it. An external iterator would have to carry the same state in a struct
+//! and re-derive it on every `next`, for no gain: no caller stops early or zips two visits.
+
+use crate::error::{CoresError, EvalError, PartitionError};
+use crate::real::Real;
+
+/// The largest number of state variables a [`ProductPartition`] supports.
+pub const MAX_DIMS: usize = 16;
+
+/// A triangular fuzzy partition of one state variable: a validated view of its cores.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Partition<'a, T> {
+    cores: &'a [T],
+}
+
+/// Where a value falls between the cores of a [`Partition`].
+///
+/// The value has membership `1 - upper_weight` in core `lower` and `upper_weight` in core
+/// `lower + 1`. When the value sits exactly on a core (or saturates at an edge),
+/// `upper_weight` is zero and only `lower` is active.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment<T> {
+    /// Index of the lower active core.
+    pub lower: usize,
+    /// Membership of core `lower + 1`; zero when only `lower` is active.
+    pub upper_weight: T,
+}
+
+impl<T: Real> Segment<T> {
+    /// Membership of core `lower`.
+    #[inline]
+    #[must_use]
+    pub fn lower_weight(&self) -> T {
+        T::ONE - self.upper_weight
+    }
+
+    /// Whether two cores are active.
+    #[inline]
+    #[must_use]
+    pub fn is_split(&self) -> bool {
+        self.upper_weight != T::ZERO
+    }
+}
+
+impl<'a, T: Real> Partition<'a, T> {
+    /// Validates `cores` (at least two, finite, strictly increasing) and wraps them.
+    pub fn try_from_cores(cores: &'a [T]) -> Result<Self, CoresError> {
+        if cores.len() < 2 {
+            return Err(CoresError::TooFew { found: cores.len() });
+        }
+        for (index, &c) in cores.iter().enumerate() {
+            if !c.is_finite() {
+                return Err(CoresError::NotFinite { index });
+            }
+            if index > 0 && c <= cores[index - 1] {
+                return Err(CoresError::NotIncreasing { index });
+            }
+        }
+        Ok(Self { cores })
+    }
+
+    /// The cores, in increasing order.
+    #[inline]
+    #[must_use]
+    pub fn cores(&self) -> &'a [T] {
+        self.cores
+    }
+
+    /// Number of cores (at least 2).
+    #[inline]
+    #[must_use]
+    pub fn n_cores(&self) -> usize {
+        self.cores.len()
+    }
+
+    /// The smallest core.
+    #[inline]
+    #[must_use]
+    pub fn first(&self) -> T {
+        self.cores[0]
+    }
+
+    /// The largest core.
+    #[inline]
+    #[must_use]
+    pub fn last(&self) -> T {
+        self.cores[self.cores.len() - 1]
+    }
+
+    /// Locates a finite value between the cores (values outside saturate to the edge).
+    ///
+    /// The result is exact at cores: a value equal to `c_k` gives `lower = k` and weight 0.
+    #[inline]
+    #[must_use]
+    pub fn locate(&self, x: T) -> Segment<T> {
+        let c = self.cores;
+        let n = c.len();
+        if x <= c[0] {
+            return Segment {
+                lower: 0,
+                upper_weight: T::ZERO,
+            };
+        }
+        if x >= c[n - 1] {
+            return Segment {
+                lower: n - 1,
+                upper_weight: T::ZERO,
+            };
+        }
+        // c[0] < x < c[n-1]: the first core above x is at 1..n-1. (`max(1)` only matters
+        // for NaN, which callers reject; it keeps the index in range regardless.)
+        let above = c.partition_point(|&ck| ck <= x).max(1);
+        let lower = above - 1;
+        let w = (x - c[lower]) / (c[above] - c[lower]);
+        Segment {
+            lower,
+            upper_weight: w,
+        }
+    }
+
+    /// Membership degree of `x` in core `k` (0 for `k` out of range).
+    #[must_use]
+    pub fn membership(&self, k: usize, x: T) -> T {
+        let s = self.locate(x);
+        if k == s.lower {
+            s.lower_weight()
+        } else if k == s.lower + 1 {
+            s.upper_weight
+        } else {
+            T::ZERO
+        }
+    }
+
+    /// Writes the membership of `x` in every core into `out` (length [`n_cores`](Self::n_cores)).
+    pub fn memberships(&self, x: T, out: &mut [T]) -> Result<(), EvalError> {
+        crate::error::check_len("memberships", self.n_cores(), out.len())?;
+        if !x.is_finite() {
+            return Err(EvalError::NotFinite {
+                what: "value",
+                index: 0,
+            });
+        }
+        out.fill(T::ZERO);
+        let s = self.locate(x);
+        out[s.lower] = s.lower_weight();
+        if s.is_split() {
+            out[s.lower + 1] = s.upper_weight;
+        }
+        Ok(())
+    }
+}
+
+/// A product of triangular partitions: the fuzzy grid over a state vector.
+///
+/// Holds a view of each variable's cores (no allocation) and the row-major strides of the flat
+/// core index (see the [module docs](self)).
+#[derive(Clone, Copy, Debug)]
+pub struct ProductPartition<'a, T> {
+    dims: [Partition<'a, T>; MAX_DIMS],
+    strides: [usize; MAX_DIMS],
+    n_dims: usize,
+    n_cores: usize,
+}
+
+impl<'a, T: Real> ProductPartition<'a, T> {
+    /// Builds a grid from the cores of each state variable, validating each.
+    ///
+    /// ```
+    /// use fuzzyq_core::ProductPartition;
+    /// let pos = [-1.0_f32, 0.0, 1.0];
+    /// let vel = [-2.0_f32, 2.0];
+    /// let grid = ProductPartition::try_new(&[&pos[..], &vel[..]]).unwrap();
+    /// assert_eq!(grid.n_cores(), 6);
+    /// ```
+    pub fn try_new(cores: &[&'a [T]]) -> Result<Self, PartitionError> {
+        if cores.is_empty() {
+            return Err(PartitionError::NoDimensions);
+        }
+        if cores.len() > MAX_DIMS {
+            return Err(PartitionError::TooManyDimensions { found: cores.len() });
+        }
+        let mut dims = [Partition { cores: &[] as &[T] }; MAX_DIMS];
+        for (dim, c) in cores.iter().enumerate() {
+            dims[dim] = Partition::try_from_cores(c)
+                .map_err(|error| PartitionError::Cores { dim, error })?;
+        }
+        Self::from_partitions(&dims[..cores.len()])
+    }
+
+    /// Builds a grid from already validated partitions.
+    pub fn from_partitions(parts: &[Partition<'a, T>]) -> Result<Self, PartitionError> {
+        if parts.is_empty() {
+            return Err(PartitionError::NoDimensions);
+        }
+        if parts.len() > MAX_DIMS {
+            return Err(PartitionError::TooManyDimensions { found: parts.len() });
+        }
+        let mut dims = [Partition { cores: &[] as &[T] }; MAX_DIMS];
+        dims[..parts.len()].copy_from_slice(parts);
+        let mut strides = [0usize; MAX_DIMS];
+        let mut n: u64 = 1;
+        for e in (0..parts.len()).rev() {
+            strides[e] = n as usize;
+            n = n
+                .checked_mul(parts[e].n_cores() as u64)
+                .filter(|&n| n <= u64::from(u32::MAX))
+                .ok_or(PartitionError::TooManyCores)?;
+        }
+        Ok(Self {
+            dims,
+            strides,
+            n_dims: parts.len(),
+            n_cores: n as usize,
+        })
+    }
+
+    /// Number of state variables `E`.
+    #[inline]
+    #[must_use]
+    pub fn n_dims(&self) -> usize {
+        self.n_dims
+    }
+
+    /// Number of joint cores `N` (the product of the per-variable core counts).
+    #[inline]
+    #[must_use]
+    pub fn n_cores(&self) -> usize {
+        self.n_cores
+    }
+
+    /// The partition of state variable `dim`.
+    ///
+    /// # Panics
+    /// If `dim >= n_dims()`.
+    #[inline]
+    #[must_use]
+    pub fn dim(&self, dim: usize) -> Partition<'a, T> {
+        assert!(dim < self.n_dims, "dimension {dim} out of range");
+        self.dims[dim]
+    }
+
+    /// The partitions of all state variables.
+    #[inline]
+    #[must_use]
+    pub fn dims(&self) -> &[Partition<'a, T>] {
+        &self.dims[..self.n_dims]
+    }
+
+    /// Row-major strides of the flat core index, one per state variable.
+    #[inline]
+    #[must_use]
+    pub fn strides(&self) -> &[usize] {
+        &self.strides[..self.n_dims]
+    }
+
+    /// Per-variable core indices of flat core `index` (row-major), written into `out`.
+    pub fn unravel(&self, index: usize, out: &mut [usize]) -> Result<(), EvalError> {
+        crate::error::check_len("core indices", self.n_dims, out.len())?;
+        if index >= self.n_cores {
+            return Err(EvalError::OutOfRange {
+                what: "core",
+                index,
+                len: self.n_cores,
+            });
+        }
+        let mut rest = index;
+        for e in 0..self.n_dims {
+            out[e] = rest / self.strides[e];
+            rest %= self.strides[e];
+        }
+        Ok(())
+    }
+
+    /// Coordinates of flat core `index`: the state at which its membership is 1.
+    pub fn core_state(&self, index: usize, out: &mut [T]) -> Result<(), EvalError> {
+        crate::error::check_len("state", self.n_dims, out.len())?;
+        if index >= self.n_cores {
+            return Err(EvalError::OutOfRange {
+                what: "core",
+                index,
+                len: self.n_cores,
+            });
+        }
+        let mut rest = index;
+        for e in 0..self.n_dims {
+            out[e] = self.dims[e].cores[rest / self.strides[e]];
+            rest %= self.strides[e];
+        }
+        Ok(())
+    }
+
+    /// Finds the active cores of state `x` (length `E`, finite).
+    pub fn active(&self, x: &[T]) -> Result<ActiveCores<T>, EvalError> {
+        crate::error::check_len("state", self.n_dims, x.len())?;
+        if let Some(index) = x.iter().position(|v| !v.is_finite()) {
+            return Err(EvalError::NotFinite {
+                what: "state",
+                index,
+            });
+        }
+        Ok(self.active_unchecked(x))
+    }
+
+    /// [`active`](Self::active) for a state the caller knows has length `E` and finite values.
+    ///
+    /// A wrong length or a NaN gives a meaningless (but memory-safe) result; the solver uses
+    /// this on states that its model produced and it already checked.
+    #[inline]
+    #[must_use]
+    pub fn active_unchecked(&self, x: &[T]) -> ActiveCores<T> {
+        let mut a = ActiveCores {
+            base: 0,
+            base_weight: T::ONE,
+            split_stride: [0; MAX_DIMS],
+            split_lower: [T::ZERO; MAX_DIMS],
+            split_upper: [T::ZERO; MAX_DIMS],
+            n_split: 0,
+        };
+        for e in 0..self.n_dims {
+            let s = self.dims[e].locate(x[e]);
+            a.base += s.lower * self.strides[e];
+            if s.is_split() {
+                a.split_stride[a.n_split] = self.strides[e];
+                a.split_lower[a.n_split] = s.lower_weight();
+                a.split_upper[a.n_split] = s.upper_weight;
+                a.n_split += 1;
+            }
+        }
+        a
+    }
+
+    /// Membership of state `x` in flat core `index` (the product of per-variable memberships).
+    pub fn membership(&self, index: usize, x: &[T]) -> Result<T, EvalError> {
+        let mut idx = [0usize; MAX_DIMS];
+        self.unravel(index, &mut idx[..self.n_dims])?;
+        crate::error::check_len("state", self.n_dims, x.len())?;
+        let mut mu = T::ONE;
+        for e in 0..self.n_dims {
+            mu *= self.dims[e].membership(idx[e], x[e]);
+        }
+        Ok(mu)
+    }
+}
+
+/// The active cores of one state: at most `2^E` flat indices with weights summing to 1.
+///
+/// Produced by [`ProductPartition::active`]; visit them with [`for_each`](Self::for_each).
+#[derive(Clone, Copy, Debug)]
+pub struct ActiveCores<T> {
+    base: usize,
+    base_weight: T,
+    split_stride: [usize; MAX_DIMS],
+    split_lower: [T; MAX_DIMS],
+    split_upper: [T; MAX_DIMS],
+    n_split: usize,
+}
+
+impl<T: Real> ActiveCores<T> {
+    /// Number of active cores: `2^s` where `s` is the number of variables that fall strictly
+    /// between two cores.
+    #[inline]
+    #[must_use]
+    pub fn len(&self) -> usize {
+        1 << self.n_split
+    }
+
+    /// Always false: every state has at least one active core.
+    #[inline]
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        false
+    }
+
+    /// Calls `f(flat_index, weight)` for every active core, in increasing flat index.
+    ///
+    /// The weight of a core is the product of its per-variable memberships, multiplied in
+    /// variable order, so the same state always gives bit-identical weights.
+    #[inline]
+    pub fn for_each(&self, mut f: impl FnMut(usize, T)) {
+        let s = self.n_split;
+        for mask in 0..(1usize << s) {
+            let mut index = self.base;
+            let mut w = self.base_weight;
+            // Bit (s-1-j) of the mask selects the upper core of split variable j, so the
+            // variable with the largest stride is the most significant bit and the visit runs
+            // in increasing flat index.
+            for j in 0..s {
+                if (mask >> (s - 1 - j)) & 1 == 1 {
+                    index += self.split_stride[j];
+                    w *= self.split_upper[j];
+                } else {
+                    w *= self.split_lower[j];
+                }
+            }
+            f(index, w);
+        }
+    }
+
+    /// Sum of `weight * values[index]` over the active cores: the fuzzy interpolation of a
+    /// per-core table (for example a value function `V`) at the state.
+    ///
+    /// `values` must cover every active index (`values.len() >= n_cores` of the grid).
+    #[inline]
+    #[must_use]
+    pub fn interpolate(&self, values: &[T]) -> T {
+        let mut acc = T::ZERO;
+        self.for_each(|d, w| acc += w * values[d]);
+        acc
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejects_bad_cores() {
+        assert_eq!(
+            Partition::try_from_cores(&[1.0f32]),
+            Err(CoresError::TooFew { found: 1 })
+        );
+        assert_eq!(
+            Partition::try_from_cores(&[0.0f64, f64::NAN]),
+            Err(CoresError::NotFinite { index: 1 })
+        );
+        assert_eq!(
+            Partition::try_from_cores(&[0.0f64, 1.0, 1.0]),
+            Err(CoresError::NotIncreasing { index: 2 })
+        );
+        assert!(matches!(
+            ProductPartition::<f32>::try_new(&[]),
+            Err(PartitionError::NoDimensions)
+        ));
+    }
+
+    #[test]
+    fn locate_is_exact_at_cores_and_saturates() {
+        let c = [-6.0f32, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
+        let p = Partition::try_from_cores(&c).unwrap();
+        for (k, &ck) in c.iter().enumerate() {
+            let s = p.locate(ck);
+            assert_eq!(s.lower, k);
+            assert_eq!(s.upper_weight, 0.0);
+        }
+        assert_eq!(p.locate(-100.0).lower, 0);
+        assert_eq!(p.locate(100.0).lower, 8);
+        let s = p.locate(1.5);
+        assert_eq!(s.lower, 6);
+        assert!((s.upper_weight - (1.2 / 2.7)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn flat_order_is_row_major() {
+        let a = [0.0f64, 1.0, 2.0];
+        let b = [0.0f64, 1.0];
+        let g = ProductPartition::try_new(&[&a[..], &b[..]]).unwrap();
+        assert_eq!(g.strides(), &[2, 1]);
+        let mut x = [0.0; 2];
+        g.core_state(3, &mut x).unwrap();
+        assert_eq!(x, [1.0, 1.0]);
+        let act = g.active(&[1.5, 0.25]).unwrap();
+        let mut seen = [(0usize, 0.0f64); 4];
+        let mut n = 0;
+        act.for_each(|d, w| {
+            seen[n] = (d, w);
+            n += 1;
+        });
+        assert_eq!(n, 4);
+        assert_eq!(
+            seen.map(|s| s.0),
+            [2, 3, 4, 5],
+            "active cores in increasing flat order"
+        );
+        assert!((seen[0].1 - 0.5 * 0.75).abs() < 1e-12);
+        assert!((seen[3].1 - 0.5 * 0.25).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,51 @@
+//! The few data-parallel patterns the solver uses, on rayon with feature `parallel` and
+//! sequential without. Each item is computed by exactly one task from its own inputs, so the
+//! split never changes a result.
+
+#[cfg(feature = "parallel")]
+use rayon::prelude::*;
+
+/// `out.chunks_mut(chunk)` with `f(state, chunk_index, chunk)`; `init` makes per-task state.
+pub(super) fn for_each_chunk_mut<U, S, I, F>(out: &mut [U], chunk: usize, init: I, f: F)
+where
+    U: Send,
+    I: Fn() -> S + Sync + Send,
+    F: Fn(&mut S, usize, &mut [U]) + Sync + Send,
+{
+    #[cfg(feature = "parallel")]
+    {
+        out.par_chunks_mut(chunk)
+            .enumerate()
+            .for_each_init(init, |s, (i, c)| f(s, i, c));
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut s = init();
+        for (i, c) in out.chunks_mut(chunk).enumerate() {
+            f(&mut s, i, c);
+        }
+    }
+}
+
+/// `(0..n).map(f)` collected in order; `min_len` items at least per task.
+pub(super) fn map_indexed<R, S, I, F>(n: usize, min_len: usize, init: I, f: F) -> Vec<R>
+where
+    R: Send,
+    I: Fn() -> S + Sync + Send,
+    F: Fn(&mut S, usize) -> R + Sync + Send,
+{
+    #[cfg(feature = "parallel")]
+    {
+        (0..n)
+            .into_par_iter()
+            .with_min_len(min_len)
+            .map_init(init, f)
+            .collect()
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let _ = min_len;
+        let mut s = init();
+        (0..n).map(|i| f(&mut s, i)).collect()
+    }
+}

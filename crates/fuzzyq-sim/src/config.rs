@@ -1,0 +1,325 @@
+//! Training configurations: the environment, the fuzzy grid and the solver settings, as one
+//! TOML document. `fuzzyq config --env pointmass` prints [`DEFAULT_POINTMASS_TOML`], the
+//! paper's values with a comment on every field.
+
+use fuzzyq_core::Partition;
+use fuzzyq_core::solver::{BackupPath, SolverConfig, SweepMode};
+use serde::{Deserialize, Serialize};
+
+use crate::error::ConfigError;
+use crate::pointmass::PointMassConfig;
+
+/// The default point-mass configuration: the paper's section 3.1.
+pub const DEFAULT_POINTMASS_TOML: &str = r#"# fuzzyq training configuration: the point-mass task of Luviano-Cruz et al. 2018, section 3.1.
+# Edit and pass back with `fuzzyq train --env pointmass --config FILE.toml`.
+
+[env]
+kind = "pointmass"
+agents = 2                                  # point masses (1 to 4)
+mass = 0.5                                  # kg, every agent
+sample_time = 0.4                           # s, zero-order hold
+position_limit = 6.0                        # m: positions are clamped to [-6, 6]
+velocity_limit = 3.0                        # m/s: velocities are clamped to [-3, 3]
+force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]  # N per axis; actions are their square (25 per agent)
+goal_radius = 0.1                           # reward region ||x||_2 < 0.1 over the whole state
+goal_reward = 5.0                           # reward inside the region (eq 40)
+integrator = "exact"                        # "exact" (constant friction) or "rk4"
+rk4_substeps = 10                           # substeps per sample time for "rk4"
+
+[env.friction]
+kind = "constant"                           # or "patches" with base = ..., patches = [{ center = [x, y], radius = r, eta = e }]
+eta = 1.0                                   # kg/s
+
+[grid]
+# Triangular membership cores, the same on every agent and axis (paper figure 1).
+position_cores = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0]
+velocity_cores = [-3.0, -1.0, 0.0, 1.0, 3.0]
+
+[solver]
+gamma = 0.96                                # discount factor
+xi = 0.05                                   # stop when ||theta_{k+1} - theta_k||_inf <= xi
+max_sweeps = 1000
+sweep = "sync"                              # "sync" (Jacobi, the paper) or "async" (Gauss-Seidel)
+absorbing_goal = false                      # true: goal states collect their reward, then nothing
+backup = "auto"                             # "auto", "block" or "generic"
+precision = "f32"                           # "f32" or "f64"
+"#;
+
+/// A whole training configuration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    /// The environment (model) and its parameters.
+    pub env: EnvConfig,
+    /// The fuzzy grid.
+    pub grid: GridConfig,
+    /// Solver settings.
+    pub solver: SolverSettings,
+}
+
+/// The environments fuzzyq can train on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum EnvConfig {
+    /// Point masses on the plane (section 3.1).
+    Pointmass(PointMassConfig),
+}
+
+impl EnvConfig {
+    /// The name used on the command line (`--env`).
+    #[must_use]
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Pointmass(_) => "pointmass",
+        }
+    }
+}
+
+/// The fuzzy grid of the point-mass task: one list of cores for every position variable and
+/// one for every velocity variable.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GridConfig {
+    /// Cores of every position variable (m).
+    pub position_cores: Vec<f64>,
+    /// Cores of every velocity variable (m/s).
+    pub velocity_cores: Vec<f64>,
+}
+
+/// Solver settings as written in a config file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSettings {
+    /// Discount factor, `[0, 1)`.
+    pub gamma: f64,
+    /// Stopping threshold, `> 0`.
+    pub xi: f64,
+    /// Sweep limit, `>= 1`.
+    pub max_sweeps: usize,
+    /// Sweep order.
+    pub sweep: Sweep,
+    /// Goal states are absorbing (zero future value).
+    pub absorbing_goal: bool,
+    /// Backup implementation.
+    pub backup: Backup,
+    /// Floating-point precision of the solver.
+    pub precision: Precision,
+}
+
+/// Sweep order (config spelling of [`SweepMode`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Sweep {
+    /// Synchronous (Jacobi).
+    #[default]
+    Sync,
+    /// Asynchronous (Gauss-Seidel).
+    Async,
+}
+
+/// Backup implementation (config spelling of [`BackupPath`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Backup {
+    /// Block path when the model declares blocks.
+    #[default]
+    Auto,
+    /// Block path.
+    Block,
+    /// Generic path.
+    Generic,
+}
+
+/// Solver precision.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// Single precision (half the memory, twice the SIMD width).
+    #[default]
+    F32,
+    /// Double precision.
+    F64,
+}
+
+impl Default for SolverSettings {
+    fn default() -> Self {
+        let c = SolverConfig::default();
+        Self {
+            gamma: c.gamma,
+            xi: c.xi,
+            max_sweeps: c.max_sweeps,
+            sweep: Sweep::Sync,
+            absorbing_goal: c.absorbing_goal,
+            backup: Backup::Auto,
+            precision: Precision::F32,
+        }
+    }
+}
+
+impl SolverSettings {
+    /// The core solver's configuration.
+    #[must_use]
+    pub fn solver_config(&self) -> SolverConfig {
+        SolverConfig {
+            gamma: self.gamma,
+            xi: self.xi,
+            max_sweeps: self.max_sweeps,
+            sweep: match self.sweep {
+                Sweep::Sync => SweepMode::Synchronous,
+                Sweep::Async => SweepMode::Asynchronous,
+            },
+            absorbing_goal: self.absorbing_goal,
+            path: match self.backup {
+                Backup::Auto => BackupPath::Auto,
+                Backup::Block => BackupPath::Block,
+                Backup::Generic => BackupPath::Generic,
+            },
+        }
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        if !(self.gamma >= 0.0 && self.gamma < 1.0) {
+            return Err(ConfigError::invalid(
+                "solver.gamma",
+                format!("must be in [0, 1), got {}", self.gamma),
+            ));
+        }
+        if !(self.xi > 0.0 && self.xi.is_finite()) {
+            return Err(ConfigError::invalid(
+                "solver.xi",
+                format!("must be a positive number, got {}", self.xi),
+            ));
+        }
+        if self.max_sweeps == 0 {
+            return Err(ConfigError::invalid(
+                "solver.max_sweeps",
+                "must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl Default for TrainConfig {
+    /// The paper's point-mass task.
+    fn default() -> Self {
+        Self {
+            env: EnvConfig::Pointmass(PointMassConfig::default()),
+            grid: GridConfig {
+                position_cores: vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0],
+                velocity_cores: vec![-3.0, -1.0, 0.0, 1.0, 3.0],
+            },
+            solver: SolverSettings::default(),
+        }
+    }
+}
+
+fn check_cores(field: &str, cores: &[f64]) -> Result<(), ConfigError> {
+    Partition::try_from_cores(cores)
+        .map(|_| ())
+        .map_err(|e| ConfigError::invalid(field, e.to_string()))
+}
+
+impl TrainConfig {
+    /// Parses and validates a TOML document.
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let c: Self = toml::from_str(text).map_err(|e| {
+            // toml's messages span several lines (with a source excerpt); keep the first.
+            let msg = e.message().trim().to_string();
+            let at = e
+                .span()
+                .map(|s| {
+                    let line = text[..s.start.min(text.len())].lines().count().max(1);
+                    format!(" (line {line})")
+                })
+                .unwrap_or_default();
+            ConfigError::Parse(format!("{msg}{at}"))
+        })?;
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// The configuration as TOML.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("a config always serialises")
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        match &self.env {
+            EnvConfig::Pointmass(p) => p.validate()?,
+        }
+        check_cores("grid.position_cores", &self.grid.position_cores)?;
+        check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
+        let n = self
+            .grid_cores()
+            .iter()
+            .map(Vec::len)
+            .try_fold(1u64, |a, l| a.checked_mul(l as u64));
+        if n.is_none_or(|n| n > u64::from(u32::MAX)) {
+            return Err(ConfigError::invalid(
+                "grid",
+                "the joint grid has more than 2^32 cores",
+            ));
+        }
+        self.solver.validate()
+    }
+
+    /// The cores of every state variable, in state order.
+    #[must_use]
+    pub fn grid_cores(&self) -> Vec<Vec<f64>> {
+        match &self.env {
+            EnvConfig::Pointmass(p) => (0..p.agents)
+                .flat_map(|_| {
+                    [
+                        self.grid.position_cores.clone(),
+                        self.grid.position_cores.clone(),
+                        self.grid.velocity_cores.clone(),
+                        self.grid.velocity_cores.clone(),
+                    ]
+                })
+                .collect(),
+        }
+    }
+
+    /// Number of joint cores.
+    #[must_use]
+    pub fn n_cores(&self) -> usize {
+        self.grid_cores().iter().map(Vec::len).product()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_toml_is_the_default_config() {
+        let c = TrainConfig::from_toml(DEFAULT_POINTMASS_TOML).unwrap();
+        assert_eq!(c, TrainConfig::default());
+        assert_eq!(c.n_cores(), 4_100_625);
+        let again = TrainConfig::from_toml(&c.to_toml()).unwrap();
+        assert_eq!(again, c);
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let e = TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replace("mass = 0.5", "mass = -1"))
+            .unwrap_err();
+        assert_eq!(e.to_string(), "env.mass: must be a positive number, got -1");
+        let e =
+            TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replace("gamma = 0.96", "gamma = 1"))
+                .unwrap_err();
+        assert!(e.to_string().starts_with("solver.gamma"), "{e}");
+        let e = TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replace("xi = 0.05", "xii = 0.05"))
+            .unwrap_err();
+        assert!(e.to_string().contains("xii"), "{e}");
+        assert!(!e.to_string().contains('\n'));
+        let e = TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replace(
+            "velocity_cores = [-3.0, -1.0, 0.0, 1.0, 3.0]",
+            "velocity_cores = [-3.0, 1.0, 0.0]",
+        ))
+        .unwrap_err();
+        assert!(e.to_string().starts_with("grid.velocity_cores"), "{e}");
+    }
+}

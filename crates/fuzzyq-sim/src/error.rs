@@ -1,0 +1,119 @@
+//! Errors of the sim crate: one enum per concern, each message one line naming what is wrong.
+
+use std::path::PathBuf;
+
+use fuzzyq_core::solver::SolveError;
+use fuzzyq_core::{EvalError, PartitionError};
+
+/// An invalid configuration: a field out of range, a malformed file, a wrong combination.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// A field has an invalid value.
+    #[error("{field}: {reason}")]
+    Invalid {
+        /// The field, as written in a config file (`env.mass`).
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The TOML text does not parse or does not match the schema.
+    #[error("{0}")]
+    Parse(String),
+}
+
+impl ConfigError {
+    /// An invalid field.
+    pub fn invalid(field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Invalid {
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+}
+
+/// A policy file that cannot be read or written.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PolicyFileError {
+    /// Reading failed.
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Writing failed (nothing was left at the destination).
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file does not start with the policy magic tag.
+    #[error("{} is not a fuzzyq policy file", path.display())]
+    NotAPolicy {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The file was written by an incompatible format version.
+    #[error(
+        "{} has policy format version {found}; this build reads version {supported}",
+        path.display()
+    )]
+    Version {
+        /// The file.
+        path: PathBuf,
+        /// Its version.
+        found: u32,
+        /// The version this build reads.
+        supported: u32,
+    },
+    /// The file is shorter than its header says.
+    #[error("{} is truncated ({found} of {expected} bytes)", path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Bytes present.
+        found: u64,
+        /// Bytes expected.
+        expected: u64,
+    },
+    /// The payload does not match its checksum.
+    #[error("{} is corrupted (checksum mismatch)", path.display())]
+    Checksum {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The payload does not decode or is inconsistent.
+    #[error("{} is malformed: {reason}", path.display())]
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Any failure of training or acting.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimError {
+    /// Invalid configuration.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The solver refused or stopped.
+    #[error(transparent)]
+    Solve(#[from] SolveError),
+    /// A state, action or buffer was rejected.
+    #[error(transparent)]
+    Eval(#[from] EvalError),
+    /// The grid is invalid.
+    #[error("grid: {0}")]
+    Grid(#[from] PartitionError),
+    /// A policy file problem.
+    #[error(transparent)]
+    PolicyFile(#[from] PolicyFileError),
+}

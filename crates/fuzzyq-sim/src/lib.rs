@@ -1,0 +1,55 @@
+//! # fuzzyq-sim
+//!
+//! Models and environments for fuzzyq, and the glue from a configuration to a trained policy
+//! and back to actions:
+//!
+//! - [`pointmass`]: the paper's point-mass task (section 3.1) for `n` agents, with the exact
+//!   zero-order-hold step or RK4 for a position-dependent friction, declaring its independent
+//!   dynamics blocks to the solver;
+//! - [`config`]: the TOML training configuration (environment, grid, solver);
+//! - [`train`]: configuration in, [`PolicyArtifact`] out;
+//! - [`artifact`]: the policy file (tagged, versioned, checksummed, written atomically);
+//! - [`policy`] and [`rollout`]: greedy and interpolated policies, simulated runs and their
+//!   metrics.
+//!
+//! ```
+//! use fuzzyq_sim::config::{GridConfig, TrainConfig};
+//! use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
+//!
+//! // The paper's task with one agent on a coarse grid.
+//! let mut config = TrainConfig::default();
+//! if let fuzzyq_sim::config::EnvConfig::Pointmass(p) = &mut config.env {
+//!     p.agents = 1;
+//! }
+//! config.grid = GridConfig {
+//!     position_cores: vec![-6.0, -1.0, 0.0, 1.0, 6.0],
+//!     velocity_cores: vec![-3.0, 0.0, 3.0],
+//! };
+//! let artifact = fuzzyq_sim::train::train(&config, |_| std::ops::ControlFlow::Continue(()))?;
+//! assert!(artifact.summary.converged);
+//! let policy = AnyPolicy::from_artifact(artifact)?;
+//! let (trajectory, metrics) =
+//!     fuzzyq_sim::rollout::rollout_any(&policy, &[-4.0, 3.0, 0.0, 0.0], 40, PolicyKind::Greedy)?;
+//! assert_eq!(trajectory.states.len(), 41);
+//! assert!(metrics.final_error_m[0] < 4.0);
+//! # Ok::<(), fuzzyq_sim::SimError>(())
+//! ```
+#![deny(missing_docs)]
+
+pub mod artifact;
+pub mod config;
+pub mod error;
+pub mod pointmass;
+pub mod policy;
+pub mod rollout;
+pub mod train;
+
+pub use artifact::PolicyArtifact;
+pub use config::TrainConfig;
+pub use error::{ConfigError, PolicyFileError, SimError};
+pub use pointmass::{PointMass, PointMassConfig};
+
+/// The README's Rust examples, compiled as doctests so that they cannot drift from the API.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+pub struct ReadmeDoctests;

@@ -1,0 +1,589 @@
+//! The point-mass task of the paper's section 3.1 (eqs 38-41), for any number of agents.
+//!
+//! Agent `i` is a point mass `m` on the plane with friction: `m s'' = -eta(s) s' + u`, with a
+//! piecewise-constant force `u = (u_x, u_y)` held over each sample time `T` (zero-order hold).
+//! The state is `[s_1x, s_1y, v_1x, v_1y, s_2x, ...]` (as printed in the paper); after each step
+//! positions are clamped to `[-P, P]` and velocities to `[-V, V]`. Each agent's actions are
+//! the square of the force levels, `u_x` slowest: with levels `{-2, -0.2, 0, 0.2, 2}`,
+//! 25 actions per agent and `25^n` joint actions. The shared reward is `R` when the whole state
+//! is within `goal_radius` of the origin (eq 40, evaluated at the current state), else 0.
+//!
+//! # Integration
+//! - `exact` (constant friction only): the closed-form zero-order-hold solution. With
+//!   `a = eta / m` and `w = u / eta`: `v' = w + (v - w) e^{-aT}`,
+//!   `s' = s + w T + (v - w)(1 - e^{-aT}) / a` (and the frictionless limit for `eta = 0`).
+//! - `rk4`: classical Runge-Kutta with `rk4_substeps` substeps per sample time, for any
+//!   friction field `eta(s)`.
+//!
+//! Arithmetic runs in `f64` whatever the solver's precision; results are rounded once.
+//!
+//! # Blocks
+//! With constant friction the dynamics separate per agent and axis: block `(s_ix, v_ix)`
+//! depends on `u_ix` only. The model declares these `2n` blocks (agent-major, x before y:
+//! the joint action's radix order). A position-dependent friction couples an agent's axes, so
+//! the model then declares one 4-variable block per agent.
+
+use std::sync::Arc;
+
+use fuzzyq_core::{ActionSet, Block, Model};
+use serde::{Deserialize, Serialize};
+
+use crate::error::ConfigError;
+
+/// A friction field `eta(s_x, s_y)` in kg/s, as written in a config file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum FrictionConfig {
+    /// The same `eta` everywhere (the paper's setting, `eta = 1`).
+    Constant {
+        /// Friction coefficient, `>= 0`.
+        eta: f64,
+    },
+    /// `base` everywhere except inside discs, where the disc's `eta` applies (the last
+    /// listed disc that contains the point wins): rough patches on the floor.
+    Patches {
+        /// Friction outside every patch.
+        base: f64,
+        /// The patches.
+        patches: Vec<FrictionPatch>,
+    },
+}
+
+/// A disc of different friction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionPatch {
+    /// Centre `(x, y)` in m.
+    pub center: [f64; 2],
+    /// Radius in m, `> 0`.
+    pub radius: f64,
+    /// Friction inside, `>= 0`.
+    pub eta: f64,
+}
+
+/// How a step is integrated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Integrator {
+    /// Closed-form zero-order hold (constant friction only).
+    #[default]
+    Exact,
+    /// Classical RK4 with substeps.
+    Rk4,
+}
+
+/// The point-mass task's parameters (the `[env]` table of a config file).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointMassConfig {
+    /// Number of agents, 1 to 4.
+    pub agents: usize,
+    /// Mass of each agent in kg, `> 0`.
+    pub mass: f64,
+    /// Sample time `T` in s, `> 0`.
+    pub sample_time: f64,
+    /// Positions are clamped to `[-position_limit, position_limit]` (m).
+    pub position_limit: f64,
+    /// Velocities are clamped to `[-velocity_limit, velocity_limit]` (m/s).
+    pub velocity_limit: f64,
+    /// Force levels per axis (N); each agent's actions are their square, `u_x` slowest.
+    pub force_levels: Vec<f64>,
+    /// The reward region: `||x||_2 < goal_radius` over the whole state.
+    pub goal_radius: f64,
+    /// Reward inside the region.
+    pub goal_reward: f64,
+    /// Integration method.
+    pub integrator: Integrator,
+    /// RK4 substeps per sample time (used by `rk4`).
+    pub rk4_substeps: usize,
+    /// Friction field.
+    pub friction: FrictionConfig,
+}
+
+impl Default for PointMassConfig {
+    /// The paper's section 3.1 values.
+    fn default() -> Self {
+        Self {
+            agents: 2,
+            mass: 0.5,
+            sample_time: 0.4,
+            position_limit: 6.0,
+            velocity_limit: 3.0,
+            force_levels: vec![-2.0, -0.2, 0.0, 0.2, 2.0],
+            goal_radius: 0.1,
+            goal_reward: 5.0,
+            integrator: Integrator::Exact,
+            rk4_substeps: 10,
+            friction: FrictionConfig::Constant { eta: 1.0 },
+        }
+    }
+}
+
+/// The largest number of point-mass agents (the joint action count grows as `L^(2n)`).
+pub const MAX_POINT_MASS_AGENTS: usize = 4;
+
+fn positive(field: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v > 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            field,
+            format!("must be a positive number, got {v}"),
+        ))
+    }
+}
+
+fn non_negative(field: &'static str, v: f64) -> Result<(), ConfigError> {
+    if v >= 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            field,
+            format!("must be a non-negative number, got {v}"),
+        ))
+    }
+}
+
+impl PointMassConfig {
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.agents == 0 || self.agents > MAX_POINT_MASS_AGENTS {
+            return Err(ConfigError::invalid(
+                "env.agents",
+                format!(
+                    "must be between 1 and {MAX_POINT_MASS_AGENTS}, got {}",
+                    self.agents
+                ),
+            ));
+        }
+        positive("env.mass", self.mass)?;
+        positive("env.sample_time", self.sample_time)?;
+        positive("env.position_limit", self.position_limit)?;
+        positive("env.velocity_limit", self.velocity_limit)?;
+        non_negative("env.goal_radius", self.goal_radius)?;
+        if !self.goal_reward.is_finite() {
+            return Err(ConfigError::invalid(
+                "env.goal_reward",
+                "must be a finite number",
+            ));
+        }
+        if self.force_levels.is_empty() {
+            return Err(ConfigError::invalid(
+                "env.force_levels",
+                "needs at least one level",
+            ));
+        }
+        if let Some(f) = self.force_levels.iter().find(|f| !f.is_finite()) {
+            return Err(ConfigError::invalid(
+                "env.force_levels",
+                format!("must be finite numbers, got {f}"),
+            ));
+        }
+        let joint = (self.force_levels.len() as u64)
+            .checked_pow(2 * self.agents as u32)
+            .unwrap_or(u64::MAX);
+        if joint > 1 << 20 {
+            return Err(ConfigError::invalid(
+                "env.force_levels",
+                format!(
+                    "{} levels for {} agents make {joint} joint actions (at most 2^20)",
+                    self.force_levels.len(),
+                    self.agents
+                ),
+            ));
+        }
+        if self.rk4_substeps == 0 || self.rk4_substeps > 10_000 {
+            return Err(ConfigError::invalid(
+                "env.rk4_substeps",
+                format!("must be between 1 and 10000, got {}", self.rk4_substeps),
+            ));
+        }
+        match &self.friction {
+            FrictionConfig::Constant { eta } => non_negative("env.friction.eta", *eta)?,
+            FrictionConfig::Patches { base, patches } => {
+                non_negative("env.friction.base", *base)?;
+                for p in patches {
+                    non_negative("env.friction.patches.eta", p.eta)?;
+                    positive("env.friction.patches.radius", p.radius)?;
+                    if !(p.center[0].is_finite() && p.center[1].is_finite()) {
+                        return Err(ConfigError::invalid(
+                            "env.friction.patches.center",
+                            "must be finite numbers",
+                        ));
+                    }
+                }
+                if self.integrator == Integrator::Exact {
+                    return Err(ConfigError::invalid(
+                        "env.integrator",
+                        "\"exact\" needs constant friction; use \"rk4\" with friction patches",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Length of the state vector, `4 n`.
+    #[must_use]
+    pub fn state_dim(&self) -> usize {
+        4 * self.agents
+    }
+}
+
+/// A friction field for the Rust API: any `eta(s_x, s_y)`.
+pub type FrictionFn = Arc<dyn Fn(f64, f64) -> f64 + Send + Sync>;
+
+#[derive(Clone)]
+enum Friction {
+    Constant(f64),
+    Field(FrictionFn),
+}
+
+/// The point-mass model (implements [`Model`] for `f32` and `f64`).
+#[derive(Clone)]
+pub struct PointMass {
+    config: PointMassConfig,
+    friction: Friction,
+    actions_f32: Vec<f32>,
+    actions_f64: Vec<f64>,
+    block_dims: Vec<Vec<usize>>,
+    block_comps: Vec<Vec<usize>>,
+}
+
+impl std::fmt::Debug for PointMass {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PointMass")
+            .field("config", &self.config)
+            .finish()
+    }
+}
+
+impl PointMass {
+    /// Builds the model from a validated config.
+    pub fn new(config: PointMassConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let friction = match &config.friction {
+            FrictionConfig::Constant { eta } => Friction::Constant(*eta),
+            FrictionConfig::Patches { base, patches } => {
+                let (base, patches) = (*base, patches.clone());
+                Friction::Field(Arc::new(move |x, y| {
+                    patches
+                        .iter()
+                        .rev()
+                        .find(|p| (x - p.center[0]).hypot(y - p.center[1]) <= p.radius)
+                        .map_or(base, |p| p.eta)
+                }))
+            }
+        };
+        Ok(Self::build(config, friction))
+    }
+
+    /// Builds the model with an arbitrary friction field `eta(s_x, s_y)` (integrated with RK4;
+    /// `config.friction` is ignored). Such a model cannot be written to a policy file.
+    pub fn with_friction_fn(
+        mut config: PointMassConfig,
+        eta: FrictionFn,
+    ) -> Result<Self, ConfigError> {
+        config.integrator = Integrator::Rk4;
+        config.friction = FrictionConfig::Constant { eta: 0.0 };
+        config.validate()?;
+        Ok(Self::build(config, Friction::Field(eta)))
+    }
+
+    fn build(config: PointMassConfig, friction: Friction) -> Self {
+        let levels = &config.force_levels;
+        let mut actions_f64 = Vec::with_capacity(2 * levels.len() * levels.len());
+        for &ux in levels {
+            for &uy in levels {
+                actions_f64.push(ux);
+                actions_f64.push(uy);
+            }
+        }
+        let actions_f32 = actions_f64.iter().map(|&a| a as f32).collect();
+        let (block_dims, block_comps) = match friction {
+            Friction::Constant(_) => (0..config.agents)
+                .flat_map(|i| (0..2).map(move |axis| (i, axis)))
+                .map(|(i, axis)| (vec![4 * i + axis, 4 * i + 2 + axis], vec![2 * i + axis]))
+                .unzip(),
+            Friction::Field(_) => (0..config.agents)
+                .map(|i| ((4 * i..4 * i + 4).collect(), vec![2 * i, 2 * i + 1]))
+                .unzip(),
+        };
+        Self {
+            config,
+            friction,
+            actions_f32,
+            actions_f64,
+            block_dims,
+            block_comps,
+        }
+    }
+
+    /// The paper's model (section 3.1): two agents, `m = 0.5`, `eta = 1`, `T = 0.4`.
+    #[must_use]
+    pub fn paper() -> Self {
+        Self::new(PointMassConfig::default()).expect("the default config is valid")
+    }
+
+    /// The parameters.
+    #[must_use]
+    pub fn config(&self) -> &PointMassConfig {
+        &self.config
+    }
+
+    /// Whether the friction is the same everywhere (then the `exact` integrator applies).
+    #[must_use]
+    pub fn has_constant_friction(&self) -> bool {
+        matches!(self.friction, Friction::Constant(_))
+    }
+
+    /// The successor in `f64`: one sample time from `x` under joint force vector `u`.
+    pub fn step_f64(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        let c = &self.config;
+        for i in 0..c.agents {
+            let s = &x[4 * i..4 * i + 4];
+            let f = [u[2 * i], u[2 * i + 1]];
+            let out = match (&self.friction, c.integrator) {
+                (Friction::Constant(eta), Integrator::Exact) => {
+                    exact_step(c.mass, *eta, c.sample_time, s, f)
+                }
+                (Friction::Constant(eta), Integrator::Rk4) => {
+                    let eta = *eta;
+                    rk4_step(c.mass, &|_, _| eta, c.sample_time, c.rk4_substeps, s, f)
+                }
+                (Friction::Field(eta), _) => {
+                    rk4_step(c.mass, eta.as_ref(), c.sample_time, c.rk4_substeps, s, f)
+                }
+            };
+            let n = &mut next[4 * i..4 * i + 4];
+            for axis in 0..2 {
+                n[axis] = out[axis].clamp(-c.position_limit, c.position_limit);
+                n[2 + axis] = out[2 + axis].clamp(-c.velocity_limit, c.velocity_limit);
+            }
+        }
+    }
+
+    /// Whether `x` is in the reward region, `||x||_2 < goal_radius`.
+    pub fn in_goal_f64(&self, x: &[f64]) -> bool {
+        x.iter().map(|v| v * v).sum::<f64>().sqrt() < self.config.goal_radius
+    }
+
+    /// Agent `i`'s position `(s_x, s_y)` in state `x`.
+    #[must_use]
+    pub fn position(x: &[f64], agent: usize) -> [f64; 2] {
+        [x[4 * agent], x[4 * agent + 1]]
+    }
+}
+
+/// Exact zero-order-hold step of one agent `[s_x, s_y, v_x, v_y]`.
+fn exact_step(m: f64, eta: f64, t: f64, s: &[f64], f: [f64; 2]) -> [f64; 4] {
+    let mut out = [0.0; 4];
+    for axis in 0..2 {
+        let (p, v, u) = (s[axis], s[2 + axis], f[axis]);
+        let (p1, v1) = if eta == 0.0 {
+            (p + v * t + 0.5 * u / m * t * t, v + u / m * t)
+        } else {
+            let a = eta / m;
+            let w = u / eta;
+            let decay = (-a * t).exp();
+            // (1 - e^{-aT}) / a, written with exp_m1 to stay accurate for small aT.
+            let gain = -(-a * t).exp_m1() / a;
+            (p + w * t + (v - w) * gain, w + (v - w) * decay)
+        };
+        out[axis] = p1;
+        out[2 + axis] = v1;
+    }
+    out
+}
+
+/// RK4 step of one agent under friction field `eta`.
+fn rk4_step(
+    m: f64,
+    eta: &(dyn Fn(f64, f64) -> f64 + Send + Sync),
+    t: f64,
+    substeps: usize,
+    s: &[f64],
+    f: [f64; 2],
+) -> [f64; 4] {
+    let deriv = |y: [f64; 4]| -> [f64; 4] {
+        let e = eta(y[0], y[1]);
+        [y[2], y[3], (-e * y[2] + f[0]) / m, (-e * y[3] + f[1]) / m]
+    };
+    let h = t / substeps as f64;
+    let mut y = [s[0], s[1], s[2], s[3]];
+    let add = |y: [f64; 4], k: [f64; 4], c: f64| -> [f64; 4] {
+        [
+            y[0] + c * k[0],
+            y[1] + c * k[1],
+            y[2] + c * k[2],
+            y[3] + c * k[3],
+        ]
+    };
+    for _ in 0..substeps {
+        let k1 = deriv(y);
+        let k2 = deriv(add(y, k1, h / 2.0));
+        let k3 = deriv(add(y, k2, h / 2.0));
+        let k4 = deriv(add(y, k3, h));
+        for j in 0..4 {
+            y[j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+        }
+    }
+    y
+}
+
+macro_rules! impl_model {
+    ($t:ty, $actions:ident) => {
+        impl Model<$t> for PointMass {
+            fn state_dim(&self) -> usize {
+                self.config.state_dim()
+            }
+
+            fn n_agents(&self) -> usize {
+                self.config.agents
+            }
+
+            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
+                ActionSet::try_new(&self.$actions, 2).expect("validated force levels")
+            }
+
+            fn state_bounds(&self, dim: usize) -> ($t, $t) {
+                let lim = if dim % 4 < 2 {
+                    self.config.position_limit
+                } else {
+                    self.config.velocity_limit
+                };
+                (-lim as $t, lim as $t)
+            }
+
+            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
+                let n = self.config.state_dim();
+                let mut xs = [0.0f64; 4 * MAX_POINT_MASS_AGENTS];
+                let mut us = [0.0f64; 2 * MAX_POINT_MASS_AGENTS];
+                let mut out = [0.0f64; 4 * MAX_POINT_MASS_AGENTS];
+                for (a, &b) in xs.iter_mut().zip(&x[..n]) {
+                    *a = f64::from(b);
+                }
+                for (a, &b) in us.iter_mut().zip(&u[..n / 2]) {
+                    *a = f64::from(b);
+                }
+                self.step_f64(&xs[..n], &us[..n / 2], &mut out[..n]);
+                for (a, &b) in next.iter_mut().zip(&out[..n]) {
+                    *a = b as $t;
+                }
+            }
+
+            fn reward(&self, x: &[$t], _u: &[$t]) -> $t {
+                if <Self as Model<$t>>::is_goal(self, x) {
+                    self.config.goal_reward as $t
+                } else {
+                    0.0
+                }
+            }
+
+            fn reward_depends_on_action(&self) -> bool {
+                false
+            }
+
+            fn is_goal(&self, x: &[$t]) -> bool {
+                let sq: f64 = x.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+                sq.sqrt() < self.config.goal_radius
+            }
+
+            fn n_blocks(&self) -> usize {
+                self.block_dims.len()
+            }
+
+            fn block(&self, b: usize) -> Block<'_> {
+                Block {
+                    state_dims: &self.block_dims[b],
+                    action_components: &self.block_comps[b],
+                }
+            }
+        }
+    };
+}
+
+impl_model!(f32, actions_f32);
+impl_model!(f64, actions_f64);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_step_matches_fine_rk4() {
+        let mut rk = PointMassConfig {
+            integrator: Integrator::Rk4,
+            rk4_substeps: 400,
+            ..PointMassConfig::default()
+        };
+        let exact = PointMass::new(PointMassConfig::default()).unwrap();
+        let fine = PointMass::new(rk.clone()).unwrap();
+        let x = [-4.0, -6.0, -2.0, 2.0, 5.0, 3.0, 2.0, -1.0];
+        let u = [2.0, -0.2, 0.0, 2.0];
+        let (mut a, mut b) = ([0.0; 8], [0.0; 8]);
+        exact.step_f64(&x, &u, &mut a);
+        fine.step_f64(&x, &u, &mut b);
+        for (p, q) in a.iter().zip(&b) {
+            assert!((p - q).abs() < 1e-10, "{a:?} vs {b:?}");
+        }
+        // Frictionless limit.
+        rk.friction = FrictionConfig::Constant { eta: 0.0 };
+        let fine0 = PointMass::new(rk).unwrap();
+        let exact0 = PointMass::new(PointMassConfig {
+            friction: FrictionConfig::Constant { eta: 0.0 },
+            ..PointMassConfig::default()
+        })
+        .unwrap();
+        exact0.step_f64(&[0.0; 8], &u, &mut a);
+        fine0.step_f64(&[0.0; 8], &u, &mut b);
+        for (p, q) in a.iter().zip(&b) {
+            assert!((p - q).abs() < 1e-10);
+        }
+    }
+
+    #[test]
+    fn clamps_positions_and_velocities() {
+        let m = PointMass::paper();
+        let mut n = [0.0; 8];
+        m.step_f64(
+            &[5.9, 0.0, 3.0, 0.0, -5.9, 0.0, -3.0, 0.0],
+            &[2.0, 0.0, -2.0, 0.0],
+            &mut n,
+        );
+        assert_eq!(n[0], 6.0);
+        assert_eq!(n[4], -6.0);
+        assert!(n[2] <= 3.0 && n[6] >= -3.0);
+    }
+
+    #[test]
+    fn declares_blocks_in_radix_order() {
+        let m = PointMass::paper();
+        assert_eq!(Model::<f32>::n_blocks(&m), 4);
+        let b = Model::<f32>::block(&m, 3);
+        assert_eq!(b.state_dims, &[5, 7]);
+        assert_eq!(b.action_components, &[3]);
+        let set = Model::<f64>::action_set(&m, 0);
+        assert_eq!(set.n_actions(), 25);
+        assert_eq!(set.action(1), &[-2.0, -0.2]);
+    }
+
+    #[test]
+    fn rejects_bad_configs() {
+        let bad = |f: fn(&mut PointMassConfig)| {
+            let mut c = PointMassConfig::default();
+            f(&mut c);
+            PointMass::new(c).unwrap_err().to_string()
+        };
+        assert!(bad(|c| c.mass = 0.0).contains("env.mass"));
+        assert!(bad(|c| c.agents = 0).contains("env.agents"));
+        assert!(bad(|c| c.force_levels.clear()).contains("env.force_levels"));
+        assert!(
+            bad(|c| c.friction = FrictionConfig::Patches {
+                base: 1.0,
+                patches: vec![]
+            })
+            .contains("rk4")
+        );
+    }
+}

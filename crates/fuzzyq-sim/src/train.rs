@@ -1,0 +1,97 @@
+//! Training: configuration in, [`PolicyArtifact`] out.
+
+use std::ops::ControlFlow;
+
+use fuzzyq_core::Real;
+use fuzzyq_core::solver::{self, BackupPath, Grid, Progress, Solution};
+
+use crate::artifact::{PolicyArtifact, TrainSummary, Values};
+use crate::config::{EnvConfig, Precision, TrainConfig};
+use crate::error::SimError;
+use crate::pointmass::PointMass;
+
+/// Builds the model a configuration describes.
+pub fn build_model(config: &TrainConfig) -> Result<PointMass, SimError> {
+    match &config.env {
+        EnvConfig::Pointmass(p) => Ok(PointMass::new(p.clone())?),
+    }
+}
+
+/// The configuration's grid in precision `T`.
+pub fn build_grid<T: Real>(config: &TrainConfig) -> Result<Grid<T>, SimError> {
+    let cores = config
+        .grid_cores()
+        .into_iter()
+        .map(|c| c.into_iter().map(T::from_f64).collect())
+        .collect();
+    Ok(Grid::new(cores)?)
+}
+
+/// Runs fuzzy Q-iteration as configured; `observer` sees every sweep and may stop the run
+/// ([`SolveError::Interrupted`](fuzzyq_core::solver::SolveError::Interrupted)).
+pub fn train(
+    config: &TrainConfig,
+    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, SimError> {
+    config.validate()?;
+    match config.solver.precision {
+        Precision::F32 => Ok(artifact(
+            config,
+            solve::<f32>(config, observer)?,
+            Values::F32,
+        )),
+        Precision::F64 => Ok(artifact(
+            config,
+            solve::<f64>(config, observer)?,
+            Values::F64,
+        )),
+    }
+}
+
+fn solve<T: Real>(
+    config: &TrainConfig,
+    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<Solution<T>, SimError>
+where
+    PointMass: fuzzyq_core::Model<T>,
+{
+    let model = build_model(config)?;
+    let grid = build_grid::<T>(config)?;
+    Ok(solver::solve(
+        &model,
+        &grid,
+        &config.solver.solver_config(),
+        observer,
+    )?)
+}
+
+fn artifact<T>(
+    config: &TrainConfig,
+    s: Solution<T>,
+    values: impl FnOnce(Vec<T>) -> Values,
+) -> PolicyArtifact {
+    PolicyArtifact {
+        config: config.clone(),
+        summary: TrainSummary {
+            sweeps: s.sweeps.len(),
+            converged: s.converged(),
+            final_delta: s.final_delta,
+            deltas: s
+                .sweeps
+                .iter()
+                .map(|r| (r.delta.lower, r.delta.upper))
+                .collect(),
+            seconds: s.seconds,
+            sweep_bound: s.bound,
+            reward_bound: s.reward_bound,
+            backup: match s.path {
+                BackupPath::Generic => "generic",
+                _ => "block",
+            }
+            .into(),
+            fuzzyq_version: env!("CARGO_PKG_VERSION").into(),
+        },
+        values: values(s.v),
+        greedy: s.greedy,
+    }
+}

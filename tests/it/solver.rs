@@ -1,0 +1,438 @@
+//! The solver against a brute-force reference, its two backup paths against each other, and
+//! its invariants: contraction, determinism across thread counts, sync/async agreement.
+
+use std::ops::ControlFlow;
+
+use fuzzyq_core::solver::{
+    BackupPath, Grid, Operator, Solution, SolveError, SolverConfig, Stop, SweepMode, solve,
+};
+use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
+use fuzzyq_sim::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
+use fuzzyq_tests::{
+    assert_close, brute_force, max_and_argmax, max_diff, medium_two_agent, small_one_agent,
+    small_two_agent, with_threads,
+};
+use proptest::prelude::*;
+
+fn config(path: BackupPath, sweep: SweepMode) -> SolverConfig {
+    SolverConfig {
+        path,
+        sweep,
+        ..SolverConfig::default()
+    }
+}
+
+fn run<T: Real, M: Model<T> + Sync>(m: &M, g: &Grid<T>, c: &SolverConfig) -> Solution<T> {
+    solve(m, g, c, |_| ControlFlow::Continue(())).expect("solve")
+}
+
+/// Deterministic pseudo-random values in `[lo, hi)`.
+fn values<T: Real>(n: usize, seed: u64, lo: f64, hi: f64) -> Vec<T> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..n)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            T::from_f64(lo + (hi - lo) * ((s >> 11) as f64 / (1u64 << 53) as f64))
+        })
+        .collect()
+}
+
+/// The generic path is the paper's iteration: same sweeps, bit-identical V, the exact
+/// stopping rule, the same greedy actions.
+#[test]
+fn generic_path_matches_brute_force_exactly() {
+    for absorbing in [false, true] {
+        let (m, g) = small_one_agent::<f64>();
+        let c = SolverConfig {
+            absorbing_goal: absorbing,
+            ..config(BackupPath::Generic, SweepMode::Synchronous)
+        };
+        let s = run(&m, &g, &c);
+        let r = brute_force(&m, &g, c.gamma, c.xi, absorbing);
+        assert_eq!(s.sweeps.len(), r.deltas.len(), "absorbing {absorbing}");
+        assert!(s.converged());
+        let (v, _) = max_and_argmax(&r.theta, 25);
+        assert_eq!(s.v, v, "V is bit-identical to max_u theta_K");
+        let (_, greedy) = max_and_argmax(&r.theta_next, 25);
+        assert_eq!(s.greedy, greedy);
+        for (rec, &exact) in s.sweeps.iter().zip(&r.deltas) {
+            let d = rec.delta;
+            assert!(
+                d.lower <= exact + 1e-12 && exact <= d.upper + 1e-12,
+                "sweep {}: {exact} outside [{}, {}]",
+                rec.sweep,
+                d.lower,
+                d.upper
+            );
+        }
+        assert!((s.final_delta - r.deltas.last().unwrap()).abs() < 1e-12);
+        assert!(s.final_delta <= c.xi && r.deltas[r.deltas.len() - 2] > c.xi);
+    }
+}
+
+#[test]
+fn block_path_matches_brute_force() {
+    for absorbing in [false, true] {
+        let (m, g) = small_one_agent::<f64>();
+        let c = SolverConfig {
+            absorbing_goal: absorbing,
+            ..config(BackupPath::Block, SweepMode::Synchronous)
+        };
+        let s = run(&m, &g, &c);
+        assert_eq!(s.path, BackupPath::Block);
+        let r = brute_force(&m, &g, c.gamma, c.xi, absorbing);
+        assert_eq!(s.sweeps.len(), r.deltas.len());
+        let (v, _) = max_and_argmax(&r.theta, 25);
+        assert_close(&s.v, &v, 1e-10);
+        assert!((s.final_delta - r.deltas.last().unwrap()).abs() < 1e-10);
+    }
+}
+
+#[test]
+fn block_and_generic_backups_agree_on_two_agents() {
+    let (m, g) = small_two_agent::<f64>();
+    let view = g.view();
+    let backup = Backup {
+        gamma: 0.96,
+        absorbing_goal: false,
+    };
+    let block = Operator::new(&m, view, backup, BackupPath::Block).unwrap();
+    let generic = Operator::new(&m, view, backup, BackupPath::Generic).unwrap();
+    let v = values::<f64>(g.n_cores(), 7, -50.0, 120.0);
+    let (tb, tg) = (block.apply(&v).unwrap(), generic.apply(&v).unwrap());
+    assert_close(&tb, &tg, 1e-9);
+    let (gb, gg) = (block.greedy(&v).unwrap(), generic.greedy(&v).unwrap());
+    // Greedy actions agree except where two actions are within rounding of each other.
+    let mut q = vec![0.0; 625];
+    let mut x = vec![0.0; 8];
+    let mut differ = 0;
+    for d in 0..g.n_cores() {
+        if gb[d] != gg[d] {
+            differ += 1;
+            view.core_state(d, &mut x).unwrap();
+            generic.q_values(&v, &x, &mut q).unwrap();
+            assert!((q[gb[d] as usize] - q[gg[d] as usize]).abs() < 1e-9);
+        }
+    }
+    assert!(differ < g.n_cores() / 100, "{differ} cores differ");
+}
+
+#[test]
+fn decisions_agree_between_paths_at_any_state() {
+    let (m, g) = small_two_agent::<f64>();
+    for absorbing in [false, true] {
+        let backup = Backup {
+            gamma: 0.96,
+            absorbing_goal: absorbing,
+        };
+        let block = Operator::new(&m, g.view(), backup, BackupPath::Block).unwrap();
+        let generic = Operator::new(&m, g.view(), backup, BackupPath::Generic).unwrap();
+        let v = values::<f64>(g.n_cores(), 11, 0.0, 100.0);
+        let (mut qb, mut qg) = (vec![0.0; 625], vec![0.0; 625]);
+        let states = values::<f64>(8 * 20, 3, -1.0, 1.0);
+        for (i, s) in states.chunks(8).enumerate() {
+            // Scale into the state box; the first state sits on the goal core.
+            let x: Vec<f64> = if i == 0 {
+                vec![0.0; 8]
+            } else {
+                s.iter()
+                    .enumerate()
+                    .map(|(j, &u)| if j % 4 < 2 { 6.0 * u } else { 3.0 * u })
+                    .collect()
+            };
+            block.q_values(&v, &x, &mut qb).unwrap();
+            generic.q_values(&v, &x, &mut qg).unwrap();
+            assert_close(&qb, &qg, 1e-9);
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// `||T V1 - T V2||_inf <= gamma ||V1 - V2||_inf` for both paths.
+    #[test]
+    fn backup_is_a_gamma_contraction(
+        seed in any::<u64>(),
+        gamma in 0.0..0.999f64,
+        absorbing in any::<bool>(),
+        generic in any::<bool>(),
+    ) {
+        let (m, g) = small_one_agent::<f64>();
+        let path = if generic { BackupPath::Generic } else { BackupPath::Block };
+        let op = Operator::new(&m, g.view(), Backup { gamma, absorbing_goal: absorbing }, path)
+            .unwrap();
+        let v1 = values::<f64>(g.n_cores(), seed, -100.0, 100.0);
+        let v2 = values::<f64>(g.n_cores(), seed ^ 0xABCD, -100.0, 100.0);
+        let lhs = max_diff(&op.apply(&v1).unwrap(), &op.apply(&v2).unwrap());
+        let rhs = gamma * max_diff(&v1, &v2);
+        prop_assert!(lhs <= rhs + 1e-9, "{lhs} > {rhs}");
+    }
+}
+
+/// Synchronous and asynchronous sweeps stop within their error bounds of the same fixed
+/// point; asynchronous sweeps need fewer of them.
+#[test]
+fn sync_and_async_reach_the_same_fixed_point() {
+    let (m, g) = medium_two_agent::<f64>();
+    let xi = 1e-5;
+    let sync = run(
+        &m,
+        &g,
+        &SolverConfig {
+            xi,
+            ..config(BackupPath::Block, SweepMode::Synchronous)
+        },
+    );
+    let asy = run(
+        &m,
+        &g,
+        &SolverConfig {
+            xi,
+            ..config(BackupPath::Block, SweepMode::Asynchronous)
+        },
+    );
+    assert!(sync.converged() && asy.converged());
+    let bound = 2.0 * 0.96 / 0.04 * xi;
+    let d = max_diff(&sync.v, &asy.v);
+    assert!(d <= bound, "{d} > {bound}");
+    // Not a trivial fixed point: the reward propagates over hundreds of sweeps.
+    assert!(sync.sweeps.len() > 200 && asy.sweeps.len() > 100);
+    assert!(sync.v.iter().cloned().fold(0.0, f64::max) > 50.0);
+
+    // Generic asynchronous sweeps (different slabs) reach it too.
+    let (m1, g1) = small_one_agent::<f64>();
+    let a = run(
+        &m1,
+        &g1,
+        &SolverConfig {
+            xi,
+            ..config(BackupPath::Generic, SweepMode::Asynchronous)
+        },
+    );
+    let s = run(
+        &m1,
+        &g1,
+        &SolverConfig {
+            xi,
+            ..config(BackupPath::Generic, SweepMode::Synchronous)
+        },
+    );
+    assert!(max_diff(&a.v, &s.v) <= bound);
+}
+
+/// Bit-identical results for 1, 2 and 3 threads, on every path and sweep mode.
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let (m, medium) = medium_two_agent::<f32>();
+    let (_, small) = small_two_agent::<f32>();
+    for (path, sweep, max_sweeps) in [
+        (BackupPath::Block, SweepMode::Synchronous, 1000),
+        (BackupPath::Block, SweepMode::Asynchronous, 1000),
+        (BackupPath::Generic, SweepMode::Synchronous, 4),
+        (BackupPath::Generic, SweepMode::Asynchronous, 4),
+    ] {
+        let c = SolverConfig {
+            max_sweeps,
+            ..config(path, sweep)
+        };
+        let g = if path == BackupPath::Block {
+            &medium
+        } else {
+            &small
+        };
+        let runs: Vec<Solution<f32>> = [1, 2, 3]
+            .into_iter()
+            .map(|n| with_threads(n, || run(&m, g, &c)))
+            .collect();
+        assert!(
+            runs[0].v.iter().any(|&v| v > 0.0),
+            "{path:?} {sweep:?}: trivial V"
+        );
+        for r in &runs[1..] {
+            assert_eq!(r.v, runs[0].v, "{path:?} {sweep:?}");
+            assert_eq!(r.greedy, runs[0].greedy);
+            assert_eq!(r.final_delta.to_bits(), runs[0].final_delta.to_bits());
+            let deltas = |s: &Solution<f32>| s.sweeps.iter().map(|r| r.delta).collect::<Vec<_>>();
+            assert_eq!(deltas(r), deltas(&runs[0]));
+        }
+    }
+}
+
+/// `f32` and `f64` solves agree: the same sweeps and V within 1e-4 relative.
+#[test]
+fn single_and_double_precision_agree() {
+    let (m, g32) = medium_two_agent::<f32>();
+    let (_, g64) = medium_two_agent::<f64>();
+    let c = config(BackupPath::Auto, SweepMode::Synchronous);
+    let a = run(&m, &g32, &c);
+    let b = run(&m, &g64, &c);
+    assert_eq!(a.sweeps.len(), b.sweeps.len());
+    assert!(a.sweeps.len() > 100);
+    for (x, y) in a.v.iter().zip(&b.v) {
+        assert!((f64::from(*x) - y).abs() <= 1e-4 * y.abs().max(1.0));
+    }
+}
+
+#[test]
+fn absorbing_goal_pins_goal_cores_to_their_reward() {
+    let (m, g) = small_one_agent::<f64>();
+    let s = run(
+        &m,
+        &g,
+        &SolverConfig {
+            absorbing_goal: true,
+            ..SolverConfig::default()
+        },
+    );
+    let view = g.view();
+    let mut x = vec![0.0; 4];
+    let origin = (0..g.n_cores())
+        .find(|&d| {
+            view.core_state(d, &mut x).unwrap();
+            x.iter().all(|&v| v == 0.0)
+        })
+        .unwrap();
+    assert_eq!(s.v[origin], 5.0);
+    let plain = run(&m, &g, &SolverConfig::default());
+    assert!(plain.v[origin] > 100.0);
+}
+
+#[test]
+fn sweep_limit_and_interruption() {
+    let (m, g) = small_one_agent::<f32>();
+    let s = run(
+        &m,
+        &g,
+        &SolverConfig {
+            max_sweeps: 3,
+            ..SolverConfig::default()
+        },
+    );
+    assert_eq!(s.stop, Stop::SweepLimit);
+    assert_eq!(s.sweeps.len(), 3);
+    assert!(s.final_delta.is_finite());
+    let e = solve(&m, &g, &SolverConfig::default(), |p| {
+        if p.record.sweep == 2 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })
+    .unwrap_err();
+    assert_eq!(e, SolveError::Interrupted { sweeps: 2 });
+}
+
+#[test]
+fn invalid_settings_are_refused() {
+    let (m, g) = small_one_agent::<f32>();
+    let bad = |c: SolverConfig| solve(&m, &g, &c, |_| ControlFlow::Continue(())).unwrap_err();
+    assert_eq!(
+        bad(SolverConfig {
+            gamma: 1.0,
+            ..SolverConfig::default()
+        }),
+        SolveError::Gamma(1.0)
+    );
+    assert!(matches!(
+        bad(SolverConfig {
+            xi: 0.0,
+            ..SolverConfig::default()
+        }),
+        SolveError::Xi(_)
+    ));
+    let g2 = fuzzyq_tests::grid::<f32>(2, &[-1.0, 1.0], &[-1.0, 1.0]);
+    let e = solve(&m, &g2, &SolverConfig::default(), |_| {
+        ControlFlow::Continue(())
+    })
+    .unwrap_err();
+    assert_eq!(e, SolveError::StateDim { model: 4, grid: 8 });
+}
+
+/// A model that declares the constant-friction blocks while its friction depends on
+/// position: the solver must refuse the declaration rather than compute a wrong backup.
+struct WrongBlocks(PointMass);
+
+impl Model<f64> for WrongBlocks {
+    fn state_dim(&self) -> usize {
+        4
+    }
+    fn n_agents(&self) -> usize {
+        1
+    }
+    fn action_set(&self, a: usize) -> ActionSet<'_, f64> {
+        self.0.action_set(a)
+    }
+    fn state_bounds(&self, d: usize) -> (f64, f64) {
+        Model::<f64>::state_bounds(&self.0, d)
+    }
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.0.step(x, u, next)
+    }
+    fn reward(&self, x: &[f64], u: &[f64]) -> f64 {
+        self.0.reward(x, u)
+    }
+    fn n_blocks(&self) -> usize {
+        2
+    }
+    fn block(&self, b: usize) -> Block<'_> {
+        const DIMS: [[usize; 2]; 2] = [[0, 2], [1, 3]];
+        const COMPS: [[usize; 1]; 2] = [[0], [1]];
+        Block {
+            state_dims: &DIMS[b],
+            action_components: &COMPS[b],
+        }
+    }
+}
+
+#[test]
+fn wrong_block_declarations_are_refused() {
+    let field = PointMass::new(PointMassConfig {
+        agents: 1,
+        integrator: Integrator::Rk4,
+        friction: FrictionConfig::Patches {
+            base: 1.0,
+            patches: vec![fuzzyq_sim::pointmass::FrictionPatch {
+                center: [0.5, 0.5],
+                radius: 1.0,
+                eta: 4.0,
+            }],
+        },
+        ..PointMassConfig::default()
+    })
+    .unwrap();
+    // Its own declaration (one 4-variable block) is right, and agrees with the generic path.
+    let (_, g) = small_one_agent::<f64>();
+    let b = run(
+        &field,
+        &g,
+        &config(BackupPath::Block, SweepMode::Synchronous),
+    );
+    let gen_ = run(
+        &field,
+        &g,
+        &config(BackupPath::Generic, SweepMode::Synchronous),
+    );
+    assert_eq!(b.sweeps.len(), gen_.sweeps.len());
+    assert_close(&b.v, &gen_.v, 1e-9);
+    // Per-axis blocks are wrong for it.
+    let e = solve(
+        &WrongBlocks(field),
+        &g,
+        &config(BackupPath::Block, SweepMode::Synchronous),
+        |_| ControlFlow::Continue(()),
+    )
+    .unwrap_err();
+    assert!(matches!(e, SolveError::BlockMismatch { .. }), "{e}");
+}
+
+#[test]
+fn grid_must_span_a_valid_partition() {
+    let e = Grid::<f32>::new(vec![vec![0.0, 1.0], vec![2.0]]).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "state variable 1: a partition needs at least 2 cores, found 1"
+    );
+}

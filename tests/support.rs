@@ -1,0 +1,171 @@
+//! Shared fixtures of the integration tests: small point-mass problems, a brute-force fuzzy
+//! Q-iteration that stores the whole `theta`, thread-pool helpers and float comparison.
+#![allow(missing_docs)] // test support
+
+use fuzzyq_core::model::joint_actions;
+use fuzzyq_core::solver::Grid;
+use fuzzyq_core::{Model, ProductPartition, Real};
+use fuzzyq_sim::pointmass::{PointMass, PointMassConfig};
+
+/// Asserts `|a - b| <= tol` elementwise, naming the first offending index.
+#[track_caller]
+pub fn assert_close<T: Real>(a: &[T], b: &[T], tol: f64) {
+    assert_eq!(a.len(), b.len(), "lengths differ");
+    for (i, (&x, &y)) in a.iter().zip(b).enumerate() {
+        let d = (x.to_f64() - y.to_f64()).abs();
+        assert!(d <= tol, "index {i}: {x} vs {y} (|diff| {d:e} > {tol:e})");
+    }
+}
+
+/// Largest absolute difference.
+pub fn max_diff<T: Real>(a: &[T], b: &[T]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| (x.to_f64() - y.to_f64()).abs())
+        .fold(0.0, f64::max)
+}
+
+/// Runs `f` on a dedicated rayon pool of `n` threads.
+pub fn with_threads<R: Send>(n: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(n)
+        .build()
+        .expect("thread pool")
+        .install(f)
+}
+
+/// A point-mass model with `agents` agents and the paper's parameters otherwise.
+pub fn point_mass(agents: usize) -> PointMass {
+    PointMass::new(PointMassConfig {
+        agents,
+        ..PointMassConfig::default()
+    })
+    .expect("valid config")
+}
+
+/// A point-mass grid with the given position and velocity cores on every agent and axis.
+pub fn grid<T: Real>(agents: usize, pos: &[f64], vel: &[f64]) -> Grid<T> {
+    let conv = |c: &[f64]| c.iter().map(|&v| T::from_f64(v)).collect::<Vec<T>>();
+    let mut cores = Vec::new();
+    for _ in 0..agents {
+        cores.extend([conv(pos), conv(pos), conv(vel), conv(vel)]);
+    }
+    Grid::new(cores).expect("valid grid")
+}
+
+/// A one-agent problem small enough to store `theta` (225 cores x 25 actions).
+pub fn small_one_agent<T: Real>() -> (PointMass, Grid<T>) {
+    (
+        point_mass(1),
+        grid(1, &[-6.0, -1.0, 0.0, 1.0, 6.0], &[-3.0, 0.0, 3.0]),
+    )
+}
+
+/// A two-agent problem cheap enough for the generic path (1296 cores x 625 joint actions;
+/// the origin is a core, so the reward is reachable).
+pub fn small_two_agent<T: Real>() -> (PointMass, Grid<T>) {
+    (point_mass(2), grid(2, &[-6.0, 0.0, 6.0], &[-3.0, 0.0]))
+}
+
+/// A symmetric two-agent problem for the block path (6561 cores x 625 joint actions).
+pub fn medium_two_agent<T: Real>() -> (PointMass, Grid<T>) {
+    (point_mass(2), grid(2, &[-6.0, 0.0, 6.0], &[-3.0, 0.0, 3.0]))
+}
+
+/// The result of the brute-force reference.
+pub struct Reference<T> {
+    /// `theta_K`, row-major `[core][joint action]`.
+    pub theta: Vec<T>,
+    /// `theta_{K+1}`: one more sweep, the Q-function a greedy policy derives from `V_K`.
+    pub theta_next: Vec<T>,
+    /// `||theta_k - theta_{k-1}||_inf` for every sweep.
+    pub deltas: Vec<f64>,
+}
+
+/// Fuzzy Q-iteration exactly as the paper writes it, storing every Q-value:
+/// `theta_{k+1}[d, u] = rho(x_d, u) + gamma sum_d' mu_d'(f(x_d, u)) max_u' theta_k[d', u']`,
+/// from `theta_0 = 0`, stopping at the first sweep with `||theta_{k+1} - theta_k|| <= xi`.
+pub fn brute_force<T: Real, M: Model<T>>(
+    model: &M,
+    grid: &Grid<T>,
+    gamma: f64,
+    xi: f64,
+    absorbing_goal: bool,
+) -> Reference<T> {
+    let g: ProductPartition<'_, T> = grid.view();
+    let joint = joint_actions(model).expect("joint actions");
+    let (n, m, e) = (g.n_cores(), joint.n_joint(), g.n_dims());
+    let gamma = T::from_f64(gamma);
+    // Precompute successors' active cores, rewards and goal flags.
+    let mut x = vec![T::ZERO; e];
+    let mut next = vec![T::ZERO; e];
+    let mut u = vec![T::ZERO; joint.dim()];
+    let mut succ: Vec<Vec<(usize, T)>> = Vec::with_capacity(n * m);
+    let mut rho = Vec::with_capacity(n * m);
+    let mut goal = Vec::with_capacity(n);
+    for d in 0..n {
+        g.core_state(d, &mut x).unwrap();
+        goal.push(absorbing_goal && model.is_goal(&x));
+        for a in 0..m {
+            joint.vector(a, &mut u).unwrap();
+            model.step(&x, &u, &mut next);
+            rho.push(model.reward(&x, &u));
+            let mut s = Vec::new();
+            g.active(&next).unwrap().for_each(|k, w| s.push((k, w)));
+            succ.push(s);
+        }
+    }
+    let sweep = |theta: &[T]| -> Vec<T> {
+        let v: Vec<T> = (0..n)
+            .map(|d| {
+                theta[d * m..(d + 1) * m]
+                    .iter()
+                    .copied()
+                    .fold(theta[d * m], T::max_of)
+            })
+            .collect();
+        let mut new = vec![T::ZERO; n * m];
+        for d in 0..n {
+            for a in 0..m {
+                let i = d * m + a;
+                new[i] = if goal[d] {
+                    rho[i]
+                } else {
+                    let mut ev = T::ZERO;
+                    for &(k, w) in &succ[i] {
+                        ev += w * v[k];
+                    }
+                    rho[i] + gamma * ev
+                };
+            }
+        }
+        new
+    };
+    let mut theta = vec![T::ZERO; n * m];
+    let mut deltas = Vec::new();
+    loop {
+        let new = sweep(&theta);
+        let delta = max_diff(&new, &theta);
+        theta = new;
+        deltas.push(delta);
+        if delta <= xi || deltas.len() >= 10_000 {
+            break;
+        }
+    }
+    Reference {
+        theta_next: sweep(&theta),
+        theta,
+        deltas,
+    }
+}
+
+/// `V[d] = max_u theta[d, u]` and the lowest-index argmax of each row.
+pub fn max_and_argmax<T: Real>(theta: &[T], m: usize) -> (Vec<T>, Vec<u32>) {
+    theta
+        .chunks(m)
+        .map(|row| {
+            let a = fuzzyq_core::q::argmax(row).expect("non-empty row");
+            (row[a], a as u32)
+        })
+        .unzip()
+}
