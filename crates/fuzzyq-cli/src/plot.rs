@@ -124,6 +124,50 @@ fn legend<'a, DB: DrawingBackend + 'a>(chart: &mut Chart<'a, DB>) -> anyhow::Res
         .map_err(err)
 }
 
+/// A chart with a caption, axis labels and a light grid.
+fn chart<'a, 'b, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    (x_desc, y_desc): (&str, &str),
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> anyhow::Result<Chart<'b, DB>>
+where
+    'a: 'b,
+{
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, (FONT, 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(50)
+        .build_cartesian_2d(x, y)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 15))
+        .light_line_style(BLACK.mix(0.05))
+        .draw()
+        .map_err(err)?;
+    Ok(chart)
+}
+
+/// A chart over time.
+fn time_chart<'a, 'b, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    y_desc: &str,
+    x: std::ops::Range<f64>,
+    y: std::ops::Range<f64>,
+) -> anyhow::Result<Chart<'b, DB>>
+where
+    'a: 'b,
+{
+    chart(area, caption, ("time (s)", y_desc), x, y)
+}
+
 fn draw_states<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     t: &Trajectory,
@@ -132,22 +176,8 @@ fn draw_states<DB: DrawingBackend>(
 ) -> anyhow::Result<()> {
     let col = |j: usize| t.states.iter().map(move |x| x[4 * agent + j]);
     let y = range((0..4).flat_map(col));
-    let mut chart = ChartBuilder::on(area)
-        .caption(format!("Agent {}: states", agent + 1), (FONT, 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..t_end.max(t.dt), y)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("time (s)")
-        .y_desc("m, m/s")
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 15))
-        .light_line_style(BLACK.mix(0.05))
-        .draw()
-        .map_err(err)?;
+    let caption = format!("Agent {}: states", agent + 1);
+    let mut chart = time_chart(area, &caption, "m, m/s", 0.0..t_end.max(t.dt), y)?;
     for (j, name) in ["s_x (m)", "s_y (m)", "v_x (m/s)", "v_y (m/s)"]
         .iter()
         .enumerate()
@@ -175,22 +205,8 @@ fn draw_forces<DB: DrawingBackend>(
 ) -> anyhow::Result<()> {
     let col = |j: usize| t.actions.iter().map(move |u| u[2 * agent + j]);
     let y = range((0..2).flat_map(col).chain([-0.1, 0.1]));
-    let mut chart = ChartBuilder::on(area)
-        .caption(format!("Agent {}: forces", agent + 1), (FONT, 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..t_end.max(t.dt), y)
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("time (s)")
-        .y_desc("N")
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 15))
-        .light_line_style(BLACK.mix(0.05))
-        .draw()
-        .map_err(err)?;
+    let caption = format!("Agent {}: forces", agent + 1);
+    let mut chart = time_chart(area, &caption, "N", 0.0..t_end.max(t.dt), y)?;
     for (j, name) in ["u_x (N)", "u_y (N)"].iter().enumerate() {
         let color = COLORS[j];
         // Zero-order hold: each force holds over its sample time.
@@ -233,22 +249,13 @@ fn draw_paths<DB: DrawingBackend>(
         (w.saturating_sub(side)) / 2,
         (w.saturating_sub(side)) / 2,
     );
-    let mut chart = ChartBuilder::on(&area)
-        .caption("Paths in the plane", (FONT, 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(50)
-        .build_cartesian_2d((cx - half)..(cx + half), (cy - half)..(cy + half))
-        .map_err(err)?;
-    chart
-        .configure_mesh()
-        .x_desc("s_x (m)")
-        .y_desc("s_y (m)")
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 15))
-        .light_line_style(BLACK.mix(0.05))
-        .draw()
-        .map_err(err)?;
+    let mut chart = chart(
+        &area,
+        "Paths in the plane",
+        ("s_x (m)", "s_y (m)"),
+        (cx - half)..(cx + half),
+        (cy - half)..(cy + half),
+    )?;
     chart
         .draw_series(std::iter::once(Cross::new(
             (0.0, 0.0),

@@ -296,17 +296,10 @@ impl<'a, T: Real> ProductPartition<'a, T> {
     /// Coordinates of flat core `index`: the state at which its membership is 1.
     pub fn core_state(&self, index: usize, out: &mut [T]) -> Result<(), EvalError> {
         crate::error::check_len("state", self.n_dims, out.len())?;
-        if index >= self.n_cores {
-            return Err(EvalError::OutOfRange {
-                what: "core",
-                index,
-                len: self.n_cores,
-            });
-        }
-        let mut rest = index;
+        let mut idx = [0usize; MAX_DIMS];
+        self.unravel(index, &mut idx[..self.n_dims])?;
         for e in 0..self.n_dims {
-            out[e] = self.dims[e].cores[rest / self.strides[e]];
-            rest %= self.strides[e];
+            out[e] = self.dims[e].cores[idx[e]];
         }
         Ok(())
     }

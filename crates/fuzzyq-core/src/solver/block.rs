@@ -90,6 +90,24 @@ fn sub_partition<'a, T: Real>(
     ProductPartition::from_partitions(parts).expect("a block of a valid grid is a valid grid")
 }
 
+/// Compressed rows of `(block core, weight)` entries, with block cores renumbered by `local`.
+fn local_rows<T: Real, R: Iterator<Item = (usize, T)>>(
+    rows: impl Iterator<Item = R>,
+    local: &[u32],
+) -> (Vec<u32>, Vec<u32>, Vec<T>) {
+    let mut ptr = vec![0u32];
+    let mut col = Vec::new();
+    let mut weight = Vec::new();
+    for row in rows {
+        for (k, w) in row {
+            col.push(local[k]);
+            weight.push(w);
+        }
+        ptr.push(col.len() as u32);
+    }
+    (ptr, col, weight)
+}
+
 /// The values of `dims` in `x`.
 fn x_block<T: Real>(x: &[T], dims: &[usize]) -> Vec<T> {
     dims.iter().map(|&d| x[d]).collect()
@@ -359,11 +377,15 @@ impl<T: Real> BlockOperator<T> {
         self.run(0, c0, v, bufs, 0, emit);
     }
 
-    pub(super) fn sweep_sync<M: Model<T> + Sync + ?Sized>(
+    /// Reduces every core against `v` (internal order) into `out`, keeping `pick` of each
+    /// `(value, action)` result: `V` for [`Reduce::Max`], actions for [`Reduce::Argmax`].
+    pub(super) fn each_core<U: Send, M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         v: &[T],
-        out: &mut [T],
+        out: &mut [U],
+        kind: Reduce,
+        pick: impl Fn((T, u32)) -> U + Sync + Send,
     ) {
         let slab = self.slab_len();
         par::for_each_chunk_mut(
@@ -372,7 +394,7 @@ impl<T: Real> BlockOperator<T> {
             || (self.bufs(), op.reduce_work()),
             |(bufs, work), c0, chunk| {
                 self.slab(c0, v, bufs, &mut |local, ev| {
-                    chunk[local] = op.reduce(c0 * slab + local, ev, Reduce::Max, work).0;
+                    chunk[local] = pick(op.reduce(c0 * slab + local, ev, kind, work));
                 });
             },
         );
@@ -455,25 +477,6 @@ impl<T: Real> BlockOperator<T> {
         maxima.into_iter().fold(T::ZERO, T::max_of)
     }
 
-    pub(super) fn greedy<M: Model<T> + Sync + ?Sized>(
-        &self,
-        op: &Operator<'_, T, M>,
-        v: &[T],
-        out: &mut [u32],
-    ) {
-        let slab = self.slab_len();
-        par::for_each_chunk_mut(
-            out,
-            slab,
-            || (self.bufs(), op.reduce_work()),
-            |(bufs, work), c0, chunk| {
-                self.slab(c0, v, bufs, &mut |local, ev| {
-                    chunk[local] = op.reduce(c0 * slab + local, ev, Reduce::Argmax, work).1;
-                });
-            },
-        );
-    }
-
     /// `Q(x, .)` at any state from `v` in grid order (see [`Operator::q_values`]).
     ///
     /// The active cores of `x` are the products of each block's active block cores, and their
@@ -495,6 +498,8 @@ impl<T: Real> BlockOperator<T> {
         // Per block: active block cores with memberships, the mixed rows and their support.
         struct Mixed<T> {
             support: Vec<usize>,
+            /// Block core -> position in `support`.
+            local: Vec<u32>,
             ptr: Vec<u32>,
             col: Vec<u32>,
             weight: Vec<T>,
@@ -531,18 +536,10 @@ impl<T: Real> BlockOperator<T> {
             for (i, &k) in support.iter().enumerate() {
                 local[k] = i as u32;
             }
-            let mut ptr = vec![0u32];
-            let mut col = Vec::new();
-            let mut weight = Vec::new();
-            for r in &rows {
-                for &(k, w) in r {
-                    col.push(local[k]);
-                    weight.push(w);
-                }
-                ptr.push(col.len() as u32);
-            }
+            let (ptr, col, weight) = local_rows(rows.iter().map(|r| r.iter().copied()), &local);
             mixed.push(Mixed {
                 support,
+                local,
                 ptr,
                 col,
                 weight,
@@ -643,23 +640,11 @@ impl<T: Real> BlockOperator<T> {
                     .collect();
                 let ev_d = contract_box(&|b| {
                     let t = &self.tables[b];
-                    let m = &mixed[b];
-                    let mut local = vec![u32::MAX; t.n_cores];
-                    for (i, &k) in m.support.iter().enumerate() {
-                        local[k] = i as u32;
-                    }
-                    let mut ptr = vec![0u32];
-                    let mut col = Vec::new();
-                    let mut weight = Vec::new();
-                    for a in 0..t.n_actions {
+                    let rows = (0..t.n_actions).map(|a| {
                         let (cols, ws) = t.row(block_cores[b], a);
-                        for (&k, &w) in cols.iter().zip(ws) {
-                            col.push(local[k as usize]);
-                            weight.push(w);
-                        }
-                        ptr.push(col.len() as u32);
-                    }
-                    (ptr, col, weight)
+                        cols.iter().map(|&k| k as usize).zip(ws.iter().copied())
+                    });
+                    local_rows(rows, &mixed[b].local)
                 });
                 for (g, &x) in goal_ev.iter_mut().zip(&ev_d) {
                     *g += mu * x;

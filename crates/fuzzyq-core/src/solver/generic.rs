@@ -67,11 +67,14 @@ impl GenericOperator {
         }
     }
 
-    pub(super) fn sweep_sync<T: Real, M: Model<T> + Sync + ?Sized>(
+    /// Reduces every core against `v` into `out`, keeping `pick` of each `(value, action)`.
+    pub(super) fn each_core<T: Real, U: Send, M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         v: &[T],
-        out: &mut [T],
+        out: &mut [U],
+        kind: Reduce,
+        pick: impl Fn((T, u32)) -> U + Sync + Send,
     ) -> Result<(), SolveError> {
         let failed = AtomicBool::new(false);
         par::for_each_chunk_mut(
@@ -80,7 +83,7 @@ impl GenericOperator {
             || Self::work(op),
             |w, s, chunk| {
                 for (j, o) in chunk.iter_mut().enumerate() {
-                    *o = Self::core(op, v, s * GENERIC_SLAB + j, Reduce::Max, w, &failed).0;
+                    *o = pick(Self::core(op, v, s * GENERIC_SLAB + j, kind, w, &failed));
                 }
             },
         );
@@ -136,25 +139,5 @@ impl GenericOperator {
         );
         Self::check(&failed)?;
         Ok(maxima.into_iter().fold(T::ZERO, T::max_of))
-    }
-
-    pub(super) fn greedy<T: Real, M: Model<T> + Sync + ?Sized>(
-        &self,
-        op: &Operator<'_, T, M>,
-        v: &[T],
-        out: &mut [u32],
-    ) -> Result<(), SolveError> {
-        let failed = AtomicBool::new(false);
-        par::for_each_chunk_mut(
-            out,
-            GENERIC_SLAB,
-            || Self::work(op),
-            |w, s, chunk| {
-                for (j, o) in chunk.iter_mut().enumerate() {
-                    *o = Self::core(op, v, s * GENERIC_SLAB + j, Reduce::Argmax, w, &failed).1;
-                }
-            },
-        );
-        Self::check(&failed)
     }
 }

@@ -662,10 +662,22 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
 
     /// One synchronous sweep: `out = max_u (rho + gamma P v)`, internal order.
     fn sweep_sync(&self, v: &[T], out: &mut [T]) -> Result<(), SolveError> {
+        self.each_core(v, out, Reduce::Max, |r| r.0)
+    }
+
+    /// Reduces every core against `v` into `out` (internal order), keeping `pick` of each
+    /// `(value, action)` result.
+    fn each_core<U: Send>(
+        &self,
+        v: &[T],
+        out: &mut [U],
+        kind: Reduce,
+        pick: impl Fn((T, u32)) -> U + Sync + Send,
+    ) -> Result<(), SolveError> {
         match &self.path {
-            Path::Generic(g) => g.sweep_sync(self, v, out),
+            Path::Generic(g) => g.each_core(self, v, out, kind, pick),
             Path::Block(b) => {
-                b.sweep_sync(self, v, out);
+                b.each_core(self, v, out, kind, pick);
                 Ok(())
             }
         }
@@ -689,13 +701,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
 
     /// Greedy joint action per core, internal order.
     fn greedy_internal(&self, v: &[T], out: &mut [u32]) -> Result<(), SolveError> {
-        match &self.path {
-            Path::Generic(g) => g.greedy(self, v, out),
-            Path::Block(b) => {
-                b.greedy(self, v, out);
-                Ok(())
-            }
-        }
+        self.each_core(v, out, Reduce::Argmax, |r| r.1)
     }
 
     /// Row-major grid order -> internal order.
