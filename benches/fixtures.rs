@@ -50,3 +50,19 @@ pub fn values<T: Real>(n: usize, scale: f64) -> Vec<T> {
 pub fn x0<T: Real>() -> Vec<T> {
     X0.iter().map(|&v| T::from_f64(v)).collect()
 }
+
+/// `V` after 40 extrapolated sweeps on `grid`: a realistic value function (a random one defeats
+/// the last stage's pruning, which real value functions allow).
+#[must_use]
+pub fn realistic_v(grid: &Grid<f32>) -> Vec<f32> {
+    let config = fuzzyq_core::solver::SolverConfig {
+        max_sweeps: 40,
+        extrapolate: true,
+        ..Default::default()
+    };
+    fuzzyq_core::solver::solve(&model(), grid, &config, |_| {
+        std::ops::ControlFlow::Continue(())
+    })
+    .expect("solve")
+    .v
+}

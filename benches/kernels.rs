@@ -4,9 +4,9 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use fuzzyq_benches::{model, paper_grid, reduced_grid, values, x0};
+use fuzzyq_benches::{model, paper_grid, realistic_v, reduced_grid, values, x0};
 use fuzzyq_core::model::joint_actions;
-use fuzzyq_core::solver::{BackupPath, Operator};
+use fuzzyq_core::solver::{BackupPath, Kernel, Operator};
 use fuzzyq_core::{Backup, q};
 
 const BACKUP: Backup<f32> = Backup {
@@ -31,14 +31,27 @@ fn memberships(c: &mut Criterion) {
 
 fn sweeps(c: &mut Criterion) {
     let m = model();
-    let grid = reduced_grid::<f32>();
-    let v = values::<f32>(grid.n_cores(), 100.0);
-    let block = Operator::new(&m, grid.view(), BACKUP, BackupPath::Block).unwrap();
     let mut g = c.benchmark_group("sweep");
-    g.sample_size(20);
-    g.bench_function("block_reduced_50625x625", |b| {
-        b.iter(|| black_box(block.apply(black_box(&v)).unwrap()))
+    g.sample_size(10);
+    let paper = paper_grid::<f32>();
+    let vp = realistic_v(&paper);
+    let op = Operator::new(&m, paper.view(), BACKUP, BackupPath::Block).unwrap();
+    g.bench_function(format!("block_paper_4100625x625_{}", op.kernel()), |b| {
+        b.iter(|| black_box(op.apply(black_box(&vp)).unwrap()))
     });
+    drop(op);
+    g.sample_size(20);
+    let grid = reduced_grid::<f32>();
+    let v = realistic_v(&grid);
+    for k in Kernel::ALL.into_iter().filter(|k| k.is_available()) {
+        let block = Operator::new(&m, grid.view(), BACKUP, BackupPath::Block)
+            .unwrap()
+            .with_kernel(k)
+            .unwrap();
+        g.bench_function(format!("block_reduced_50625x625_{}", k.name()), |b| {
+            b.iter(|| black_box(block.apply(black_box(&v)).unwrap()))
+        });
+    }
     let small = fuzzyq_sim::train::build_grid::<f32>(&{
         let mut c = fuzzyq_sim::TrainConfig::default();
         c.grid.position_cores = vec![-6.0, 0.0, 6.0];
@@ -62,7 +75,7 @@ fn decisions(c: &mut Criterion) {
     let m = model();
     let grid = paper_grid::<f32>();
     let view = grid.view();
-    let v = values::<f32>(grid.n_cores(), 100.0);
+    let v = realistic_v(&grid);
     let x = x0::<f32>();
     let op = Operator::new(&m, view, BACKUP, BackupPath::Block).unwrap();
     let joint = joint_actions(&m).unwrap();

@@ -4,7 +4,7 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{
-    BackupPath, Grid, Operator, Solution, SolveError, SolverConfig, Stop, SweepMode, solve,
+    BackupPath, Grid, Kernel, Operator, Solution, SolveError, SolverConfig, Stop, SweepMode, solve,
 };
 use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
 use fuzzyq_sim::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
@@ -228,14 +228,16 @@ fn sync_and_async_reach_the_same_fixed_point() {
 fn results_do_not_depend_on_thread_count() {
     let (m, medium) = medium_two_agent::<f32>();
     let (_, small) = small_two_agent::<f32>();
-    for (path, sweep, max_sweeps) in [
-        (BackupPath::Block, SweepMode::Synchronous, 1000),
-        (BackupPath::Block, SweepMode::Asynchronous, 1000),
-        (BackupPath::Generic, SweepMode::Synchronous, 4),
-        (BackupPath::Generic, SweepMode::Asynchronous, 4),
+    for (path, sweep, max_sweeps, extrapolate) in [
+        (BackupPath::Block, SweepMode::Synchronous, 1000, false),
+        (BackupPath::Block, SweepMode::Synchronous, 1000, true),
+        (BackupPath::Block, SweepMode::Asynchronous, 1000, false),
+        (BackupPath::Generic, SweepMode::Synchronous, 4, true),
+        (BackupPath::Generic, SweepMode::Asynchronous, 4, false),
     ] {
         let c = SolverConfig {
             max_sweeps,
+            extrapolate,
             ..config(path, sweep)
         };
         let g = if path == BackupPath::Block {
@@ -435,4 +437,84 @@ fn grid_must_span_a_valid_partition() {
         e.to_string(),
         "state variable 1: a partition needs at least 2 cores, found 1"
     );
+}
+
+/// Every kernel instance this CPU runs gives the same solution, bit for bit.
+#[test]
+fn kernel_instances_give_identical_solutions() {
+    let (m, g) = medium_two_agent::<f32>();
+    let runs: Vec<(Kernel, Solution<f32>)> = Kernel::ALL
+        .into_iter()
+        .filter(|k| k.is_available())
+        .map(|k| {
+            let c = SolverConfig {
+                kernel: Some(k),
+                extrapolate: true,
+                ..SolverConfig::default()
+            };
+            (k, run(&m, &g, &c))
+        })
+        .collect();
+    assert!(runs.iter().any(|(k, _)| *k == Kernel::Scalar));
+    let (_, reference) = runs.last().expect("scalar runs everywhere");
+    for (k, s) in &runs {
+        assert_eq!(s.kernel, k.name());
+        assert_eq!(s.v, reference.v, "{k:?}");
+        assert_eq!(s.greedy, reference.greedy, "{k:?}");
+        assert_eq!(s.sweeps.len(), reference.sweeps.len(), "{k:?}");
+    }
+}
+
+/// Extrapolated and plain sweeps both stop within gamma xi / (1 - gamma) of the fixed point;
+/// extrapolation needs fewer sweeps.
+#[test]
+fn extrapolation_stops_within_the_same_bound_in_fewer_sweeps() {
+    let (m, g) = medium_two_agent::<f64>();
+    let reference = run(
+        &m,
+        &g,
+        &SolverConfig {
+            xi: 1e-9,
+            extrapolate: true,
+            ..SolverConfig::default()
+        },
+    );
+    let xi = 0.05;
+    let bound = 0.96 * xi / 0.04;
+    let plain = run(&m, &g, &SolverConfig::default());
+    let fast = run(
+        &m,
+        &g,
+        &SolverConfig {
+            extrapolate: true,
+            ..SolverConfig::default()
+        },
+    );
+    assert!(plain.converged() && fast.converged());
+    for s in [&plain, &fast] {
+        let err = max_diff(&s.v, &reference.v);
+        assert!(err <= bound, "error {err} > bound {bound}");
+        assert!(s.final_delta <= xi);
+    }
+    assert!(
+        fast.sweeps.len() * 2 < plain.sweeps.len(),
+        "{} vs {} sweeps",
+        fast.sweeps.len(),
+        plain.sweeps.len()
+    );
+    // The absorbing goal breaks the constant-shift property: no extrapolation then.
+    let c = SolverConfig {
+        absorbing_goal: true,
+        ..SolverConfig::default()
+    };
+    let a = run(&m, &g, &c);
+    let b = run(
+        &m,
+        &g,
+        &SolverConfig {
+            extrapolate: true,
+            ..c
+        },
+    );
+    assert_eq!(a.v, b.v);
 }

@@ -10,7 +10,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use fuzzyq_core::solver::{Progress, SolveError};
-use fuzzyq_sim::config::{Backup, EnvConfig, Precision, Sweep, TrainConfig};
+use fuzzyq_sim::config::{Backup, EnvConfig, KernelChoice, Precision, Sweep, TrainConfig};
 use fuzzyq_sim::{PolicyArtifact, SimError};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
@@ -40,12 +40,23 @@ pub(crate) struct TrainArgs {
     /// Goal states collect their reward and have zero future value.
     #[arg(long)]
     absorbing_goal: bool,
+    /// Extrapolate synchronous sweeps with MacQueen's bounds (fewer sweeps, same stopping
+    /// rule and error bound).
+    #[arg(long, overrides_with = "no_extrapolate")]
+    extrapolate: bool,
+    /// Plain sweeps from theta_0 = 0, as in the paper.
+    #[arg(long)]
+    no_extrapolate: bool,
     /// Backup implementation.
     #[arg(long, value_enum)]
     backup: Option<BackupArg>,
     /// Solver precision.
     #[arg(long, value_enum)]
     precision: Option<PrecisionArg>,
+    /// Kernel instance of the block backup (default: the fastest this CPU runs; all give
+    /// identical results).
+    #[arg(long, value_enum)]
+    kernel: Option<KernelArg>,
     /// Worker threads (default: one per core; results do not depend on it).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
@@ -65,6 +76,13 @@ enum BackupArg {
     Auto,
     Block,
     Generic,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum KernelArg {
+    Scalar,
+    Avx2,
+    Avx512,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -91,12 +109,17 @@ struct Summary<'a> {
     joint_actions: usize,
     q_values: f64,
     backup: &'a str,
+    kernel: &'a str,
+    multiply_adds_per_sweep: Option<f64>,
+    sweep_seconds: f64,
+    gflops_fma: Option<f64>,
     precision: Precision,
     sweep: Sweep,
     absorbing_goal: bool,
     threads: usize,
     peak_memory_mb: Option<f64>,
     deltas: &'a [(f64, f64)],
+    extrapolated: &'a [usize],
 }
 
 fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
@@ -131,12 +154,25 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     if args.absorbing_goal {
         s.absorbing_goal = true;
     }
+    if args.extrapolate {
+        s.extrapolate = true;
+    }
+    if args.no_extrapolate {
+        s.extrapolate = false;
+    }
     if let Some(b) = args.backup {
         s.backup = match b {
             BackupArg::Auto => Backup::Auto,
             BackupArg::Block => Backup::Block,
             BackupArg::Generic => Backup::Generic,
         };
+    }
+    if let Some(k) = args.kernel {
+        s.kernel = Some(match k {
+            KernelArg::Scalar => KernelChoice::Scalar,
+            KernelArg::Avx2 => KernelChoice::Avx2,
+            KernelArg::Avx512 => KernelChoice::Avx512,
+        });
     }
     if let Some(p) = args.precision {
         s.precision = match p {
@@ -158,6 +194,9 @@ fn peak_memory_mb() -> Option<f64> {
 
 fn fmt_delta(p: &Progress) -> String {
     let d = p.record.delta;
+    if p.record.extrapolated {
+        return "extrapolated".into();
+    }
     match d.value() {
         Some(v) => format!("delta {v:.4}"),
         None => format!("delta in [{:.4}, {:.4}]", d.lower, d.upper),
@@ -201,13 +240,18 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     if !args.quiet {
         eprintln!(
             "fuzzyq train: {env}, {n_cores} cores x {joint} joint actions ({:.3e} Q-values), \
-             gamma {}, xi {}, {} sweeps, {threads} threads",
+             gamma {}, xi {}, {} sweeps{}, {threads} threads",
             n_cores as f64 * joint as f64,
             config.solver.gamma,
             config.solver.xi,
             match config.solver.sweep {
                 Sweep::Sync => "synchronous",
                 Sweep::Async => "asynchronous",
+            },
+            if config.solver.extrapolate && config.solver.sweep == Sweep::Sync {
+                " with extrapolation"
+            } else {
+                ""
             },
         );
     }
@@ -291,12 +335,20 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             joint_actions: joint,
             q_values: n_cores as f64 * joint as f64,
             backup: &s.backup,
+            kernel: &s.kernel,
+            multiply_adds_per_sweep: s.multiply_adds_per_sweep,
+            sweep_seconds: s.sweep_seconds,
+            // Billions of multiply-adds per second over the sweeps.
+            gflops_fma: s
+                .multiply_adds_per_sweep
+                .map(|m| m * s.sweeps as f64 / s.sweep_seconds.max(1e-9) / 1e9),
             precision: config.solver.precision,
             sweep: config.solver.sweep,
             absorbing_goal: config.solver.absorbing_goal,
             threads,
             peak_memory_mb: peak_memory_mb(),
             deltas: &s.deltas,
+            extrapolated: &s.extrapolated,
         };
         write_json(path, &summary)?;
     }

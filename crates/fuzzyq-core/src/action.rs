@@ -34,7 +34,7 @@ impl<'a, T: Real> ActionSet<'a, T> {
     /// Wraps `values` (action-major, `dim` components per action), checking that there is at
     /// least one action, the length is a multiple of `dim` and every component is finite.
     pub fn try_new(values: &'a [T], dim: usize) -> Result<Self, EvalError> {
-        if dim == 0 || values.len() < dim || values.len() % dim != 0 {
+        if dim == 0 || values.len() < dim || !values.len().is_multiple_of(dim) {
             return Err(EvalError::Length {
                 what: "action set components",
                 expected: dim.max(1) * (values.len() / dim.max(1)).max(1),

@@ -82,6 +82,8 @@ pub struct TrainSummary {
     pub final_delta: f64,
     /// `(lower, upper)` bounds of every sweep's change (equal when exact).
     pub deltas: Vec<(f64, f64)>,
+    /// The sweeps (from 1) that started from an extrapolated `V` (not tested against `xi`).
+    pub extrapolated: Vec<usize>,
     /// Wall-clock seconds of the solve.
     pub seconds: f64,
     /// The a-priori sweep bound (eq 37).
@@ -90,6 +92,12 @@ pub struct TrainSummary {
     pub reward_bound: f64,
     /// Backup path used: `"block"` or `"generic"`.
     pub backup: String,
+    /// Kernel instance: `"avx512"`, `"avx2"`, `"scalar"` or `"generic"`.
+    pub kernel: String,
+    /// Multiply-adds of one sweep on the block path.
+    pub multiply_adds_per_sweep: Option<f64>,
+    /// Seconds spent in sweeps (the solve minus its set-up and the final passes).
+    pub sweep_seconds: f64,
     /// The fuzzyq version that trained it.
     pub fuzzyq_version: String,
 }
@@ -303,10 +311,14 @@ mod tests {
                 converged: true,
                 final_delta: 0.01,
                 deltas: vec![(5.0, 5.0), (0.1, 0.2), (0.01, 0.01)],
+                extrapolated: vec![2],
                 seconds: 0.5,
                 sweep_bound: 200,
                 reward_bound: 5.0,
                 backup: "block".into(),
+                kernel: "scalar".into(),
+                multiply_adds_per_sweep: Some(1e6),
+                sweep_seconds: 0.4,
                 fuzzyq_version: "test".into(),
             },
         }

@@ -43,6 +43,7 @@ sweep = "sync"                              # "sync" (Jacobi, the paper) or "asy
 absorbing_goal = false                      # true: goal states collect their reward, then nothing
 backup = "auto"                             # "auto", "block" or "generic"
 precision = "f32"                           # "f32" or "f64"
+extrapolate = true                          # MacQueen extrapolation: fewer sweeps, same guarantee; false = the paper's plain sweeps
 "#;
 
 /// A whole training configuration.
@@ -104,6 +105,34 @@ pub struct SolverSettings {
     pub backup: Backup,
     /// Floating-point precision of the solver.
     pub precision: Precision,
+    /// Extrapolate synchronous sweeps with MacQueen's bounds (see the solver docs).
+    #[serde(default)]
+    pub extrapolate: bool,
+    /// Force a kernel instance (`"scalar"`, `"avx2"`, `"avx512"`); all give the same results.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<KernelChoice>,
+}
+
+/// Kernel instance (config spelling of [`fuzzyq_core::solver::Kernel`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KernelChoice {
+    /// Portable scalar code.
+    Scalar,
+    /// AVX2 with FMA.
+    Avx2,
+    /// AVX-512F.
+    Avx512,
+}
+
+impl From<KernelChoice> for fuzzyq_core::solver::Kernel {
+    fn from(k: KernelChoice) -> Self {
+        match k {
+            KernelChoice::Scalar => Self::Scalar,
+            KernelChoice::Avx2 => Self::Avx2,
+            KernelChoice::Avx512 => Self::Avx512,
+        }
+    }
 }
 
 /// Sweep order (config spelling of [`SweepMode`]).
@@ -152,6 +181,8 @@ impl Default for SolverSettings {
             absorbing_goal: c.absorbing_goal,
             backup: Backup::Auto,
             precision: Precision::F32,
+            extrapolate: true,
+            kernel: None,
         }
     }
 }
@@ -174,6 +205,8 @@ impl SolverSettings {
                 Backup::Block => BackupPath::Block,
                 Backup::Generic => BackupPath::Generic,
             },
+            kernel: self.kernel.map(Into::into),
+            extrapolate: self.extrapolate,
         }
     }
 

@@ -81,6 +81,12 @@ fn artifact<T>(
                 .iter()
                 .map(|r| (r.delta.lower, r.delta.upper))
                 .collect(),
+            extrapolated: s
+                .sweeps
+                .iter()
+                .filter(|r| r.extrapolated)
+                .map(|r| r.sweep)
+                .collect(),
             seconds: s.seconds,
             sweep_bound: s.bound,
             reward_bound: s.reward_bound,
@@ -89,6 +95,9 @@ fn artifact<T>(
                 _ => "block",
             }
             .into(),
+            kernel: s.kernel.into(),
+            multiply_adds_per_sweep: s.multiply_adds_per_sweep,
+            sweep_seconds: s.sweep_seconds,
             fuzzyq_version: env!("CARGO_PKG_VERSION").into(),
         },
         values: values(s.v),

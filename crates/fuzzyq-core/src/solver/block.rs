@@ -26,6 +26,7 @@
 
 use std::vec::Vec;
 
+use super::simd::{Kernels, RowsBuf, last_scratch_len};
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
 use crate::backup::{SparseRows, contract};
@@ -43,30 +44,65 @@ struct BlockTable<T> {
     n_actions: usize,
     /// Row-major grid offset of each block core (its contribution to the flat grid index).
     grid_offset: Vec<usize>,
-    ptr: Vec<u32>,
-    col: Vec<u32>,
-    weight: Vec<T>,
+    /// One row per (block core, block action): the successor's memberships.
+    rows: RowsBuf<T>,
 }
 
 impl<T: Real> BlockTable<T> {
-    fn rows(&self) -> SparseRows<'_, T> {
-        SparseRows {
-            ptr: &self.ptr,
-            col: &self.col,
-            weight: &self.weight,
-        }
-    }
-
     fn row(&self, c: usize, a: usize) -> (&[u32], &[T]) {
-        let i = c * self.n_actions + a;
-        let (s, e) = (self.ptr[i] as usize, self.ptr[i + 1] as usize);
-        (&self.col[s..e], &self.weight[s..e])
+        self.rows.view().row(c * self.n_actions + a)
     }
 }
 
-pub(super) struct BlockOperator<T> {
+/// How the last stage delivers its results.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Last {
+    /// Every core's row of expected values, one [`Out::Row`] per core.
+    Rows,
+    /// Fused with the maximum over actions (of the absolute value if `abs`): one
+    /// [`Out::Max`] per run of the last block's cores.
+    Max {
+        /// Maximum of the absolute values.
+        abs: bool,
+    },
+    /// The lowest maximising action of each core: one [`Out::Arg`] per run.
+    Argmax,
+}
+
+/// What a run delivers: for the core(s) starting at its first argument.
+enum Out<'a, T> {
+    Row(&'a [T]),
+    Max(&'a [T]),
+    Arg(&'a [u32]),
+}
+
+/// Per-task buffers of the block path.
+struct Work<T> {
+    /// One output buffer per stage.
+    stages: Vec<Vec<T>>,
+    /// Everything else the stages use.
+    extra: Extra<T>,
+    /// Reduction buffers.
+    reduce: super::ReduceWork<T>,
+}
+
+/// Buffers besides the stage outputs.
+struct Extra<T> {
+    /// Stage 0 computed transposed (`[a][r]`), before it is interleaved into `[r][a]`.
+    scratch: Vec<T>,
+    /// Maxima of a run of last-block cores.
+    maxima: Vec<T>,
+    /// Argmaxes of a run of last-block cores.
+    args: Vec<u32>,
+    /// Row bounds of the pruned last stage.
+    bounds: Vec<T>,
+}
+
+pub(super) struct BlockOperator<T: 'static> {
     /// Tables in contraction order.
     tables: Vec<BlockTable<T>>,
+    /// The kernels chosen for this CPU.
+    kernels: &'static Kernels<T>,
     /// Per stage: product of the later blocks' core counts.
     r_len: Vec<usize>,
     /// Per stage: product of the earlier blocks' action counts.
@@ -266,14 +302,14 @@ impl<T: Real> BlockOperator<T> {
                     ptr.push(len);
                 }
             }
+            let rows = RowsBuf::new(ptr, col, weight, n_cores)
+                .expect("rows are built with in-range columns");
             tables.push(BlockTable {
                 dims,
                 n_cores,
                 n_actions,
                 grid_offset,
-                ptr,
-                col,
-                weight,
+                rows,
             });
         }
 
@@ -303,6 +339,7 @@ impl<T: Real> BlockOperator<T> {
         let identity = product_len == m && map.iter().enumerate().all(|(u, &p)| p as usize == u);
         Ok(Self {
             tables,
+            kernels: T::kernels(None).expect("the scalar kernels always exist"),
             r_len,
             p_len,
             product_len,
@@ -318,6 +355,29 @@ impl<T: Real> BlockOperator<T> {
         self.r_len[0]
     }
 
+    /// Calls `f(internal, grid)` for every core in internal order, stepping the block cores
+    /// like an odometer (no divisions).
+    pub(super) fn for_each_grid_index(&self, mut f: impl FnMut(usize, usize)) {
+        let nb = self.tables.len();
+        let mut digit = vec![0usize; nb];
+        let mut g: usize = self.tables.iter().map(|t| t.grid_offset[0]).sum();
+        let n: usize = self.tables.iter().map(|t| t.n_cores).product();
+        for i in 0..n {
+            f(i, g);
+            for b in (0..nb).rev() {
+                let t = &self.tables[b];
+                g -= t.grid_offset[digit[b]];
+                digit[b] += 1;
+                if digit[b] < t.n_cores {
+                    g += t.grid_offset[digit[b]];
+                    break;
+                }
+                digit[b] = 0;
+                g += t.grid_offset[0];
+            }
+        }
+    }
+
     /// Internal index (contraction order, first block slowest) -> row-major grid index.
     pub(super) fn to_grid_index(&self, internal: usize) -> usize {
         let mut g = 0;
@@ -328,53 +388,226 @@ impl<T: Real> BlockOperator<T> {
         g
     }
 
-    /// Stage output buffers, one per stage.
-    fn bufs(&self) -> Vec<Vec<T>> {
-        self.tables
-            .iter()
-            .enumerate()
-            .map(|(b, t)| vec![T::ZERO; self.r_len[b] * t.n_actions * self.p_len[b]])
-            .collect()
+    /// Uses the kernels `choice`, if this CPU can run them.
+    pub(super) fn set_kernel(&mut self, choice: super::Kernel) -> Result<(), SolveError> {
+        self.kernels = T::kernels(Some(choice)).ok_or(SolveError::KernelUnavailable(choice))?;
+        Ok(())
+    }
+
+    /// Name of the kernel instance in use (`"avx512"`, `"avx2"` or `"scalar"`).
+    pub(super) fn kernel_name(&self) -> &'static str {
+        self.kernels.name
+    }
+
+    /// Multiply-adds of one sweep: stage `b` runs once per combination of the earlier blocks'
+    /// cores, over every stored entry of its table, `R_b * P_b` lanes each.
+    pub(super) fn multiply_adds(&self) -> f64 {
+        let mut contexts = 1.0;
+        let mut total = 0.0;
+        for (b, t) in self.tables.iter().enumerate() {
+            total += contexts * t.rows.nnz() as f64 * (self.r_len[b] * self.p_len[b]) as f64;
+            contexts *= t.n_cores as f64;
+        }
+        total
+    }
+
+    /// Fresh per-task buffers.
+    fn work<M: Model<T> + Sync + ?Sized>(&self, op: &Operator<'_, T, M>) -> Work<T> {
+        let last = self.tables.last().expect("at least one block");
+        let nb = self.tables.len();
+        Work {
+            stages: self
+                .tables
+                .iter()
+                .enumerate()
+                .map(|(b, t)| vec![T::ZERO; self.r_len[b] * t.n_actions * self.p_len[b]])
+                .collect(),
+            extra: Extra {
+                scratch: vec![T::ZERO; self.r_len[0] * self.tables[0].n_actions],
+                maxima: vec![T::ZERO; last.n_cores],
+                args: vec![0; last.n_cores],
+                bounds: vec![T::ZERO; last_scratch_len(last.n_cores, self.p_len[nb - 1])],
+            },
+            reduce: op.reduce_work(),
+        }
+    }
+
+    /// Stage `level` for block core `c`: `out = T_level[c] x input`. A stage over rows of one
+    /// value (the first stage) runs transposed, as `n_actions` long rows, then interleaves.
+    fn stage(&self, level: usize, c: usize, input: &[T], out: &mut [T], scratch: &mut [T]) {
+        let t = &self.tables[level];
+        let (r, p) = (self.r_len[level], self.p_len[level]);
+        if p == 1 && r > 1 && t.n_actions > 1 {
+            let na = t.n_actions;
+            (self.kernels.stage)(
+                t.rows.view(),
+                c * na,
+                na,
+                1,
+                r,
+                input,
+                &mut scratch[..na * r],
+            );
+            for (ri, o) in out[..r * na].chunks_exact_mut(na).enumerate() {
+                for (a, x) in o.iter_mut().enumerate() {
+                    *x = scratch[a * r + ri];
+                }
+            }
+        } else {
+            (self.kernels.stage)(
+                t.rows.view(),
+                c * t.n_actions,
+                t.n_actions,
+                r,
+                p,
+                input,
+                out,
+            );
+        }
+    }
+
+    /// The fused last stage on `input` for the last-block cores `first..first + n`.
+    fn last_stage<'w>(
+        &self,
+        level: usize,
+        first: usize,
+        n: usize,
+        input: &[T],
+        last: Last,
+        extra: &'w mut Extra<T>,
+    ) -> Out<'w, T> {
+        let t = &self.tables[level];
+        let (rows, na, p) = (t.rows.view(), t.n_actions, self.p_len[level]);
+        let m = &mut extra.maxima[..n];
+        let bounds = &mut extra.bounds;
+        match last {
+            Last::Max { abs } => {
+                (self.kernels.last)(rows, first, na, p, abs, input, m, bounds);
+                Out::Max(m)
+            }
+            Last::Argmax => {
+                (self.kernels.last)(rows, first, na, p, false, input, m, bounds);
+                let a = &mut extra.args[..n];
+                (self.kernels.argmax)(rows, first, na, p, input, m, a);
+                Out::Arg(a)
+            }
+            Last::Rows => unreachable!("rows are not fused"),
+        }
     }
 
     /// Runs stage `level` for block core `c` on `input`, then the later stages for every core
-    /// of the later blocks; `emit(local, ev)` receives each core's expected values, `local`
-    /// being the core's index among those sharing the blocks before `level`.
-    fn run<E: FnMut(usize, &[T])>(
+    /// of the later blocks, delivering the results as `last` says; `local` numbers the cores
+    /// among those sharing the blocks before `level`.
+    #[allow(clippy::too_many_arguments)] // recursion state, spelled out
+    fn run<E: FnMut(usize, Out<'_, T>)>(
         &self,
         level: usize,
         c: usize,
         input: &[T],
-        bufs: &mut [Vec<T>],
+        stages: &mut [Vec<T>],
+        extra: &mut Extra<T>,
         local: usize,
+        last: Last,
         emit: &mut E,
     ) {
-        let t = &self.tables[level];
-        let (out, deeper) = bufs.split_first_mut().expect("one buffer per stage");
-        contract(
-            t.rows(),
-            c * t.n_actions,
-            t.n_actions,
-            t.n_cores,
-            self.r_len[level],
-            self.p_len[level],
-            input,
-            out,
-        )
-        .expect("block tables and buffers are sized at construction");
-        if level + 1 == self.tables.len() {
+        let nb = self.tables.len();
+        if last != Last::Rows && level + 1 == nb {
+            // A single block: this stage is the last one, for core `c` alone.
+            let out = self.last_stage(level, c, 1, input, last, extra);
             emit(local, out);
-        } else {
-            let n = self.tables[level + 1].n_cores;
-            for c2 in 0..n {
-                self.run(level + 1, c2, out, deeper, local * n + c2, emit);
-            }
+            return;
+        }
+        let (out, deeper) = stages.split_first_mut().expect("one buffer per stage");
+        self.stage(level, c, input, out, &mut extra.scratch);
+        if level + 1 == nb {
+            emit(local, Out::Row(out));
+            return;
+        }
+        let next = &self.tables[level + 1];
+        if last != Last::Rows && level + 2 == nb {
+            let out = self.last_stage(level + 1, 0, next.n_cores, out, last, extra);
+            emit(local * next.n_cores, out);
+            return;
+        }
+        for c2 in 0..next.n_cores {
+            self.run(
+                level + 1,
+                c2,
+                out,
+                deeper,
+                extra,
+                local * next.n_cores + c2,
+                last,
+                emit,
+            );
         }
     }
 
     /// Every core of slab `c0` against `v` (internal order), sequentially.
-    fn slab<E: FnMut(usize, &[T])>(&self, c0: usize, v: &[T], bufs: &mut [Vec<T>], emit: &mut E) {
-        self.run(0, c0, v, bufs, 0, emit);
+    fn slab<E: FnMut(usize, Out<'_, T>)>(
+        &self,
+        c0: usize,
+        v: &[T],
+        w: &mut Work<T>,
+        last: Last,
+        emit: &mut E,
+    ) {
+        self.run(0, c0, v, &mut w.stages, &mut w.extra, 0, last, emit);
+    }
+
+    /// Whether the last stage can be fused with the reduction `kind`: the maximum over the
+    /// product actions is the maximum over joint actions (identity map) and, for `Max`, the
+    /// reward does not depend on the action.
+    fn fused<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        kind: Reduce,
+    ) -> Option<Last> {
+        match kind {
+            _ if self.map.is_some() => None,
+            Reduce::Max if op.rewards.is_some() => Some(Last::Max { abs: false }),
+            Reduce::Argmax if op.rewards.is_some() => Some(Last::Argmax),
+            Reduce::AbsMax => Some(Last::Max { abs: true }),
+            _ => None,
+        }
+    }
+
+    /// Stores what a run delivered for the cores `base + first ..` into `out` (indices offset
+    /// by `shift`), reducing rows as `kind` says.
+    #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out
+    fn deliver<U, M: Model<T> + Sync + ?Sized>(
+        op: &Operator<'_, T, M>,
+        kind: Reduce,
+        base: usize,
+        shift: usize,
+        first: usize,
+        values: Out<'_, T>,
+        out: &mut [U],
+        work: &mut super::ReduceWork<T>,
+        pick: &impl Fn((T, u32)) -> U,
+    ) {
+        let at = first - shift;
+        match values {
+            Out::Row(ev) => out[at] = pick(op.reduce(base + first, ev, kind, work)),
+            Out::Max(m) => {
+                let abs = kind == Reduce::AbsMax;
+                for (i, &x) in m.iter().enumerate() {
+                    let core = base + first + i;
+                    let v = if abs {
+                        op.finish_abs(core, x)
+                    } else {
+                        op.finish_max(core, x)
+                    };
+                    out[at + i] = pick((v, 0));
+                }
+            }
+            Out::Arg(a) => {
+                for (i, &u) in a.iter().enumerate() {
+                    let u = if op.is_goal(base + first + i) { 0 } else { u };
+                    out[at + i] = pick((T::ZERO, u));
+                }
+            }
+        }
     }
 
     /// Reduces every core against `v` (internal order) into `out`, keeping `pick` of each
@@ -388,13 +621,19 @@ impl<T: Real> BlockOperator<T> {
         pick: impl Fn((T, u32)) -> U + Sync + Send,
     ) {
         let slab = self.slab_len();
+        let last = self.fused(op, kind).unwrap_or(Last::Rows);
         par::for_each_chunk_mut(
             out,
             slab,
-            || (self.bufs(), op.reduce_work()),
-            |(bufs, work), c0, chunk| {
-                self.slab(c0, v, bufs, &mut |local, ev| {
-                    chunk[local] = pick(op.reduce(c0 * slab + local, ev, kind, work));
+            || self.work(op),
+            |w, c0, chunk| {
+                let Work {
+                    stages,
+                    extra,
+                    reduce,
+                } = w;
+                self.run(0, c0, v, stages, extra, 0, last, &mut |first, values| {
+                    Self::deliver(op, kind, c0 * slab, 0, first, values, chunk, reduce, &pick);
                 });
             },
         );
@@ -407,44 +646,68 @@ impl<T: Real> BlockOperator<T> {
     ) -> f64 {
         let slab = self.slab_len();
         let n0 = self.tables[0].n_cores;
-        let mut bufs = self.bufs();
-        let mut work = op.reduce_work();
+        let last = self.fused(op, Reduce::Max).unwrap_or(Last::Rows);
+        let mut w = self.work(op);
+        let mut reduce = op.reduce_work();
         let mut dv = 0.0f64;
         let mut fresh = vec![T::ZERO; slab];
+        let keep = |r: (T, u32)| r.0;
         for c0 in 0..n0 {
             if self.tables.len() == 1 {
                 // One block: the slab is one core; plain Gauss-Seidel.
-                let mut val = T::ZERO;
-                self.slab(c0, v, &mut bufs, &mut |_, ev| {
-                    val = op.reduce(c0, ev, Reduce::Max, &mut work).0;
+                self.slab(c0, v, &mut w, last, &mut |first, values| {
+                    Self::deliver(
+                        op,
+                        Reduce::Max,
+                        c0 * slab,
+                        0,
+                        first,
+                        values,
+                        &mut fresh,
+                        &mut reduce,
+                        &keep,
+                    );
                 });
-                fresh[0] = val;
             } else {
                 // Stage 0 reads V as earlier slabs left it; the later stages only read its
                 // output, so they run in parallel over the second block's cores.
-                let t = &self.tables[0];
-                contract(
-                    t.rows(),
-                    c0 * t.n_actions,
-                    t.n_actions,
-                    t.n_cores,
-                    self.r_len[0],
-                    1,
-                    v,
-                    &mut bufs[0],
-                )
-                .expect("block tables and buffers are sized at construction");
-                let w0 = &bufs[0];
+                let (w0, _) = w.stages.split_first_mut().expect("one buffer per stage");
+                self.stage(0, c0, v, w0, &mut w.extra.scratch);
+                let w0 = &w.stages[0];
                 let chunk_len = self.r_len[1];
                 par::for_each_chunk_mut(
                     &mut fresh,
                     chunk_len,
-                    || (self.bufs(), op.reduce_work()),
-                    |(bufs, work), c1, chunk| {
-                        self.run(1, c1, w0, &mut bufs[1..], c1, &mut |local, ev| {
-                            let i = c0 * slab + local;
-                            chunk[local - c1 * chunk_len] = op.reduce(i, ev, Reduce::Max, work).0;
-                        });
+                    || self.work(op),
+                    |t, c1, chunk| {
+                        let Work {
+                            stages,
+                            extra,
+                            reduce,
+                        } = t;
+                        let shift = c1 * chunk_len;
+                        self.run(
+                            1,
+                            c1,
+                            w0,
+                            &mut stages[1..],
+                            extra,
+                            c1,
+                            last,
+                            &mut |first, values| {
+                                Self::deliver(
+                                    op,
+                                    Reduce::Max,
+                                    c0 * slab,
+                                    shift,
+                                    first,
+                                    values,
+                                    chunk,
+                                    reduce,
+                                    &keep,
+                                );
+                            },
+                        );
                     },
                 );
             }
@@ -461,20 +724,9 @@ impl<T: Real> BlockOperator<T> {
         op: &Operator<'_, T, M>,
         dv: &[T],
     ) -> T {
-        let slab = self.slab_len();
-        let maxima = par::map_indexed(
-            self.tables[0].n_cores,
-            1,
-            || (self.bufs(), op.reduce_work()),
-            |(bufs, work), c0| {
-                let mut m = T::ZERO;
-                self.slab(c0, dv, bufs, &mut |local, ev| {
-                    m = m.max_of(op.reduce(c0 * slab + local, ev, Reduce::AbsMax, work).0);
-                });
-                m
-            },
-        );
-        maxima.into_iter().fold(T::ZERO, T::max_of)
+        let mut out = vec![T::ZERO; dv.len()];
+        self.each_core(op, dv, &mut out, Reduce::AbsMax, |r| r.0);
+        out.into_iter().fold(T::ZERO, T::max_of)
     }
 
     /// `Q(x, .)` at any state from `v` in grid order (see [`Operator::q_values`]).

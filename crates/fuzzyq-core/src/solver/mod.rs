@@ -37,9 +37,25 @@
 //!   keeps the result independent of the thread count). A `theta_k` over all cores is not
 //!   defined for these sweeps, so the stopping rule uses the change of `V` instead.
 //!
-//! Both converge to the same fixed point (Theorems 1-2 of the paper; the operator is a
+//! - **extrapolated** ([`SolverConfig::extrapolate`], synchronous only): the backup commutes
+//!   with constant shifts, `T(V + c) = T(V) + gamma c` (memberships sum to 1), so MacQueen's
+//!   bounds `V* in V_{k+1} + gamma/(1-gamma) [min dV, max dV]` hold. Every other sweep moves
+//!   `V` to their midpoint, which removes the slowest mode (on the paper's task, 114 sweeps
+//!   become 37). The stopping rule is tested only on sweeps whose input was not shifted, where
+//!   `theta_{k+1} = H(theta_k)` holds, so the a-posteriori bound
+//!   `||theta_K - theta*|| <= gamma/(1-gamma) * delta_K` keeps holding. Not used with an
+//!   absorbing goal, where the shift property fails.
+//!
+//! All converge to the same fixed point (Theorems 1-2 of the paper; the operator is a
 //! `gamma`-contraction in the infinity norm). With `theta_0 = 0` the a-priori bound of eq 37,
 //! `k <= log_gamma(xi (1 - gamma) / (R (1 + gamma)))` with `R = max |rho|`, is reported.
+//!
+//! # Kernels
+//! The block products run in kernels chosen at run time from the CPU's features (AVX-512F,
+//! AVX2 + FMA, or portable scalar code; [`Kernel`] forces one). They are register-blocked, and
+//! the last stage is fused with the maximum over actions: it bounds each action's row first
+//! and skips rows that provably cannot raise the maximum. Every instance sums in the same order
+//! with fused multiply-adds, so all return bit-identical results.
 //!
 //! # Determinism
 //! Every value is computed by one task in a fixed order; work is split between threads only
@@ -55,6 +71,7 @@
 mod block;
 mod generic;
 mod par;
+pub(crate) mod simd;
 
 use core::ops::ControlFlow;
 use std::time::Instant;
@@ -142,6 +159,39 @@ pub enum BackupPath {
     Generic,
 }
 
+/// An instruction set for the block path's kernels (see [`Operator::with_kernel`]). Every
+/// instance computes bit-identical results; they differ only in speed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Kernel {
+    /// Portable scalar code (fused multiply-add through `mul_add`).
+    Scalar,
+    /// x86-64 AVX2 with FMA.
+    Avx2,
+    /// x86-64 AVX-512F.
+    Avx512,
+}
+
+impl Kernel {
+    /// The name used in reports and on the command line.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Scalar => "scalar",
+            Self::Avx2 => "avx2",
+            Self::Avx512 => "avx512",
+        }
+    }
+
+    /// Every instance, fastest first.
+    pub const ALL: [Kernel; 3] = [Self::Avx512, Self::Avx2, Self::Scalar];
+
+    /// Whether this CPU can run the instance.
+    #[must_use]
+    pub fn is_available(self) -> bool {
+        simd::select::<f32>(Some(self)).is_some()
+    }
+}
+
 /// Settings of a fuzzy Q-iteration run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverConfig {
@@ -157,6 +207,12 @@ pub struct SolverConfig {
     pub absorbing_goal: bool,
     /// Backup implementation.
     pub path: BackupPath,
+    /// Force a kernel instance (default: the fastest this CPU supports).
+    pub kernel: Option<Kernel>,
+    /// Extrapolate synchronous sweeps to the midpoint of MacQueen's bounds every other
+    /// sweep (ignored with an absorbing goal). The stopping rule is tested only on sweeps
+    /// whose input was not shifted, so it keeps its meaning and its error bound.
+    pub extrapolate: bool,
 }
 
 impl Default for SolverConfig {
@@ -169,6 +225,8 @@ impl Default for SolverConfig {
             sweep: SweepMode::Synchronous,
             absorbing_goal: false,
             path: BackupPath::Auto,
+            kernel: None,
+            extrapolate: false,
         }
     }
 }
@@ -252,6 +310,8 @@ pub enum SolveError {
         /// Which table.
         what: &'static str,
     },
+    /// The requested kernel instance cannot run on this CPU.
+    KernelUnavailable(Kernel),
     /// The observer asked to stop.
     Interrupted {
         /// Sweeps completed before the stop.
@@ -287,6 +347,9 @@ impl core::fmt::Display for SolveError {
             }
             Self::NonFinite { what } => write!(f, "the model produced a non-finite {what}"),
             Self::TooLarge { what } => write!(f, "the {what} would exceed 2^32 entries"),
+            Self::KernelUnavailable(k) => {
+                write!(f, "this CPU cannot run the {} kernels", k.name())
+            }
             Self::Interrupted { sweeps } => write!(f, "interrupted after {sweeps} sweeps"),
         }
     }
@@ -336,6 +399,8 @@ pub struct SweepRecord {
     pub delta_v: f64,
     /// Seconds since the solve started, at the end of this sweep.
     pub seconds: f64,
+    /// The sweep started from an extrapolated `V`: its change is not tested against `xi`.
+    pub extrapolated: bool,
 }
 
 /// What the observer sees after each sweep.
@@ -377,6 +442,12 @@ pub struct Solution<T> {
     pub reward_bound: f64,
     /// The backup path used (`Block` or `Generic`).
     pub path: BackupPath,
+    /// The kernel instance (see [`Operator::kernel`]).
+    pub kernel: &'static str,
+    /// Multiply-adds of one sweep on the block path.
+    pub multiply_adds_per_sweep: Option<f64>,
+    /// Seconds spent in the sweeps themselves (without set-up, exact-delta and greedy passes).
+    pub sweep_seconds: f64,
     /// Wall-clock seconds of the whole solve.
     pub seconds: f64,
 }
@@ -425,7 +496,7 @@ pub struct Operator<'a, T: Real, M: ?Sized> {
     path: Path<T>,
 }
 
-enum Path<T> {
+enum Path<T: 'static> {
     Generic(GenericOperator),
     Block(BlockOperator<T>),
 }
@@ -472,6 +543,14 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         Ok(op)
     }
 
+    /// Uses the block path's kernel instance `kernel` (no effect on the generic path).
+    pub fn with_kernel(mut self, kernel: Kernel) -> Result<Self, SolveError> {
+        if let Path::Block(b) = &mut self.path {
+            b.set_kernel(kernel)?;
+        }
+        Ok(self)
+    }
+
     /// Number of cores.
     #[must_use]
     pub fn n_cores(&self) -> usize {
@@ -490,6 +569,26 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         match self.path {
             Path::Generic(_) => BackupPath::Generic,
             Path::Block(_) => BackupPath::Block,
+        }
+    }
+
+    /// The kernel instance of the block path (`"avx512"`, `"avx2"`, `"scalar"`), or
+    /// `"generic"` for the generic path.
+    #[must_use]
+    pub fn kernel(&self) -> &'static str {
+        match &self.path {
+            Path::Generic(_) => "generic",
+            Path::Block(b) => b.kernel_name(),
+        }
+    }
+
+    /// Multiply-adds of one synchronous sweep on the block path (`None` on the generic path,
+    /// whose cost is dominated by model steps and look-ups).
+    #[must_use]
+    pub fn multiply_adds_per_sweep(&self) -> Option<f64> {
+        match &self.path {
+            Path::Generic(_) => None,
+            Path::Block(b) => Some(b.multiply_adds()),
         }
     }
 
@@ -601,18 +700,25 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                 (self.gamma * best, 0)
             }
             Reduce::Max | Reduce::Argmax => {
-                if let (Some(r), Reduce::Max, None) = (&self.rewards, kind, map) {
-                    // State-only reward, identity map: theta = r + gamma ev is monotone in ev,
-                    // so the max commutes with it exactly.
+                if let Some(r) = &self.rewards {
+                    // State-only reward: theta = r + gamma ev is monotone in ev, so the max
+                    // commutes with it exactly, and the greedy action is decided on ev (the
+                    // lowest joint index with the largest expected value; rounding in
+                    // r + gamma ev cannot merge distinct values into a false tie).
                     let rd = r[internal];
                     if goal {
                         return (rd, 0);
                     }
-                    let mut best = ev[0];
-                    for &x in &ev[1..] {
-                        best = best.max_of(x);
+                    let mut best = at(0);
+                    let mut arg = 0u32;
+                    for u in 1..m {
+                        let x = at(u);
+                        if x > best {
+                            best = x;
+                            arg = u as u32;
+                        }
                     }
-                    return (rd + self.gamma * best, 0);
+                    return (rd + self.gamma * best, arg);
                 }
                 let reward_at = |u: usize, work: &mut ReduceWork<T>| -> T {
                     match &self.rewards {
@@ -638,6 +744,26 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                 }
                 (best, arg)
             }
+        }
+    }
+
+    /// `V` of a core from the maximum `m` of its expected values (state-only reward): the
+    /// same expression as [`Self::reduce`]'s fast path, so both give the same bits.
+    fn finish_max(&self, internal: usize, m: T) -> T {
+        let r = self.rewards.as_ref().expect("state-only reward")[internal];
+        if self.is_goal(internal) {
+            r
+        } else {
+            r + self.gamma * m
+        }
+    }
+
+    /// The theta change of a core from the maximum `m` of its |expected value changes|.
+    fn finish_abs(&self, internal: usize, m: T) -> T {
+        if self.is_goal(internal) {
+            T::ZERO
+        } else {
+            self.gamma * m
         }
     }
 
@@ -706,20 +832,26 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
 
     /// Row-major grid order -> internal order.
     fn to_internal(&self, v: &[T]) -> Vec<T> {
-        let mut out = self.zeros();
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = v[self.to_grid_index(i)];
+        match &self.path {
+            Path::Generic(_) => v.to_vec(),
+            Path::Block(b) => {
+                let mut out = self.zeros();
+                b.for_each_grid_index(|i, g| out[i] = v[g]);
+                out
+            }
         }
-        out
     }
 
     /// Internal order -> row-major grid order.
     fn to_grid<U: Copy + Default>(&self, v: &[U]) -> Vec<U> {
-        let mut out = vec![U::default(); v.len()];
-        for (i, &x) in v.iter().enumerate() {
-            out[self.to_grid_index(i)] = x;
+        match &self.path {
+            Path::Generic(_) => v.to_vec(),
+            Path::Block(b) => {
+                let mut out = vec![U::default(); v.len()];
+                b.for_each_grid_index(|i, g| out[g] = v[i]);
+                out
+            }
         }
-        out
     }
 
     /// One synchronous backup of `v` (grid order): `max_u (rho + gamma P v)` per core.
@@ -777,6 +909,18 @@ struct ReduceWork<T> {
     u: Vec<T>,
 }
 
+/// `(max |a - (b - s)|, min (a - b), max (a - b))`, in `f64`.
+fn diff_stats<T: Real>(a: &[T], b: &[T], s: T) -> (f64, f64, f64) {
+    let s = s.to_f64();
+    a.iter().zip(b).fold(
+        (0.0f64, f64::INFINITY, f64::NEG_INFINITY),
+        |(m, lo, hi), (&x, &y)| {
+            let d = x.to_f64() - y.to_f64();
+            (m.max((d + s).abs()), lo.min(d), hi.max(d))
+        },
+    )
+}
+
 fn max_abs_diff<T: Real>(a: &[T], b: &[T]) -> f64 {
     a.iter()
         .zip(b)
@@ -803,7 +947,10 @@ where
         gamma: T::from_f64(config.gamma),
         absorbing_goal: config.absorbing_goal,
     };
-    let op = Operator::new(model, grid.view(), backup, config.path)?;
+    let mut op = Operator::new(model, grid.view(), backup, config.path)?;
+    if let Some(k) = config.kernel {
+        op = op.with_kernel(k)?;
+    }
     let bound = config.sweep_bound(op.reward_bound());
     let gamma = config.gamma;
     let mut records = Vec::new();
@@ -813,30 +960,55 @@ where
     let mut v_prev = op.zeros();
     let mut v_cur = op.zeros();
     let mut v_next = op.zeros();
-    let mut dv_prev = 0.0f64; // ||V_k - V_{k-1}||
+    // Shift added to `v_cur` after it was computed (extrapolation), 0 if none.
+    let mut shift_in = T::ZERO;
+    let extrapolate = config.extrapolate && !config.absorbing_goal && config.gamma > 0.0;
+    let mut sweep_seconds = 0.0;
     for sweep in 1..=config.max_sweeps {
+        let t0 = Instant::now();
+        let extrapolated = shift_in != T::ZERO;
         let (delta, delta_v, converged) = match config.sweep {
             SweepMode::Synchronous => {
                 op.sweep_sync(&v_cur, &mut v_next)?;
-                let dv = max_abs_diff(&v_next, &v_cur);
+                sweep_seconds += t0.elapsed().as_secs_f64();
+                // max theta_k = v_cur - shift_in; theta_k = rho + gamma P v_prev and
+                // theta_{k+1} = rho + gamma P v_cur, so
+                // ||V_{k+1} - (v_cur - s)|| <= ||theta_{k+1} - theta_k|| <= gamma ||v_cur - v_prev||.
+                let (dv, lo, hi) = diff_stats(&v_next, &v_cur, shift_in);
+                let testable = shift_in == T::ZERO;
                 let delta = if sweep == 1 {
                     Delta::exact(op.reward_bound())
                 } else {
                     let lower = dv;
-                    let upper = gamma * dv_prev;
-                    if lower <= config.xi && config.xi < upper {
+                    let upper = gamma * max_abs_diff(&v_cur, &v_prev);
+                    if testable && lower <= config.xi && config.xi < upper {
                         Delta::exact(exact_delta(&op, &v_cur, &v_prev)?)
                     } else {
                         Delta { lower, upper }
                     }
                 };
+                let converged = testable && delta.upper <= config.xi;
+                // Extrapolate after a testable sweep that did not converge: MacQueen's bounds
+                // V* in V_{k+1} + gamma/(1-gamma) [min dV, max dV] hold because the operator
+                // commutes with constant shifts (T(V + c) = T(V) + gamma c); move to their
+                // midpoint.
+                shift_in = T::ZERO;
+                if extrapolate && testable && !converged {
+                    let s = T::from_f64(gamma / (1.0 - gamma) * 0.5 * (lo + hi));
+                    if s != T::ZERO {
+                        for x in v_next.iter_mut() {
+                            *x += s;
+                        }
+                        shift_in = s;
+                    }
+                }
                 core::mem::swap(&mut v_prev, &mut v_cur);
                 core::mem::swap(&mut v_cur, &mut v_next);
-                dv_prev = dv;
-                (delta, dv, delta.upper <= config.xi)
+                (delta, dv, converged)
             }
             SweepMode::Asynchronous => {
                 let dv = op.sweep_async(&mut v_cur)?;
+                sweep_seconds += t0.elapsed().as_secs_f64();
                 (Delta::exact(dv), dv, dv <= config.xi)
             }
         };
@@ -845,6 +1017,7 @@ where
             delta,
             delta_v,
             seconds: start.elapsed().as_secs_f64(),
+            extrapolated,
         };
         records.push(record);
         if converged {
@@ -883,6 +1056,9 @@ where
         bound,
         reward_bound: op.reward_bound(),
         path: op.path(),
+        kernel: op.kernel(),
+        multiply_adds_per_sweep: op.multiply_adds_per_sweep(),
+        sweep_seconds,
         seconds: start.elapsed().as_secs_f64(),
     })
 }

@@ -1,0 +1,1610 @@
+//! Runtime-dispatched kernels of the block backup.
+//!
+//! Two kernels carry nearly all of a sweep's arithmetic:
+//! - [`Kernels::stage`]: one contraction stage, `out[(r A + a) P + p] = sum_e w_e in[(k_e R + r) P + p]`
+//!   over the sparse rows of one block core (the same product as
+//!   [`crate::backup::contract`]);
+//! - [`Kernels::last`]: the last stage fused with the maximum over actions: for each core `c`
+//!   of the last block, `max_{a, p} sum_e w_e in[k_e P + p]` (or of its absolute value), so the
+//!   per-core row of 625 expected values is never written out.
+//!
+//! Both are written once, generic over a small [`Isa`] trait (vector type, masked loads and
+//! stores, fused multiply-add, maximum), and instantiated for AVX-512F, AVX2 + FMA and scalar
+//! code, in `f32` and `f64`. The instance is chosen at run time from the CPU's features (a
+//! distributed binary cannot assume the build machine's CPU); [`super::Kernel`] forces one,
+//! for tests and benchmarks.
+//!
+//! Every instance sums the entries of a row in the same order with fused multiply-adds
+//! (`acc = fma(w_e, x_e, acc)` from `acc = 0`), and fused multiply-add is exactly rounded, so
+//! all instances return **bit-identical** results; the tests check that.
+//!
+//! Register blocking: a row is processed in blocks of up to 8 (AVX-512) or 6 (AVX2) vectors
+//! kept in registers while every entry's input row streams through, so each loaded vector
+//! feeds one fused multiply-add and nothing else touches memory. The last vector of a block is
+//! masked, so rows need no padding.
+#![allow(unsafe_code)] // SIMD intrinsics: unaligned loads and stores through raw pointers.
+
+use std::sync::OnceLock;
+use std::vec::Vec;
+
+use crate::real::Real;
+
+/// Sparse rows whose columns are all below `n_cols`, validated once when built.
+#[derive(Clone, Debug)]
+pub(super) struct RowsBuf<T> {
+    ptr: Vec<u32>,
+    col: Vec<u32>,
+    weight: Vec<T>,
+    n_cols: usize,
+}
+
+/// A borrowed view of [`RowsBuf`]; only `RowsBuf::view` makes one, so the column bound holds.
+#[derive(Clone, Copy, Debug)]
+pub struct Rows<'a, T> {
+    ptr: &'a [u32],
+    col: &'a [u32],
+    weight: &'a [T],
+    n_cols: usize,
+}
+
+impl<T: Real> RowsBuf<T> {
+    /// Validates compressed rows: `ptr` non-decreasing from 0 to `col.len()`, `col` and
+    /// `weight` of equal length, every column below `n_cols`, every weight finite and
+    /// non-negative (memberships; the last stage's pruning relies on it). `None` otherwise.
+    pub(super) fn new(ptr: Vec<u32>, col: Vec<u32>, weight: Vec<T>, n_cols: usize) -> Option<Self> {
+        let ok = !ptr.is_empty()
+            && ptr[0] == 0
+            && ptr.windows(2).all(|w| w[0] <= w[1])
+            && *ptr.last()? as usize == col.len()
+            && col.len() == weight.len()
+            && col.iter().all(|&k| (k as usize) < n_cols)
+            && weight.iter().all(|w| w.is_finite() && *w >= T::ZERO);
+        ok.then_some(Self {
+            ptr,
+            col,
+            weight,
+            n_cols,
+        })
+    }
+
+    pub(super) fn view(&self) -> Rows<'_, T> {
+        Rows {
+            ptr: &self.ptr,
+            col: &self.col,
+            weight: &self.weight,
+            n_cols: self.n_cols,
+        }
+    }
+
+    /// Number of entries.
+    pub(super) fn nnz(&self) -> usize {
+        self.col.len()
+    }
+}
+
+impl<'a, T> Rows<'a, T> {
+    pub(super) fn n_rows(&self) -> usize {
+        self.ptr.len() - 1
+    }
+
+    #[inline(always)]
+    pub(super) fn row(&self, i: usize) -> (&'a [u32], &'a [T]) {
+        let (s, e) = (self.ptr[i] as usize, self.ptr[i + 1] as usize);
+        (&self.col[s..e], &self.weight[s..e])
+    }
+}
+
+/// One stage: see the [module docs](self).
+pub type StageFn<T> = fn(
+    rows: Rows<'_, T>,
+    first_row: usize,
+    n_actions: usize,
+    r_len: usize,
+    p_len: usize,
+    input: &[T],
+    out: &mut [T],
+);
+
+/// The fused last stage: `out[i] = max_{a,p} (|.| if `abs`) sum_e w_e in[k_e P + p]` over the
+/// rows `(first_core + i) A + a`.
+///
+/// `bounds` is scratch of at least [`last_scratch_len`] values.
+pub type LastFn<T> = fn(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    n_actions: usize,
+    p_len: usize,
+    abs: bool,
+    input: &[T],
+    out: &mut [T],
+    bounds: &mut [T],
+);
+
+/// Scratch the last stage needs: one bound per input row and register block (with the
+/// narrowest register blocks of any instance).
+pub(super) fn last_scratch_len(n_cols: usize, p_len: usize) -> usize {
+    // The scalar instance's blocks (4 lanes) are the narrowest.
+    n_cols * p_len.div_ceil(4).max(1)
+}
+
+/// Largest block action count for which the last stage prunes rows (a stack array).
+const PRUNE_MAX_ACTIONS: usize = 64;
+
+/// For each core, the lowest `a * p_len + p` whose expected value equals `maxima[i]` (the
+/// core's maximum from [`LastFn`]): the greedy product action, lowest index first.
+pub type ArgmaxFn<T> = fn(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    n_actions: usize,
+    p_len: usize,
+    input: &[T],
+    maxima: &[T],
+    out: &mut [u32],
+);
+
+/// The kernels of one instruction set for one scalar type.
+pub struct Kernels<T> {
+    /// `"avx512"`, `"avx2"` or `"scalar"`.
+    pub(super) name: &'static str,
+    /// One contraction stage.
+    pub(super) stage: StageFn<T>,
+    /// The last stage fused with the maximum.
+    pub(super) last: LastFn<T>,
+    /// The last stage's lowest maximiser.
+    pub(super) argmax: ArgmaxFn<T>,
+}
+
+fn check_stage<T>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    na: usize,
+    r_len: usize,
+    p_len: usize,
+    input: &[T],
+    out: &[T],
+) {
+    assert!(first_row + na <= rows.n_rows(), "stage rows out of range");
+    assert!(
+        rows.n_cols * r_len * p_len <= input.len(),
+        "stage input too short"
+    );
+    assert!(r_len * na * p_len <= out.len(), "stage output too short");
+}
+
+fn check_last<T>(
+    rows: &Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    out: &[T],
+) {
+    assert!(
+        (first_core + out.len()) * na <= rows.n_rows(),
+        "last-stage rows out of range"
+    );
+    assert!(
+        rows.n_cols * p_len <= input.len(),
+        "last-stage input too short"
+    );
+    assert!(p_len > 0, "empty rows");
+}
+
+/// The vector operations the kernels need. All methods are `unsafe`: they require the CPU
+/// features of the instance (the kernels are only entered after detection), and the pointer
+/// methods require the addressed lanes to be in bounds.
+trait Isa<T: Copy> {
+    type V: Copy;
+    type M: Copy;
+    /// Lanes per vector.
+    const LANES: usize;
+    /// Vectors per register block.
+    const BLOCK: usize;
+    unsafe fn zero() -> Self::V;
+    unsafe fn neg_inf() -> Self::V;
+    unsafe fn splat(x: T) -> Self::V;
+    /// Mask of the first `n` lanes (`1 <= n <= LANES`).
+    unsafe fn mask(n: usize) -> Self::M;
+    unsafe fn load(p: *const T) -> Self::V;
+    /// Loads the masked lanes; the others are zero and their memory is not read.
+    unsafe fn load_part(p: *const T, m: Self::M) -> Self::V;
+    unsafe fn store(p: *mut T, v: Self::V);
+    /// Stores the masked lanes only (the first `n`, which `m` selects).
+    unsafe fn store_part(p: *mut T, v: Self::V, m: Self::M, n: usize);
+    /// The first masked lane equal to `t`.
+    unsafe fn first_equal(v: Self::V, t: T, m: Self::M) -> Option<usize>;
+    unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    unsafe fn max(a: Self::V, b: Self::V) -> Self::V;
+    unsafe fn abs(a: Self::V) -> Self::V;
+    /// Maximum over the masked lanes.
+    unsafe fn reduce_max(v: Self::V, m: Self::M) -> T;
+    /// `v` with the lanes outside `m` set to minus infinity.
+    unsafe fn load_part_from(v: Self::V, m: Self::M) -> Self::V;
+    /// Scalar fused multiply-add (for rows of one lane).
+    unsafe fn fma1(a: T, b: T, c: T) -> T;
+    unsafe fn max1(a: T, b: T) -> T;
+}
+
+/// One register block of one row: `acc[j] = sum_e w_e x_e[j]` over `NE` entries whose input
+/// rows start at `xs[e]`. Entries are added in order, each as a fused multiply-add.
+#[inline(always)]
+unsafe fn accumulate<T: Copy, I: Isa<T>, const NV: usize, const NE: usize>(
+    xs: &[*const T; NE],
+    ws: &[I::V; NE],
+    m: I::M,
+) -> [I::V; NV] {
+    unsafe {
+        let mut acc = [I::zero(); NV];
+        for e in 0..NE {
+            for (j, a) in acc.iter_mut().enumerate() {
+                let p = xs[e].add(j * I::LANES);
+                let v = if j + 1 == NV {
+                    I::load_part(p, m)
+                } else {
+                    I::load(p)
+                };
+                *a = I::fma(ws[e], v, *a);
+            }
+        }
+        acc
+    }
+}
+
+/// [`accumulate`] for a row of any length (more entries than the unrolled cases).
+#[inline(always)]
+unsafe fn accumulate_any<T: Copy, I: Isa<T>, const NV: usize>(
+    cols: &[u32],
+    ws: &[T],
+    base: *const T,
+    k_stride: usize,
+    m: I::M,
+) -> [I::V; NV] {
+    unsafe {
+        let mut acc = [I::zero(); NV];
+        for (&k, &w) in cols.iter().zip(ws) {
+            let wv = I::splat(w);
+            let x = base.add(k as usize * k_stride);
+            for (j, a) in acc.iter_mut().enumerate() {
+                let p = x.add(j * I::LANES);
+                let v = if j + 1 == NV {
+                    I::load_part(p, m)
+                } else {
+                    I::load(p)
+                };
+                *a = I::fma(wv, v, *a);
+            }
+        }
+        acc
+    }
+}
+
+/// Stores one register block (the last vector masked).
+#[inline(always)]
+unsafe fn store_block<T: Copy, I: Isa<T>, const NV: usize>(
+    o: *mut T,
+    acc: &[I::V; NV],
+    m: I::M,
+    tail: usize,
+) {
+    unsafe {
+        for (j, &v) in acc.iter().enumerate() {
+            if j + 1 == NV {
+                I::store_part(o.add(j * I::LANES), v, m, tail);
+            } else {
+                I::store(o.add(j * I::LANES), v);
+            }
+        }
+    }
+}
+
+/// Stage rows of one action with exactly `NE` entries: pointers and broadcast weights are
+/// set up once and advance along `r`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn stage_rows<T: Copy, I: Isa<T>, const NV: usize, const NE: usize>(
+    cols: &[u32],
+    ws: &[T],
+    input: *const T,
+    k_stride: usize,
+    in_step: usize,
+    r_len: usize,
+    out: *mut T,
+    out_step: usize,
+    m: I::M,
+    tail: usize,
+) {
+    unsafe {
+        let mut xs = [input; NE];
+        let mut wv = [I::zero(); NE];
+        for e in 0..NE {
+            xs[e] = input.add(cols[e] as usize * k_stride);
+            wv[e] = I::splat(ws[e]);
+        }
+        let mut o = out;
+        for _ in 0..r_len {
+            let acc = accumulate::<T, I, NV, NE>(&xs, &wv, m);
+            store_block::<T, I, NV>(o, &acc, m, tail);
+            for x in xs.iter_mut() {
+                *x = x.add(in_step);
+            }
+            o = o.add(out_step);
+        }
+    }
+}
+
+/// Stage body for one register block of `NV` vectors at offset `p0` of every output row.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    na: usize,
+    r_len: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    tail: usize,
+    input: *const T,
+    out: *mut T,
+) {
+    unsafe {
+        let k_stride = r_len * p_len;
+        let out_step = na * p_len;
+        for a in 0..na {
+            let (cols, ws) = rows.row(first_row + a);
+            let inp = input.add(p0);
+            let o = out.add(a * p_len + p0);
+            match cols.len() {
+                0 => {
+                    let zero = [I::zero(); NV];
+                    for r in 0..r_len {
+                        store_block::<T, I, NV>(o.add(r * out_step), &zero, m, tail);
+                    }
+                }
+                1 => stage_rows::<T, I, NV, 1>(
+                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                ),
+                2 => stage_rows::<T, I, NV, 2>(
+                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                ),
+                3 => stage_rows::<T, I, NV, 3>(
+                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                ),
+                4 => stage_rows::<T, I, NV, 4>(
+                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                ),
+                _ => {
+                    for r in 0..r_len {
+                        let acc =
+                            accumulate_any::<T, I, NV>(cols, ws, inp.add(r * p_len), k_stride, m);
+                        store_block::<T, I, NV>(o.add(r * out_step), &acc, m, tail);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Splits a row of `p_len` lanes into register blocks: `(vectors, offset, lanes in the last
+/// vector)`. An iterator, not a callback: closures do not inherit `#[target_feature]`, and the
+/// intrinsics must inline into the feature-enabled kernel.
+struct Blocks {
+    p_len: usize,
+    lanes: usize,
+    block: usize,
+    p0: usize,
+}
+
+impl Blocks {
+    #[inline(always)]
+    fn new(p_len: usize, lanes: usize, block: usize) -> Self {
+        Self {
+            p_len,
+            lanes,
+            block,
+            p0: 0,
+        }
+    }
+}
+
+impl Iterator for Blocks {
+    type Item = (usize, usize, usize);
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.p0 >= self.p_len {
+            return None;
+        }
+        let rem = self.p_len - self.p0;
+        let nv = rem.div_ceil(self.lanes).min(self.block);
+        let span = (nv * self.lanes).min(rem);
+        let item = (nv, self.p0, span - (nv - 1) * self.lanes);
+        self.p0 += span;
+        Some(item)
+    }
+}
+
+#[inline(always)]
+unsafe fn stage_impl<T: Real, I: Isa<T>>(
+    rows: Rows<'_, T>,
+    first_row: usize,
+    na: usize,
+    r_len: usize,
+    p_len: usize,
+    input: &[T],
+    out: &mut [T],
+) {
+    check_stage(&rows, first_row, na, r_len, p_len, input, out);
+    let ip = input.as_ptr();
+    let op = out.as_mut_ptr();
+    unsafe {
+        if p_len == 1 {
+            // Rows of one value (the first stage): scalar fused multiply-adds along `r`.
+            for a in 0..na {
+                let (cols, ws) = rows.row(first_row + a);
+                for r in 0..r_len {
+                    let mut acc = T::ZERO;
+                    for (&k, &w) in cols.iter().zip(ws) {
+                        acc = I::fma1(w, *ip.add(k as usize * r_len + r), acc);
+                    }
+                    *op.add(r * na + a) = acc;
+                }
+            }
+            return;
+        }
+        for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
+            let m = I::mask(tail);
+            let args = (&rows, first_row, na, r_len, p_len, p0, m, tail, ip, op);
+            match nv {
+                1 => stage_block::<T, I, 1>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                2 => stage_block::<T, I, 2>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                3 => stage_block::<T, I, 3>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                4 => stage_block::<T, I, 4>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                5 => stage_block::<T, I, 5>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                6 => stage_block::<T, I, 6>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                7 => stage_block::<T, I, 7>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+                _ => stage_block::<T, I, 8>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
+                ),
+            }
+        }
+    }
+}
+
+/// The expected values of one (core, action) row for one register block.
+#[inline(always)]
+unsafe fn row_block<T: Copy, I: Isa<T>, const NV: usize>(
+    cols: &[u32],
+    ws: &[T],
+    input: *const T,
+    p_len: usize,
+    m: I::M,
+) -> [I::V; NV] {
+    macro_rules! fixed {
+        ($ne:literal) => {{
+            let mut xs = [input; $ne];
+            let mut wv = [I::zero(); $ne];
+            for e in 0..$ne {
+                xs[e] = input.add(cols[e] as usize * p_len);
+                wv[e] = I::splat(ws[e]);
+            }
+            accumulate::<T, I, NV, $ne>(&xs, &wv, m)
+        }};
+    }
+    unsafe {
+        match cols.len() {
+            1 => fixed!(1),
+            2 => fixed!(2),
+            3 => fixed!(3),
+            4 => fixed!(4),
+            _ => accumulate_any::<T, I, NV>(cols, ws, input, p_len, m),
+        }
+    }
+}
+
+/// Last-stage body for one register block: the running maximum over every action's row.
+#[inline(always)]
+unsafe fn last_block<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+) -> T {
+    unsafe {
+        let mut best = [I::neg_inf(); NV];
+        for a in 0..na {
+            let (cols, ws) = rows.row(c * na + a);
+            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+            for (b, &v) in best.iter_mut().zip(&acc) {
+                *b = I::max(*b, if ABS { I::abs(v) } else { v });
+            }
+        }
+        let all = I::mask(I::LANES);
+        let mut out = I::reduce_max(best[NV - 1], m);
+        for &b in &best[..NV - 1] {
+            out = I::max1(out, I::reduce_max(b, all));
+        }
+        out
+    }
+}
+
+/// The lowest `a * p_len + p` whose expected value equals `target` in one register block,
+/// scanning actions in order (`None` if no lane matches).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn argmax_block<T: Copy, I: Isa<T>, const NV: usize>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    a: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+    target: T,
+) -> Option<usize> {
+    unsafe {
+        let (cols, ws) = rows.row(c * na + a);
+        let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+        let all = I::mask(I::LANES);
+        for (j, &v) in acc.iter().enumerate() {
+            let mask = if j + 1 == NV { m } else { all };
+            if let Some(lane) = I::first_equal(v, target, mask) {
+                return Some(a * p_len + p0 + j * I::LANES + lane);
+            }
+        }
+        None
+    }
+}
+
+/// The maximum (of the absolute value if `ABS`) over the valid lanes of one register block of
+/// one input row.
+#[inline(always)]
+unsafe fn row_bound<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    x: *const T,
+    m: I::M,
+) -> T {
+    unsafe {
+        let all = I::mask(I::LANES);
+        let mut out = None;
+        for j in 0..NV {
+            let last = j + 1 == NV;
+            let v = if last {
+                I::load_part(x.add(j * I::LANES), m)
+            } else {
+                I::load(x.add(j * I::LANES))
+            };
+            let v = if ABS { I::abs(v) } else { v };
+            let r = I::reduce_max(v, if last { m } else { all });
+            out = Some(match out {
+                Some(o) => I::max1(o, r),
+                None => r,
+            });
+        }
+        out.expect("NV >= 1")
+    }
+}
+
+/// The maximum over the valid lanes of one (core, action) row in one register block.
+#[inline(always)]
+unsafe fn row_max<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    cols: &[u32],
+    ws: &[T],
+    input: *const T,
+    p_len: usize,
+    m: I::M,
+) -> T {
+    unsafe {
+        let acc = row_block::<T, I, NV>(cols, ws, input, p_len, m);
+        let all = I::mask(I::LANES);
+        let mut best = I::neg_inf();
+        for (j, &v) in acc.iter().enumerate() {
+            let v = if ABS { I::abs(v) } else { v };
+            if j + 1 == NV {
+                best = I::max(best, I::load_part_from(v, m));
+            } else {
+                best = I::max(best, v);
+            }
+        }
+        I::reduce_max(best, all)
+    }
+}
+
+/// One register block of the last stage for core `c`, pruned: rows are visited in decreasing
+/// order of an upper bound of their values, and the visit stops at the first row whose bound
+/// does not exceed the best value found. Memberships are non-negative and fused multiply-add rounds
+/// monotonically, so `fma(w_e, bound_e, ...)` (the same chain as the row's) bounds every
+/// computed value of the row: the result is bit-identical to visiting every row.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn last_block_pruned<T: Real, I: Isa<T>, const NV: usize, const ABS: bool>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+    bounds: &[T],
+    mut best: T,
+) -> T {
+    unsafe {
+        let mut ub = [T::ZERO; PRUNE_MAX_ACTIONS];
+        let mut order = [0u8; PRUNE_MAX_ACTIONS];
+        for a in 0..na {
+            let (cols, ws) = rows.row(c * na + a);
+            let mut b = T::ZERO;
+            for (&k, &w) in cols.iter().zip(ws) {
+                b = I::fma1(w, bounds[k as usize], b);
+            }
+            // Insertion into `order`, by decreasing bound.
+            let mut i = a;
+            while i > 0 && ub[order[i - 1] as usize] < b {
+                order[i] = order[i - 1];
+                i -= 1;
+            }
+            order[i] = a as u8;
+            ub[a] = b;
+        }
+        for &a in &order[..na] {
+            let a = a as usize;
+            // A row whose bound does not exceed the best cannot raise the maximum.
+            if ub[a] <= best {
+                break;
+            }
+            let (cols, ws) = rows.row(c * na + a);
+            let v = row_max::<T, I, NV, ABS>(cols, ws, input.add(p0), p_len, m);
+            best = I::max1(best, v);
+        }
+        best
+    }
+}
+
+macro_rules! by_nv {
+    ($nv:expr, $f:ident::<$t:ty, $i:ty, _ $(, $c:ident)*>($($arg:expr),* $(,)?)) => {
+        match $nv {
+            1 => $f::<$t, $i, 1 $(, $c)*>($($arg),*),
+            2 => $f::<$t, $i, 2 $(, $c)*>($($arg),*),
+            3 => $f::<$t, $i, 3 $(, $c)*>($($arg),*),
+            4 => $f::<$t, $i, 4 $(, $c)*>($($arg),*),
+            5 => $f::<$t, $i, 5 $(, $c)*>($($arg),*),
+            6 => $f::<$t, $i, 6 $(, $c)*>($($arg),*),
+            7 => $f::<$t, $i, 7 $(, $c)*>($($arg),*),
+            _ => $f::<$t, $i, 8 $(, $c)*>($($arg),*),
+        }
+    };
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape and scratch, spelled out
+unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    out: &mut [T],
+    bounds: &mut [T],
+) {
+    check_last(&rows, first_core, na, p_len, input, out);
+    let ip = input.as_ptr();
+    let n_cols = rows.n_cols;
+    let prune = na <= PRUNE_MAX_ACTIONS;
+    if prune {
+        let n_blocks = Blocks::new(p_len, I::LANES, I::BLOCK).count();
+        assert!(
+            bounds.len() >= n_cols * n_blocks,
+            "last-stage scratch too short"
+        );
+    }
+    unsafe {
+        if prune {
+            for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                let m = I::mask(tail);
+                for k in 0..n_cols {
+                    let x = ip.add(k * p_len + p0);
+                    bounds[bi * n_cols + k] = by_nv!(nv, row_bound::<T, I, _, ABS>(x, m));
+                }
+            }
+        }
+        for (i, o) in out.iter_mut().enumerate() {
+            let c = first_core + i;
+            let mut best = T::from_f64(f64::NEG_INFINITY);
+            for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                let m = I::mask(tail);
+                best = if prune {
+                    let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+                    by_nv!(
+                        nv,
+                        last_block_pruned::<T, I, _, ABS>(&rows, c, na, p_len, p0, m, ip, b, best)
+                    )
+                } else {
+                    let v = by_nv!(
+                        nv,
+                        last_block::<T, I, _, ABS>(&rows, c, na, p_len, p0, m, ip)
+                    );
+                    I::max1(best, v)
+                };
+            }
+            *o = best;
+        }
+    }
+}
+
+#[inline(always)]
+unsafe fn argmax_impl<T: Real, I: Isa<T>>(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    maxima: &[T],
+    out: &mut [u32],
+) {
+    assert_eq!(maxima.len(), out.len(), "one maximum per core");
+    check_last(&rows, first_core, na, p_len, input, maxima);
+    let ip = input.as_ptr();
+    unsafe {
+        for (i, o) in out.iter_mut().enumerate() {
+            let c = first_core + i;
+            let target = maxima[i];
+            let mut found = None;
+            'actions: for a in 0..na {
+                let mut hit = None;
+                for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
+                    let m = I::mask(tail);
+                    let args = (&rows, c, a, na, p_len, p0, m, ip, target);
+                    hit = match nv {
+                        1 => argmax_block::<T, I, 1>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        2 => argmax_block::<T, I, 2>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        3 => argmax_block::<T, I, 3>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        4 => argmax_block::<T, I, 4>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        5 => argmax_block::<T, I, 5>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        6 => argmax_block::<T, I, 6>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        7 => argmax_block::<T, I, 7>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        _ => argmax_block::<T, I, 8>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                    };
+                    if hit.is_some() {
+                        break;
+                    }
+                }
+                if hit.is_some() {
+                    found = hit;
+                    break 'actions;
+                }
+            }
+            // The maximum was computed by the same arithmetic, so it is always found.
+            *o = found.unwrap_or(0) as u32;
+        }
+    }
+}
+
+/// Scalar instance: one lane, `mul_add` for the fused multiply-add.
+struct Scalar;
+
+macro_rules! scalar_isa {
+    ($t:ty) => {
+        impl Isa<$t> for Scalar {
+            type V = $t;
+            type M = bool;
+            const LANES: usize = 1;
+            const BLOCK: usize = 4;
+            #[inline(always)]
+            unsafe fn zero() -> $t {
+                0.0
+            }
+            #[inline(always)]
+            unsafe fn neg_inf() -> $t {
+                <$t>::NEG_INFINITY
+            }
+            #[inline(always)]
+            unsafe fn splat(x: $t) -> $t {
+                x
+            }
+            #[inline(always)]
+            unsafe fn mask(n: usize) -> bool {
+                n >= 1
+            }
+            #[inline(always)]
+            unsafe fn load(p: *const $t) -> $t {
+                unsafe { *p }
+            }
+            #[inline(always)]
+            unsafe fn load_part(p: *const $t, m: bool) -> $t {
+                if m { unsafe { *p } } else { 0.0 }
+            }
+            #[inline(always)]
+            unsafe fn store(p: *mut $t, v: $t) {
+                unsafe { *p = v }
+            }
+            #[inline(always)]
+            unsafe fn store_part(p: *mut $t, v: $t, m: bool, _n: usize) {
+                if m {
+                    unsafe { *p = v }
+                }
+            }
+            #[inline(always)]
+            unsafe fn first_equal(v: $t, t: $t, m: bool) -> Option<usize> {
+                (m && v == t).then_some(0)
+            }
+            #[inline(always)]
+            unsafe fn fma(a: $t, b: $t, c: $t) -> $t {
+                a.mul_add(b, c)
+            }
+            #[inline(always)]
+            unsafe fn max(a: $t, b: $t) -> $t {
+                if a >= b { a } else { b }
+            }
+            #[inline(always)]
+            unsafe fn abs(a: $t) -> $t {
+                a.abs()
+            }
+            #[inline(always)]
+            unsafe fn reduce_max(v: $t, _m: bool) -> $t {
+                v
+            }
+            #[inline(always)]
+            unsafe fn load_part_from(v: $t, m: bool) -> $t {
+                if m { v } else { <$t>::NEG_INFINITY }
+            }
+            #[inline(always)]
+            unsafe fn fma1(a: $t, b: $t, c: $t) -> $t {
+                a.mul_add(b, c)
+            }
+            #[inline(always)]
+            unsafe fn max1(a: $t, b: $t) -> $t {
+                if a >= b { a } else { b }
+            }
+        }
+    };
+}
+scalar_isa!(f32);
+scalar_isa!(f64);
+
+#[cfg(target_arch = "x86_64")]
+mod x86 {
+    use core::arch::x86_64::*;
+
+    use super::Isa;
+
+    /// AVX-512F instance.
+    pub(super) struct Avx512;
+    /// AVX2 + FMA instance.
+    pub(super) struct Avx2;
+
+    impl Isa<f32> for Avx512 {
+        type V = __m512;
+        type M = __mmask16;
+        const LANES: usize = 16;
+        const BLOCK: usize = 8;
+        #[inline(always)]
+        unsafe fn zero() -> __m512 {
+            unsafe { _mm512_setzero_ps() }
+        }
+        #[inline(always)]
+        unsafe fn neg_inf() -> __m512 {
+            unsafe { _mm512_set1_ps(f32::NEG_INFINITY) }
+        }
+        #[inline(always)]
+        unsafe fn splat(x: f32) -> __m512 {
+            unsafe { _mm512_set1_ps(x) }
+        }
+        #[inline(always)]
+        unsafe fn mask(n: usize) -> __mmask16 {
+            ((1u32 << n) - 1) as __mmask16
+        }
+        #[inline(always)]
+        unsafe fn load(p: *const f32) -> __m512 {
+            unsafe { _mm512_loadu_ps(p) }
+        }
+        #[inline(always)]
+        unsafe fn load_part(p: *const f32, m: __mmask16) -> __m512 {
+            unsafe { _mm512_maskz_loadu_ps(m, p) }
+        }
+        #[inline(always)]
+        unsafe fn store(p: *mut f32, v: __m512) {
+            unsafe { _mm512_storeu_ps(p, v) }
+        }
+        #[inline(always)]
+        unsafe fn store_part(p: *mut f32, v: __m512, m: __mmask16, _n: usize) {
+            unsafe { _mm512_mask_storeu_ps(p, m, v) }
+        }
+        #[inline(always)]
+        unsafe fn first_equal(v: __m512, t: f32, m: __mmask16) -> Option<usize> {
+            let k = unsafe { _mm512_mask_cmpeq_ps_mask(m, v, _mm512_set1_ps(t)) };
+            (k != 0).then(|| k.trailing_zeros() as usize)
+        }
+        #[inline(always)]
+        unsafe fn fma(a: __m512, b: __m512, c: __m512) -> __m512 {
+            unsafe { _mm512_fmadd_ps(a, b, c) }
+        }
+        #[inline(always)]
+        unsafe fn max(a: __m512, b: __m512) -> __m512 {
+            unsafe { _mm512_max_ps(a, b) }
+        }
+        #[inline(always)]
+        unsafe fn abs(a: __m512) -> __m512 {
+            unsafe { _mm512_abs_ps(a) }
+        }
+        #[inline(always)]
+        unsafe fn reduce_max(v: __m512, m: __mmask16) -> f32 {
+            unsafe { _mm512_mask_reduce_max_ps(m, v) }
+        }
+        #[inline(always)]
+        unsafe fn load_part_from(v: __m512, m: __mmask16) -> __m512 {
+            unsafe { _mm512_mask_mov_ps(_mm512_set1_ps(f32::NEG_INFINITY), m, v) }
+        }
+        #[inline(always)]
+        unsafe fn fma1(a: f32, b: f32, c: f32) -> f32 {
+            a.mul_add(b, c)
+        }
+        #[inline(always)]
+        unsafe fn max1(a: f32, b: f32) -> f32 {
+            if a >= b { a } else { b }
+        }
+    }
+
+    impl Isa<f64> for Avx512 {
+        type V = __m512d;
+        type M = __mmask8;
+        const LANES: usize = 8;
+        const BLOCK: usize = 8;
+        #[inline(always)]
+        unsafe fn zero() -> __m512d {
+            unsafe { _mm512_setzero_pd() }
+        }
+        #[inline(always)]
+        unsafe fn neg_inf() -> __m512d {
+            unsafe { _mm512_set1_pd(f64::NEG_INFINITY) }
+        }
+        #[inline(always)]
+        unsafe fn splat(x: f64) -> __m512d {
+            unsafe { _mm512_set1_pd(x) }
+        }
+        #[inline(always)]
+        unsafe fn mask(n: usize) -> __mmask8 {
+            ((1u32 << n) - 1) as __mmask8
+        }
+        #[inline(always)]
+        unsafe fn load(p: *const f64) -> __m512d {
+            unsafe { _mm512_loadu_pd(p) }
+        }
+        #[inline(always)]
+        unsafe fn load_part(p: *const f64, m: __mmask8) -> __m512d {
+            unsafe { _mm512_maskz_loadu_pd(m, p) }
+        }
+        #[inline(always)]
+        unsafe fn store(p: *mut f64, v: __m512d) {
+            unsafe { _mm512_storeu_pd(p, v) }
+        }
+        #[inline(always)]
+        unsafe fn store_part(p: *mut f64, v: __m512d, m: __mmask8, _n: usize) {
+            unsafe { _mm512_mask_storeu_pd(p, m, v) }
+        }
+        #[inline(always)]
+        unsafe fn first_equal(v: __m512d, t: f64, m: __mmask8) -> Option<usize> {
+            let k = unsafe { _mm512_mask_cmpeq_pd_mask(m, v, _mm512_set1_pd(t)) };
+            (k != 0).then(|| k.trailing_zeros() as usize)
+        }
+        #[inline(always)]
+        unsafe fn fma(a: __m512d, b: __m512d, c: __m512d) -> __m512d {
+            unsafe { _mm512_fmadd_pd(a, b, c) }
+        }
+        #[inline(always)]
+        unsafe fn max(a: __m512d, b: __m512d) -> __m512d {
+            unsafe { _mm512_max_pd(a, b) }
+        }
+        #[inline(always)]
+        unsafe fn abs(a: __m512d) -> __m512d {
+            unsafe { _mm512_abs_pd(a) }
+        }
+        #[inline(always)]
+        unsafe fn reduce_max(v: __m512d, m: __mmask8) -> f64 {
+            unsafe { _mm512_mask_reduce_max_pd(m, v) }
+        }
+        #[inline(always)]
+        unsafe fn load_part_from(v: __m512d, m: __mmask8) -> __m512d {
+            unsafe { _mm512_mask_mov_pd(_mm512_set1_pd(f64::NEG_INFINITY), m, v) }
+        }
+        #[inline(always)]
+        unsafe fn fma1(a: f64, b: f64, c: f64) -> f64 {
+            a.mul_add(b, c)
+        }
+        #[inline(always)]
+        unsafe fn max1(a: f64, b: f64) -> f64 {
+            if a >= b { a } else { b }
+        }
+    }
+
+    /// Lane masks for AVX2 masked loads: a window of 8 (or 4) lanes starting at `8 - n`.
+    static MASK32: [i32; 16] = [-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0];
+    static MASK64: [i64; 8] = [-1, -1, -1, -1, 0, 0, 0, 0];
+
+    impl Isa<f32> for Avx2 {
+        type V = __m256;
+        type M = __m256i;
+        const LANES: usize = 8;
+        const BLOCK: usize = 6;
+        #[inline(always)]
+        unsafe fn zero() -> __m256 {
+            unsafe { _mm256_setzero_ps() }
+        }
+        #[inline(always)]
+        unsafe fn neg_inf() -> __m256 {
+            unsafe { _mm256_set1_ps(f32::NEG_INFINITY) }
+        }
+        #[inline(always)]
+        unsafe fn splat(x: f32) -> __m256 {
+            unsafe { _mm256_set1_ps(x) }
+        }
+        #[inline(always)]
+        unsafe fn mask(n: usize) -> __m256i {
+            // SAFETY: 1 <= n <= 8, so the 8 lanes read lie within MASK32.
+            unsafe { _mm256_loadu_si256(MASK32.as_ptr().add(8 - n).cast()) }
+        }
+        #[inline(always)]
+        unsafe fn load(p: *const f32) -> __m256 {
+            unsafe { _mm256_loadu_ps(p) }
+        }
+        #[inline(always)]
+        unsafe fn load_part(p: *const f32, m: __m256i) -> __m256 {
+            unsafe { _mm256_maskload_ps(p, m) }
+        }
+        #[inline(always)]
+        unsafe fn store(p: *mut f32, v: __m256) {
+            unsafe { _mm256_storeu_ps(p, v) }
+        }
+        #[inline(always)]
+        unsafe fn store_part(p: *mut f32, v: __m256, _m: __m256i, n: usize) {
+            // Masked stores (vmaskmovps) are microcoded and very slow on AMD CPUs: store
+            // through a buffer instead.
+            let mut buf = [0.0f32; 8];
+            unsafe {
+                _mm256_storeu_ps(buf.as_mut_ptr(), v);
+                core::ptr::copy_nonoverlapping(buf.as_ptr(), p, n);
+            }
+        }
+        #[inline(always)]
+        unsafe fn first_equal(v: __m256, t: f32, m: __m256i) -> Option<usize> {
+            let bits = unsafe {
+                let c = _mm256_cmp_ps::<_CMP_EQ_OQ>(v, _mm256_set1_ps(t));
+                _mm256_movemask_ps(c) & _mm256_movemask_ps(_mm256_castsi256_ps(m))
+            };
+            (bits != 0).then(|| bits.trailing_zeros() as usize)
+        }
+        #[inline(always)]
+        unsafe fn fma(a: __m256, b: __m256, c: __m256) -> __m256 {
+            unsafe { _mm256_fmadd_ps(a, b, c) }
+        }
+        #[inline(always)]
+        unsafe fn max(a: __m256, b: __m256) -> __m256 {
+            unsafe { _mm256_max_ps(a, b) }
+        }
+        #[inline(always)]
+        unsafe fn abs(a: __m256) -> __m256 {
+            unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), a) }
+        }
+        #[inline(always)]
+        unsafe fn reduce_max(v: __m256, m: __m256i) -> f32 {
+            unsafe {
+                let v =
+                    _mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), v, _mm256_castsi256_ps(m));
+                let h = _mm_max_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+                let h = _mm_max_ps(h, _mm_movehl_ps(h, h));
+                let h = _mm_max_ss(h, _mm_shuffle_ps(h, h, 1));
+                _mm_cvtss_f32(h)
+            }
+        }
+        #[inline(always)]
+        unsafe fn load_part_from(v: __m256, m: __m256i) -> __m256 {
+            unsafe {
+                _mm256_blendv_ps(_mm256_set1_ps(f32::NEG_INFINITY), v, _mm256_castsi256_ps(m))
+            }
+        }
+        #[inline(always)]
+        unsafe fn fma1(a: f32, b: f32, c: f32) -> f32 {
+            a.mul_add(b, c)
+        }
+        #[inline(always)]
+        unsafe fn max1(a: f32, b: f32) -> f32 {
+            if a >= b { a } else { b }
+        }
+    }
+
+    impl Isa<f64> for Avx2 {
+        type V = __m256d;
+        type M = __m256i;
+        const LANES: usize = 4;
+        const BLOCK: usize = 6;
+        #[inline(always)]
+        unsafe fn zero() -> __m256d {
+            unsafe { _mm256_setzero_pd() }
+        }
+        #[inline(always)]
+        unsafe fn neg_inf() -> __m256d {
+            unsafe { _mm256_set1_pd(f64::NEG_INFINITY) }
+        }
+        #[inline(always)]
+        unsafe fn splat(x: f64) -> __m256d {
+            unsafe { _mm256_set1_pd(x) }
+        }
+        #[inline(always)]
+        unsafe fn mask(n: usize) -> __m256i {
+            // SAFETY: 1 <= n <= 4, so the 4 lanes read lie within MASK64.
+            unsafe { _mm256_loadu_si256(MASK64.as_ptr().add(4 - n).cast()) }
+        }
+        #[inline(always)]
+        unsafe fn load(p: *const f64) -> __m256d {
+            unsafe { _mm256_loadu_pd(p) }
+        }
+        #[inline(always)]
+        unsafe fn load_part(p: *const f64, m: __m256i) -> __m256d {
+            unsafe { _mm256_maskload_pd(p, m) }
+        }
+        #[inline(always)]
+        unsafe fn store(p: *mut f64, v: __m256d) {
+            unsafe { _mm256_storeu_pd(p, v) }
+        }
+        #[inline(always)]
+        unsafe fn store_part(p: *mut f64, v: __m256d, _m: __m256i, n: usize) {
+            // See the f32 instance.
+            let mut buf = [0.0f64; 4];
+            unsafe {
+                _mm256_storeu_pd(buf.as_mut_ptr(), v);
+                core::ptr::copy_nonoverlapping(buf.as_ptr(), p, n);
+            }
+        }
+        #[inline(always)]
+        unsafe fn first_equal(v: __m256d, t: f64, m: __m256i) -> Option<usize> {
+            let bits = unsafe {
+                let c = _mm256_cmp_pd::<_CMP_EQ_OQ>(v, _mm256_set1_pd(t));
+                _mm256_movemask_pd(c) & _mm256_movemask_pd(_mm256_castsi256_pd(m))
+            };
+            (bits != 0).then(|| bits.trailing_zeros() as usize)
+        }
+        #[inline(always)]
+        unsafe fn fma(a: __m256d, b: __m256d, c: __m256d) -> __m256d {
+            unsafe { _mm256_fmadd_pd(a, b, c) }
+        }
+        #[inline(always)]
+        unsafe fn max(a: __m256d, b: __m256d) -> __m256d {
+            unsafe { _mm256_max_pd(a, b) }
+        }
+        #[inline(always)]
+        unsafe fn abs(a: __m256d) -> __m256d {
+            unsafe { _mm256_andnot_pd(_mm256_set1_pd(-0.0), a) }
+        }
+        #[inline(always)]
+        unsafe fn reduce_max(v: __m256d, m: __m256i) -> f64 {
+            unsafe {
+                let v =
+                    _mm256_blendv_pd(_mm256_set1_pd(f64::NEG_INFINITY), v, _mm256_castsi256_pd(m));
+                let h = _mm_max_pd(_mm256_castpd256_pd128(v), _mm256_extractf128_pd(v, 1));
+                let h = _mm_max_sd(h, _mm_unpackhi_pd(h, h));
+                _mm_cvtsd_f64(h)
+            }
+        }
+        #[inline(always)]
+        unsafe fn load_part_from(v: __m256d, m: __m256i) -> __m256d {
+            unsafe {
+                _mm256_blendv_pd(_mm256_set1_pd(f64::NEG_INFINITY), v, _mm256_castsi256_pd(m))
+            }
+        }
+        #[inline(always)]
+        unsafe fn fma1(a: f64, b: f64, c: f64) -> f64 {
+            a.mul_add(b, c)
+        }
+        #[inline(always)]
+        unsafe fn max1(a: f64, b: f64) -> f64 {
+            if a >= b { a } else { b }
+        }
+    }
+}
+
+/// Declares the entry points of one instance: `unsafe` inner functions compiled with the
+/// instance's target features, and safe wrappers that check the features (a cached atomic
+/// load) before entering them.
+macro_rules! entry_points {
+    ($t:ty, $isa:ty, [$($features:literal)?], $detect:expr, $stage:ident, $last:ident, $argmax:ident) => {
+        fn $argmax(
+            rows: Rows<'_, $t>,
+            first_core: usize,
+            na: usize,
+            p_len: usize,
+            input: &[$t],
+            maxima: &[$t],
+            out: &mut [u32],
+        ) {
+            $(#[target_feature(enable = $features)])?
+            unsafe fn inner(
+                rows: Rows<'_, $t>,
+                first_core: usize,
+                na: usize,
+                p_len: usize,
+                input: &[$t],
+                maxima: &[$t],
+                out: &mut [u32],
+            ) {
+                unsafe { argmax_impl::<$t, $isa>(rows, first_core, na, p_len, input, maxima, out) }
+            }
+            assert!($detect, "CPU features missing for this kernel");
+            // SAFETY: as for the stage kernel, with `check_last`.
+            unsafe { inner(rows, first_core, na, p_len, input, maxima, out) }
+        }
+
+        fn $stage(
+            rows: Rows<'_, $t>,
+            first_row: usize,
+            na: usize,
+            r_len: usize,
+            p_len: usize,
+            input: &[$t],
+            out: &mut [$t],
+        ) {
+            $(#[target_feature(enable = $features)])?
+            unsafe fn inner(
+                rows: Rows<'_, $t>,
+                first_row: usize,
+                na: usize,
+                r_len: usize,
+                p_len: usize,
+                input: &[$t],
+                out: &mut [$t],
+            ) {
+                unsafe { stage_impl::<$t, $isa>(rows, first_row, na, r_len, p_len, input, out) }
+            }
+            assert!($detect, "CPU features missing for this kernel");
+            // SAFETY: the features were just detected; `stage_impl` checks every bound its
+            // pointer arithmetic relies on (`check_stage`, and the rows' column bound).
+            unsafe { inner(rows, first_row, na, r_len, p_len, input, out) }
+        }
+
+        #[allow(clippy::too_many_arguments)] // the kernel's signature
+        fn $last(
+            rows: Rows<'_, $t>,
+            first_core: usize,
+            na: usize,
+            p_len: usize,
+            abs: bool,
+            input: &[$t],
+            out: &mut [$t],
+            bounds: &mut [$t],
+        ) {
+            $(#[target_feature(enable = $features)])?
+            #[allow(clippy::too_many_arguments)] // the kernel's signature
+            unsafe fn inner(
+                rows: Rows<'_, $t>,
+                first_core: usize,
+                na: usize,
+                p_len: usize,
+                abs: bool,
+                input: &[$t],
+                out: &mut [$t],
+                bounds: &mut [$t],
+            ) {
+                unsafe {
+                    if abs {
+                        last_impl::<$t, $isa, true>(rows, first_core, na, p_len, input, out, bounds)
+                    } else {
+                        last_impl::<$t, $isa, false>(rows, first_core, na, p_len, input, out, bounds)
+                    }
+                }
+            }
+            assert!($detect, "CPU features missing for this kernel");
+            // SAFETY: as above, with `check_last` and the scratch length check.
+            unsafe { inner(rows, first_core, na, p_len, abs, input, out, bounds) }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+fn has_avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma")
+}
+
+#[cfg(target_arch = "x86_64")]
+fn has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+}
+
+// The scalar instance needs no features: its "detection" is `true`.
+entry_points!(
+    f32,
+    Scalar,
+    [],
+    true,
+    stage_scalar_f32,
+    last_scalar_f32,
+    argmax_scalar_f32
+);
+entry_points!(
+    f64,
+    Scalar,
+    [],
+    true,
+    stage_scalar_f64,
+    last_scalar_f64,
+    argmax_scalar_f64
+);
+#[cfg(target_arch = "x86_64")]
+entry_points!(
+    f32,
+    x86::Avx512,
+    ["avx512f,fma"],
+    has_avx512(),
+    stage_avx512_f32,
+    last_avx512_f32,
+    argmax_avx512_f32
+);
+#[cfg(target_arch = "x86_64")]
+entry_points!(
+    f64,
+    x86::Avx512,
+    ["avx512f,fma"],
+    has_avx512(),
+    stage_avx512_f64,
+    last_avx512_f64,
+    argmax_avx512_f64
+);
+#[cfg(target_arch = "x86_64")]
+entry_points!(
+    f32,
+    x86::Avx2,
+    ["avx2,fma"],
+    has_avx2(),
+    stage_avx2_f32,
+    last_avx2_f32,
+    argmax_avx2_f32
+);
+#[cfg(target_arch = "x86_64")]
+entry_points!(
+    f64,
+    x86::Avx2,
+    ["avx2,fma"],
+    has_avx2(),
+    stage_avx2_f64,
+    last_avx2_f64,
+    argmax_avx2_f64
+);
+
+/// The kernel instances of a scalar type, best first; only those the CPU supports.
+pub(crate) trait KernelSet: Sized + 'static {
+    /// All instances this CPU can run, best first (scalar last).
+    fn available() -> &'static [Kernels<Self>];
+}
+
+macro_rules! kernel_set {
+    ($t:ty, [$s:ident, $l:ident, $a:ident], [$s2:ident, $l2:ident, $a2:ident], [$s5:ident, $l5:ident, $a5:ident]) => {
+        impl KernelSet for $t {
+            fn available() -> &'static [Kernels<$t>] {
+                static SET: OnceLock<Vec<Kernels<$t>>> = OnceLock::new();
+                SET.get_or_init(|| {
+                    let mut v = Vec::new();
+                    #[cfg(target_arch = "x86_64")]
+                    {
+                        if has_avx512() {
+                            v.push(Kernels {
+                                name: "avx512",
+                                stage: $s5,
+                                last: $l5,
+                                argmax: $a5,
+                            });
+                        }
+                        if has_avx2() {
+                            v.push(Kernels {
+                                name: "avx2",
+                                stage: $s2,
+                                last: $l2,
+                                argmax: $a2,
+                            });
+                        }
+                    }
+                    v.push(Kernels {
+                        name: "scalar",
+                        stage: $s,
+                        last: $l,
+                        argmax: $a,
+                    });
+                    v
+                })
+            }
+        }
+    };
+}
+
+kernel_set!(
+    f32,
+    [stage_scalar_f32, last_scalar_f32, argmax_scalar_f32],
+    [stage_avx2_f32, last_avx2_f32, argmax_avx2_f32],
+    [stage_avx512_f32, last_avx512_f32, argmax_avx512_f32]
+);
+kernel_set!(
+    f64,
+    [stage_scalar_f64, last_scalar_f64, argmax_scalar_f64],
+    [stage_avx2_f64, last_avx2_f64, argmax_avx2_f64],
+    [stage_avx512_f64, last_avx512_f64, argmax_avx512_f64]
+);
+
+/// The instance to use: `choice` if given (`None` if this CPU cannot run it), else the best
+/// available.
+pub(crate) fn select<T: KernelSet>(choice: Option<super::Kernel>) -> Option<&'static Kernels<T>> {
+    let all = T::available();
+    match choice {
+        None => all.first(),
+        Some(k) => all.iter().find(|i| i.name == k.name()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backup::{SparseRows, contract};
+    use proptest::prelude::*;
+
+    /// Random rows: `n_rows` rows of 0 to 5 entries (non-negative weights, some zero rows).
+    fn rows_strategy(n_rows: usize, n_cols: usize) -> impl Strategy<Value = RowsBuf<f32>> {
+        prop::collection::vec(
+            prop::collection::vec((0..n_cols as u32, 0.0f32..1.0), 0..6),
+            n_rows,
+        )
+        .prop_map(move |rows| {
+            let mut ptr = vec![0u32];
+            let (mut col, mut weight) = (Vec::new(), Vec::new());
+            for r in rows {
+                for (k, w) in r {
+                    col.push(k);
+                    weight.push(w);
+                }
+                ptr.push(col.len() as u32);
+            }
+            RowsBuf::new(ptr, col, weight, n_cols).expect("valid rows")
+        })
+    }
+
+    fn values(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed | 1;
+        (0..n)
+            .map(|_| {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                ((s >> 40) as f32 / (1u64 << 24) as f32) * 200.0 - 100.0
+            })
+            .collect()
+    }
+
+    /// A shape: block cores, actions, successor cores, r_len, p_len (covering masked tails,
+    /// single lanes and rows longer than a register block).
+    fn shape() -> impl Strategy<Value = (usize, usize, usize, usize, usize)> {
+        (
+            1usize..4,
+            1usize..7,
+            1usize..9,
+            1usize..5,
+            prop_oneof![1usize..40, 120usize..300],
+        )
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(48))]
+
+        #[test]
+        fn every_instance_matches_the_scalar_one_bit_for_bit(
+            ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
+                (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
+            }),
+            seed in any::<u64>(),
+        ) {
+            let input = values(n_k * r_len * p_len, seed);
+            let scalar = select::<f32>(Some(super::super::Kernel::Scalar)).unwrap();
+            for k in f32::available() {
+                for c in 0..n_c {
+                    let mut a = vec![0.0f32; r_len * na * p_len];
+                    let mut b = vec![0.0f32; r_len * na * p_len];
+                    (k.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut a);
+                    (scalar.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut b);
+                    prop_assert_eq!(&a, &b, "stage, {} kernels", k.name);
+
+                    // The unfused reference agrees to rounding.
+                    let sr = SparseRows { ptr: &rows.ptr, col: &rows.col, weight: &rows.weight };
+                    let mut r = vec![0.0f32; r_len * na * p_len];
+                    contract(sr, c * na, na, n_k, r_len, p_len, &input, &mut r).unwrap();
+                    for (x, y) in a.iter().zip(&r) {
+                        prop_assert!((x - y).abs() <= 1e-4 * (1.0 + y.abs()));
+                    }
+                }
+                // The last stage over rows of length p_len (r_len = 1).
+                let last_in = &input[..n_k * p_len];
+                let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+                for abs in [false, true] {
+                    let mut m = vec![0.0f32; n_c];
+                    let mut ms = vec![0.0f32; n_c];
+                    (k.last)(rows.view(), 0, na, p_len, abs, last_in, &mut m, &mut bounds);
+                    (scalar.last)(rows.view(), 0, na, p_len, abs, last_in, &mut ms, &mut bounds);
+                    prop_assert_eq!(&m, &ms, "last, {} kernels", k.name);
+                    // Pruned maxima equal the maxima of the full stage output.
+                    for c in 0..n_c {
+                        let mut full = vec![0.0f32; na * p_len];
+                        (k.stage)(rows.view(), c * na, na, 1, p_len, last_in, &mut full);
+                        let want = full
+                            .iter()
+                            .map(|&x| if abs { x.abs() } else { x })
+                            .fold(f32::NEG_INFINITY, f32::max);
+                        prop_assert_eq!(m[c], want, "pruned maximum, core {}", c);
+                        if !abs {
+                            let mut arg = vec![0u32; 1];
+                            (k.argmax)(rows.view(), c, na, p_len, last_in, &m[c..c + 1], &mut arg);
+                            let first = full.iter().position(|&x| x == want).unwrap();
+                            prop_assert_eq!(arg[0] as usize, first, "argmax, core {}", c);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rows_are_validated() {
+        assert!(RowsBuf::new(vec![0, 1], vec![3], vec![0.5f32], 3).is_none());
+        assert!(RowsBuf::new(vec![0, 1], vec![2], vec![-0.5f32], 3).is_none());
+        assert!(RowsBuf::new(vec![0, 2], vec![2], vec![0.5f32], 3).is_none());
+        assert!(RowsBuf::new(vec![0, 1], vec![2], vec![0.5f32], 3).is_some());
+    }
+
+    #[test]
+    fn f64_instances_match_too() {
+        let rows = RowsBuf::new(
+            vec![0, 2, 3, 7],
+            vec![0, 2, 1, 0, 1, 2, 2],
+            vec![0.25, 0.75, 1.0, 0.1, 0.2, 0.3, 0.4],
+            3,
+        )
+        .unwrap();
+        for p_len in [1, 5, 13, 130] {
+            let input: Vec<f64> = values(3 * 2 * p_len, 9)
+                .into_iter()
+                .map(f64::from)
+                .collect();
+            let scalar = select::<f64>(Some(super::super::Kernel::Scalar)).unwrap();
+            for k in f64::available() {
+                let (mut a, mut b) = (vec![0.0; 2 * 3 * p_len], vec![0.0; 2 * 3 * p_len]);
+                (k.stage)(rows.view(), 0, 3, 2, p_len, &input, &mut a);
+                (scalar.stage)(rows.view(), 0, 3, 2, p_len, &input, &mut b);
+                assert_eq!(a, b, "{} p_len {p_len}", k.name);
+            }
+        }
+    }
+}
