@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
-# Builds fuzzyq and reproduces the paper's simulation (section 3.1, figures 2-4) on its full
-# fuzzy grid: trains the joint Q-function (4,100,625 cores x 625 joint actions), rolls out the
-# greedy and the interpolated policy from the paper's start [-4,-6,-2,2,5,3,2,-1], and writes
-# the policy, figures, trajectories and metrics to results/paper/ (or the directory given).
+# Sets fuzzyq up and reproduces the paper's simulation (section 3.1, figures 2-4) on its full
+# fuzzy grid. Builds the `fuzzyq` command and installs the Python package into `.venv`; trains
+# the joint Q-function (4,100,625 cores x 625 joint actions), rolls out the greedy and the
+# interpolated policy from the paper's start [-4,-6,-2,2,5,3,2,-1], and writes the policy,
+# figures, trajectories and metrics to results/paper/ (or the directory given).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 out=${1:-results/paper}
 cargo build --release --locked -p fuzzyq-cli
+./scripts/setup-python.sh .venv
 mkdir -p "$out"
 fuzzyq=target/release/fuzzyq
 
@@ -17,4 +19,4 @@ for kind in greedy interpolated; do
         --csv "$out/rollout-$kind.csv" --plot "$out/rollout-$kind.png" \
         --json "$out/rollout-$kind.json"
 done
-echo "results in $out/"
+echo "results in $out/; the Python package is in .venv (source .venv/bin/activate)"

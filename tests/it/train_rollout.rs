@@ -15,6 +15,7 @@ fn reduced() -> TrainConfig {
         grid: GridConfig {
             position_cores: vec![-6.0, -0.5, 0.0, 0.5, 6.0],
             velocity_cores: vec![-3.0, 0.0, 3.0],
+            cores: None,
         },
         ..TrainConfig::default()
     }

@@ -30,6 +30,19 @@ pub struct Block<'a> {
     pub action_components: &'a [usize],
 }
 
+/// Transitions precomputed at every (core, joint action) pair of a grid: what a model
+/// defined outside Rust provides (see [`Model::tabulated`]). Entries are ordered by core
+/// (row-major grid order), then joint action.
+#[derive(Clone, Copy, Debug)]
+pub struct Tabulated<'a, T> {
+    /// Number of cores of the grid the table was computed on.
+    pub n_cores: usize,
+    /// Successor states, `n_cores * M * E` values.
+    pub next_states: &'a [T],
+    /// Rewards, `n_cores * M` values.
+    pub rewards: &'a [T],
+}
+
 /// A deterministic multi-agent model with discrete per-agent action sets.
 pub trait Model<T: Real> {
     /// Length `E` of the state vector.
@@ -69,6 +82,14 @@ pub trait Model<T: Real> {
     /// Number of declared independent dynamics blocks (0: none; see the [module docs](self)).
     fn n_blocks(&self) -> usize {
         0
+    }
+
+    /// Precomputed transitions at the cores of the grid being solved, if the model is only
+    /// known there (a table built from a Python callable). The solver then reads successors
+    /// and rewards from the table instead of calling [`step`](Self::step) and
+    /// [`reward`](Self::reward).
+    fn tabulated(&self) -> Option<Tabulated<'_, T>> {
+        None
     }
 
     /// Block `b` (`0 <= b < n_blocks()`).

@@ -134,6 +134,14 @@ impl<'a, T: Real> Partition<'a, T> {
         let above = c.partition_point(|&ck| ck <= x).max(1);
         let lower = above - 1;
         let w = (x - c[lower]) / (c[above] - c[lower]);
+        if w >= T::ONE {
+            // x is within rounding of the upper core: it is that core (otherwise the lower
+            // core would be "active" with membership 0).
+            return Segment {
+                lower: above,
+                upper_weight: T::ZERO,
+            };
+        }
         Segment {
             lower,
             upper_weight: w,
@@ -389,7 +397,9 @@ impl<T: Real> ActiveCores<T> {
     /// Calls `f(flat_index, weight)` for every active core, in increasing flat index.
     ///
     /// The weight of a core is the product of its per-variable memberships, multiplied in
-    /// variable order, so the same state always gives bit-identical weights.
+    /// variable order, so the same state always gives bit-identical weights. Each
+    /// per-variable membership is positive; their product can underflow to 0 when several are
+    /// tiny (below about `1e-154` in `f64`).
     #[inline]
     pub fn for_each(&self, mut f: impl FnMut(usize, T)) {
         let s = self.n_split;
@@ -462,6 +472,19 @@ mod tests {
         let s = p.locate(1.5);
         assert_eq!(s.lower, 6);
         assert!((s.upper_weight - (1.2 / 2.7)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn values_within_rounding_of_a_core_are_that_core() {
+        // Regression: (x - c_i) / (c_{i+1} - c_i) rounds to 1 for x just below c_{i+1}, which
+        // left core i active with membership 0.
+        let c = [-3.0f64, 0.0, 3.0];
+        let p = Partition::try_from_cores(&c).unwrap();
+        let s = p.locate(-7.7e-203);
+        assert_eq!((s.lower, s.upper_weight), (1, 0.0));
+        let mut mu = [0.0; 3];
+        p.memberships(-7.7e-203, &mut mu).unwrap();
+        assert_eq!(mu, [0.0, 1.0, 0.0]);
     }
 
     #[test]

@@ -102,6 +102,40 @@ pub struct TrainSummary {
     pub fuzzyq_version: String,
 }
 
+impl TrainSummary {
+    /// The summary of a solver run.
+    pub fn from_solution<T>(s: &fuzzyq_core::solver::Solution<T>) -> Self {
+        Self {
+            sweeps: s.sweeps.len(),
+            converged: s.converged(),
+            final_delta: s.final_delta,
+            deltas: s
+                .sweeps
+                .iter()
+                .map(|r| (r.delta.lower, r.delta.upper))
+                .collect(),
+            extrapolated: s
+                .sweeps
+                .iter()
+                .filter(|r| r.extrapolated)
+                .map(|r| r.sweep)
+                .collect(),
+            seconds: s.seconds,
+            sweep_bound: s.bound,
+            reward_bound: s.reward_bound,
+            backup: match s.path {
+                fuzzyq_core::solver::BackupPath::Generic => "generic",
+                _ => "block",
+            }
+            .into(),
+            kernel: s.kernel.into(),
+            multiply_adds_per_sweep: s.multiply_adds_per_sweep,
+            sweep_seconds: s.sweep_seconds,
+            fuzzyq_version: env!("CARGO_PKG_VERSION").into(),
+        }
+    }
+}
+
 /// A trained policy.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PolicyArtifact {
@@ -299,6 +333,7 @@ mod tests {
             grid: GridConfig {
                 position_cores: vec![-1.0, 1.0],
                 velocity_cores: vec![-1.0, 1.0],
+                cores: None,
             },
             ..TrainConfig::default()
         };

@@ -77,7 +77,7 @@ impl EnvConfig {
 }
 
 /// The fuzzy grid of the point-mass task: one list of cores for every position variable and
-/// one for every velocity variable.
+/// one for every velocity variable, or explicit cores per state variable.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridConfig {
@@ -85,6 +85,10 @@ pub struct GridConfig {
     pub position_cores: Vec<f64>,
     /// Cores of every velocity variable (m/s).
     pub velocity_cores: Vec<f64>,
+    /// Cores of each state variable, in state order; when given, they replace the two lists
+    /// above (which must still be valid cores).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cores: Option<Vec<Vec<f64>>>,
 }
 
 /// Solver settings as written in a config file.
@@ -241,6 +245,7 @@ impl Default for TrainConfig {
             grid: GridConfig {
                 position_cores: vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0],
                 velocity_cores: vec![-3.0, -1.0, 0.0, 1.0, 3.0],
+                cores: None,
             },
             solver: SolverSettings::default(),
         }
@@ -284,6 +289,23 @@ impl TrainConfig {
         }
         check_cores("grid.position_cores", &self.grid.position_cores)?;
         check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
+        if let Some(cores) = &self.grid.cores {
+            let want = match &self.env {
+                EnvConfig::Pointmass(p) => p.state_dim(),
+            };
+            if cores.len() != want {
+                return Err(ConfigError::invalid(
+                    "grid.cores",
+                    format!(
+                        "needs one list per state variable ({want}), got {}",
+                        cores.len()
+                    ),
+                ));
+            }
+            for (i, c) in cores.iter().enumerate() {
+                check_cores(&format!("grid.cores[{i}]"), c)?;
+            }
+        }
         let n = self
             .grid_cores()
             .iter()
@@ -301,6 +323,9 @@ impl TrainConfig {
     /// The cores of every state variable, in state order.
     #[must_use]
     pub fn grid_cores(&self) -> Vec<Vec<f64>> {
+        if let Some(cores) = &self.grid.cores {
+            return cores.clone();
+        }
         match &self.env {
             EnvConfig::Pointmass(p) => (0..p.agents)
                 .flat_map(|_| {

@@ -24,6 +24,7 @@
 //! config.grid = GridConfig {
 //!     position_cores: vec![-6.0, -1.0, 0.0, 1.0, 6.0],
 //!     velocity_cores: vec![-3.0, 0.0, 3.0],
+//!     cores: None,
 //! };
 //! let artifact = fuzzyq_sim::train::train(&config, |_| std::ops::ControlFlow::Continue(()))?;
 //! assert!(artifact.summary.converged);

@@ -3,7 +3,7 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::Real;
-use fuzzyq_core::solver::{self, BackupPath, Grid, Progress, Solution};
+use fuzzyq_core::solver::{self, Grid, Progress, Solution};
 
 use crate::artifact::{PolicyArtifact, TrainSummary, Values};
 use crate::config::{EnvConfig, Precision, TrainConfig};
@@ -72,34 +72,7 @@ fn artifact<T>(
 ) -> PolicyArtifact {
     PolicyArtifact {
         config: config.clone(),
-        summary: TrainSummary {
-            sweeps: s.sweeps.len(),
-            converged: s.converged(),
-            final_delta: s.final_delta,
-            deltas: s
-                .sweeps
-                .iter()
-                .map(|r| (r.delta.lower, r.delta.upper))
-                .collect(),
-            extrapolated: s
-                .sweeps
-                .iter()
-                .filter(|r| r.extrapolated)
-                .map(|r| r.sweep)
-                .collect(),
-            seconds: s.seconds,
-            sweep_bound: s.bound,
-            reward_bound: s.reward_bound,
-            backup: match s.path {
-                BackupPath::Generic => "generic",
-                _ => "block",
-            }
-            .into(),
-            kernel: s.kernel.into(),
-            multiply_adds_per_sweep: s.multiply_adds_per_sweep,
-            sweep_seconds: s.sweep_seconds,
-            fuzzyq_version: env!("CARGO_PKG_VERSION").into(),
-        },
+        summary: TrainSummary::from_solution(&s),
         values: values(s.v),
         greedy: s.greedy,
     }

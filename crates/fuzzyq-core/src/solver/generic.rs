@@ -1,5 +1,8 @@
 //! The generic backup path: step the model for every core and joint action, interpolate `V`
 //! over the successor's active cores. Internal order is the grid's row-major order.
+//!
+//! For a [tabulated](crate::Model::tabulated) model the successors' active cores and weights
+//! are computed once, at construction, and every sweep reads them.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::vec::Vec;
@@ -9,7 +12,17 @@ use crate::backup::expected_values;
 use crate::model::Model;
 use crate::real::Real;
 
-pub(super) struct GenericOperator;
+pub(super) struct GenericOperator<T> {
+    /// Precomputed successors of a tabulated model: entries `ptr[d M + u] .. ptr[d M + u + 1]`.
+    table: Option<Successors<T>>,
+}
+
+/// The successors' active cores and weights of every (core, joint action) pair.
+struct Successors<T> {
+    ptr: Vec<usize>,
+    col: Vec<u32>,
+    weight: Vec<T>,
+}
 
 /// Per-task buffers.
 struct Work<T> {
@@ -19,8 +32,55 @@ struct Work<T> {
     reduce: ReduceWork<T>,
 }
 
-impl GenericOperator {
-    fn work<T: Real, M: Model<T> + Sync + ?Sized>(op: &Operator<'_, T, M>) -> Work<T> {
+impl<T: Real> GenericOperator<T> {
+    /// The generic path; for a tabulated model, with its successors' memberships precomputed.
+    pub(super) fn new(
+        grid: &crate::partition::ProductPartition<'_, T>,
+        n_joint: usize,
+        table: Option<crate::model::Tabulated<'_, T>>,
+    ) -> Self {
+        let table = table.map(|t| {
+            let e = grid.n_dims();
+            let per_core = par::map_indexed(
+                grid.n_cores(),
+                64,
+                || (),
+                |(), d| {
+                    let mut lens = Vec::with_capacity(n_joint);
+                    let mut entries = Vec::new();
+                    for u in 0..n_joint {
+                        let i = (d * n_joint + u) * e;
+                        let before = entries.len();
+                        grid.active_unchecked(&t.next_states[i..i + e])
+                            .for_each(|k, w| {
+                                if w != T::ZERO {
+                                    entries.push((k as u32, w));
+                                }
+                            });
+                        lens.push(entries.len() - before);
+                    }
+                    (lens, entries)
+                },
+            );
+            let mut ptr = Vec::with_capacity(grid.n_cores() * n_joint + 1);
+            let mut col = Vec::new();
+            let mut weight = Vec::new();
+            ptr.push(0);
+            for (lens, entries) in per_core {
+                for l in lens {
+                    ptr.push(ptr.last().expect("non-empty") + l);
+                }
+                for (k, w) in entries {
+                    col.push(k);
+                    weight.push(w);
+                }
+            }
+            Successors { ptr, col, weight }
+        });
+        Self { table }
+    }
+
+    fn work<M: Model<T> + Sync + ?Sized>(op: &Operator<'_, T, M>) -> Work<T> {
         let e = op.state_dim();
         Work {
             x: vec![T::ZERO; e],
@@ -31,7 +91,8 @@ impl GenericOperator {
     }
 
     /// Reduces core `i` against `v`; flags a non-finite successor.
-    fn core<T: Real, M: Model<T> + Sync + ?Sized>(
+    fn core<M: Model<T> + Sync + ?Sized>(
+        &self,
         op: &Operator<'_, T, M>,
         v: &[T],
         i: usize,
@@ -39,7 +100,17 @@ impl GenericOperator {
         w: &mut Work<T>,
         failed: &AtomicBool,
     ) -> (T, u32) {
-        if !op.is_goal(i) {
+        if let Some(t) = &self.table {
+            let m = w.ev.len();
+            for (u, ev) in w.ev.iter_mut().enumerate() {
+                let (s, e) = (t.ptr[i * m + u], t.ptr[i * m + u + 1]);
+                let mut acc = T::ZERO;
+                for (&k, &wt) in t.col[s..e].iter().zip(&t.weight[s..e]) {
+                    acc += wt * v[k as usize];
+                }
+                *ev = acc;
+            }
+        } else if !op.is_goal(i) {
             op.core_state(i, &mut w.x);
             if expected_values(
                 op.model,
@@ -68,7 +139,7 @@ impl GenericOperator {
     }
 
     /// Reduces every core against `v` into `out`, keeping `pick` of each `(value, action)`.
-    pub(super) fn each_core<T: Real, U: Send, M: Model<T> + Sync + ?Sized>(
+    pub(super) fn each_core<U: Send, M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         v: &[T],
@@ -83,14 +154,14 @@ impl GenericOperator {
             || Self::work(op),
             |w, s, chunk| {
                 for (j, o) in chunk.iter_mut().enumerate() {
-                    *o = pick(Self::core(op, v, s * GENERIC_SLAB + j, kind, w, &failed));
+                    *o = pick(self.core(op, v, s * GENERIC_SLAB + j, kind, w, &failed));
                 }
             },
         );
         Self::check(&failed)
     }
 
-    pub(super) fn sweep_async<T: Real, M: Model<T> + Sync + ?Sized>(
+    pub(super) fn sweep_async<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         v: &mut [T],
@@ -106,7 +177,7 @@ impl GenericOperator {
                 len,
                 16,
                 || Self::work(op),
-                |w, j| Self::core(op, read, start + j, Reduce::Max, w, &failed).0,
+                |w, j| self.core(op, read, start + j, Reduce::Max, w, &failed).0,
             );
             for (o, x) in v[start..start + len].iter_mut().zip(new) {
                 dv = dv.max((x.to_f64() - o.to_f64()).abs());
@@ -117,7 +188,7 @@ impl GenericOperator {
         Self::check(&failed).map(|()| dv)
     }
 
-    pub(super) fn abs_max<T: Real, M: Model<T> + Sync + ?Sized>(
+    pub(super) fn abs_max<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         dv: &[T],
@@ -132,7 +203,7 @@ impl GenericOperator {
             |w, s| {
                 let mut m = T::ZERO;
                 for i in s * GENERIC_SLAB..((s + 1) * GENERIC_SLAB).min(n) {
-                    m = m.max_of(Self::core(op, dv, i, Reduce::AbsMax, w, &failed).0);
+                    m = m.max_of(self.core(op, dv, i, Reduce::AbsMax, w, &failed).0);
                 }
                 m
             },

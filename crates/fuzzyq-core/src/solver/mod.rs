@@ -72,6 +72,9 @@ mod block;
 mod generic;
 mod par;
 pub(crate) mod simd;
+mod table;
+
+pub use table::TabulatedModel;
 
 use core::ops::ControlFlow;
 use std::time::Instant;
@@ -490,6 +493,8 @@ pub struct Operator<'a, T: Real, M: ?Sized> {
     gamma: T,
     /// `rho(x_d)` per core in internal order, when the reward does not depend on the action.
     rewards: Option<Vec<T>>,
+    /// `rho(x_d, u)` per core and joint action, for a tabulated model.
+    reward_table: Option<&'a [T]>,
     /// Absorbing goal flags per core in internal order (empty unless absorbing).
     goal: Vec<bool>,
     reward_bound: f64,
@@ -497,7 +502,7 @@ pub struct Operator<'a, T: Real, M: ?Sized> {
 }
 
 enum Path<T: 'static> {
-    Generic(GenericOperator),
+    Generic(GenericOperator<T>),
     Block(BlockOperator<T>),
 }
 
@@ -517,7 +522,21 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             });
         }
         let joint = joint_actions(model)?;
+        let table = model.tabulated();
+        if let Some(t) = &table {
+            let (n, m, e) = (grid.n_cores(), joint.n_joint(), grid.n_dims());
+            if t.n_cores != n {
+                return Err(SolveError::Eval(EvalError::Length {
+                    what: "tabulated model's cores",
+                    expected: n,
+                    found: t.n_cores,
+                }));
+            }
+            crate::error::check_len("tabulated rewards", n * m, t.rewards.len())?;
+            crate::error::check_len("tabulated next states", n * m * e, t.next_states.len())?;
+        }
         let use_blocks = match path {
+            _ if table.is_some() => false,
             BackupPath::Generic => false,
             BackupPath::Block if model.n_blocks() == 0 => return Err(SolveError::NoBlocks),
             BackupPath::Block => true,
@@ -526,7 +545,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let path = if use_blocks {
             Path::Block(BlockOperator::new(model, &grid, &joint)?)
         } else {
-            Path::Generic(GenericOperator)
+            Path::Generic(GenericOperator::new(&grid, joint.n_joint(), table))
         };
         let mut op = Self {
             model,
@@ -535,6 +554,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             backup,
             gamma: backup.gamma,
             rewards: None,
+            reward_table: table.map(|t| t.rewards),
             goal: Vec::new(),
             reward_bound: 0.0,
             path,
@@ -619,8 +639,21 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let n = self.n_cores();
         let e = self.state_dim();
         let a = self.joint.dim();
-        let depends = self.model.reward_depends_on_action();
         let absorbing = self.backup.absorbing_goal;
+        if let Some(t) = self.reward_table {
+            self.reward_bound = t.iter().fold(0.0, |m, r| m.max(r.to_f64().abs()));
+            if absorbing {
+                let mut x = vec![T::ZERO; e];
+                self.goal = (0..n)
+                    .map(|i| {
+                        self.core_state(i, &mut x);
+                        self.model.is_goal(&x)
+                    })
+                    .collect();
+            }
+            return Ok(());
+        }
+        let depends = self.model.reward_depends_on_action();
         // Per core: (reward if state-only, goal flag, max |rho| over actions).
         let this = &*self;
         let per_core = par::map_indexed(
@@ -721,15 +754,16 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                     return (rd + self.gamma * best, arg);
                 }
                 let reward_at = |u: usize, work: &mut ReduceWork<T>| -> T {
-                    match &self.rewards {
-                        Some(r) => r[internal],
-                        None => {
+                    match (&self.rewards, self.reward_table) {
+                        (Some(r), _) => r[internal],
+                        (None, Some(t)) => t[internal * m + u],
+                        (None, None) => {
                             self.joint.vector_unchecked(u, &mut work.u);
                             self.model.reward(&work.x, &work.u)
                         }
                     }
                 };
-                if self.rewards.is_none() {
+                if self.rewards.is_none() && self.reward_table.is_none() {
                     self.core_state(internal, &mut work.x);
                 }
                 let mut best = T::ZERO;

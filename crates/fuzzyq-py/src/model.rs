@@ -1,0 +1,689 @@
+//! `Grid`, `PointMass` and `CallableModel`.
+
+use std::sync::Arc;
+
+use fuzzyq_core::model::joint_actions;
+use fuzzyq_core::{ActionSet, JointActions, Model};
+use fuzzyq_sim::pointmass::{FrictionConfig, FrictionPatch, Integrator, PointMassConfig};
+use numpy::ndarray::Array2;
+use numpy::{PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+
+use crate::convert::{finite_vector, matrix, one_or_batch, vector};
+use crate::errors::{Kind, config_error, error, eval_error};
+
+/// Active core indices and their memberships.
+type Memberships<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<f64>>);
+
+/// A friction patch as given from Python: `((x, y), radius, eta)`.
+type Patch = ((f64, f64), f64, f64);
+
+/// A fuzzy grid: triangular membership functions on each state variable, combined by product.
+///
+/// `Grid(cores)` takes one increasing sequence of cores per state variable. Cores are numbered
+/// in row-major (C) order: `values.reshape(grid.shape)` views per-core values as an array over
+/// the grid.
+#[pyclass(module = "fuzzyq", frozen)]
+pub struct Grid {
+    pub(crate) inner: fuzzyq_core::solver::Grid<f64>,
+}
+
+impl Grid {
+    pub(crate) fn from_inner(inner: fuzzyq_core::solver::Grid<f64>) -> Self {
+        Self { inner }
+    }
+
+    /// The grid in precision `T`.
+    pub(crate) fn to_precision<T: fuzzyq_core::Real>(&self) -> fuzzyq_core::solver::Grid<T> {
+        let cores = self
+            .inner
+            .cores()
+            .iter()
+            .map(|c| c.iter().map(|&v| T::from_f64(v)).collect())
+            .collect();
+        fuzzyq_core::solver::Grid::new(cores).expect("a valid f64 grid is valid in f32")
+    }
+}
+
+#[pymethods]
+impl Grid {
+    #[new]
+    fn new(py: Python<'_>, cores: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let items = cores.try_iter().map_err(|_| {
+            error(
+                py,
+                Kind::InputType,
+                "cores: expected a sequence of 1-D arrays, one per state variable",
+            )
+        })?;
+        let mut all = Vec::new();
+        for (i, item) in items.enumerate() {
+            all.push(vector(&item?, &format!("cores[{i}]"), None)?);
+        }
+        let inner = fuzzyq_core::solver::Grid::new(all)
+            .map_err(|e| error(py, Kind::Config, format!("grid: {e}")))?;
+        Ok(Self { inner })
+    }
+
+    /// Number of state variables.
+    #[getter]
+    fn n_dims(&self) -> usize {
+        self.inner.n_dims()
+    }
+
+    /// Number of joint cores (the product of the per-variable counts).
+    #[getter]
+    fn n_cores(&self) -> usize {
+        self.inner.n_cores()
+    }
+
+    /// Cores per state variable, as a tuple.
+    #[getter]
+    fn shape<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        PyTuple::new(py, self.inner.cores().iter().map(Vec::len))
+    }
+
+    /// The cores of each state variable.
+    #[getter]
+    fn cores<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, PyArray1<f64>>> {
+        self.inner
+            .cores()
+            .iter()
+            .map(|c| PyArray1::from_slice(py, c))
+            .collect()
+    }
+
+    /// The active cores of state `x` and their memberships (which sum to 1).
+    fn memberships<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+    ) -> PyResult<Memberships<'py>> {
+        let x = finite_vector(x, "x", Some(self.inner.n_dims()))?;
+        let active = self
+            .inner
+            .view()
+            .active(&x)
+            .map_err(|e| eval_error(py, &e))?;
+        let (mut idx, mut w) = (Vec::new(), Vec::new());
+        active.for_each(|d, m| {
+            idx.push(d as i64);
+            w.push(m);
+        });
+        Ok((PyArray1::from_vec(py, idx), PyArray1::from_vec(py, w)))
+    }
+
+    /// The state at which core `index` has membership 1.
+    fn core_state<'py>(
+        &self,
+        py: Python<'py>,
+        index: usize,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let mut x = vec![0.0; self.inner.n_dims()];
+        self.inner
+            .view()
+            .core_state(index, &mut x)
+            .map_err(|e| eval_error(py, &e))?;
+        Ok(PyArray1::from_vec(py, x))
+    }
+
+    /// Every core's state, shape `(n_cores, n_dims)`.
+    fn core_states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let (n, e) = (self.inner.n_cores(), self.inner.n_dims());
+        if n.saturating_mul(e) > 200_000_000 {
+            return Err(error(
+                py,
+                Kind::Input,
+                format!("core_states: {n} x {e} values are too many to return"),
+            ));
+        }
+        let view = self.inner.view();
+        let mut out = vec![0.0; n * e];
+        for (d, row) in out.chunks_exact_mut(e).enumerate() {
+            view.core_state(d, row)
+                .map_err(|err| eval_error(py, &err))?;
+        }
+        let a = Array2::from_shape_vec((n, e), out).expect("n x e values");
+        Ok(PyArray2::from_owned_array(py, a))
+    }
+
+    /// The fuzzy interpolation `sum_d mu_d(x) values[d]` of per-core values at `x`.
+    fn interpolate(
+        &self,
+        py: Python<'_>,
+        values: &Bound<'_, PyAny>,
+        x: &Bound<'_, PyAny>,
+    ) -> PyResult<f64> {
+        let v = vector(values, "values", Some(self.inner.n_cores()))?;
+        let x = finite_vector(x, "x", Some(self.inner.n_dims()))?;
+        let active = self
+            .inner
+            .view()
+            .active(&x)
+            .map_err(|e| eval_error(py, &e))?;
+        Ok(active.interpolate(&v))
+    }
+
+    fn __repr__(&self) -> String {
+        let shape: Vec<String> = self
+            .inner
+            .cores()
+            .iter()
+            .map(|c| c.len().to_string())
+            .collect();
+        format!(
+            "Grid(shape=({}), n_cores={})",
+            shape.join(", "),
+            self.inner.n_cores()
+        )
+    }
+}
+
+/// The point-mass task of the paper's section 3.1 for `agents` agents.
+///
+/// Each agent is a point mass on the plane with friction, `m s'' = -eta s' + u`; forces are
+/// held over each sample time. The state is `[s1x, s1y, v1x, v1y, s2x, ...]`; each agent's
+/// actions are the square of `force_levels` (`u_x` slowest); the shared reward is
+/// `goal_reward` while the whole state is within `goal_radius` of the origin.
+#[pyclass(module = "fuzzyq", frozen)]
+pub struct PointMass {
+    pub(crate) model: Arc<fuzzyq_sim::PointMass>,
+}
+
+impl PointMass {
+    pub(crate) fn from_config(py: Python<'_>, config: PointMassConfig) -> PyResult<Self> {
+        let model = fuzzyq_sim::PointMass::new(config).map_err(|e| config_error(py, &e))?;
+        Ok(Self {
+            model: Arc::new(model),
+        })
+    }
+
+    fn joint(&self) -> JointActions<'_, f64> {
+        joint_actions(&*self.model).expect("a validated point mass")
+    }
+}
+
+#[pymethods]
+impl PointMass {
+    #[new]
+    #[pyo3(signature = (
+        agents = 2,
+        *,
+        mass = 0.5,
+        sample_time = 0.4,
+        position_limit = 6.0,
+        velocity_limit = 3.0,
+        force_levels = None,
+        goal_radius = 0.1,
+        goal_reward = 5.0,
+        integrator = "exact",
+        rk4_substeps = 10,
+        friction = 1.0,
+        friction_patches = None,
+    ))]
+    #[allow(clippy::too_many_arguments)] // the model's parameters, as keyword arguments
+    fn new(
+        py: Python<'_>,
+        agents: usize,
+        mass: f64,
+        sample_time: f64,
+        position_limit: f64,
+        velocity_limit: f64,
+        force_levels: Option<&Bound<'_, PyAny>>,
+        goal_radius: f64,
+        goal_reward: f64,
+        integrator: &str,
+        rk4_substeps: usize,
+        friction: f64,
+        friction_patches: Option<Vec<Patch>>,
+    ) -> PyResult<Self> {
+        let integrator = match integrator {
+            "exact" => Integrator::Exact,
+            "rk4" => Integrator::Rk4,
+            other => {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    format!("integrator: expected \"exact\" or \"rk4\", got {other:?}"),
+                ));
+            }
+        };
+        let force_levels = match force_levels {
+            Some(f) => finite_vector(f, "force_levels", None)?,
+            None => PointMassConfig::default().force_levels,
+        };
+        let friction = match friction_patches {
+            None => FrictionConfig::Constant { eta: friction },
+            Some(p) => FrictionConfig::Patches {
+                base: friction,
+                patches: p
+                    .into_iter()
+                    .map(|((x, y), radius, eta)| FrictionPatch {
+                        center: [x, y],
+                        radius,
+                        eta,
+                    })
+                    .collect(),
+            },
+        };
+        Self::from_config(
+            py,
+            PointMassConfig {
+                agents,
+                mass,
+                sample_time,
+                position_limit,
+                velocity_limit,
+                force_levels,
+                goal_radius,
+                goal_reward,
+                integrator,
+                rk4_substeps,
+                friction,
+            },
+        )
+    }
+
+    /// Length of the state vector, `4 * agents`.
+    #[getter]
+    fn state_dim(&self) -> usize {
+        self.model.config().state_dim()
+    }
+
+    /// Number of agents.
+    #[getter]
+    fn n_agents(&self) -> usize {
+        self.model.config().agents
+    }
+
+    /// Length of the joint action vector, `2 * agents`.
+    #[getter]
+    fn action_dim(&self) -> usize {
+        2 * self.model.config().agents
+    }
+
+    /// Actions per agent.
+    #[getter]
+    fn n_actions(&self) -> usize {
+        Model::<f64>::action_set(&*self.model, 0).n_actions()
+    }
+
+    /// Joint actions, `n_actions ** agents`.
+    #[getter]
+    fn n_joint_actions(&self) -> usize {
+        self.joint().n_joint()
+    }
+
+    /// Sample time (s).
+    #[getter]
+    fn sample_time(&self) -> f64 {
+        self.model.config().sample_time
+    }
+
+    /// Positions are clamped to `[-position_limit, position_limit]`.
+    #[getter]
+    fn position_limit(&self) -> f64 {
+        self.model.config().position_limit
+    }
+
+    /// Velocities are clamped to `[-velocity_limit, velocity_limit]`.
+    #[getter]
+    fn velocity_limit(&self) -> f64 {
+        self.model.config().velocity_limit
+    }
+
+    /// The reward region's radius.
+    #[getter]
+    fn goal_radius(&self) -> f64 {
+        self.model.config().goal_radius
+    }
+
+    /// The reward inside the region.
+    #[getter]
+    fn goal_reward(&self) -> f64 {
+        self.model.config().goal_reward
+    }
+
+    /// Each agent's actions, shape `(n_actions, 2)`: forces `(u_x, u_y)`.
+    #[getter]
+    fn actions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let set: ActionSet<'_, f64> = Model::<f64>::action_set(&*self.model, 0);
+        let a = Array2::from_shape_vec((set.n_actions(), 2), set.values().to_vec()).expect("pairs");
+        PyArray2::from_owned_array(py, a)
+    }
+
+    /// The joint action vector (all agents' forces) of joint action `index`.
+    fn joint_action<'py>(
+        &self,
+        py: Python<'py>,
+        index: usize,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let j = self.joint();
+        let mut u = vec![0.0; j.dim()];
+        j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
+        Ok(PyArray1::from_vec(py, u))
+    }
+
+    /// The joint action index of per-agent action indices.
+    fn joint_index(&self, py: Python<'_>, per_agent: Vec<usize>) -> PyResult<usize> {
+        self.joint()
+            .compose(&per_agent)
+            .map_err(|e| eval_error(py, &e))
+    }
+
+    /// The per-agent action indices of joint action `index`.
+    fn agent_indices(&self, py: Python<'_>, index: usize) -> PyResult<Vec<usize>> {
+        let j = self.joint();
+        let mut out = vec![0; j.n_agents()];
+        j.decompose(index, &mut out)
+            .map_err(|e| eval_error(py, &e))?;
+        Ok(out)
+    }
+
+    /// The successor of state `x` under joint force vector `u`; also batches: `x` of shape
+    /// `(n, state_dim)` with `u` of shape `(n, action_dim)`.
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (e, a) = (self.state_dim(), self.action_dim());
+        let (xs, bx) = one_or_batch(x, "x", e)?;
+        let (us, bu) = one_or_batch(u, "u", a)?;
+        if bx != bu {
+            return Err(error(
+                py,
+                Kind::Input,
+                format!(
+                    "x and u: expected the same batch size, got {} and {}",
+                    bx.map_or("none".into(), |b| b.to_string()),
+                    bu.map_or("none".into(), |b| b.to_string())
+                ),
+            ));
+        }
+        let n = bx.unwrap_or(1);
+        let mut out = vec![0.0; n * e];
+        for i in 0..n {
+            self.model.step_f64(
+                &xs[i * e..(i + 1) * e],
+                &us[i * a..(i + 1) * a],
+                &mut out[i * e..(i + 1) * e],
+            );
+        }
+        Ok(match bx {
+            None => PyArray1::from_vec(py, out).into_any(),
+            Some(b) => {
+                PyArray2::from_owned_array(py, Array2::from_shape_vec((b, e), out).expect("b x e"))
+                    .into_any()
+            }
+        })
+    }
+
+    /// The reward at state `x` (it does not depend on the action).
+    fn reward(&self, x: &Bound<'_, PyAny>) -> PyResult<f64> {
+        let x = finite_vector(x, "x", Some(self.state_dim()))?;
+        Ok(if self.model.in_goal_f64(&x) {
+            self.model.config().goal_reward
+        } else {
+            0.0
+        })
+    }
+
+    /// Whether `x` is in the reward region.
+    fn in_goal(&self, x: &Bound<'_, PyAny>) -> PyResult<bool> {
+        let x = finite_vector(x, "x", Some(self.state_dim()))?;
+        Ok(self.model.in_goal_f64(&x))
+    }
+
+    /// The paper's grid for this number of agents: position cores
+    /// `[-6, -3, -0.3, -0.1, 0, 0.1, 0.3, 3, 6]` and velocity cores `[-3, -1, 0, 1, 3]`.
+    fn paper_grid(&self) -> Grid {
+        let pos = vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
+        let vel = vec![-3.0, -1.0, 0.0, 1.0, 3.0];
+        let mut cores = Vec::new();
+        for _ in 0..self.n_agents() {
+            cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
+        }
+        Grid::from_inner(fuzzyq_core::solver::Grid::new(cores).expect("valid cores"))
+    }
+
+    fn __repr__(&self) -> String {
+        let c = self.model.config();
+        format!(
+            "PointMass(agents={}, mass={}, sample_time={}, force_levels={:?})",
+            c.agents, c.mass, c.sample_time, c.force_levels
+        )
+    }
+}
+
+/// A model defined by a vectorised Python function.
+///
+/// `transition(states, actions)` receives a batch of states, shape `(n, state_dim)`, and of
+/// joint action vectors, shape `(n, action_dim)` (float64), and returns
+/// `(next_states, rewards)` of shapes `(n, state_dim)` and `(n,)`. The solver calls it in
+/// batches of `batch_size` on every (core, joint action) pair of the grid, once, and solves on
+/// the resulting table. `actions` holds each agent's discrete actions, an array of shape
+/// `(n_actions, components)` (or `(n_actions,)` for one component).
+#[pyclass(module = "fuzzyq", frozen)]
+pub struct CallableModel {
+    transition: Py<PyAny>,
+    state_dim: usize,
+    pub(crate) actions: Vec<(Vec<f64>, usize)>,
+    batch_size: usize,
+}
+
+impl CallableModel {
+    fn joint(&self) -> JointActions<'_, f64> {
+        let sets: Vec<ActionSet<'_, f64>> = self
+            .actions
+            .iter()
+            .map(|(v, d)| ActionSet::try_new(v, *d).expect("validated"))
+            .collect();
+        JointActions::try_new(&sets).expect("validated")
+    }
+
+    /// Evaluates the transition on every (core, joint action) pair of `grid`, in batches:
+    /// `(next states, rewards)` in core-major, joint-action order.
+    pub(crate) fn tabulate(
+        &self,
+        py: Python<'_>,
+        grid: &fuzzyq_core::solver::Grid<f64>,
+    ) -> PyResult<(Vec<f64>, Vec<f64>)> {
+        let e = self.state_dim;
+        if grid.n_dims() != e {
+            return Err(error(
+                py,
+                Kind::Config,
+                format!(
+                    "the grid has {} state variables but the model's state has {e}",
+                    grid.n_dims()
+                ),
+            ));
+        }
+        let joint = self.joint();
+        let (n, m, a) = (grid.n_cores(), joint.n_joint(), joint.dim());
+        let total = n
+            .checked_mul(m)
+            .filter(|&t| t <= 500_000_000)
+            .ok_or_else(|| {
+                error(
+                    py,
+                    Kind::Config,
+                    format!("{n} cores x {m} joint actions is too many pairs to tabulate"),
+                )
+            })?;
+        let view = grid.view();
+        let mut next = Vec::with_capacity(total * e);
+        let mut rewards = Vec::with_capacity(total);
+        let mut start = 0;
+        let f = self.transition.bind(py);
+        while start < total {
+            let b = self.batch_size.min(total - start);
+            let mut xs = vec![0.0; b * e];
+            let mut us = vec![0.0; b * a];
+            for i in 0..b {
+                let (d, u) = ((start + i) / m, (start + i) % m);
+                view.core_state(d, &mut xs[i * e..(i + 1) * e])
+                    .expect("core in range");
+                joint.vector_unchecked(u, &mut us[i * a..(i + 1) * a]);
+            }
+            let xs =
+                PyArray2::from_owned_array(py, Array2::from_shape_vec((b, e), xs).expect("b x e"));
+            let us =
+                PyArray2::from_owned_array(py, Array2::from_shape_vec((b, a), us).expect("b x a"));
+            let out = f.call1((xs, us))?;
+            let model_error =
+                |msg: String| error(py, Kind::Model, format!("transition returned {msg}"));
+            let (xn, r): (Bound<'_, PyAny>, Bound<'_, PyAny>) = out.extract().map_err(|_| {
+                model_error("something other than a pair (next_states, rewards)".into())
+            })?;
+            let (_, _, xn) = matrix(&xn, "next_states", Some(b), Some(e))
+                .map_err(|err| model_error(err.value(py).to_string()))?;
+            let r = vector(&r, "rewards", Some(b))
+                .map_err(|err| model_error(err.value(py).to_string()))?;
+            if let Some(i) = xn.iter().position(|v| !v.is_finite()) {
+                return Err(model_error(format!(
+                    "a non-finite next state (pair {})",
+                    start + i / e
+                )));
+            }
+            if let Some(i) = r.iter().position(|v| !v.is_finite()) {
+                return Err(model_error(format!(
+                    "a non-finite reward (pair {})",
+                    start + i
+                )));
+            }
+            next.extend_from_slice(&xn);
+            rewards.extend_from_slice(&r);
+            start += b;
+            py.check_signals()?;
+        }
+        Ok((next, rewards))
+    }
+}
+
+#[pymethods]
+impl CallableModel {
+    #[new]
+    #[pyo3(signature = (transition, *, state_dim, actions, batch_size = 65536))]
+    fn new(
+        py: Python<'_>,
+        transition: Bound<'_, PyAny>,
+        state_dim: usize,
+        actions: &Bound<'_, PyAny>,
+        batch_size: usize,
+    ) -> PyResult<Self> {
+        if !transition.is_callable() {
+            return Err(error(
+                py,
+                Kind::InputType,
+                "transition: expected a callable",
+            ));
+        }
+        if state_dim == 0 || state_dim > fuzzyq_core::MAX_DIMS {
+            return Err(error(
+                py,
+                Kind::Config,
+                format!(
+                    "state_dim: expected 1 to {}, got {state_dim}",
+                    fuzzyq_core::MAX_DIMS
+                ),
+            ));
+        }
+        if batch_size == 0 {
+            return Err(error(py, Kind::Config, "batch_size: must be at least 1"));
+        }
+        let items = actions.try_iter().map_err(|_| {
+            error(
+                py,
+                Kind::InputType,
+                "actions: expected a sequence of arrays, one per agent",
+            )
+        })?;
+        let mut sets = Vec::new();
+        for (i, item) in items.enumerate() {
+            let item = item?;
+            let what = format!("actions[{i}]");
+            let (values, dim) = match matrix(&item, &what, None, None) {
+                Ok((_, c, v)) => (v, c),
+                Err(_) => (finite_vector(&item, &what, None)?, 1),
+            };
+            crate::convert::check_finite(py, &what, &values)?;
+            ActionSet::try_new(&values, dim)
+                .map_err(|e| error(py, Kind::Config, format!("{what}: {e}")))?;
+            sets.push((values, dim));
+        }
+        if sets.is_empty() || sets.len() > fuzzyq_core::MAX_AGENTS {
+            return Err(error(
+                py,
+                Kind::Config,
+                format!(
+                    "actions: expected 1 to {} agents, got {}",
+                    fuzzyq_core::MAX_AGENTS,
+                    sets.len()
+                ),
+            ));
+        }
+        let model = Self {
+            transition: transition.unbind(),
+            state_dim,
+            actions: sets,
+            batch_size,
+        };
+        let n: Option<usize> = model
+            .actions
+            .iter()
+            .try_fold(1usize, |acc, (v, d)| acc.checked_mul(v.len() / d));
+        if n.is_none_or(|n| n > u32::MAX as usize) {
+            return Err(error(py, Kind::Config, "actions: too many joint actions"));
+        }
+        Ok(model)
+    }
+
+    /// Length of the state vector.
+    #[getter]
+    fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    /// Number of agents.
+    #[getter]
+    fn n_agents(&self) -> usize {
+        self.actions.len()
+    }
+
+    /// Length of the joint action vector.
+    #[getter]
+    fn action_dim(&self) -> usize {
+        self.joint().dim()
+    }
+
+    /// Number of joint actions.
+    #[getter]
+    fn n_joint_actions(&self) -> usize {
+        self.joint().n_joint()
+    }
+
+    /// The joint action vector of joint action `index`.
+    fn joint_action<'py>(
+        &self,
+        py: Python<'py>,
+        index: usize,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let j = self.joint();
+        let mut u = vec![0.0; j.dim()];
+        j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
+        Ok(PyArray1::from_vec(py, u))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "CallableModel(state_dim={}, agents={}, joint_actions={})",
+            self.state_dim,
+            self.actions.len(),
+            self.joint().n_joint()
+        )
+    }
+}

@@ -1,0 +1,217 @@
+"""Type stubs of the fuzzyq extension module (checked against it with mypy.stubtest)."""
+
+from collections.abc import Callable, Sequence
+from os import PathLike
+from typing import Any, final
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "FuzzyqError",
+    "ConfigError",
+    "InputError",
+    "InputTypeError",
+    "ModelError",
+    "PolicyFileError",
+    "SolverError",
+    "__version__",
+    "Grid",
+    "PointMass",
+    "CallableModel",
+    "Solution",
+    "Policy",
+    "solve",
+    "load",
+    "available_kernels",
+]
+
+__version__: str
+
+class FuzzyqError(Exception):
+    """Base class of every error fuzzyq raises."""
+
+class ConfigError(FuzzyqError, ValueError):
+    """An invalid setting, grid or model definition."""
+
+class InputError(FuzzyqError, ValueError):
+    """An array of the wrong shape, or with values out of range."""
+
+class InputTypeError(FuzzyqError, TypeError):
+    """An argument of the wrong type or dtype."""
+
+class ModelError(FuzzyqError, ValueError):
+    """A model returned data of the wrong shape or non-finite values."""
+
+class PolicyFileError(FuzzyqError, OSError):
+    """A policy file that cannot be read or written."""
+
+class SolverError(FuzzyqError, RuntimeError):
+    """A problem the solver refuses to solve."""
+
+@final
+class Grid:
+    """A fuzzy grid: triangular memberships per state variable, combined by product."""
+
+    def __new__(cls, cores: Sequence[npt.ArrayLike]) -> Grid: ...
+    @property
+    def n_dims(self) -> int: ...
+    @property
+    def n_cores(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, ...]: ...
+    @property
+    def cores(self) -> list[npt.NDArray[np.float64]]: ...
+    def memberships(
+        self, x: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]: ...
+    def core_state(self, index: int) -> npt.NDArray[np.float64]: ...
+    def core_states(self) -> npt.NDArray[np.float64]: ...
+    def interpolate(self, values: npt.ArrayLike, x: npt.ArrayLike) -> float: ...
+
+@final
+class PointMass:
+    """The point-mass task of the paper's section 3.1."""
+
+    def __new__(
+        cls,
+        agents: int = 2,
+        *,
+        mass: float = 0.5,
+        sample_time: float = 0.4,
+        position_limit: float = 6.0,
+        velocity_limit: float = 3.0,
+        force_levels: npt.ArrayLike | None = None,
+        goal_radius: float = 0.1,
+        goal_reward: float = 5.0,
+        integrator: str = "exact",
+        rk4_substeps: int = 10,
+        friction: float = 1.0,
+        friction_patches: Sequence[tuple[tuple[float, float], float, float]] | None = None,
+    ) -> PointMass: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def n_agents(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def n_actions(self) -> int: ...
+    @property
+    def n_joint_actions(self) -> int: ...
+    @property
+    def sample_time(self) -> float: ...
+    @property
+    def position_limit(self) -> float: ...
+    @property
+    def velocity_limit(self) -> float: ...
+    @property
+    def goal_radius(self) -> float: ...
+    @property
+    def goal_reward(self) -> float: ...
+    @property
+    def actions(self) -> npt.NDArray[np.float64]: ...
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
+    def joint_index(self, per_agent: Sequence[int]) -> int: ...
+    def agent_indices(self, index: int) -> list[int]: ...
+    def step(self, x: npt.ArrayLike, u: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+    def reward(self, x: npt.ArrayLike) -> float: ...
+    def in_goal(self, x: npt.ArrayLike) -> bool: ...
+    def paper_grid(self) -> Grid: ...
+
+@final
+class CallableModel:
+    """A model defined by a vectorised Python function `transition(states, actions)`."""
+
+    def __new__(
+        cls,
+        transition: Callable[
+            [npt.NDArray[np.float64], npt.NDArray[np.float64]],
+            tuple[npt.ArrayLike, npt.ArrayLike],
+        ],
+        *,
+        state_dim: int,
+        actions: Sequence[npt.ArrayLike],
+        batch_size: int = 65536,
+    ) -> CallableModel: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def n_agents(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def n_joint_actions(self) -> int: ...
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
+
+@final
+class Solution:
+    """The result of `solve` or `load`."""
+
+    @property
+    def V(self) -> npt.NDArray[np.float32] | npt.NDArray[np.float64]: ...
+    @property
+    def greedy(self) -> npt.NDArray[np.uint32]: ...
+    @property
+    def grid(self) -> Grid: ...
+    @property
+    def sweeps(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def final_delta(self) -> float: ...
+    @property
+    def error_bound(self) -> float: ...
+    @property
+    def deltas(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def seconds(self) -> float: ...
+    @property
+    def kernel(self) -> str: ...
+    @property
+    def gamma(self) -> float: ...
+    @property
+    def xi(self) -> float: ...
+    def theta(self) -> npt.NDArray[np.float64]: ...
+    def value(self, x: npt.ArrayLike) -> float: ...
+    def policy(self, kind: str = "greedy") -> Policy: ...
+    def save(self, path: str | PathLike[str]) -> None: ...
+
+@final
+class Policy:
+    """A greedy (eq 7) or interpolated (eq 22) policy."""
+
+    @property
+    def kind(self) -> str: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def n_joint_actions(self) -> int: ...
+    @property
+    def n_agents(self) -> int: ...
+    def act(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+    def act_batch(self, states: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+    def act_index(self, x: npt.ArrayLike) -> int: ...
+    def agent_actions(self, x: npt.ArrayLike) -> list[int]: ...
+    def q_values(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+
+def solve(
+    model: PointMass | CallableModel,
+    grid: Grid,
+    *,
+    gamma: float = 0.96,
+    xi: float = 0.05,
+    max_sweeps: int = 1000,
+    sweep: str = "sync",
+    extrapolate: bool = True,
+    absorbing_goal: bool = False,
+    precision: str = "f32",
+    backup: str = "auto",
+    kernel: str | None = None,
+    threads: int | None = None,
+    callback: Callable[[dict[str, Any]], object] | None = None,
+) -> Solution: ...
+def load(path: str | PathLike[str]) -> Solution: ...
+def available_kernels() -> list[str]: ...

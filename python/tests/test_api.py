@@ -1,0 +1,407 @@
+"""Tests of the fuzzyq Python API: grids, models, solving, policies, files and errors."""
+
+from __future__ import annotations
+
+import _thread
+import json
+import os
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import fuzzyq
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def one_agent() -> tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]:
+    model = fuzzyq.PointMass(agents=1)
+    grid = model.paper_grid()
+    return model, grid, fuzzyq.solve(model, grid)
+
+
+# --- grids -----------------------------------------------------------------------------------
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(-20, 20), st.floats(-20, 20))
+def test_memberships_sum_to_one(a: float, b: float) -> None:
+    grid = fuzzyq.Grid([[-6, -1, 0, 1, 6], [-3, 0, 3]])
+    idx, w = grid.memberships([a, b])
+    assert len(idx) <= 4
+    # Products of two memberships below ~1e-154 underflow to 0; none is negative or above 1.
+    assert np.all(w >= 0) and np.all(w <= 1)
+    for dim, v in enumerate([a, b]):
+        one = fuzzyq.Grid([grid.cores[dim]])
+        _, wd = one.memberships([v])
+        assert np.all(wd > 0), "an active core has a positive membership in its variable"
+    assert abs(w.sum() - 1) < 1e-12
+    assert np.all(np.diff(idx) > 0)
+
+
+def test_grid_is_row_major_and_exact_at_cores() -> None:
+    grid = fuzzyq.Grid([np.array([0.0, 1.0, 2.0]), [0, 1]])
+    assert grid.shape == (3, 2) and grid.n_cores == 6 and grid.n_dims == 2
+    np.testing.assert_array_equal(grid.core_state(3), [1.0, 1.0])
+    idx, w = grid.memberships([1.0, 1.0])
+    assert list(idx) == [3] and list(w) == [1.0]
+    states = grid.core_states()
+    assert states.shape == (6, 2)
+    values = np.arange(6.0)
+    assert grid.interpolate(values, [0.5, 0.5]) == pytest.approx(np.mean([0, 1, 2, 3]))
+
+
+def test_grid_errors() -> None:
+    with pytest.raises(fuzzyq.ConfigError, match="state variable 0: cores must increase"):
+        fuzzyq.Grid([[1.0, 0.0]])
+    with pytest.raises(ValueError, match="at least 2 cores"):
+        fuzzyq.Grid([[1.0]])
+    with pytest.raises(fuzzyq.InputTypeError, match="cores"):
+        fuzzyq.Grid(5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"cores\[0\]: expected an array of numbers"):
+        fuzzyq.Grid([["a", "b"]])
+    grid = fuzzyq.Grid([[0, 1], [0, 1]])
+    with pytest.raises(fuzzyq.InputError, match=r"x: expected shape \(2,\), got \(3,\)"):
+        grid.memberships([0, 0, 0])
+    with pytest.raises(fuzzyq.InputError, match="not a finite number"):
+        grid.memberships([0, np.nan])
+    with pytest.raises(fuzzyq.InputError, match="values"):
+        grid.interpolate([1.0], [0, 0])
+
+
+# --- the point-mass model ----------------------------------------------------------------------
+
+
+def test_point_mass_model() -> None:
+    m = fuzzyq.PointMass()
+    assert (m.state_dim, m.n_agents, m.action_dim, m.n_actions, m.n_joint_actions) == (8, 2, 4, 25, 625)
+    assert m.actions.shape == (25, 2)
+    np.testing.assert_array_equal(m.actions[1], [-2.0, -0.2])
+    np.testing.assert_array_equal(m.joint_action(m.joint_index([1, 24])), [-2.0, -0.2, 2.0, 2.0])
+    assert m.agent_indices(26) == [1, 1]
+    x = np.array([-4.0, -6, -2, 2, 5, 3, 2, -1])
+    u = m.joint_action(0)
+    one = m.step(x, u)
+    batch = m.step(np.stack([x, x]), np.stack([u, u]))
+    assert batch.shape == (2, 8)
+    np.testing.assert_array_equal(batch[1], one)
+    assert m.reward(np.zeros(8)) == 5.0 and m.in_goal(np.zeros(8))
+    assert m.reward(x) == 0.0
+    # Frictionless closed form: s' = s + v T + u T^2 / (2 m).
+    free = fuzzyq.PointMass(agents=1, friction=0.0)
+    np.testing.assert_allclose(free.step([0, 0, 1, 0], [2, 0, ])[:1], [1 * 0.4 + 2 * 0.16 / 1.0])
+
+
+def test_point_mass_errors() -> None:
+    with pytest.raises(fuzzyq.ConfigError, match="env.mass"):
+        fuzzyq.PointMass(mass=-1)
+    with pytest.raises(fuzzyq.ConfigError, match="integrator"):
+        fuzzyq.PointMass(integrator="euler")
+    with pytest.raises(fuzzyq.ConfigError, match="rk4"):
+        fuzzyq.PointMass(friction_patches=[((0, 0), 1, 2)])
+    m = fuzzyq.PointMass(agents=1)
+    with pytest.raises(fuzzyq.InputError, match=r"expected shape \(4,\) or \(n, 4\)"):
+        m.step(np.zeros(3), np.zeros(2))
+    with pytest.raises(fuzzyq.InputError, match="same batch size"):
+        m.step(np.zeros((2, 4)), np.zeros(2))
+    with pytest.raises(fuzzyq.InputError, match="out of range"):
+        m.joint_action(25)
+    with pytest.raises(fuzzyq.InputTypeError):
+        m.step(None, None)  # type: ignore[arg-type]
+
+
+# --- solving -------------------------------------------------------------------------------------
+
+
+def test_solve_point_mass(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, grid, s = one_agent
+    assert s.converged and s.final_delta <= 0.05
+    assert s.V.shape == (grid.n_cores,) and s.V.dtype == np.float32
+    assert s.greedy.shape == (grid.n_cores,) and s.greedy.dtype == np.uint32
+    assert s.deltas.shape == (s.sweeps, 2)
+    assert s.error_bound == pytest.approx(0.96 / 0.04 * s.final_delta)
+    # The paper's plain sweeps: 114 (the change decays like 5 * 0.96^k).
+    plain = fuzzyq.solve(model, grid, extrapolate=False)
+    assert plain.sweeps == 114
+    # Both stop within the error bound of each other's fixed point.
+    assert np.max(np.abs(plain.V - s.V)) <= plain.error_bound + s.error_bound
+    # theta is consistent with V: V[d] = max_u theta[d, u] for the next sweep.
+    theta = s.theta()
+    assert theta.shape == (grid.n_cores, 25)
+    assert s.value(grid.core_state(0)) == pytest.approx(float(s.V[0]))
+
+
+def test_policies(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, grid, s = one_agent
+    greedy, interp = s.policy("greedy"), s.policy("interpolated")
+    x = np.array([-4.0, 3.0, 0.5, -0.5])
+    q = greedy.q_values(x)
+    assert q.shape == (25,)
+    u = greedy.act_index(x)
+    assert u == int(np.argmax(q))
+    np.testing.assert_array_equal(greedy.act(x), model.joint_action(u))
+    assert greedy.agent_actions(x) == [u]
+    batch = np.stack([x, -x, np.zeros(4)])
+    for pol in (greedy, interp):
+        out = pol.act_batch(batch)
+        assert out.shape == (3, 2)
+        for row, xi in zip(out, batch):
+            np.testing.assert_array_equal(row, pol.act(xi))
+    assert np.all(np.abs(interp.act(x)) <= 2.0)
+    with pytest.raises(fuzzyq.ConfigError, match="only the greedy policy"):
+        interp.act_index(x)
+    with pytest.raises(fuzzyq.ConfigError, match="kind"):
+        s.policy("epsilon")
+
+
+def test_rollout_reaches_the_goal(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, _, s = one_agent
+    for kind in ("greedy", "interpolated"):
+        pol = s.policy(kind)
+        x = np.array([-4.0, -6.0, -2.0, 2.0])
+        reached = False
+        for _ in range(75):
+            reached |= model.in_goal(x)
+            x = model.step(x, pol.act(x))
+        assert reached, kind
+        assert np.hypot(x[0], x[1]) < 0.08, kind
+
+
+def test_solver_settings_and_errors(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, grid, s = one_agent
+    for kwargs, err, match in [
+        ({"gamma": 1.5}, fuzzyq.ConfigError, "solver.gamma"),
+        ({"xi": 0}, fuzzyq.ConfigError, "solver.xi"),
+        ({"sweep": "gauss"}, fuzzyq.ConfigError, "sweep"),
+        ({"precision": "f16"}, fuzzyq.ConfigError, "precision"),
+        ({"backup": "fast"}, fuzzyq.ConfigError, "backup"),
+        ({"kernel": "neon"}, fuzzyq.ConfigError, "kernel"),
+        ({"threads": 0}, fuzzyq.ConfigError, "threads"),
+        ({"callback": 3}, fuzzyq.InputTypeError, "callback"),
+    ]:
+        with pytest.raises(err, match=match):
+            fuzzyq.solve(model, grid, **kwargs)  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="grid.cores"):
+        fuzzyq.solve(model, fuzzyq.Grid([[0, 1]] * 3))
+    with pytest.raises(fuzzyq.InputTypeError, match="model"):
+        fuzzyq.solve("pointmass", grid)  # type: ignore[arg-type]
+    # Every setting gives the same fixed point (within the bounds) and is deterministic.
+    a = fuzzyq.solve(model, grid, precision="f64", sweep="async", threads=1)
+    b = fuzzyq.solve(model, grid, precision="f64", sweep="async", threads=2)
+    np.testing.assert_array_equal(a.V, b.V)
+    assert a.V.dtype == np.float64
+    assert np.max(np.abs(a.V - s.V)) < 2.5
+    for k in fuzzyq.available_kernels():
+        np.testing.assert_array_equal(fuzzyq.solve(model, grid, kernel=k).V, s.V)
+
+
+def test_callback_sees_every_sweep_and_can_stop(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, grid, _ = one_agent
+    seen: list[dict[str, object]] = []
+    s = fuzzyq.solve(model, grid, callback=seen.append)
+    assert [d["sweep"] for d in seen] == list(range(1, s.sweeps + 1))
+    assert set(seen[0]) >= {"sweep", "delta_lower", "delta_upper", "seconds", "bound", "extrapolated"}
+
+    class Stop(Exception):
+        pass
+
+    def stop(info: dict[str, object]) -> None:
+        if info["sweep"] == 3:
+            raise Stop
+
+    with pytest.raises(Stop):
+        fuzzyq.solve(model, grid, callback=stop)
+
+
+def test_ctrl_c_interrupts_a_long_solve_promptly() -> None:
+    model = fuzzyq.PointMass(agents=2)
+    grid = model.paper_grid()  # about 8 s on 2 cores
+    timer = threading.Timer(1.5, _thread.interrupt_main)
+    start = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            fuzzyq.solve(model, grid)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 5.0
+
+
+# --- models written in Python ------------------------------------------------------------------
+
+
+def point_mass_transition(model: fuzzyq.PointMass):  # type: ignore[no-untyped-def]
+    def transition(states: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        assert states.dtype == np.float64 and actions.dtype == np.float64
+        rewards = np.where(np.linalg.norm(states, axis=1) < model.goal_radius, model.goal_reward, 0.0)
+        return model.step(states, actions), rewards
+
+    return transition
+
+
+def test_callable_model_matches_the_built_in_model(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, grid, s = one_agent
+    calls: list[int] = []
+
+    def transition(states: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        calls.append(len(states))
+        return point_mass_transition(model)(states, actions)
+
+    custom = fuzzyq.CallableModel(transition, state_dim=4, actions=[model.actions], batch_size=10_000)
+    assert custom.n_joint_actions == 25 and custom.action_dim == 2
+    c = fuzzyq.solve(custom, grid, precision="f64")
+    ref = fuzzyq.solve(model, grid, precision="f64", backup="generic")
+    np.testing.assert_allclose(c.V, ref.V, rtol=1e-12)
+    assert c.sweeps == ref.sweeps
+    assert sum(calls) == grid.n_cores * 25 and max(calls) <= 10_000
+    x = np.array([-4.0, 3.0, 0.5, -0.5])
+    np.testing.assert_allclose(c.policy().q_values(x), ref.policy().q_values(x), rtol=1e-9)
+    with pytest.raises(fuzzyq.ConfigError, match="built-in"):
+        c.save("never.fzq")
+
+
+def test_a_ten_line_custom_system() -> None:
+    # A 1-D double integrator pushed to the origin: the README's example.
+    def transition(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        pos = np.clip(x[:, 0] + 0.1 * x[:, 1], -1, 1)
+        vel = np.clip(x[:, 1] + 0.1 * u[:, 0], -1, 1)
+        return np.stack([pos, vel], axis=1), -(x[:, 0] ** 2)
+
+    model = fuzzyq.CallableModel(transition, state_dim=2, actions=[[-1.0, 0.0, 1.0]])
+    grid = fuzzyq.Grid([np.linspace(-1, 1, 21), np.linspace(-1, 1, 21)])
+    solution = fuzzyq.solve(model, grid, gamma=0.95, xi=1e-3)
+    policy = solution.policy("greedy")
+    assert solution.converged
+    assert policy.act([0.8, 0.0])[0] == -1.0 and policy.act([-0.8, 0.0])[0] == 1.0
+
+
+def test_callable_model_errors() -> None:
+    grid = fuzzyq.Grid([[-1, 0, 1]])
+    ok = lambda x, u: (x, np.zeros(len(x)))  # noqa: E731
+    with pytest.raises(fuzzyq.InputTypeError, match="callable"):
+        fuzzyq.CallableModel(3, state_dim=1, actions=[[0.0]])  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="state_dim"):
+        fuzzyq.CallableModel(ok, state_dim=0, actions=[[0.0]])
+    with pytest.raises(fuzzyq.ConfigError, match="agents"):
+        fuzzyq.CallableModel(ok, state_dim=1, actions=[])
+    with pytest.raises(fuzzyq.InputError, match=r"actions\[0\]"):
+        fuzzyq.CallableModel(ok, state_dim=1, actions=[[0.0, np.inf]])
+    with pytest.raises(fuzzyq.ConfigError, match="state variables"):
+        fuzzyq.solve(fuzzyq.CallableModel(ok, state_dim=2, actions=[[0.0]]), grid)
+    for bad, match in [
+        (lambda x, u: x, "pair"),
+        (lambda x, u: (x[:, :0], np.zeros(len(x))), r"expected shape \(3, 1\)"),
+        (lambda x, u: (x, np.zeros(2)), r"rewards: expected shape \(3,\)"),
+        (lambda x, u: (x * np.nan, np.zeros(len(x))), "non-finite next state"),
+        (lambda x, u: (x, np.full(len(x), np.inf)), "non-finite reward"),
+        (lambda x, u: (x, ["a"] * len(x)), "rewards"),
+    ]:
+        with pytest.raises(fuzzyq.ModelError, match=match):
+            fuzzyq.solve(fuzzyq.CallableModel(bad, state_dim=1, actions=[[0.0]]), grid)
+
+    def boom(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        raise ZeroDivisionError("inside the model")
+
+    with pytest.raises(ZeroDivisionError, match="inside the model"):
+        fuzzyq.solve(fuzzyq.CallableModel(boom, state_dim=1, actions=[[0.0]]), grid)
+
+
+# --- files: Python and the command line share the format ----------------------------------------
+
+
+def fuzzyq_cli() -> Path | None:
+    for profile in ("release", "debug"):
+        exe = REPO / "target" / profile / "fuzzyq"
+        if exe.exists():
+            return exe
+    return None
+
+
+def test_save_load_round_trip(tmp_path: Path, one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    _, _, s = one_agent
+    path = tmp_path / "one.fzq"
+    s.save(path)
+    back = fuzzyq.load(path)
+    np.testing.assert_array_equal(back.V, s.V)
+    np.testing.assert_array_equal(back.greedy, s.greedy)
+    assert back.sweeps == s.sweeps and back.grid.shape == s.grid.shape
+    x = [-4.0, 3.0, 0.5, -0.5]
+    assert back.policy().act_index(x) == s.policy().act_index(x)
+    with pytest.raises(fuzzyq.PolicyFileError, match="not a fuzzyq policy file"):
+        (tmp_path / "junk.fzq").write_text("hello")
+        fuzzyq.load(tmp_path / "junk.fzq")
+    with pytest.raises(fuzzyq.PolicyFileError, match="truncated"):
+        (tmp_path / "cut.fzq").write_bytes(path.read_bytes()[:100])
+        fuzzyq.load(tmp_path / "cut.fzq")
+    with pytest.raises(fuzzyq.PolicyFileError, match="cannot read"):
+        fuzzyq.load(tmp_path / "missing.fzq")
+    with pytest.raises(fuzzyq.PolicyFileError, match="cannot write"):
+        s.save(tmp_path / "no" / "dir" / "x.fzq")
+
+
+@pytest.mark.skipif(fuzzyq_cli() is None, reason="the fuzzyq binary is not built")
+def test_python_and_cli_policies_act_alike(tmp_path: Path) -> None:
+    exe = fuzzyq_cli()
+    assert exe is not None
+    model = fuzzyq.PointMass(agents=1)
+    x0 = "-4,-6,-2,2"
+    # Python -> CLI: the CLI's greedy rollout matches the Python policy step by step.
+    s = fuzzyq.solve(model, model.paper_grid())
+    s.save(tmp_path / "py.fzq")
+    subprocess.run(
+        [exe, "rollout", "--policy", tmp_path / "py.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "py.csv", "-q"],
+        check=True,
+    )
+    rows = np.loadtxt(tmp_path / "py.csv", delimiter=",", skiprows=1, max_rows=30)
+    pol = s.policy("greedy")
+    for row in rows:
+        np.testing.assert_array_equal(pol.act(row[1:5]), row[5:7])
+    # CLI -> Python.
+    config = subprocess.run([exe, "config"], check=True, capture_output=True, text=True).stdout
+    (tmp_path / "one.toml").write_text(config.replace("agents = 2 ", "agents = 1 "))
+    subprocess.run([exe, "train", "--config", tmp_path / "one.toml", "--out", tmp_path / "cli.fzq", "-q"], check=True)
+    subprocess.run(
+        [exe, "rollout", "--policy", tmp_path / "cli.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "cli.csv", "--json", tmp_path / "m.json", "-q"],
+        check=True,
+    )
+    loaded = fuzzyq.load(tmp_path / "cli.fzq").policy("greedy")
+    rows = np.loadtxt(tmp_path / "cli.csv", delimiter=",", skiprows=1, max_rows=30)
+    for row in rows:
+        np.testing.assert_array_equal(loaded.act(row[1:5]), row[5:7])
+    assert json.loads((tmp_path / "m.json").read_text())["final_error_m"][0] < 0.08
+
+
+def test_solve_releases_the_gil() -> None:
+    model = fuzzyq.PointMass(agents=2)
+    grid = fuzzyq.Grid([[-6, 0, 6], [-6, 0, 6], [-3, 0, 3], [-3, 0, 3]] * 2)
+    ticks = 0
+    done = threading.Event()
+
+    def count() -> None:
+        nonlocal ticks
+        while not done.is_set():
+            ticks += 1
+            time.sleep(0.001)
+
+    t = threading.Thread(target=count)
+    t.start()
+    try:
+        fuzzyq.solve(model, grid, xi=1e-4, extrapolate=False)
+    finally:
+        done.set()
+        t.join()
+    assert ticks > 5
+
+
+def test_package_is_typed() -> None:
+    pkg = Path(fuzzyq.__file__).parent
+    assert (pkg / "py.typed").exists()
+    assert (pkg / "_fuzzyq.pyi").exists()
+    assert os.path.basename(fuzzyq.__file__) == "__init__.py"
