@@ -31,6 +31,13 @@ def agent_name(i: int) -> str:
     return f"agent_{i}"
 
 
+def validate_render_mode(render_mode: str | None, modes: list[str]) -> str | None:
+    """`render_mode` must be None or one of `modes`."""
+    if render_mode is not None and render_mode not in modes:
+        raise fuzzyq.InputError(f"render_mode must be None or one of {modes}, got {render_mode!r}")
+    return render_mode
+
+
 def validate_max_steps(max_steps: object) -> int | None:
     """`max_steps` must be a positive int or None (never truncate)."""
     if max_steps is None:

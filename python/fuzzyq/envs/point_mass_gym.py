@@ -10,7 +10,13 @@ from gymnasium import spaces
 
 import fuzzyq
 
-from ._core import Observation, PointMassSim, agent_name, validate_index
+from ._core import (
+    Observation,
+    PointMassSim,
+    agent_name,
+    validate_index,
+    validate_render_mode,
+)
 
 
 class PointMassEnv(gymnasium.Env[Observation, np.int64]):
@@ -68,16 +74,11 @@ class PointMassEnv(gymnasium.Env[Observation, np.int64]):
     def __init__(
         self, *, max_steps: int | None = 75, render_mode: str | None = None, **model_kwargs: Any
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise fuzzyq.InputError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, "
-                f"got {render_mode!r}"
-            )
         self._sim = PointMassSim(max_steps, model_kwargs)
         model = self._sim.model
         # Per-instance metadata: frames are one sample time apart.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / model.sample_time}
-        self.render_mode = render_mode
+        self.render_mode = validate_render_mode(render_mode, self.metadata["render_modes"])
         self.observation_space = cast("spaces.Space[Observation]", self._sim.observation_space())
         self.action_space = spaces.Discrete(model.n_joint_actions)
         self._names = [agent_name(i) for i in range(model.n_agents)]

@@ -14,7 +14,13 @@ from pettingzoo import ParallelEnv  # type: ignore[import-untyped, unused-ignore
 
 import fuzzyq
 
-from ._core import Observation, PointMassSim, agent_name, validate_index
+from ._core import (
+    Observation,
+    PointMassSim,
+    agent_name,
+    validate_index,
+    validate_render_mode,
+)
 
 
 class PointMassParallelEnv(
@@ -69,15 +75,10 @@ class PointMassParallelEnv(
     def __init__(
         self, *, max_steps: int | None = 75, render_mode: str | None = None, **model_kwargs: Any
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise fuzzyq.InputError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, "
-                f"got {render_mode!r}"
-            )
         self._sim = PointMassSim(max_steps, model_kwargs)
         model = self._sim.model
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / model.sample_time}
-        self.render_mode = render_mode
+        self.render_mode = validate_render_mode(render_mode, self.metadata["render_modes"])
         self.possible_agents = [agent_name(i) for i in range(model.n_agents)]
         self.agents: list[str] = []
         self.observation_spaces = {a: self._sim.observation_space() for a in self.possible_agents}
