@@ -218,14 +218,9 @@ pub(crate) fn solve(
 
     if let Ok(pm) = model.cast::<PointMass>() {
         let pm = pm.get();
-        let cores = g.inner.cores().to_vec();
         let config = TrainConfig {
             env: EnvConfig::Pointmass(pm.model.config().clone()),
-            grid: GridConfig {
-                position_cores: cores[0].clone(),
-                velocity_cores: cores[cores.len().min(3) - 1].clone(),
-                cores: Some(cores),
-            },
+            grid: GridConfig::explicit(g.inner.cores().to_vec()),
             solver: settings,
         };
         config

@@ -91,6 +91,21 @@ pub struct GridConfig {
     pub cores: Option<Vec<Vec<f64>>>,
 }
 
+impl GridConfig {
+    /// A grid given by the cores of each state variable (any grid, not only the point-mass
+    /// layout). The two shared lists are filled from the first position and velocity variables
+    /// (they are overridden by `cores` but must stay valid for the file to validate).
+    #[must_use]
+    pub fn explicit(cores: Vec<Vec<f64>>) -> Self {
+        let pick = |i: usize| cores.get(i).or(cores.last()).cloned().unwrap_or_default();
+        Self {
+            position_cores: pick(0),
+            velocity_cores: pick(2),
+            cores: Some(cores),
+        }
+    }
+}
+
 /// Solver settings as written in a config file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -621,22 +621,36 @@ impl<T: Real> BlockOperator<T> {
         pick: impl Fn((T, u32)) -> U + Sync + Send,
     ) {
         let slab = self.slab_len();
-        let last = self.fused(op, kind).unwrap_or(Last::Rows);
         par::for_each_chunk_mut(
             out,
             slab,
             || self.work(op),
-            |w, c0, chunk| {
-                let Work {
-                    stages,
-                    extra,
-                    reduce,
-                } = w;
-                self.run(0, c0, v, stages, extra, 0, last, &mut |first, values| {
-                    Self::deliver(op, kind, c0 * slab, 0, first, values, chunk, reduce, &pick);
-                });
-            },
+            |w, c0, chunk| self.slab_into(op, v, kind, c0, w, chunk, &pick),
         );
+    }
+
+    /// Reduces every core of slab `c0` against `v` into `chunk` (one entry per slab core).
+    #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out
+    fn slab_into<U, M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        kind: Reduce,
+        c0: usize,
+        w: &mut Work<T>,
+        chunk: &mut [U],
+        pick: &impl Fn((T, u32)) -> U,
+    ) {
+        let last = self.fused(op, kind).unwrap_or(Last::Rows);
+        let base = c0 * self.slab_len();
+        let Work {
+            stages,
+            extra,
+            reduce,
+        } = w;
+        self.run(0, c0, v, stages, extra, 0, last, &mut |first, values| {
+            Self::deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
+        });
     }
 
     pub(super) fn sweep_async<M: Model<T> + Sync + ?Sized>(
@@ -724,9 +738,18 @@ impl<T: Real> BlockOperator<T> {
         op: &Operator<'_, T, M>,
         dv: &[T],
     ) -> T {
-        let mut out = vec![T::ZERO; dv.len()];
-        self.each_core(op, dv, &mut out, Reduce::AbsMax, |r| r.0);
-        out.into_iter().fold(T::ZERO, T::max_of)
+        // One slab's values at a time, per task; the maximum is exact in any order.
+        let slab = self.slab_len();
+        let maxima = par::map_indexed(
+            self.tables[0].n_cores,
+            1,
+            || (self.work(op), vec![T::ZERO; slab]),
+            |(w, buf), c0| {
+                self.slab_into(op, dv, Reduce::AbsMax, c0, w, buf, &|r: (T, u32)| r.0);
+                buf.iter().copied().fold(T::ZERO, T::max_of)
+            },
+        );
+        maxima.into_iter().fold(T::ZERO, T::max_of)
     }
 
     /// `Q(x, .)` at any state from `v` in grid order (see [`Operator::q_values`]).

@@ -66,7 +66,9 @@
 //! After the last sweep one more pass computes, for every core, the lowest-index joint action
 //! maximising `theta_{K+1}[d, .] = rho + gamma P V_K`: the same Q-function the greedy policy
 //! evaluates at any state from `V_K`, and the per-core table the interpolated policy (eq 22)
-//! needs.
+//! needs. When the reward does not depend on the action, `theta[d, u]` differs between actions
+//! only through the expected value `(P V_K)[d, u]`, so ties are decided on that value (rounding
+//! in `rho + gamma ev` could otherwise merge distinct values into a false tie).
 
 mod block;
 mod generic;
@@ -477,7 +479,7 @@ enum Reduce {
     Max,
     /// `gamma * max_u |ev[u]|` (zero for absorbing goal cores).
     AbsMax,
-    /// The lowest `u` maximising `theta[d, u]`.
+    /// The lowest `u` maximising `theta[d, u]` (on the expected value for state-only rewards).
     Argmax,
 }
 
