@@ -15,6 +15,7 @@ fn reduced() -> TrainConfig {
         grid: GridConfig {
             position_cores: vec![-6.0, -0.5, 0.0, 0.5, 6.0],
             velocity_cores: vec![-3.0, 0.0, 3.0],
+            heading_divisions: None,
             cores: None,
         },
         ..TrainConfig::default()
@@ -94,7 +95,9 @@ fn rollout_rejects_bad_initial_states() {
 fn position_dependent_friction_trains_with_rk4() {
     let mut c = reduced();
     {
-        let EnvConfig::Pointmass(p) = &mut c.env;
+        let EnvConfig::Pointmass(p) = &mut c.env else {
+            unreachable!("a point-mass config")
+        };
         p.agents = 1;
         p.integrator = Integrator::Rk4;
         p.friction = fuzzyq_sim::pointmass::FrictionConfig::Patches {

@@ -41,12 +41,15 @@ enum Command {
 pub(crate) enum Env {
     /// Point masses on the plane (paper section 3.1).
     Pointmass,
+    /// Two Khepera IV robots with sonars (paper sections 3.2-3.3).
+    Khepera,
 }
 
 impl Env {
     fn name(self) -> &'static str {
         match self {
             Self::Pointmass => "pointmass",
+            Self::Khepera => "khepera",
         }
     }
 }
@@ -98,9 +101,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Train(args) => train::run(args),
         Command::Rollout(args) => rollout::run(args),
         Command::Config { env } => {
-            match env {
-                Env::Pointmass => print_stdout(fuzzyq_sim::config::DEFAULT_POINTMASS_TOML)?,
-            }
+            print_stdout(fuzzyq_sim::config::TrainConfig::default_toml(env.name())?)?;
             Ok(())
         }
     }

@@ -6,8 +6,15 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use fuzzyq_sim::PolicyArtifact;
+use fuzzyq_sim::config::EnvConfig;
+use fuzzyq_sim::physics::{Collisions, PointMassPlantConfig, rollout_plant};
 use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
+use fuzzyq_sim::robots::{
+    KheperaMetrics, PAPER_KHEPERA_X0, poses_from_paper, random_starts, rollout_khepera_any,
+    success_over_starts,
+};
 use fuzzyq_sim::rollout::{PAPER_X0, RolloutMetrics, Trajectory, rollout_any};
+use serde::Serialize;
 
 use crate::{check_writable, plot, write_file, write_json};
 
@@ -16,12 +23,31 @@ pub(crate) struct RolloutArgs {
     /// A policy file written by `fuzzyq train`.
     #[arg(long, value_name = "POLICY")]
     policy: PathBuf,
-    /// Initial state, comma-separated [default: the paper's -4,-6,-2,2,5,3,2,-1].
+    /// Initial state, comma-separated [default: the paper's -4,-6,-2,2,5,3,2,-1 for the point
+    /// masses, -4,5,0,0,5,3,0,0 for the robots].
     #[arg(long, value_name = "X0", allow_hyphen_values = true)]
     x0: Option<String>,
-    /// Steps to simulate (one sample time each).
-    #[arg(long, value_name = "K", default_value_t = 75)]
-    steps: usize,
+    /// Khepera: initial headings in degrees, one per robot [default: 0 for every robot].
+    #[arg(long, value_name = "DEG,...", allow_hyphen_values = true)]
+    headings: Option<String>,
+    /// Steps to simulate (one sample time each) [default: 75 for the point masses, 250 for the
+    /// robots].
+    #[arg(long, value_name = "K")]
+    steps: Option<usize>,
+    /// Point masses: run on the analytic model or on the rapier plant (discs that collide
+    /// with each other and the walls). The robots always run on the rapier plant.
+    #[arg(long, value_enum)]
+    plant: Option<PlantArg>,
+    /// Radius of the point-mass discs on the rapier plant (m).
+    #[arg(long, value_name = "R", default_value_t = 0.05)]
+    radius: f64,
+    /// Khepera: seed of the plant's noise (and of the random starts with --starts).
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// Khepera: instead of one run, roll out from N seeded random starts and report the
+    /// success rate (--plot draws the starts, --json writes every run's metrics).
+    #[arg(long, value_name = "N")]
+    starts: Option<usize>,
     /// Greedy (eq 7) or interpolated (eq 22) policy.
     #[arg(long, value_enum, default_value_t = KindArg::Greedy)]
     policy_kind: KindArg,
@@ -37,6 +63,14 @@ pub(crate) struct RolloutArgs {
     /// Print nothing on success.
     #[arg(long, short)]
     quiet: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum PlantArg {
+    /// The analytic model the policy was trained on.
+    Model,
+    /// rapier2d rigid bodies.
+    Rapier,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -60,7 +94,7 @@ fn parse_x0(text: &str) -> anyhow::Result<Vec<f64>> {
         .collect()
 }
 
-fn csv(t: &Trajectory) -> String {
+fn csv(t: &Trajectory, action_names: [&str; 2]) -> String {
     let mut out = String::from("t");
     for i in 1..=t.agents {
         for v in ["sx", "sy", "vx", "vy"] {
@@ -68,7 +102,7 @@ fn csv(t: &Trajectory) -> String {
         }
     }
     for i in 1..=t.agents {
-        let _ = write!(out, ",ux{i},uy{i}");
+        let _ = write!(out, ",{}{i},{}{i}", action_names[0], action_names[1]);
     }
     out.push_str(",reward\n");
     for (k, x) in t.states.iter().enumerate() {
@@ -117,6 +151,15 @@ fn report(m: &RolloutMetrics) -> String {
     )
 }
 
+/// The point-mass metrics on the rapier plant: the model's metrics plus collisions.
+#[derive(Serialize)]
+struct PlantMetrics<'a> {
+    #[serde(flatten)]
+    metrics: &'a RolloutMetrics,
+    plant: &'static str,
+    collisions: &'a Collisions,
+}
+
 pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     for (path, what) in [
         (&args.csv, "CSV"),
@@ -130,13 +173,32 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
         plot::check_extension(p)?;
     }
-    if args.steps == 0 {
+    if args.steps == Some(0) {
         anyhow::bail!("--steps must be at least 1");
     }
     let artifact = PolicyArtifact::load(&args.policy)?;
-    let agents = match &artifact.config.env {
-        fuzzyq_sim::config::EnvConfig::Pointmass(p) => p.agents,
-    };
+    match artifact.config.env.clone() {
+        EnvConfig::Pointmass(p) => point_mass(args, artifact, p.agents),
+        EnvConfig::Khepera(k) => khepera(args, artifact, &k),
+    }
+}
+
+fn kind_of(args: &RolloutArgs) -> PolicyKind {
+    match args.policy_kind {
+        KindArg::Greedy => PolicyKind::Greedy,
+        KindArg::Interpolated => PolicyKind::Interpolated,
+    }
+}
+
+fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> anyhow::Result<()> {
+    for (set, flag) in [
+        (args.headings.is_some(), "--headings"),
+        (args.starts.is_some(), "--starts"),
+    ] {
+        if set {
+            anyhow::bail!("{flag} applies to khepera policies only");
+        }
+    }
     let x0 = match &args.x0 {
         Some(t) => parse_x0(t)?,
         None if agents == 2 => PAPER_X0.to_vec(),
@@ -146,23 +208,182 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
             4 * agents
         ),
     };
-    let kind = match args.policy_kind {
-        KindArg::Greedy => PolicyKind::Greedy,
-        KindArg::Interpolated => PolicyKind::Interpolated,
-    };
+    let kind = kind_of(&args);
+    let steps = args.steps.unwrap_or(75);
     let policy = AnyPolicy::from_artifact(artifact)?;
-    let (trajectory, metrics) = rollout_any(&policy, &x0, args.steps, kind)?;
+    let (trajectory, metrics, collisions) = match args.plant.unwrap_or(PlantArg::Model) {
+        PlantArg::Model => {
+            let (t, m) = rollout_any(&policy, &x0, steps, kind)?;
+            (t, m, None)
+        }
+        PlantArg::Rapier => {
+            let plant = PointMassPlantConfig {
+                radius: args.radius,
+                ..PointMassPlantConfig::default()
+            };
+            let (t, m, c) = match &policy {
+                AnyPolicy::F32(p) => rollout_plant(p, &x0, steps, kind, &plant)?,
+                AnyPolicy::F64(p) => rollout_plant(p, &x0, steps, kind, &plant)?,
+            };
+            (t, m, Some(c))
+        }
+    };
     if let Some(p) = &args.csv {
-        write_file(p, csv(&trajectory).as_bytes(), "CSV")?;
+        write_file(p, csv(&trajectory, ["ux", "uy"]).as_bytes(), "CSV")?;
     }
     if let Some(p) = &args.plot {
         plot::rollout_figure(p, &trajectory, kind)?;
     }
     if let Some(p) = &args.json {
+        match &collisions {
+            None => write_json(p, &metrics)?,
+            Some(c) => write_json(
+                p,
+                &PlantMetrics {
+                    metrics: &metrics,
+                    plant: "rapier",
+                    collisions: c,
+                },
+            )?,
+        }
+    }
+    if !args.quiet {
+        let mut text = report(&metrics);
+        if let Some(c) = &collisions {
+            let _ = writeln!(text, "rapier plant: {} collisions", c.total);
+        }
+        crate::print_stdout(&text)?;
+    }
+    Ok(())
+}
+
+fn khepera(
+    args: RolloutArgs,
+    artifact: PolicyArtifact,
+    config: &fuzzyq_sim::khepera::KheperaConfig,
+) -> anyhow::Result<()> {
+    if args.plant == Some(PlantArg::Model) {
+        anyhow::bail!("--plant model: khepera policies run on the rapier plant only");
+    }
+    let kind = kind_of(&args);
+    let steps = args.steps.unwrap_or(250);
+    let policy = AnyPolicy::from_artifact(artifact)?;
+    if let Some(n) = args.starts {
+        if n == 0 {
+            anyhow::bail!("--starts must be at least 1");
+        }
+        if args.x0.is_some() || args.headings.is_some() || args.csv.is_some() {
+            anyhow::bail!(
+                "--starts draws random starts; it cannot be combined with --x0, --headings or --csv"
+            );
+        }
+        let (report, runs) = success_over_starts(&policy, n, args.seed, steps, kind)?;
+        if let Some(p) = &args.plot {
+            let starts = random_starts(config, n, args.seed)?;
+            let ok: Vec<bool> = runs.iter().map(|m| m.success).collect();
+            plot::success_figure(
+                p,
+                &starts,
+                &ok,
+                &config.arena,
+                &format!(
+                    "{} policy: {} of {} random starts succeed (seed {})",
+                    kind.name(),
+                    report.successes,
+                    n,
+                    args.seed
+                ),
+            )?;
+        }
+        if let Some(p) = &args.json {
+            #[derive(Serialize)]
+            struct Out<'a> {
+                #[serde(flatten)]
+                report: &'a fuzzyq_sim::robots::SuccessReport,
+                policy_kind: PolicyKind,
+                steps: usize,
+                runs: &'a [KheperaMetrics],
+            }
+            write_json(
+                p,
+                &Out {
+                    report: &report,
+                    policy_kind: kind,
+                    steps,
+                    runs: &runs,
+                },
+            )?;
+        }
+        if !args.quiet {
+            crate::print_stdout(&format!(
+                "{} policy, {n} random starts (seed {}), {steps} steps of {} s: {} succeed ({:.0}%), \
+                 {} with collisions, mean time to the reward region {}, mean final ||x|| {:.3}\n",
+                kind.name(),
+                args.seed,
+                config.sample_time,
+                report.successes,
+                100.0 * report.success_rate,
+                report.runs_with_collisions,
+                fmt_opt(report.mean_reach_time_s),
+                report.mean_final_norm,
+            ))?;
+        }
+        return Ok(());
+    }
+    let x0 = match &args.x0 {
+        Some(t) => parse_x0(t)?,
+        None if config.agents == 2 => PAPER_KHEPERA_X0.to_vec(),
+        None => anyhow::bail!(
+            "the policy has {} robots; give --x0 with {} values",
+            config.agents,
+            4 * config.agents
+        ),
+    };
+    let headings = match &args.headings {
+        Some(t) => parse_x0(t)
+            .map_err(|e| anyhow::anyhow!("{}", e.to_string().replace("--x0", "--headings")))?,
+        None => vec![0.0; config.agents],
+    };
+    let start = poses_from_paper(config, &x0, &headings)?;
+    let (run, metrics) = rollout_khepera_any(&policy, &start, steps, kind, args.seed)?;
+    if let Some(p) = &args.csv {
+        write_file(p, csv(&run.trajectory, ["vl", "vr"]).as_bytes(), "CSV")?;
+    }
+    if let Some(p) = &args.plot {
+        plot::khepera_figure(
+            p,
+            &run,
+            &config.arena,
+            config.radius,
+            kind,
+            &format!(
+                "Khepera IV robots, {} policy on the rapier plant: {}",
+                kind.name(),
+                if metrics.success {
+                    "both arrive, no collision"
+                } else {
+                    "not successful"
+                }
+            ),
+        )?;
+    }
+    if let Some(p) = &args.json {
         write_json(p, &metrics)?;
     }
     if !args.quiet {
-        crate::print_stdout(&report(&metrics))?;
+        let mut text = report(&metrics.rollout);
+        let _ = writeln!(
+            text,
+            "rapier plant: {} collisions; final ||x|| {:.3} ({} the reward region)",
+            metrics.collisions.total,
+            metrics.final_norm,
+            if metrics.final_norm < config.goal_radius {
+                "inside"
+            } else {
+                "outside"
+            }
+        );
+        crate::print_stdout(&text)?;
     }
     Ok(())
 }

@@ -60,6 +60,27 @@ pub(crate) struct TrainArgs {
     /// Worker threads (default: one per core; results do not depend on it).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
+    /// The arena of the khepera environment (TOML with walls and obstacles); replaces the
+    /// config's `[env.arena]`.
+    #[arg(long, value_name = "FILE.toml")]
+    arena: Option<PathBuf>,
+    /// The learner: joint fuzzy Q-iteration on the model (`fqi`), or model-free fuzzy
+    /// Q-learning with the additive layout on the robots' quantised observations (`fql`,
+    /// khepera only; writes a TOML policy of the learned parameters).
+    #[arg(long, value_enum, default_value_t = LearnerArg::Fqi)]
+    learner: LearnerArg,
+    /// fql: number of episodes [default: 2000].
+    #[arg(long, value_name = "N")]
+    episodes: Option<usize>,
+    /// fql: seed of exploration and starts.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// fql: write the learning curve (one row per episode) as CSV.
+    #[arg(long, value_name = "FILE.csv")]
+    curve: Option<PathBuf>,
+    /// fql: draw the learning curve (PNG or SVG).
+    #[arg(long, value_name = "FILE.png|FILE.svg")]
+    plot: Option<PathBuf>,
     /// Where to write the policy file.
     #[arg(long, value_name = "POLICY")]
     out: PathBuf,
@@ -69,6 +90,14 @@ pub(crate) struct TrainArgs {
     /// No progress output.
     #[arg(long, short)]
     quiet: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum LearnerArg {
+    /// Joint fuzzy Q-iteration.
+    Fqi,
+    /// Model-free fuzzy Q-learning (additive layout).
+    Fql,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -129,7 +158,7 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
                 .with_context(|| format!("cannot read config {}", path.display()))?;
             TrainConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))?
         }
-        None => TrainConfig::default(),
+        None => TrainConfig::default_for(args.env.name())?,
     };
     if config.env.name() != args.env.name() {
         anyhow::bail!(
@@ -137,6 +166,14 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             config.env.name(),
             args.env.name()
         );
+    }
+    if let Some(path) = &args.arena {
+        match &mut config.env {
+            EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::arena::Arena::from_file(path)?,
+            EnvConfig::Pointmass(_) => {
+                anyhow::bail!("--arena applies to --env khepera only")
+            }
+        }
     }
     let s = &mut config.solver;
     if let Some(g) = args.gamma {
@@ -205,6 +242,18 @@ fn fmt_delta(p: &Progress) -> String {
 
 pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let config = build_config(&args)?;
+    if args.learner == LearnerArg::Fql {
+        return run_fql(&args, &config);
+    }
+    for (set, flag) in [
+        (args.episodes.is_some(), "--episodes"),
+        (args.curve.is_some(), "--curve"),
+        (args.plot.is_some(), "--plot"),
+    ] {
+        if set {
+            anyhow::bail!("{flag} applies to --learner fql only");
+        }
+    }
     check_writable(&args.out, "policy")?;
     if let Some(j) = &args.json {
         check_writable(j, "summary")?;
@@ -235,6 +284,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let env = config.env.name();
     let joint = match &config.env {
         EnvConfig::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
+        EnvConfig::Khepera(k) => fuzzyq_sim::khepera::N_ACTIONS.pow(k.agents as u32),
     };
     let tty = std::io::stderr().is_terminal();
     if !args.quiet {
@@ -351,6 +401,147 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             extrapolated: &s.extrapolated,
         };
         write_json(path, &summary)?;
+    }
+    Ok(())
+}
+
+/// `fuzzyq train --learner fql`: model-free fuzzy Q-learning on the robots.
+fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
+    use fuzzyq_sim::khepera_fql::{FqlPolicyFile, default_fql_config, train_fql};
+    let EnvConfig::Khepera(k) = &config.env else {
+        anyhow::bail!("--learner fql is available for --env khepera only");
+    };
+    check_writable(&args.out, "policy")?;
+    for (p, what) in [
+        (&args.curve, "curve"),
+        (&args.plot, "plot"),
+        (&args.json, "summary"),
+    ] {
+        if let Some(p) = p {
+            check_writable(p, what)?;
+        }
+    }
+    if let Some(p) = &args.plot {
+        crate::plot::check_extension(p)?;
+    }
+    let mut fql = default_fql_config();
+    fql.seed = args.seed;
+    fql.gamma = config.solver.gamma;
+    if let Some(n) = args.episodes {
+        fql.episodes = n;
+    }
+    fql.validate()?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        let _ = ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+        });
+    }
+    let tty = std::io::stderr().is_terminal();
+    let bar = if args.quiet || !tty {
+        ProgressBar::hidden()
+    } else {
+        let b =
+            ProgressBar::with_draw_target(Some(fql.episodes as u64), ProgressDrawTarget::stderr());
+        b.set_style(
+            ProgressStyle::with_template("{spinner} episode {pos}/{len} {msg} [{elapsed_precise}]")
+                .expect("valid template"),
+        );
+        b
+    };
+    if !args.quiet {
+        eprintln!(
+            "fuzzyq train: khepera, model-free fuzzy Q-learning ({:?} update, additive layout), \
+             {} episodes of at most {} steps, seed {}",
+            fql.update, fql.episodes, fql.max_steps, fql.seed
+        );
+    }
+    let plain = !args.quiet && !tty;
+    let started = std::time::Instant::now();
+    let outcome = train_fql(k, &fql, |r| {
+        bar.set_position(r.episode as u64 + 1);
+        if let Some(s) = r.eval_success_rate {
+            bar.set_message(format!("greedy success {:.0}%", 100.0 * s));
+            if plain {
+                eprintln!(
+                    "episode {}: greedy evaluation success {:.0}%",
+                    r.episode + 1,
+                    100.0 * s
+                );
+            }
+        }
+        if stop.load(Ordering::SeqCst) {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    })?;
+    bar.finish_and_clear();
+    if stop.load(Ordering::SeqCst) {
+        return Err(Failure::Interrupted(format!(
+            "interrupted after {} episodes; no policy was written",
+            outcome.curve.len()
+        ))
+        .into());
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    FqlPolicyFile::from_outcome(k, &fql, &outcome).save(&args.out)?;
+    if let Some(p) = &args.curve {
+        let mut text = Vec::new();
+        fuzzyq_sim::fql::write_curve_csv(&outcome.curve, &mut text)?;
+        crate::write_file(p, &text, "curve")?;
+    }
+    if let Some(p) = &args.plot {
+        crate::plot::learning_curve_figure(
+            p,
+            &outcome.curve,
+            &format!("Fuzzy Q-learning on two Khepera robots (seed {})", fql.seed),
+        )?;
+    }
+    let last_eval = outcome.curve.iter().rev().find_map(|r| r.eval_success_rate);
+    #[derive(Serialize)]
+    struct FqlSummary {
+        env: &'static str,
+        learner: &'static str,
+        policy: String,
+        episodes: usize,
+        steps_total: usize,
+        converged_at: Option<usize>,
+        final_eval_success_rate: Option<f64>,
+        seconds: f64,
+        seed: u64,
+    }
+    if let Some(j) = &args.json {
+        write_json(
+            j,
+            &FqlSummary {
+                env: "khepera",
+                learner: "fql",
+                policy: args.out.display().to_string(),
+                episodes: outcome.curve.len(),
+                steps_total: outcome.steps_total,
+                converged_at: outcome.converged_at,
+                final_eval_success_rate: last_eval,
+                seconds,
+                seed: fql.seed,
+            },
+        )?;
+    }
+    if !args.quiet {
+        eprintln!(
+            "learned in {seconds:.1} s: {} episodes, {} steps, converged {}, last greedy \
+             evaluation success {}; wrote {}",
+            outcome.curve.len(),
+            outcome.steps_total,
+            outcome
+                .converged_at
+                .map_or_else(|| "no".to_string(), |e| format!("at episode {e}")),
+            last_eval.map_or_else(|| "n/a".to_string(), |s| format!("{:.0}%", 100.0 * s)),
+            args.out.display()
+        );
     }
     Ok(())
 }

@@ -261,3 +261,157 @@ fn bad_input_fails_cleanly_without_touching_files() {
     assert_eq!(o.status.code(), Some(0));
     assert!(String::from_utf8_lossy(&o.stdout).contains("rollout"));
 }
+
+#[test]
+fn khepera_train_rollout_and_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = fuzzyq(&["config", "--env", "khepera"], d);
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    // One robot on the default grid trains in a fraction of a second.
+    std::fs::write(
+        d.join("one.toml"),
+        text.replace("agents = 2 ", "agents = 1 "),
+    )
+    .unwrap();
+    let arena = "x = [-6.0, 6.0]\ny = [-6.0, 6.0]\n[[obstacle]]\nshape = \"disc\"\ncenter = [2.0, 2.0]\nradius = 0.3\n";
+    std::fs::write(d.join("arena.toml"), arena).unwrap();
+    let o = fuzzyq(
+        &[
+            "train",
+            "--env",
+            "khepera",
+            "--config",
+            "one.toml",
+            "--arena",
+            "arena.toml",
+            "--out",
+            "k.fzq",
+            "-q",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = fuzzyq(
+        &[
+            "rollout",
+            "--policy",
+            "k.fzq",
+            "--x0",
+            "-3,2,0,0",
+            "--headings",
+            "90",
+            "--steps",
+            "200",
+            "--json",
+            "m.json",
+            "--plot",
+            "k.png",
+            "--csv",
+            "k.csv",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m = json(&d.join("m.json"));
+    assert_eq!(m["collisions"]["total"], 0);
+    assert_eq!(m["success"], true);
+    assert!(m["reach_time_s"].as_f64().is_some());
+    assert!(std::fs::metadata(d.join("k.png")).unwrap().len() > 10_000);
+    let csv = std::fs::read_to_string(d.join("k.csv")).unwrap();
+    assert!(csv.starts_with("t,sx1,sy1,vx1,vy1,vl1,vr1,reward"), "{csv}");
+    let o = fuzzyq(
+        &[
+            "rollout", "--policy", "k.fzq", "--starts", "4", "--seed", "3", "--steps", "300",
+            "--json", "s.json", "--plot", "s.png",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s = json(&d.join("s.json"));
+    assert_eq!(s["starts"], 4);
+    assert_eq!(s["runs"].as_array().unwrap().len(), 4);
+    // Bad input: one line, exit code 2.
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "k.fzq", "--plant", "model"], d),
+        "rapier plant",
+    );
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "k.fzq", "--x0", "-3,2,1,0"], d),
+        "at rest",
+    );
+    assert_fails(
+        &fuzzyq(&["rollout", "--policy", "k.fzq", "--x0", "6,0,0,0"], d),
+        "robot",
+    );
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train",
+                "--env",
+                "pointmass",
+                "--arena",
+                "arena.toml",
+                "--out",
+                "x.fzq",
+            ],
+            d,
+        ),
+        "--arena",
+    );
+    std::fs::write(d.join("bad.toml"), "x = [1.0, -1.0]\ny = [-1.0, 1.0]\n").unwrap();
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train", "--env", "khepera", "--config", "one.toml", "--arena", "bad.toml",
+                "--out", "x.fzq",
+            ],
+            d,
+        ),
+        "arena",
+    );
+    assert!(!d.join("x.fzq").exists());
+    // Model-free fuzzy Q-learning: policy, curve and summary.
+    let o = fuzzyq(
+        &[
+            "train",
+            "--env",
+            "khepera",
+            "--learner",
+            "fql",
+            "--episodes",
+            "3",
+            "--out",
+            "f.toml",
+            "--curve",
+            "c.csv",
+            "--json",
+            "f.json",
+            "-q",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let f = json(&d.join("f.json"));
+    assert_eq!(f["episodes"], 3);
+    let curve = std::fs::read_to_string(d.join("c.csv")).unwrap();
+    assert_eq!(curve.lines().count(), 4, "{curve}");
+    assert!(std::fs::read_to_string(d.join("f.toml")).unwrap().len() > 1000);
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train",
+                "--env",
+                "pointmass",
+                "--learner",
+                "fql",
+                "--out",
+                "y.toml",
+            ],
+            d,
+        ),
+        "khepera only",
+    );
+    assert!(!d.join("y.toml").exists());
+}

@@ -346,7 +346,19 @@ impl Solution {
         let model = match model {
             Some(m) => m,
             None => {
-                Arc::new(fuzzyq_sim::train::build_model(&a.config).map_err(|e| sim_error(py, &e))?)
+                match fuzzyq_sim::train::build_model(&a.config).map_err(|e| sim_error(py, &e))? {
+                    fuzzyq_sim::env::EnvModel::PointMass(m) => Arc::new(m),
+                    other => {
+                        let e = fuzzyq_sim::SimError::from(fuzzyq_sim::ConfigError::invalid(
+                            "env",
+                            format!(
+                                "{} policies are not available from Python yet; use the fuzzyq CLI",
+                                other.name()
+                            ),
+                        ));
+                        return Err(sim_error(py, &e));
+                    }
+                }
             }
         };
         let grid = match grid {

@@ -194,6 +194,7 @@ impl PolicyArtifact {
     pub fn n_joint_actions(&self) -> usize {
         match &self.config.env {
             crate::config::EnvConfig::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
+            crate::config::EnvConfig::Khepera(k) => crate::khepera::N_ACTIONS.pow(k.agents as u32),
         }
     }
 
@@ -333,6 +334,7 @@ mod tests {
             grid: GridConfig {
                 position_cores: vec![-1.0, 1.0],
                 velocity_cores: vec![-1.0, 1.0],
+                heading_divisions: None,
                 cores: None,
             },
             ..TrainConfig::default()

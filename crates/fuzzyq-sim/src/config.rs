@@ -7,6 +7,7 @@ use fuzzyq_core::solver::{BackupPath, SolverConfig, SweepMode};
 use serde::{Deserialize, Serialize};
 
 use crate::error::ConfigError;
+use crate::khepera::KheperaConfig;
 use crate::pointmass::PointMassConfig;
 
 /// The default point-mass configuration: the paper's section 3.1.
@@ -46,6 +47,61 @@ precision = "f32"                           # "f32" or "f64"
 extrapolate = true                          # MacQueen extrapolation: fewer sweeps, same guarantee; false = the paper's plain sweeps
 "#;
 
+/// The default Khepera configuration: the robot experiment of sections 3.2-3.3.
+pub const DEFAULT_KHEPERA_TOML: &str = r#"# fuzzyq training configuration: two Khepera IV robots (Luviano-Cruz et al. 2018, sections 3.2-3.3).
+# Edit and pass back with `fuzzyq train --env khepera --config FILE.toml`; `--arena FILE.toml`
+# replaces [env.arena].
+
+[env]
+kind = "khepera"
+agents = 2                                  # robots (1 to 4)
+radius = 0.07                               # m: the robot is a 140 mm disc
+wheel_base = 0.105                          # m
+max_wheel_speed = 0.8                       # m/s, the Khepera IV's top speed
+forward_speed = 0.15                        # m/s, both wheels, action "forward"
+turn_speed = 0.05                           # m/s, wheels opposite, actions "turn_cw" / "turn_ccw"
+sample_time = 0.4                           # s, control period
+goal_radius = 0.2                           # reward region ||x|| < 0.2 (eq 42)
+goal_reward = 5.0
+collision_penalty = 5.0                     # reward -5 where two robots overlap
+sonar_angles_deg = [-90.0, -45.0, 0.0, 45.0, 90.0]
+sonar_cone_deg = 20.0                       # each sonar casts rays_per_sonar rays over this cone
+rays_per_sonar = 3
+sonar_min_range = 0.25                      # m
+sonar_max_range = 2.0                       # m; no echo reads this
+sonar_levels = [0.5, 1.0]                   # m: near below 0.5, medium below 1.0, far above
+distance_edges = [0.2, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0]  # m: goal distance levels 0-8
+
+[env.arena]
+x = [-6.0, 6.0]                             # m, walls
+y = [-6.0, 6.0]
+# [[env.arena.obstacle]]
+# shape = "box"                             # or "disc" with center and radius
+# center = [-2.0, 2.5]
+# half_extents = [0.5, 0.05]
+# angle_deg = 38.66
+
+[env.noise]
+sonar_std = 0.0                             # m, Gaussian noise on sonar readings
+sonar_dropout = 0.0                         # probability a reading is lost
+wheel_std = 0.0                             # relative Gaussian noise on wheel speeds
+
+[grid]
+# Cores on each robot's pose: x and y share position_cores, heading_cores are radians.
+position_cores = [-6.0, -4.0, -2.5, -1.5, -0.8, -0.4, -0.2, -0.1, -0.05, 0.0, 0.05, 0.1, 0.2, 0.4, 0.8, 1.5, 2.5, 4.0, 6.0]
+heading_divisions = 16                      # heading cores at -pi + 2 pi k / 16, k = 0..16
+
+[solver]
+gamma = 0.96
+xi = 0.2                                    # the paper's value for the robots
+max_sweeps = 1000
+sweep = "sync"
+absorbing_goal = false
+backup = "auto"
+precision = "f32"
+extrapolate = true
+"#;
+
 /// A whole training configuration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -64,6 +120,8 @@ pub struct TrainConfig {
 pub enum EnvConfig {
     /// Point masses on the plane (section 3.1).
     Pointmass(PointMassConfig),
+    /// Khepera IV robots (sections 3.2-3.3).
+    Khepera(KheperaConfig),
 }
 
 impl EnvConfig {
@@ -72,6 +130,7 @@ impl EnvConfig {
     pub fn name(&self) -> &'static str {
         match self {
             Self::Pointmass(_) => "pointmass",
+            Self::Khepera(_) => "khepera",
         }
     }
 }
@@ -83,8 +142,13 @@ impl EnvConfig {
 pub struct GridConfig {
     /// Cores of every position variable (m).
     pub position_cores: Vec<f64>,
-    /// Cores of every velocity variable (m/s).
+    /// Cores of every velocity variable (m/s; point masses).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub velocity_cores: Vec<f64>,
+    /// Heading cores of the Khepera robots: `heading_divisions + 1` cores evenly over
+    /// `[-pi, pi]` (both ends are the same heading; the model wraps angles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading_divisions: Option<usize>,
     /// Cores of each state variable, in state order; when given, they replace the two lists
     /// above (which must still be valid cores).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -101,6 +165,7 @@ impl GridConfig {
         Self {
             position_cores: pick(0),
             velocity_cores: pick(2),
+            heading_divisions: None,
             cores: Some(cores),
         }
     }
@@ -260,12 +325,42 @@ impl Default for TrainConfig {
             grid: GridConfig {
                 position_cores: vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0],
                 velocity_cores: vec![-3.0, -1.0, 0.0, 1.0, 3.0],
+                heading_divisions: None,
                 cores: None,
             },
             solver: SolverSettings::default(),
         }
     }
 }
+
+impl TrainConfig {
+    /// The default configuration of environment `env` (`"pointmass"` or `"khepera"`).
+    pub fn default_for(env: &str) -> Result<Self, ConfigError> {
+        match env {
+            "pointmass" => Ok(Self::default()),
+            "khepera" => Self::from_toml(DEFAULT_KHEPERA_TOML),
+            other => Err(ConfigError::invalid(
+                "env",
+                format!("unknown environment {other:?} (expected pointmass or khepera)"),
+            )),
+        }
+    }
+
+    /// The commented default TOML of environment `env`.
+    pub fn default_toml(env: &str) -> Result<&'static str, ConfigError> {
+        match env {
+            "pointmass" => Ok(DEFAULT_POINTMASS_TOML),
+            "khepera" => Ok(DEFAULT_KHEPERA_TOML),
+            other => Err(ConfigError::invalid(
+                "env",
+                format!("unknown environment {other:?} (expected pointmass or khepera)"),
+            )),
+        }
+    }
+}
+
+/// The default number of heading divisions of the Khepera grid.
+pub const DEFAULT_HEADING_DIVISIONS: usize = 16;
 
 fn check_cores(field: &str, cores: &[f64]) -> Result<(), ConfigError> {
     Partition::try_from_cores(cores)
@@ -300,13 +395,33 @@ impl TrainConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
         match &self.env {
-            EnvConfig::Pointmass(p) => p.validate()?,
+            EnvConfig::Pointmass(p) => {
+                p.validate()?;
+                check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
+                if self.grid.heading_divisions.is_some() {
+                    return Err(ConfigError::invalid(
+                        "grid.heading_divisions",
+                        "applies to the khepera environment only",
+                    ));
+                }
+            }
+            EnvConfig::Khepera(k) => {
+                k.validate()?;
+                if let Some(d) = self.grid.heading_divisions
+                    && !(2..=360).contains(&d)
+                {
+                    return Err(ConfigError::invalid(
+                        "grid.heading_divisions",
+                        format!("must be between 2 and 360, got {d}"),
+                    ));
+                }
+            }
         }
         check_cores("grid.position_cores", &self.grid.position_cores)?;
-        check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
         if let Some(cores) = &self.grid.cores {
             let want = match &self.env {
                 EnvConfig::Pointmass(p) => p.state_dim(),
+                EnvConfig::Khepera(k) => k.state_dim(),
             };
             if cores.len() != want {
                 return Err(ConfigError::invalid(
@@ -352,6 +467,31 @@ impl TrainConfig {
                     ]
                 })
                 .collect(),
+            EnvConfig::Khepera(k) => {
+                let d = self
+                    .grid
+                    .heading_divisions
+                    .unwrap_or(DEFAULT_HEADING_DIVISIONS);
+                let pi = std::f64::consts::PI;
+                let heading: Vec<f64> = (0..=d)
+                    .map(|i| {
+                        if i == d {
+                            pi
+                        } else {
+                            -pi + 2.0 * pi * i as f64 / d as f64
+                        }
+                    })
+                    .collect();
+                (0..k.agents)
+                    .flat_map(|_| {
+                        [
+                            self.grid.position_cores.clone(),
+                            self.grid.position_cores.clone(),
+                            heading.clone(),
+                        ]
+                    })
+                    .collect()
+            }
         }
     }
 
@@ -373,6 +513,21 @@ mod tests {
         assert_eq!(c.n_cores(), 4_100_625);
         let again = TrainConfig::from_toml(&c.to_toml()).unwrap();
         assert_eq!(again, c);
+    }
+
+    #[test]
+    fn default_khepera_toml_round_trips() {
+        let c = TrainConfig::default_for("khepera").unwrap();
+        let EnvConfig::Khepera(k) = &c.env else {
+            panic!("not khepera")
+        };
+        assert_eq!(k, &KheperaConfig::default());
+        assert_eq!(c.n_cores(), (19 * 19 * 17usize).pow(2));
+        let cores = c.grid_cores();
+        assert_eq!(cores[2].first(), Some(&-std::f64::consts::PI));
+        assert_eq!(cores[2].last(), Some(&std::f64::consts::PI));
+        assert_eq!(TrainConfig::from_toml(&c.to_toml()).unwrap(), c);
+        assert!(TrainConfig::default_for("boat").is_err());
     }
 
     #[test]

@@ -11,6 +11,10 @@
 //! - [`artifact`]: the policy file (tagged, versioned, checksummed, written atomically);
 //! - [`policy`] and [`rollout`]: greedy and interpolated policies, simulated runs and their
 //!   metrics.
+//! - [`fql`]: model-free fuzzy Q-learning (section 2.5) on any episodic [`fql::Environment`].
+//! - [`khepera_fql`]: model-free fuzzy Q-learning of the Khepera task on the rapier plant.
+//! - [`physics`]: rapier2d plants (colliding point masses, Khepera robots with sonars) that
+//!   move exactly as the models do in open space.
 //!
 //! ```
 //! use fuzzyq_sim::config::{GridConfig, TrainConfig};
@@ -24,6 +28,7 @@
 //! config.grid = GridConfig {
 //!     position_cores: vec![-6.0, -1.0, 0.0, 1.0, 6.0],
 //!     velocity_cores: vec![-3.0, 0.0, 3.0],
+//!     heading_divisions: None,
 //!     cores: None,
 //! };
 //! let artifact = fuzzyq_sim::train::train(&config, |_| std::ops::ControlFlow::Continue(()))?;
@@ -37,11 +42,18 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod arena;
 pub mod artifact;
 pub mod config;
+pub mod env;
 pub mod error;
+pub mod fql;
+pub mod khepera;
+pub mod khepera_fql;
+pub mod physics;
 pub mod pointmass;
 pub mod policy;
+pub mod robots;
 pub mod rollout;
 pub mod train;
 

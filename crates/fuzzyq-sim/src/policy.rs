@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{PolicyArtifact, Values};
 use crate::config::TrainConfig;
+use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
-use crate::pointmass::PointMass;
 use crate::train::{build_grid, build_model};
 
 /// Which policy to derive from a solution.
@@ -35,7 +35,7 @@ impl PolicyKind {
 /// A trained policy in precision `T`: the model, the grid, `V` and the per-core greedy actions.
 pub struct Policy<T: Real> {
     config: TrainConfig,
-    model: PointMass,
+    model: EnvModel,
     grid: Grid<T>,
     v: Vec<T>,
     greedy: Vec<u32>,
@@ -43,7 +43,7 @@ pub struct Policy<T: Real> {
 
 impl<T: Real> Policy<T>
 where
-    PointMass: Model<T>,
+    EnvModel: Model<T>,
 {
     /// Assembles a policy from its parts (lengths are checked).
     pub fn new(config: TrainConfig, v: Vec<T>, greedy: Vec<u32>) -> Result<Self, SimError> {
@@ -78,7 +78,7 @@ where
 
     /// The model.
     #[must_use]
-    pub fn model(&self) -> &PointMass {
+    pub fn model(&self) -> &EnvModel {
         &self.model
     }
 
@@ -130,7 +130,7 @@ where
 pub struct Actor<'p, T: Real> {
     policy: &'p Policy<T>,
     kind: PolicyKind,
-    op: Option<Operator<'p, T, PointMass>>,
+    op: Option<Operator<'p, T, EnvModel>>,
     joint: JointActions<'p, T>,
     q: Vec<T>,
     x: Vec<T>,
@@ -139,7 +139,7 @@ pub struct Actor<'p, T: Real> {
 
 impl<T: Real> Actor<'_, T>
 where
-    PointMass: Model<T>,
+    EnvModel: Model<T>,
 {
     /// Length of the joint action vector.
     #[must_use]

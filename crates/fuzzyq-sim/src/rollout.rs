@@ -3,6 +3,7 @@
 use fuzzyq_core::{Model, Real};
 use serde::{Deserialize, Serialize};
 
+use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
 use crate::pointmass::PointMass;
 use crate::policy::{AnyPolicy, Policy, PolicyKind};
@@ -87,6 +88,23 @@ pub fn check_x0(model: &PointMass, x0: &[f64]) -> Result<(), SimError> {
     Ok(())
 }
 
+/// The point-mass model of a policy, or an error naming the policy's environment.
+pub fn point_mass_of<T: Real>(policy: &Policy<T>) -> Result<&PointMass, SimError>
+where
+    EnvModel: Model<T>,
+{
+    policy.model().point_mass().ok_or_else(|| {
+        ConfigError::invalid(
+            "env",
+            format!(
+                "this is a {} policy; point-mass rollouts need a pointmass policy",
+                policy.model().name()
+            ),
+        )
+        .into()
+    })
+}
+
 /// Runs `policy` for `steps` steps from `x0` on the model (integrated in `f64`).
 pub fn rollout<T: Real>(
     policy: &Policy<T>,
@@ -95,9 +113,9 @@ pub fn rollout<T: Real>(
     kind: PolicyKind,
 ) -> Result<(Trajectory, RolloutMetrics), SimError>
 where
-    PointMass: Model<T>,
+    EnvModel: Model<T>,
 {
-    let model = policy.model();
+    let model = point_mass_of(policy)?;
     check_x0(model, x0)?;
     let mut actor = policy.actor(kind)?;
     let n = x0.len();
@@ -144,14 +162,26 @@ pub fn rollout_any(
     }
 }
 
-fn measure(
+pub(crate) fn measure(
     model: &PointMass,
     t: &Trajectory,
     gamma: f64,
     kind: PolicyKind,
     value_x0: f64,
 ) -> RolloutMetrics {
-    let reach_step = t.states.iter().position(|x| model.in_goal_f64(x));
+    measure_with(|x| model.in_goal_f64(x), t, gamma, kind, value_x0)
+}
+
+/// The metrics of a trajectory whose states hold `(s_x, s_y, v_x, v_y)` per agent, with the
+/// reward region given by `in_goal`.
+pub(crate) fn measure_with(
+    in_goal: impl Fn(&[f64]) -> bool,
+    t: &Trajectory,
+    gamma: f64,
+    kind: PolicyKind,
+    value_x0: f64,
+) -> RolloutMetrics {
+    let reach_step = t.states.iter().position(|x| in_goal(x));
     let dist = |x: &[f64], i: usize| {
         let p = PointMass::position(x, i);
         p[0].hypot(p[1])
@@ -176,7 +206,7 @@ fn measure(
         arrival_time_s,
         final_error_m: (0..t.agents).map(|i| dist(last, i)).collect(),
         discounted_return,
-        steps_in_goal: t.states.iter().filter(|x| model.in_goal_f64(x)).count(),
+        steps_in_goal: t.states.iter().filter(|x| in_goal(x)).count(),
         value_x0,
     }
 }

@@ -7,13 +7,16 @@ use fuzzyq_core::solver::{self, Grid, Progress, Solution};
 
 use crate::artifact::{PolicyArtifact, TrainSummary, Values};
 use crate::config::{EnvConfig, Precision, TrainConfig};
+use crate::env::EnvModel;
 use crate::error::SimError;
+use crate::khepera::KheperaModel;
 use crate::pointmass::PointMass;
 
 /// Builds the model a configuration describes.
-pub fn build_model(config: &TrainConfig) -> Result<PointMass, SimError> {
+pub fn build_model(config: &TrainConfig) -> Result<EnvModel, SimError> {
     match &config.env {
-        EnvConfig::Pointmass(p) => Ok(PointMass::new(p.clone())?),
+        EnvConfig::Pointmass(p) => Ok(EnvModel::PointMass(PointMass::new(p.clone())?)),
+        EnvConfig::Khepera(k) => Ok(EnvModel::Khepera(KheperaModel::new(k.clone())?)),
     }
 }
 
@@ -53,7 +56,7 @@ fn solve<T: Real>(
     observer: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Solution<T>, SimError>
 where
-    PointMass: fuzzyq_core::Model<T>,
+    EnvModel: fuzzyq_core::Model<T>,
 {
     let model = build_model(config)?;
     let grid = build_grid::<T>(config)?;

@@ -1,0 +1,334 @@
+//! The walled arena of the robot experiments and its obstacles, read from TOML.
+//!
+//! The arena is a rectangle bounded by walls; obstacles are boxes (optionally rotated) and
+//! discs. The same description builds the rapier colliders of the physics plants
+//! ([`crate::physics`]) and answers the geometric questions of the models that learn on it
+//! (does a robot disc at this pose touch anything; how far does a ray go), so that the model a
+//! policy is trained on and the plant it runs on see the same world.
+//!
+//! ```toml
+//! # the paper's 12 m x 12 m surface with one obstacle
+//! x = [-6.0, 6.0]
+//! y = [-6.0, 6.0]
+//!
+//! [[obstacle]]
+//! shape = "box"
+//! center = [-2.0, 2.5]
+//! half_extents = [0.6, 0.05]
+//! angle_deg = 38.66
+//!
+//! [[obstacle]]
+//! shape = "disc"
+//! center = [2.0, -2.0]
+//! radius = 0.3
+//! ```
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{ConfigError, SimError};
+
+/// One obstacle.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Obstacle {
+    /// A rectangle of half extents `half_extents`, rotated by `angle_deg` counter-clockwise.
+    Box {
+        /// Centre (m).
+        center: [f64; 2],
+        /// Half width and half height before rotation (m).
+        half_extents: [f64; 2],
+        /// Rotation (degrees, counter-clockwise).
+        #[serde(default)]
+        angle_deg: f64,
+    },
+    /// A disc.
+    Disc {
+        /// Centre (m).
+        center: [f64; 2],
+        /// Radius (m).
+        radius: f64,
+    },
+}
+
+/// A rectangular walled arena with obstacles.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Arena {
+    /// The walls' x range `[lo, hi]` (m).
+    pub x: [f64; 2],
+    /// The walls' y range `[lo, hi]` (m).
+    pub y: [f64; 2],
+    /// Obstacles inside the walls.
+    #[serde(default, rename = "obstacle")]
+    pub obstacles: Vec<Obstacle>,
+}
+
+impl Default for Arena {
+    /// The paper's open arena: walls at +-6 m, no obstacles.
+    fn default() -> Self {
+        Self {
+            x: [-6.0, 6.0],
+            y: [-6.0, 6.0],
+            obstacles: Vec::new(),
+        }
+    }
+}
+
+fn finite(field: &str, v: &[f64]) -> Result<(), ConfigError> {
+    match v.iter().find(|v| !v.is_finite()) {
+        Some(bad) => Err(ConfigError::invalid(
+            field,
+            format!("must be finite, found {bad}"),
+        )),
+        None => Ok(()),
+    }
+}
+
+impl Arena {
+    /// Reads and validates an arena file.
+    pub fn from_file(path: &Path) -> Result<Self, SimError> {
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            ConfigError::invalid("arena", format!("cannot read {}: {e}", path.display()))
+        })?;
+        Self::from_toml(&text).map_err(|e| match e {
+            SimError::Config(ConfigError::Parse(m)) => {
+                ConfigError::Parse(format!("{}: {m}", path.display())).into()
+            }
+            other => other,
+        })
+    }
+
+    /// Parses and validates an arena from TOML text.
+    pub fn from_toml(text: &str) -> Result<Self, SimError> {
+        let arena: Self = toml::from_str(text)
+            .map_err(|e| ConfigError::Parse(format!("arena: {}", e.message().trim_end())))?;
+        arena.validate()?;
+        Ok(arena)
+    }
+
+    /// The arena as TOML text.
+    #[must_use]
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).expect("an arena serialises")
+    }
+
+    /// Checks that the walls enclose a non-empty area and every obstacle is well formed.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        finite("arena.x", &self.x)?;
+        finite("arena.y", &self.y)?;
+        if self.x[0] >= self.x[1] || self.y[0] >= self.y[1] {
+            return Err(ConfigError::invalid(
+                "arena",
+                format!(
+                    "walls must satisfy lo < hi, found x = {:?}, y = {:?}",
+                    self.x, self.y
+                ),
+            ));
+        }
+        for (i, o) in self.obstacles.iter().enumerate() {
+            let field = format!("arena.obstacle[{i}]");
+            match o {
+                Obstacle::Box {
+                    center,
+                    half_extents,
+                    angle_deg,
+                } => {
+                    finite(&field, center)?;
+                    finite(&field, half_extents)?;
+                    finite(&field, &[*angle_deg])?;
+                    if half_extents.iter().any(|&h| h <= 0.0) {
+                        return Err(ConfigError::invalid(
+                            field,
+                            format!("half_extents must be positive, found {half_extents:?}"),
+                        ));
+                    }
+                }
+                Obstacle::Disc { center, radius } => {
+                    finite(&field, center)?;
+                    finite(&field, &[*radius])?;
+                    if *radius <= 0.0 {
+                        return Err(ConfigError::invalid(
+                            field,
+                            format!("radius must be positive, found {radius}"),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether a disc of radius `r` centred at `c` touches a wall or an obstacle.
+    #[must_use]
+    pub fn disc_collides(&self, c: [f64; 2], r: f64) -> bool {
+        if c[0] - r < self.x[0]
+            || c[0] + r > self.x[1]
+            || c[1] - r < self.y[0]
+            || c[1] + r > self.y[1]
+        {
+            return true;
+        }
+        self.obstacles.iter().any(|o| obstacle_distance(o, c) < r)
+    }
+
+    /// Distance from `origin` along the unit direction `dir` to the first wall or obstacle, if
+    /// within `max_range` (an exact reference for the physics plant's ray casts).
+    #[must_use]
+    pub fn ray_distance(&self, origin: [f64; 2], dir: [f64; 2], max_range: f64) -> Option<f64> {
+        let mut best = f64::INFINITY;
+        // Walls: the ray starts inside, so it leaves through the first wall it meets.
+        for (k, (lo, hi)) in [(self.x[0], self.x[1]), (self.y[0], self.y[1])]
+            .into_iter()
+            .enumerate()
+        {
+            if dir[k] > 0.0 {
+                best = best.min((hi - origin[k]) / dir[k]);
+            } else if dir[k] < 0.0 {
+                best = best.min((lo - origin[k]) / dir[k]);
+            }
+        }
+        for o in &self.obstacles {
+            if let Some(t) = ray_obstacle(o, origin, dir) {
+                best = best.min(t);
+            }
+        }
+        (best <= max_range).then_some(best.max(0.0))
+    }
+}
+
+/// Rotates `p` by `-angle` (into a box's frame).
+fn to_local(p: [f64; 2], center: [f64; 2], angle_deg: f64) -> [f64; 2] {
+    let (s, c) = angle_deg.to_radians().sin_cos();
+    let d = [p[0] - center[0], p[1] - center[1]];
+    [c * d[0] + s * d[1], -s * d[0] + c * d[1]]
+}
+
+/// Distance from a point to an obstacle (0 inside).
+fn obstacle_distance(o: &Obstacle, p: [f64; 2]) -> f64 {
+    match o {
+        Obstacle::Box {
+            center,
+            half_extents,
+            angle_deg,
+        } => {
+            let q = to_local(p, *center, *angle_deg);
+            let dx = (q[0].abs() - half_extents[0]).max(0.0);
+            let dy = (q[1].abs() - half_extents[1]).max(0.0);
+            dx.hypot(dy)
+        }
+        Obstacle::Disc { center, radius } => {
+            ((p[0] - center[0]).hypot(p[1] - center[1]) - radius).max(0.0)
+        }
+    }
+}
+
+/// Entry distance of a ray into an obstacle (`None` if it misses or starts inside).
+fn ray_obstacle(o: &Obstacle, origin: [f64; 2], dir: [f64; 2]) -> Option<f64> {
+    match o {
+        Obstacle::Box {
+            center,
+            half_extents,
+            angle_deg,
+        } => {
+            let p = to_local(origin, *center, *angle_deg);
+            let (s, c) = angle_deg.to_radians().sin_cos();
+            let d = [c * dir[0] + s * dir[1], -s * dir[0] + c * dir[1]];
+            // Slab test.
+            let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+            for k in 0..2 {
+                if d[k] == 0.0 {
+                    if p[k].abs() > half_extents[k] {
+                        return None;
+                    }
+                } else {
+                    let a = (-half_extents[k] - p[k]) / d[k];
+                    let b = (half_extents[k] - p[k]) / d[k];
+                    t0 = t0.max(a.min(b));
+                    t1 = t1.min(a.max(b));
+                }
+            }
+            (t0 <= t1 && t0 >= 0.0).then_some(t0)
+        }
+        Obstacle::Disc { center, radius } => {
+            let m = [origin[0] - center[0], origin[1] - center[1]];
+            let b = m[0] * dir[0] + m[1] * dir[1];
+            let c = m[0] * m[0] + m[1] * m[1] - radius * radius;
+            let disc = b * b - c;
+            if c < 0.0 || disc < 0.0 {
+                return None;
+            }
+            let t = -b - disc.sqrt();
+            (t >= 0.0).then_some(t)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DOC: &str = r#"
+x = [-6.0, 6.0]
+y = [-6.0, 6.0]
+
+[[obstacle]]
+shape = "box"
+center = [0.0, 2.0]
+half_extents = [1.0, 0.5]
+
+[[obstacle]]
+shape = "disc"
+center = [3.0, 0.0]
+radius = 0.5
+"#;
+
+    #[test]
+    fn parses_and_answers_geometry() {
+        let a = Arena::from_toml(DOC).unwrap();
+        assert_eq!(a.obstacles.len(), 2);
+        // Rays by hand: up from the origin hits the box's lower face at y = 1.5.
+        assert_eq!(a.ray_distance([0.0, 0.0], [0.0, 1.0], 10.0), Some(1.5));
+        // Right hits the disc at x = 2.5.
+        assert_eq!(a.ray_distance([0.0, 0.0], [1.0, 0.0], 10.0), Some(2.5));
+        // Left hits the wall at x = -6, beyond a 2 m range.
+        assert_eq!(a.ray_distance([0.0, 0.0], [-1.0, 0.0], 10.0), Some(6.0));
+        assert_eq!(a.ray_distance([0.0, 0.0], [-1.0, 0.0], 2.0), None);
+        assert!(a.disc_collides([0.0, 1.0], 0.6));
+        assert!(!a.disc_collides([0.0, 1.0], 0.4));
+        assert!(a.disc_collides([5.95, 0.0], 0.07));
+        assert!(!a.disc_collides([-5.0, -5.0], 0.07));
+        assert!(a.disc_collides([3.0, 0.6], 0.2));
+    }
+
+    #[test]
+    fn rotated_box() {
+        let a = Arena {
+            obstacles: vec![Obstacle::Box {
+                center: [0.0, 0.0],
+                half_extents: [1.0, 0.1],
+                angle_deg: 90.0,
+            }],
+            ..Arena::default()
+        };
+        // Rotated upright: the ray along +x meets its face at x = 0.1 from x = -1.
+        let t = a.ray_distance([-1.0, 0.0], [1.0, 0.0], 5.0).unwrap();
+        assert!((t - 0.9).abs() < 1e-12, "{t}");
+        assert!(a.disc_collides([0.0, 0.9], 0.05));
+        assert!(!a.disc_collides([0.5, 0.0], 0.3));
+    }
+
+    #[test]
+    fn bad_input_names_the_field() {
+        let e = Arena::from_toml("x = [1.0, -1.0]\ny = [-1.0, 1.0]").unwrap_err();
+        assert!(e.to_string().contains("arena"), "{e}");
+        let e = Arena::from_toml(
+            "x = [-1.0, 1.0]\ny = [-1.0, 1.0]\n[[obstacle]]\nshape = \"disc\"\ncenter = [0.0, 0.0]\nradius = -1.0",
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("obstacle[0]"), "{e}");
+        let e = Arena::from_toml("x = [-1.0, 1.0]\ny = [-1.0, 1.0]\nwall = 3").unwrap_err();
+        assert!(e.to_string().contains("wall"), "{e}");
+    }
+}
