@@ -5,15 +5,16 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use fuzzyq_sim::PolicyArtifact;
 use fuzzyq_sim::config::EnvConfig;
+use fuzzyq_sim::khepera_fql::{FqlPolicyFile, fql_success_over_starts, rollout_fql};
 use fuzzyq_sim::physics::{Collisions, PointMassPlantConfig, rollout_plant};
 use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
 use fuzzyq_sim::robots::{
-    KheperaMetrics, PAPER_KHEPERA_X0, poses_from_paper, random_starts, rollout_khepera_any,
-    success_over_starts,
+    KheperaMetrics, KheperaRun, PAPER_KHEPERA_X0, SuccessReport, poses_from_paper, random_starts,
+    rollout_khepera_any, success_over_starts,
 };
 use fuzzyq_sim::rollout::{PAPER_X0, RolloutMetrics, Trajectory, rollout_any};
+use fuzzyq_sim::{PolicyArtifact, PolicyFileError};
 use serde::Serialize;
 
 use crate::{check_writable, plot, write_file, write_json};
@@ -38,12 +39,12 @@ pub(crate) struct RolloutArgs {
     /// with each other and the walls). The robots always run on the rapier plant.
     #[arg(long, value_enum)]
     plant: Option<PlantArg>,
-    /// Radius of the point-mass discs on the rapier plant (m).
-    #[arg(long, value_name = "R", default_value_t = 0.05)]
-    radius: f64,
-    /// Khepera: seed of the plant's noise (and of the random starts with --starts).
-    #[arg(long, value_name = "S", default_value_t = 0)]
-    seed: u64,
+    /// Radius of the point-mass discs on the rapier plant (m) [default: 0.05].
+    #[arg(long, value_name = "R")]
+    radius: Option<f64>,
+    /// Khepera: seed of the plant's noise (and of the random starts with --starts) [default: 0].
+    #[arg(long, value_name = "S")]
+    seed: Option<u64>,
     /// Khepera: instead of one run, roll out from N seeded random starts and report the
     /// success rate (--plot draws the starts, --json writes every run's metrics).
     #[arg(long, value_name = "N")]
@@ -73,14 +74,14 @@ enum PlantArg {
     Rapier,
 }
 
-#[derive(Clone, Copy, Debug, ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum KindArg {
     Greedy,
     Interpolated,
 }
 
-/// Parses `-4,-6,-2,2` (also with spaces or surrounding brackets).
-fn parse_x0(text: &str) -> anyhow::Result<Vec<f64>> {
+/// Parses `-4,-6,-2,2` (also with spaces or surrounding brackets) given to `flag`.
+fn parse_list(text: &str, flag: &str) -> anyhow::Result<Vec<f64>> {
     let t = text.trim().trim_start_matches('[').trim_end_matches(']');
     t.split(|c: char| c == ',' || c.is_whitespace())
         .filter(|s| !s.is_empty())
@@ -89,7 +90,7 @@ fn parse_x0(text: &str) -> anyhow::Result<Vec<f64>> {
             s.parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .with_context(|| format!("--x0: value {} ({s:?}) is not a finite number", i + 1))
+                .with_context(|| format!("{flag}: value {} ({s:?}) is not a finite number", i + 1))
         })
         .collect()
 }
@@ -176,10 +177,65 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     if args.steps == Some(0) {
         anyhow::bail!("--steps must be at least 1");
     }
-    let artifact = PolicyArtifact::load(&args.policy)?;
+    let artifact = match PolicyArtifact::load(&args.policy) {
+        Ok(a) => a,
+        // Not a `.fzq` file: a fuzzy Q-learning policy (`train --learner fql`) is TOML.
+        Err(e @ PolicyFileError::NotAPolicy { .. }) => {
+            let Ok(file) = FqlPolicyFile::load(&args.policy) else {
+                return Err(e.into());
+            };
+            if args.policy_kind != KindArg::Greedy {
+                anyhow::bail!(
+                    "--policy-kind: a fuzzy Q-learning policy acts greedily (decentralised)"
+                );
+            }
+            let config = file.config.clone();
+            return khepera(args, &Robots::Fql(file), &config);
+        }
+        Err(e) => return Err(e.into()),
+    };
     match artifact.config.env.clone() {
         EnvConfig::Pointmass(p) => point_mass(args, artifact, p.agents),
-        EnvConfig::Khepera(k) => khepera(args, artifact, &k),
+        EnvConfig::Khepera(k) => {
+            let policy = AnyPolicy::from_artifact(artifact)?;
+            khepera(args, &Robots::Fqi(policy), &k)
+        }
+    }
+}
+
+/// A trained Khepera policy of either learner.
+enum Robots {
+    /// Joint fuzzy Q-iteration.
+    Fqi(AnyPolicy),
+    /// Model-free fuzzy Q-learning.
+    Fql(FqlPolicyFile),
+}
+
+impl Robots {
+    fn run(
+        &self,
+        start: &[[f64; 3]],
+        steps: usize,
+        kind: PolicyKind,
+        seed: u64,
+    ) -> anyhow::Result<(KheperaRun, KheperaMetrics)> {
+        Ok(match self {
+            Self::Fqi(p) => rollout_khepera_any(p, start, steps, kind, seed)?,
+            Self::Fql(f) => rollout_fql(&f.q, &f.config, start, steps, seed, f.fql.gamma)?,
+        })
+    }
+
+    fn starts(
+        &self,
+        n: usize,
+        seed: u64,
+        steps: usize,
+        kind: PolicyKind,
+    ) -> anyhow::Result<(SuccessReport, Vec<KheperaMetrics>)> {
+        Ok(match self {
+            Self::Fqi(p) => success_over_starts(p, n, seed, steps, kind)?,
+            Self::Fql(f) => fql_success_over_starts(&f.q, &f.config, n, seed, steps, f.fql.gamma)?,
+        })
     }
 }
 
@@ -194,13 +250,17 @@ fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> any
     for (set, flag) in [
         (args.headings.is_some(), "--headings"),
         (args.starts.is_some(), "--starts"),
+        (args.seed.is_some(), "--seed"),
     ] {
         if set {
             anyhow::bail!("{flag} applies to khepera policies only");
         }
     }
+    if args.radius.is_some() && args.plant != Some(PlantArg::Rapier) {
+        anyhow::bail!("--radius applies to --plant rapier only");
+    }
     let x0 = match &args.x0 {
-        Some(t) => parse_x0(t)?,
+        Some(t) => parse_list(t, "--x0")?,
         None if agents == 2 => PAPER_X0.to_vec(),
         None => anyhow::bail!(
             "the policy has {agents} agents; give --x0 with {} values (the default start is the \
@@ -218,7 +278,9 @@ fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> any
         }
         PlantArg::Rapier => {
             let plant = PointMassPlantConfig {
-                radius: args.radius,
+                radius: args
+                    .radius
+                    .unwrap_or(PointMassPlantConfig::default().radius),
                 ..PointMassPlantConfig::default()
             };
             let (t, m, c) = match &policy {
@@ -259,15 +321,18 @@ fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> any
 
 fn khepera(
     args: RolloutArgs,
-    artifact: PolicyArtifact,
+    policy: &Robots,
     config: &fuzzyq_sim::khepera::KheperaConfig,
 ) -> anyhow::Result<()> {
     if args.plant == Some(PlantArg::Model) {
         anyhow::bail!("--plant model: khepera policies run on the rapier plant only");
     }
+    if args.radius.is_some() {
+        anyhow::bail!("--radius applies to point-mass policies on --plant rapier only");
+    }
+    let seed = args.seed.unwrap_or(0);
     let kind = kind_of(&args);
     let steps = args.steps.unwrap_or(250);
-    let policy = AnyPolicy::from_artifact(artifact)?;
     if let Some(n) = args.starts {
         if n == 0 {
             anyhow::bail!("--starts must be at least 1");
@@ -277,9 +342,9 @@ fn khepera(
                 "--starts draws random starts; it cannot be combined with --x0, --headings or --csv"
             );
         }
-        let (report, runs) = success_over_starts(&policy, n, args.seed, steps, kind)?;
+        let (report, runs) = policy.starts(n, seed, steps, kind)?;
         if let Some(p) = &args.plot {
-            let starts = random_starts(config, n, args.seed)?;
+            let starts = random_starts(config, n, seed)?;
             let ok: Vec<bool> = runs.iter().map(|m| m.success).collect();
             plot::success_figure(
                 p,
@@ -291,7 +356,7 @@ fn khepera(
                     kind.name(),
                     report.successes,
                     n,
-                    args.seed
+                    seed
                 ),
             )?;
         }
@@ -299,7 +364,7 @@ fn khepera(
             #[derive(Serialize)]
             struct Out<'a> {
                 #[serde(flatten)]
-                report: &'a fuzzyq_sim::robots::SuccessReport,
+                report: &'a SuccessReport,
                 policy_kind: PolicyKind,
                 steps: usize,
                 runs: &'a [KheperaMetrics],
@@ -319,7 +384,7 @@ fn khepera(
                 "{} policy, {n} random starts (seed {}), {steps} steps of {} s: {} succeed ({:.0}%), \
                  {} with collisions, mean time to the reward region {}, mean final ||x|| {:.3}\n",
                 kind.name(),
-                args.seed,
+                seed,
                 config.sample_time,
                 report.successes,
                 100.0 * report.success_rate,
@@ -331,7 +396,7 @@ fn khepera(
         return Ok(());
     }
     let x0 = match &args.x0 {
-        Some(t) => parse_x0(t)?,
+        Some(t) => parse_list(t, "--x0")?,
         None if config.agents == 2 => PAPER_KHEPERA_X0.to_vec(),
         None => anyhow::bail!(
             "the policy has {} robots; give --x0 with {} values",
@@ -340,12 +405,11 @@ fn khepera(
         ),
     };
     let headings = match &args.headings {
-        Some(t) => parse_x0(t)
-            .map_err(|e| anyhow::anyhow!("{}", e.to_string().replace("--x0", "--headings")))?,
+        Some(t) => parse_list(t, "--headings")?,
         None => vec![0.0; config.agents],
     };
     let start = poses_from_paper(config, &x0, &headings)?;
-    let (run, metrics) = rollout_khepera_any(&policy, &start, steps, kind, args.seed)?;
+    let (run, metrics) = policy.run(&start, steps, kind, seed)?;
     if let Some(p) = &args.csv {
         write_file(p, csv(&run.trajectory, ["vl", "vr"]).as_bytes(), "CSV")?;
     }
@@ -394,9 +458,13 @@ mod tests {
 
     #[test]
     fn parses_x0_forms() {
-        assert_eq!(parse_x0("-4,-6,2").unwrap(), vec![-4.0, -6.0, 2.0]);
-        assert_eq!(parse_x0("[1, 2.5]").unwrap(), vec![1.0, 2.5]);
-        assert!(parse_x0("1,x").unwrap_err().to_string().contains("value 2"));
-        assert!(parse_x0("1,nan").is_err());
+        assert_eq!(
+            parse_list("-4,-6,2", "--x0").unwrap(),
+            vec![-4.0, -6.0, 2.0]
+        );
+        assert_eq!(parse_list("[1, 2.5]", "--x0").unwrap(), vec![1.0, 2.5]);
+        let e = parse_list("1,x", "--headings").unwrap_err().to_string();
+        assert!(e.starts_with("--headings: value 2"), "{e}");
+        assert!(parse_list("1,nan", "--x0").is_err());
     }
 }

@@ -342,6 +342,25 @@ fn khepera_train_rollout_and_starts() {
         "at rest",
     );
     assert_fails(
+        &fuzzyq(&["rollout", "--policy", "k.fzq", "--radius", "0.1"], d),
+        "--radius",
+    );
+    assert_fails(
+        &fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                "k.fzq",
+                "--x0",
+                "-3,2,0,0",
+                "--headings",
+                "x",
+            ],
+            d,
+        ),
+        "--headings: value 1",
+    );
+    assert_fails(
         &fuzzyq(&["rollout", "--policy", "k.fzq", "--x0", "6,0,0,0"], d),
         "robot",
     );
@@ -398,6 +417,40 @@ fn khepera_train_rollout_and_starts() {
     let curve = std::fs::read_to_string(d.join("c.csv")).unwrap();
     assert_eq!(curve.lines().count(), 4, "{curve}");
     assert!(std::fs::read_to_string(d.join("f.toml")).unwrap().len() > 1000);
+    // ... rolled out like a joint policy, from one start or many.
+    let o = fuzzyq(
+        &[
+            "rollout", "--policy", "f.toml", "--steps", "20", "--json", "fr.json", "--plot",
+            "fr.png",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(json(&d.join("fr.json"))["steps"], 20);
+    let o = fuzzyq(
+        &[
+            "rollout", "--policy", "f.toml", "--starts", "2", "--steps", "20", "--json", "fs.json",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        json(&d.join("fs.json"))["runs"].as_array().unwrap().len(),
+        2
+    );
+    assert_fails(
+        &fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                "f.toml",
+                "--policy-kind",
+                "interpolated",
+            ],
+            d,
+        ),
+        "greedily",
+    );
     assert_fails(
         &fuzzyq(
             &[

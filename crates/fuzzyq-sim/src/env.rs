@@ -44,23 +44,6 @@ impl EnvModel {
             Self::Khepera(_) => "khepera",
         }
     }
-
-    /// Sample time of one step (s).
-    #[must_use]
-    pub fn sample_time(&self) -> f64 {
-        match self {
-            Self::PointMass(m) => m.config().sample_time,
-            Self::Khepera(m) => m.config().sample_time,
-        }
-    }
-
-    /// The transition in `f64`.
-    pub fn step_f64(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
-        match self {
-            Self::PointMass(m) => m.step_f64(x, u, next),
-            Self::Khepera(m) => m.step_f64(x, u, next),
-        }
-    }
 }
 
 macro_rules! dispatch {

@@ -454,10 +454,29 @@ impl KheperaModel {
         out
     }
 
-    /// Whether the paper's 8-D state is inside the reward region (eq 42).
+    /// Whether the joint pose `x` is in the reward region: positions within `goal_radius`
+    /// (eq 42 for robots at rest), no two robots overlapping, none touching the arena (where
+    /// [`reward_f64`](Self::reward_f64) pays the goal reward).
     #[must_use]
-    pub fn in_goal_paper(&self, paper_x: &[f64]) -> bool {
+    pub fn in_region(&self, x: &[f64]) -> bool {
+        let sq: f64 = x.chunks_exact(3).map(|p| p[0] * p[0] + p[1] * p[1]).sum();
+        sq.sqrt() < self.config.goal_radius && !self.any_overlap(x) && !self.any_touches_arena(x)
+    }
+
+    /// Whether the paper's 8-D state `[s_1x, s_1y, v_1x, v_1y, ...]` is in the reward region:
+    /// `||x|| < goal_radius` with the velocities (eq 42), no overlap, nothing touching the arena.
+    #[must_use]
+    pub fn in_region_paper(&self, paper_x: &[f64]) -> bool {
+        let n = self.config.agents;
+        let mut pose = [0.0f64; 3 * MAX_ROBOTS];
+        for i in 0..n {
+            pose[3 * i] = paper_x[4 * i];
+            pose[3 * i + 1] = paper_x[4 * i + 1];
+        }
+        let pose = &pose[..3 * n];
         paper_x.iter().map(|v| v * v).sum::<f64>().sqrt() < self.config.goal_radius
+            && !self.any_overlap(pose)
+            && !self.any_touches_arena(pose)
     }
 
     /// Whether a robot at pose state `x` touches a wall or an obstacle.
@@ -502,6 +521,28 @@ impl KheperaModel {
     }
 }
 
+/// The first `len` values of `x` in `f64` (at most `3 * MAX_ROBOTS`), without allocating.
+fn widen<T: Copy + Into<f64>>(x: &[T], len: usize) -> Widened {
+    let mut buf = [0.0f64; 3 * MAX_ROBOTS];
+    for (a, &b) in buf.iter_mut().zip(&x[..len]) {
+        *a = b.into();
+    }
+    Widened { buf, len }
+}
+
+/// A fixed-capacity `f64` vector (see [`widen`]).
+struct Widened {
+    buf: [f64; 3 * MAX_ROBOTS],
+    len: usize,
+}
+
+impl std::ops::Deref for Widened {
+    type Target = [f64];
+    fn deref(&self) -> &[f64] {
+        &self.buf[..self.len]
+    }
+}
+
 macro_rules! impl_model {
     ($t:ty, $actions:ident) => {
         impl Model<$t> for KheperaModel {
@@ -528,28 +569,15 @@ macro_rules! impl_model {
 
             fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
                 let n = self.config.agents;
-                let mut xs = [0.0f64; 3 * MAX_ROBOTS];
-                let mut us = [0.0f64; 2 * MAX_ROBOTS];
                 let mut out = [0.0f64; 3 * MAX_ROBOTS];
-                for (a, &b) in xs.iter_mut().zip(&x[..3 * n]) {
-                    *a = f64::from(b);
-                }
-                for (a, &b) in us.iter_mut().zip(&u[..2 * n]) {
-                    *a = f64::from(b);
-                }
-                self.step_f64(&xs[..3 * n], &us[..2 * n], &mut out[..3 * n]);
+                self.step_f64(&widen(x, 3 * n), &widen(u, 2 * n), &mut out[..3 * n]);
                 for (a, &b) in next.iter_mut().zip(&out[..3 * n]) {
                     *a = b as $t;
                 }
             }
 
             fn reward(&self, x: &[$t], _u: &[$t]) -> $t {
-                let n = self.config.agents;
-                let mut xs = [0.0f64; 3 * MAX_ROBOTS];
-                for (a, &b) in xs.iter_mut().zip(&x[..3 * n]) {
-                    *a = f64::from(b);
-                }
-                self.reward_f64(&xs[..3 * n]) as $t
+                self.reward_f64(&widen(x, 3 * self.config.agents)) as $t
             }
 
             fn reward_depends_on_action(&self) -> bool {
@@ -557,18 +585,7 @@ macro_rules! impl_model {
             }
 
             fn is_goal(&self, x: &[$t]) -> bool {
-                let n = self.config.agents;
-                let sq: f64 = (0..n)
-                    .map(|i| {
-                        let (a, b) = (f64::from(x[3 * i]), f64::from(x[3 * i + 1]));
-                        a * a + b * b
-                    })
-                    .sum();
-                let mut xs = [0.0f64; 3 * MAX_ROBOTS];
-                for (a, &b) in xs.iter_mut().zip(&x[..3 * n]) {
-                    *a = f64::from(b);
-                }
-                sq.sqrt() < self.config.goal_radius && !self.any_overlap(&xs[..3 * n])
+                self.in_region(&widen(x, 3 * self.config.agents))
             }
 
             fn n_blocks(&self) -> usize {

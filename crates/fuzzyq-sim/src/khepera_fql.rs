@@ -89,8 +89,9 @@ use crate::physics::KheperaWorld;
 #[cfg(doc)]
 use crate::physics::StepContacts;
 use crate::policy::PolicyKind;
-use crate::robots::{KheperaMetrics, KheperaRun, SuccessReport, random_starts};
-use crate::rollout::{Trajectory, measure_with};
+use crate::robots::{
+    KheperaMetrics, KheperaRun, SuccessReport, measure_run, random_starts, run_on_plant,
+};
 
 /// The goal of the task: the origin.
 pub const GOAL: [f64; 2] = [0.0, 0.0];
@@ -211,13 +212,6 @@ pub struct KheperaEnv {
     error: Option<SimError>,
 }
 
-/// Whether the joint pose `x` is in the reward region: `||(s_1, s_2)|| < goal_radius`, no
-/// overlap, no robot touching the arena (where [`KheperaModel::reward_f64`] pays the goal).
-fn in_region(model: &KheperaModel, x: &[f64]) -> bool {
-    let sq: f64 = x.chunks_exact(3).map(|p| p[0] * p[0] + p[1] * p[1]).sum();
-    sq.sqrt() < model.config().goal_radius && !model.any_overlap(x) && !model.any_touches_arena(x)
-}
-
 fn flatten(poses: &[[f64; 3]], out: &mut Vec<f64>) {
     out.clear();
     out.extend(poses.iter().flatten());
@@ -297,7 +291,7 @@ impl KheperaEnv {
         self.last_contact = false;
         self.sense()?;
         flatten(self.world.poses(), &mut self.pose_flat);
-        self.in_region = in_region(&self.model, &self.pose_flat);
+        self.in_region = self.model.in_region(&self.pose_flat);
         Ok(())
     }
 
@@ -352,7 +346,7 @@ impl KheperaEnv {
         self.sense()?;
         flatten(self.world.poses(), &mut self.pose_flat);
         self.last_contact = !contacts.is_empty();
-        self.in_region = in_region(&self.model, &self.pose_flat);
+        self.in_region = self.model.in_region(&self.pose_flat);
         let mut reward = if self.last_contact {
             -self.config.collision_penalty
         } else {
@@ -524,93 +518,30 @@ pub fn rollout_fql(
         );
     }
     let model = KheperaModel::new(config.clone())?;
-    let n = config.agents;
-    let n_sonar = config.sonar_angles_deg.len();
-    let mut world = KheperaWorld::new(config, seed)?;
-    world.reset(start)?;
-    let read = |world: &mut KheperaWorld| -> Result<Vec<Vec<f64>>, SimError> {
-        (0..n)
-            .map(|r| {
-                let mut s = vec![0.0; n_sonar];
-                world.sonar(r, &mut s)?;
-                Ok(s)
-            })
-            .collect()
-    };
-    let paper = |poses: &[[f64; 3]], vel: Option<&[[f64; 2]]>| -> Vec<f64> {
-        (0..n)
-            .flat_map(|i| {
-                let v = vel.map_or([0.0, 0.0], |v| v[i]);
-                [poses[i][0], poses[i][1], v[0], v[1]]
-            })
-            .collect()
-    };
-    let observe = |poses: &[[f64; 3]], sonar: &[Vec<f64>], obs: &mut [Vec<f64>]| {
+    let mut obs = vec![vec![0.0; config.sonar_angles_deg.len() + 2]; config.agents];
+    let (run, collisions) = run_on_plant(&model, start, steps, seed, |poses, sonar, u| {
         for (i, o) in obs.iter_mut().enumerate() {
             observation(poses[i], &sonar[i], o);
+            let w = config.wheels(q.greedy(i, o)?);
+            u[2 * i..2 * i + 2].copy_from_slice(&w);
         }
-    };
-    let mut obs = vec![vec![0.0; n_sonar + 2]; n];
-    let mut poses = vec![world.poses().to_vec()];
-    let mut states = vec![paper(world.poses(), None)];
-    let mut sonar = vec![read(&mut world)?];
-    observe(world.poses(), &sonar[0], &mut obs);
-    let value_x0 = {
-        let refs: Vec<&[f64]> = obs.iter().map(Vec::as_slice).collect();
-        q.value(&refs)?
-    };
-    let mut actions = Vec::with_capacity(steps);
-    let mut indices = Vec::with_capacity(steps);
-    let mut rewards = Vec::with_capacity(steps);
-    let mut x = Vec::with_capacity(3 * n);
-    for _ in 0..steps {
-        flatten(world.poses(), &mut x);
-        let chosen = (0..n)
-            .map(|i| q.greedy(i, &obs[i]))
-            .collect::<Result<Vec<usize>, SimError>>()?;
-        rewards.push(model.reward_f64(&x));
-        let wheels: Vec<[f64; 2]> = chosen.iter().map(|&a| config.wheels(a)).collect();
-        world.step(&wheels)?;
-        actions.push(wheels.iter().flatten().copied().collect());
-        indices.push(chosen);
-        poses.push(world.poses().to_vec());
-        states.push(paper(world.poses(), Some(world.velocities())));
-        let s = read(&mut world)?;
-        observe(world.poses(), &s, &mut obs);
-        sonar.push(s);
+        Ok(())
+    })?;
+    for (i, o) in obs.iter_mut().enumerate() {
+        observation(run.poses[0][i], &run.sonar[0][i], o);
     }
-    let trajectory = Trajectory {
-        dt: config.sample_time,
-        agents: n,
-        states,
-        actions,
-        rewards,
-    };
-    let in_goal = |x: &[f64]| {
-        let p: Vec<f64> = (0..n).flat_map(|i| [x[4 * i], x[4 * i + 1], 0.0]).collect();
-        model.in_goal_paper(x) && !model.any_overlap(&p)
-    };
-    let rollout = measure_with(in_goal, &trajectory, gamma, PolicyKind::Greedy, value_x0);
-    let last = trajectory.states.last().expect("at least x0");
-    let final_norm = last.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let collisions = world.collisions().clone();
-    let metrics = KheperaMetrics {
-        success: in_goal(last) && collisions.total == 0,
-        rollout,
-        headings_deg: start.iter().map(|p| p[2].to_degrees()).collect(),
-        seed,
+    let refs: Vec<&[f64]> = obs.iter().map(Vec::as_slice).collect();
+    let value_x0 = q.value(&refs)?;
+    let metrics = measure_run(
+        &model,
+        &run,
         collisions,
-        final_norm,
-    };
-    Ok((
-        KheperaRun {
-            trajectory,
-            poses,
-            action_indices: indices,
-            sonar,
-        },
-        metrics,
-    ))
+        gamma,
+        PolicyKind::Greedy,
+        value_x0,
+        seed,
+    );
+    Ok((run, metrics))
 }
 
 /// Rolls the greedy policy of `q` out from the `count` starts of
@@ -630,21 +561,7 @@ pub fn fql_success_over_starts(
         let (_, m) = rollout_fql(q, config, s, steps, seed.wrapping_add(k as u64), gamma)?;
         all.push(m);
     }
-    let successes = all.iter().filter(|m| m.success).count();
-    let reached: Vec<f64> = all.iter().filter_map(|m| m.rollout.reach_time_s).collect();
-    Ok((
-        SuccessReport {
-            starts: count,
-            seed,
-            successes,
-            success_rate: successes as f64 / count.max(1) as f64,
-            runs_with_collisions: all.iter().filter(|m| m.collisions.total > 0).count(),
-            mean_reach_time_s: (!reached.is_empty())
-                .then(|| reached.iter().sum::<f64>() / reached.len() as f64),
-            mean_final_norm: all.iter().map(|m| m.final_norm).sum::<f64>() / count.max(1) as f64,
-        },
-        all,
-    ))
+    Ok((SuccessReport::from_runs(seed, &all), all))
 }
 
 /// A learned Khepera FQL policy with what produced it, saved as TOML text.

@@ -75,7 +75,7 @@ use crate::error::{ConfigError, SimError};
 use crate::khepera::{self, KheperaConfig, MAX_ROBOTS};
 use crate::pointmass::{FrictionConfig, PointMass, PointMassConfig};
 use crate::policy::{Policy, PolicyKind};
-use crate::rollout::{RolloutMetrics, Trajectory, check_x0, measure, point_mass_of};
+use crate::rollout::{RolloutMetrics, Trajectory, point_mass_of, rollout_on};
 
 /// Thickness of the wall cuboids (m).
 pub const WALL_THICKNESS: f64 = 0.5;
@@ -816,37 +816,17 @@ pub fn rollout_plant<T: Real>(
 where
     EnvModel: Model<T>,
 {
-    let model = point_mass_of(policy)?;
-    check_x0(model, x0)?;
-    let mut world = PointMassPlant::new(model, plant)?;
-    world.reset(x0)?;
-    let mut actor = policy.actor(kind)?;
-    let mut states = vec![x0.to_vec()];
-    let mut actions = Vec::with_capacity(steps);
-    let mut rewards = Vec::with_capacity(steps);
-    let mut u = vec![0.0; actor.action_dim()];
-    for _ in 0..steps {
-        let x = world.state().to_vec();
-        actor.act(&x, &mut u)?;
-        rewards.push(Model::<f64>::reward(model, &x, &u));
-        world.step(&u)?;
-        actions.push(u.clone());
-        states.push(world.state().to_vec());
-    }
-    let trajectory = Trajectory {
-        dt: model.config().sample_time,
-        agents: model.config().agents,
-        states,
-        actions,
-        rewards,
-    };
-    let metrics = measure(
-        model,
-        &trajectory,
-        policy.config().solver.gamma,
-        kind,
-        policy.value(x0)?,
-    );
+    let mut world = PointMassPlant::new(point_mass_of(policy)?, plant)?;
+    let mut placed = false;
+    let (trajectory, metrics) = rollout_on(policy, x0, steps, kind, |x, u, next| {
+        if !placed {
+            world.reset(x)?;
+            placed = true;
+        }
+        world.step(u)?;
+        next.copy_from_slice(world.state());
+        Ok(())
+    })?;
     Ok((trajectory, metrics, world.collisions.clone()))
 }
 

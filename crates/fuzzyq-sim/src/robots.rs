@@ -157,11 +157,36 @@ where
     EnvModel: Model<T>,
 {
     let model = khepera_of(policy)?;
+    let (run, collisions) = run_on_plant(model, start, steps, seed, |poses, _, u| {
+        actor.act(&flat(poses), u).map(|_| ())
+    })?;
+    let value_x0 = policy.value(&flat(start))?;
+    let metrics = measure_run(
+        model,
+        &run,
+        collisions,
+        policy.config().solver.gamma,
+        kind,
+        value_x0,
+        seed,
+    );
+    Ok((run, metrics))
+}
+
+/// Runs a controller on the plant seeded with `seed` for `steps` control periods from
+/// `start`: before every period, `decide(poses, sonar, wheels)` writes the joint wheel speeds
+/// `(v_l, v_r)` per robot from the current poses and sonar readings.
+pub(crate) fn run_on_plant(
+    model: &KheperaModel,
+    start: &[[f64; 3]],
+    steps: usize,
+    seed: u64,
+    mut decide: impl FnMut(&[[f64; 3]], &[Vec<f64>], &mut [f64]) -> Result<(), SimError>,
+) -> Result<(KheperaRun, Collisions), SimError> {
     let config = model.config();
     let n = config.agents;
     let mut world = KheperaWorld::new(config, seed)?;
     world.reset(start)?;
-    let dt = config.sample_time;
     let n_sonar = config.sonar_angles_deg.len();
     let read = |world: &mut KheperaWorld| -> Result<Vec<Vec<f64>>, SimError> {
         (0..n)
@@ -186,11 +211,10 @@ where
     let mut actions = Vec::with_capacity(steps);
     let mut indices = Vec::with_capacity(steps);
     let mut rewards = Vec::with_capacity(steps);
-    let mut u = vec![0.0; actor.action_dim()];
-    for _ in 0..steps {
-        let x = flat(world.poses());
-        actor.act(&x, &mut u)?;
-        rewards.push(model.reward_f64(&x));
+    let mut u = vec![0.0; 2 * n];
+    for k in 0..steps {
+        decide(world.poses(), &sonar[k], &mut u)?;
+        rewards.push(model.reward_f64(&flat(world.poses())));
         let wheels: Vec<[f64; 2]> = (0..n).map(|i| [u[2 * i], u[2 * i + 1]]).collect();
         indices.push(wheels.iter().map(|w| nearest_action(config, *w)).collect());
         world.step(&wheels)?;
@@ -200,43 +224,43 @@ where
         sonar.push(read(&mut world)?);
     }
     let trajectory = Trajectory {
-        dt,
+        dt: config.sample_time,
         agents: n,
         states,
         actions,
         rewards,
     };
-    let in_goal = |x: &[f64]| {
-        let p: Vec<f64> = (0..n).flat_map(|i| [x[4 * i], x[4 * i + 1], 0.0]).collect();
-        model.in_goal_paper(x) && !model.any_overlap(&p)
+    let run = KheperaRun {
+        trajectory,
+        poses,
+        action_indices: indices,
+        sonar,
     };
-    let rollout = measure_with(
-        in_goal,
-        &trajectory,
-        policy.config().solver.gamma,
-        kind,
-        policy.value(&flat(start))?,
-    );
-    let last = trajectory.states.last().expect("at least x0");
-    let final_norm = last.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let collisions = world.collisions().clone();
-    let metrics = KheperaMetrics {
-        success: in_goal(last) && collisions.total == 0,
+    Ok((run, world.collisions().clone()))
+}
+
+/// The metrics of a run on the plant.
+pub(crate) fn measure_run(
+    model: &KheperaModel,
+    run: &KheperaRun,
+    collisions: Collisions,
+    gamma: f64,
+    kind: PolicyKind,
+    value_x0: f64,
+    seed: u64,
+) -> KheperaMetrics {
+    let in_region = |x: &[f64]| model.in_region_paper(x);
+    let t = &run.trajectory;
+    let rollout = measure_with(in_region, t, gamma, kind, value_x0);
+    let last = t.states.last().expect("at least x0");
+    KheperaMetrics {
+        success: in_region(last) && collisions.total == 0,
         rollout,
-        headings_deg: start.iter().map(|p| p[2].to_degrees()).collect(),
+        headings_deg: run.poses[0].iter().map(|p| p[2].to_degrees()).collect(),
         seed,
         collisions,
-        final_norm,
-    };
-    Ok((
-        KheperaRun {
-            trajectory,
-            poses,
-            action_indices: indices,
-            sonar,
-        },
-        metrics,
-    ))
+        final_norm: last.iter().map(|v| v * v).sum::<f64>().sqrt(),
+    }
 }
 
 /// Runs a policy of either precision on the plant.
@@ -332,6 +356,26 @@ pub struct SuccessReport {
     pub mean_final_norm: f64,
 }
 
+impl SuccessReport {
+    /// Summarises the runs from the starts drawn with `seed`.
+    #[must_use]
+    pub fn from_runs(seed: u64, runs: &[KheperaMetrics]) -> Self {
+        let count = runs.len();
+        let successes = runs.iter().filter(|m| m.success).count();
+        let reached: Vec<f64> = runs.iter().filter_map(|m| m.rollout.reach_time_s).collect();
+        Self {
+            starts: count,
+            seed,
+            successes,
+            success_rate: successes as f64 / count.max(1) as f64,
+            runs_with_collisions: runs.iter().filter(|m| m.collisions.total > 0).count(),
+            mean_reach_time_s: (!reached.is_empty())
+                .then(|| reached.iter().sum::<f64>() / reached.len() as f64),
+            mean_final_norm: runs.iter().map(|m| m.final_norm).sum::<f64>() / count.max(1) as f64,
+        }
+    }
+}
+
 /// Rolls the policy out from `count` random starts (see [`random_starts`]); run `k` uses the
 /// plant seed `seed + k`.
 pub fn success_over_starts(
@@ -370,19 +414,5 @@ pub fn success_over_starts(
         AnyPolicy::F32(p) => runs(p, &starts, steps, kind, seed)?,
         AnyPolicy::F64(p) => runs(p, &starts, steps, kind, seed)?,
     };
-    let successes = all.iter().filter(|m| m.success).count();
-    let reached: Vec<f64> = all.iter().filter_map(|m| m.rollout.reach_time_s).collect();
-    Ok((
-        SuccessReport {
-            starts: count,
-            seed,
-            successes,
-            success_rate: successes as f64 / count.max(1) as f64,
-            runs_with_collisions: all.iter().filter(|m| m.collisions.total > 0).count(),
-            mean_reach_time_s: (!reached.is_empty())
-                .then(|| reached.iter().sum::<f64>() / reached.len() as f64),
-            mean_final_norm: all.iter().map(|m| m.final_norm).sum::<f64>() / count.max(1) as f64,
-        },
-        all,
-    ))
+    Ok((SuccessReport::from_runs(seed, &all), all))
 }

@@ -116,6 +116,25 @@ where
     EnvModel: Model<T>,
 {
     let model = point_mass_of(policy)?;
+    rollout_on(policy, x0, steps, kind, |x, u, next| {
+        model.step_f64(x, u, next);
+        Ok(())
+    })
+}
+
+/// The point-mass rollout driver: `plant(x, u, next)` advances the state `x` under the joint
+/// force `u` by one sample time (the analytic model, or a physics plant).
+pub(crate) fn rollout_on<T: Real>(
+    policy: &Policy<T>,
+    x0: &[f64],
+    steps: usize,
+    kind: PolicyKind,
+    mut plant: impl FnMut(&[f64], &[f64], &mut [f64]) -> Result<(), SimError>,
+) -> Result<(Trajectory, RolloutMetrics), SimError>
+where
+    EnvModel: Model<T>,
+{
+    let model = point_mass_of(policy)?;
     check_x0(model, x0)?;
     let mut actor = policy.actor(kind)?;
     let n = x0.len();
@@ -128,7 +147,7 @@ where
         let x = states.last().expect("at least x0");
         actor.act(x, &mut u)?;
         rewards.push(Model::<f64>::reward(model, x, &u));
-        model.step_f64(x, &u, &mut next);
+        plant(x, &u, &mut next)?;
         actions.push(u.clone());
         states.push(next.clone());
     }
@@ -162,7 +181,7 @@ pub fn rollout_any(
     }
 }
 
-pub(crate) fn measure(
+fn measure(
     model: &PointMass,
     t: &Trajectory,
     gamma: f64,
