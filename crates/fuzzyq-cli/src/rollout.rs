@@ -190,7 +190,7 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
                 );
             }
             let config = file.config.clone();
-            return khepera(args, &Robots::Fql(file), &config);
+            return khepera(args, &Robots::Fql(Box::new(file)), &config);
         }
         Err(e) => return Err(e.into()),
     };
@@ -198,7 +198,7 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
         EnvConfig::Pointmass(p) => point_mass(args, artifact, p.agents),
         EnvConfig::Khepera(k) => {
             let policy = AnyPolicy::from_artifact(artifact)?;
-            khepera(args, &Robots::Fqi(policy), &k)
+            khepera(args, &Robots::Fqi(Box::new(policy)), &k)
         }
     }
 }
@@ -206,9 +206,9 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
 /// A trained Khepera policy of either learner.
 enum Robots {
     /// Joint fuzzy Q-iteration.
-    Fqi(AnyPolicy),
+    Fqi(Box<AnyPolicy>),
     /// Model-free fuzzy Q-learning.
-    Fql(FqlPolicyFile),
+    Fql(Box<FqlPolicyFile>),
 }
 
 impl Robots {
