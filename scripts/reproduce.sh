@@ -3,7 +3,8 @@
 # fuzzy grid. Builds the `fuzzyq` command and installs the Python package into `.venv`; trains
 # the joint Q-function (4,100,625 cores x 625 joint actions), rolls out the greedy and the
 # interpolated policy from the paper's start [-4,-6,-2,2,5,3,2,-1], and writes the policy,
-# figures, trajectories and metrics to results/paper/ (or the directory given).
+# figures, trajectories and metrics to results/paper/ (or the directory given); then reruns
+# the paper's Table 1 (fuzzy against crisp learners) into results/paper/table1/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -19,4 +20,5 @@ for kind in greedy interpolated; do
         --csv "$out/rollout-$kind.csv" --plot "$out/rollout-$kind.png" \
         --json "$out/rollout-$kind.json"
 done
+"$fuzzyq" compare --env pointmass --out "$out/table1"
 echo "results in $out/; the Python package is in .venv (source .venv/bin/activate)"

@@ -130,3 +130,27 @@ fn bad_inputs_are_typed_errors() {
         "state variable 0: cores must increase strictly, but core 1 does not exceed core 0"
     );
 }
+
+proptest! {
+    /// A crisp partition puts the whole membership on one nearest core.
+    #[test]
+    fn crisp_membership_is_the_nearest_core(c in cores(12), x in -30.0..30.0f64) {
+        use fuzzyq_core::Membership;
+        let p = Partition::try_from_cores(&c).unwrap().with_membership(Membership::Crisp);
+        let mut mu = vec![0.0; c.len()];
+        p.memberships(x, &mut mu).unwrap();
+        let ones: Vec<usize> = (0..c.len()).filter(|&k| mu[k] == 1.0).collect();
+        prop_assert_eq!(ones.len(), 1);
+        prop_assert!(mu.iter().all(|&m| m == 0.0 || m == 1.0));
+        let k = ones[0];
+        for (j, &cj) in c.iter().enumerate() {
+            prop_assert!((x - c[k]).abs() <= (x - cj).abs() + 1e-12, "core {k} is not nearest (core {j})");
+        }
+        let grid = ProductPartition::try_new(&[&c[..], &c[..]]).unwrap().with_membership(Membership::Crisp);
+        let active = grid.active(&[x, x]).unwrap();
+        prop_assert_eq!(active.len(), 1);
+        active.for_each(|d, w| {
+            assert_eq!((d, w), (k * c.len() + k, 1.0));
+        });
+    }
+}

@@ -17,6 +17,7 @@ fn reduced() -> TrainConfig {
             velocity_cores: vec![-3.0, 0.0, 3.0],
             heading_divisions: None,
             cores: None,
+            membership: Default::default(),
         },
         ..TrainConfig::default()
     }

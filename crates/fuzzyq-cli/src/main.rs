@@ -4,6 +4,7 @@
 //! a training run). Output files are written atomically: a failure never leaves a
 //! half-written file.
 
+mod compare;
 mod plot;
 mod rollout;
 mod train;
@@ -28,6 +29,9 @@ enum Command {
     Train(train::TrainArgs),
     /// Run a trained policy from an initial state; write the trajectory, figures and metrics.
     Rollout(rollout::RolloutArgs),
+    /// Rerun the paper's Table 1: train fuzzy and crisp learners on the point-mass task, roll
+    /// each out from the same start and random starts, write the table and figures.
+    Compare(compare::CompareArgs),
     /// Print an environment's default configuration (the paper's values) as TOML.
     Config {
         /// The environment.
@@ -46,7 +50,7 @@ pub(crate) enum Env {
 }
 
 impl Env {
-    fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Pointmass => "pointmass",
             Self::Khepera => "khepera",
@@ -100,6 +104,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Train(args) => train::run(args),
         Command::Rollout(args) => rollout::run(args),
+        Command::Compare(args) => compare::run(args),
         Command::Config { env } => {
             print_stdout(fuzzyq_sim::config::TrainConfig::default_toml(env.name())?)?;
             Ok(())
@@ -107,7 +112,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-fn print_stdout(text: &str) -> anyhow::Result<()> {
+pub(crate) fn print_stdout(text: &str) -> anyhow::Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
     out.write_all(text.as_bytes())?;

@@ -7,6 +7,7 @@
 //!   taken and the reward over time, and the paths in the arena with its obstacles.
 //! - [`learning_curve_figure`]: the learning curve of fuzzy Q-learning.
 //! - [`success_figure`]: success or failure from many random starts, in the arena.
+//! - [`compare_figure`]: the paths of every learner of `fuzzyq compare` from one start.
 //!
 //! PNG text is rendered with the embedded DejaVu Sans, so no system fonts are needed.
 
@@ -15,6 +16,7 @@ use std::sync::Once;
 
 use anyhow::{Context, anyhow, bail};
 use fuzzyq_sim::arena::{Arena, Obstacle};
+use fuzzyq_sim::compare::Comparison;
 use fuzzyq_sim::fql::EpisodeRecord;
 use fuzzyq_sim::khepera::ACTION_NAMES;
 use fuzzyq_sim::policy::PolicyKind;
@@ -65,6 +67,16 @@ const COLORS: [RGBColor; 4] = [
 
 /// Draws the rollout figure into `path` (PNG or SVG), atomically.
 pub(crate) fn rollout_figure(path: &Path, t: &Trajectory, kind: PolicyKind) -> anyhow::Result<()> {
+    let title = format!("fuzzyq rollout ({} policy, T = {} s)", kind.name(), t.dt);
+    rollout_figure_titled(path, t, &title)
+}
+
+/// [`rollout_figure`] with a given title.
+pub(crate) fn rollout_figure_titled(
+    path: &Path,
+    t: &Trajectory,
+    title: &str,
+) -> anyhow::Result<()> {
     if t.agents == 0 || t.states.is_empty() {
         return Err(anyhow!("cannot plot an empty rollout"));
     }
@@ -72,8 +84,8 @@ pub(crate) fn rollout_figure(path: &Path, t: &Trajectory, kind: PolicyKind) -> a
     write_figure(
         path,
         size,
-        |root| draw(root, t, kind),
-        |root| draw(root, t, kind),
+        |root| draw(root, t, title),
+        |root| draw(root, t, title),
     )
 }
 
@@ -129,13 +141,10 @@ fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     t: &Trajectory,
-    kind: PolicyKind,
+    title: &str,
 ) -> anyhow::Result<()> {
     root.fill(&WHITE).map_err(err)?;
-    let title = format!("fuzzyq rollout ({} policy, T = {} s)", kind.name(), t.dt);
-    let root = root
-        .titled(&title, (FONT, 26).into_font().style(FontStyle::Bold))
-        .map_err(err)?;
+    let root = titled(root, title)?;
     let (w, _) = root.dim_in_pixel();
     let (left, right) = root.split_horizontally(w.saturating_sub(640));
     let panels = left.split_evenly((2, t.agents));
@@ -338,15 +347,7 @@ fn draw_paths<DB: DrawingBackend>(
         (cx - half)..(cx + half),
         (cy - half)..(cy + half),
     )?;
-    chart
-        .draw_series(std::iter::once(Cross::new(
-            (0.0, 0.0),
-            8,
-            BLACK.stroke_width(2),
-        )))
-        .map_err(err)?
-        .label("origin (goal)")
-        .legend(|(x, y)| Cross::new((x + 9, y), 6, BLACK.stroke_width(2)));
+    draw_origin(&mut chart, 8)?;
     for i in 0..t.agents {
         let color = COLORS[i % COLORS.len()];
         let path: Vec<(f64, f64)> = t.states.iter().map(|x| (x[4 * i], x[4 * i + 1])).collect();
@@ -405,6 +406,23 @@ const EPISODE_AXES: Axes = Axes {
 };
 /// Episodes in the moving averages of the learning curve.
 const MA_WINDOW: usize = 20;
+
+/// The goal: a cross at the origin, with its legend entry.
+fn draw_origin<'a, DB: DrawingBackend + 'a>(
+    chart: &mut Chart<'a, DB>,
+    size: u32,
+) -> anyhow::Result<()> {
+    chart
+        .draw_series(std::iter::once(Cross::new(
+            (0.0, 0.0),
+            size,
+            BLACK.stroke_width(2),
+        )))
+        .map_err(err)?
+        .label("origin (goal)")
+        .legend(|(x, y)| Cross::new((x + 9, y), 6, BLACK.stroke_width(2)));
+    Ok(())
+}
 
 /// A short line in the series' colour, for legends.
 fn key(color: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
@@ -627,15 +645,7 @@ fn draw_arena<'a, DB: DrawingBackend + 'a>(
 /// The goal, over everything else: a cross at the origin and the reward region's circle.
 /// Returns the number of legend entries added.
 fn draw_goal<'a, DB: DrawingBackend + 'a>(chart: &mut Chart<'a, DB>) -> anyhow::Result<usize> {
-    chart
-        .draw_series(std::iter::once(Cross::new(
-            (0.0, 0.0),
-            7,
-            BLACK.stroke_width(2),
-        )))
-        .map_err(err)?
-        .label("origin (goal)")
-        .legend(|(x, y)| Cross::new((x + 9, y), 6, BLACK.stroke_width(2)));
+    draw_origin(chart, 7)?;
     chart
         .draw_series(std::iter::once(PathElement::new(
             circle((0.0, 0.0), GOAL_RADIUS),
@@ -1412,6 +1422,93 @@ fn draw_param_change<DB: DrawingBackend>(
             .position(SeriesLabelPosition::UpperRight)
             .draw()
             .map_err(err)?;
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// The comparison of learners (`fuzzyq compare`).
+
+/// One colour per learner of the comparison.
+const LEARNER_COLORS: [RGBColor; 6] = [
+    RGBColor(0x1f, 0x77, 0xb4),
+    RGBColor(0xd6, 0x27, 0x28),
+    RGBColor(0x2c, 0xa0, 0x2c),
+    RGBColor(0xff, 0x7f, 0x0e),
+    RGBColor(0x94, 0x67, 0xbd),
+    RGBColor(0x8c, 0x56, 0x4b),
+];
+
+/// The paths of every learner from the comparison's start, one panel per agent.
+pub(crate) fn compare_figure(path: &Path, c: &Comparison) -> anyhow::Result<()> {
+    let agents = c.trajectories.first().map_or(0, |t| t.agents);
+    if agents == 0 || c.trajectories.iter().any(|t| t.states.is_empty()) {
+        bail!("cannot plot an empty comparison");
+    }
+    let size = (620 * agents as u32, 700);
+    write_figure(
+        path,
+        size,
+        |root| draw_compare(root, c, agents),
+        |root| draw_compare(root, c, agents),
+    )
+}
+
+fn draw_compare<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    c: &Comparison,
+    agents: usize,
+) -> anyhow::Result<()> {
+    root.fill(&WHITE).map_err(err)?;
+    let title = format!(
+        "Paths of every learner from x0 = {:?} ({} steps of {} s)",
+        c.x0, c.steps, c.dt
+    );
+    let root = titled(root, &title)?;
+    // One square range for all panels: every path and the goal.
+    let all = || {
+        c.trajectories
+            .iter()
+            .flat_map(|t| t.states.iter())
+            .flat_map(move |x| (0..agents).map(move |i| (x[4 * i], x[4 * i + 1])))
+            .chain([(0.0, 0.0)])
+    };
+    let (xs, ys) = (range(all().map(|p| p.0)), range(all().map(|p| p.1)));
+    let half = ((xs.end - xs.start).max(ys.end - ys.start)) / 2.0;
+    let (cx, cy) = ((xs.start + xs.end) / 2.0, (ys.start + ys.end) / 2.0);
+    for (i, area) in root.split_evenly((1, agents)).iter().enumerate() {
+        let mut chart = chart(
+            area,
+            &format!("Agent {}", i + 1),
+            ("s_x (m)", "s_y (m)"),
+            (cx - half)..(cx + half),
+            (cy - half)..(cy + half),
+        )?;
+        draw_origin(&mut chart, 8)?;
+        for (k, (r, t)) in c.reports.iter().zip(&c.trajectories).enumerate() {
+            let color = LEARNER_COLORS[k % LEARNER_COLORS.len()];
+            let path: Vec<(f64, f64)> = t.states.iter().map(|x| (x[4 * i], x[4 * i + 1])).collect();
+            chart
+                .draw_series(LineSeries::new(path.iter().copied(), color.stroke_width(2)))
+                .map_err(err)?
+                .label(r.learner.name())
+                .legend(key(color));
+            chart
+                .draw_series(std::iter::once(Circle::new(
+                    *path.last().expect("a non-empty path"),
+                    4,
+                    color.filled(),
+                )))
+                .map_err(err)?;
+        }
+        chart
+            .draw_series(std::iter::once(TriangleMarker::new(
+                (c.x0[4 * i], c.x0[4 * i + 1]),
+                9,
+                BLACK.filled(),
+            )))
+            .map_err(err)?;
+        legend_at(&mut chart, SeriesLabelPosition::LowerRight)?;
     }
     Ok(())
 }

@@ -8,12 +8,13 @@ use clap::{Args, ValueEnum};
 use fuzzyq_sim::config::EnvConfig;
 use fuzzyq_sim::khepera_fql::{FqlPolicyFile, fql_success_over_starts, rollout_fql};
 use fuzzyq_sim::physics::{Collisions, PointMassPlantConfig, rollout_plant};
+use fuzzyq_sim::pointmass_fql::PointMassPolicyFile;
 use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
 use fuzzyq_sim::robots::{
     KheperaMetrics, KheperaRun, PAPER_KHEPERA_X0, SuccessReport, poses_from_paper, random_starts,
     rollout_khepera_any, success_over_starts,
 };
-use fuzzyq_sim::rollout::{PAPER_X0, RolloutMetrics, Trajectory, rollout_any};
+use fuzzyq_sim::rollout::{PAPER_X0, RolloutMetrics, Trajectory, rollout_additive, rollout_any};
 use fuzzyq_sim::{PolicyArtifact, PolicyFileError};
 use serde::Serialize;
 
@@ -81,7 +82,7 @@ enum KindArg {
 }
 
 /// Parses `-4,-6,-2,2` (also with spaces or surrounding brackets) given to `flag`.
-fn parse_list(text: &str, flag: &str) -> anyhow::Result<Vec<f64>> {
+pub(crate) fn parse_list(text: &str, flag: &str) -> anyhow::Result<Vec<f64>> {
     let t = text.trim().trim_start_matches('[').trim_end_matches(']');
     t.split(|c: char| c == ',' || c.is_whitespace())
         .filter(|s| !s.is_empty())
@@ -181,26 +182,43 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
         Ok(a) => a,
         // Not a `.fzq` file: a fuzzy Q-learning policy (`train --learner fql`) is TOML.
         Err(e @ PolicyFileError::NotAPolicy { .. }) => {
-            let Ok(file) = FqlPolicyFile::load(&args.policy) else {
-                return Err(e.into());
-            };
             if args.policy_kind != KindArg::Greedy {
                 anyhow::bail!(
-                    "--policy-kind: a fuzzy Q-learning policy acts greedily (decentralised)"
+                    "--policy-kind: a policy learned from samples (fql, vqql) acts greedily \
+                     (decentralised)"
                 );
             }
-            let config = file.config.clone();
-            return khepera(args, &Robots::Fql(Box::new(file)), &config);
+            if let Ok(file) = FqlPolicyFile::load(&args.policy) {
+                let config = file.config.clone();
+                return khepera(args, &Robots::Fql(Box::new(file)), &config);
+            }
+            let Ok(file) = PointMassPolicyFile::load(&args.policy) else {
+                return Err(e.into());
+            };
+            let agents = file.config.agents;
+            return point_mass(args, PointMasses::Additive(Box::new(file)), agents);
         }
         Err(e) => return Err(e.into()),
     };
     match artifact.config.env.clone() {
-        EnvConfig::Pointmass(p) => point_mass(args, artifact, p.agents),
+        EnvConfig::Pointmass(p) => point_mass(
+            args,
+            PointMasses::Fqi(Box::new(AnyPolicy::from_artifact(artifact)?)),
+            p.agents,
+        ),
         EnvConfig::Khepera(k) => {
             let policy = AnyPolicy::from_artifact(artifact)?;
             khepera(args, &Robots::Fqi(Box::new(policy)), &k)
         }
     }
+}
+
+/// A trained point-mass policy: fuzzy Q-iteration, or a learner from samples.
+enum PointMasses {
+    /// Joint fuzzy Q-iteration.
+    Fqi(Box<AnyPolicy>),
+    /// Fuzzy Q-learning or VQQL (additive layout).
+    Additive(Box<PointMassPolicyFile>),
 }
 
 /// A trained Khepera policy of either learner.
@@ -246,7 +264,7 @@ fn kind_of(args: &RolloutArgs) -> PolicyKind {
     }
 }
 
-fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> anyhow::Result<()> {
+fn point_mass(args: RolloutArgs, policy: PointMasses, agents: usize) -> anyhow::Result<()> {
     for (set, flag) in [
         (args.headings.is_some(), "--headings"),
         (args.starts.is_some(), "--starts"),
@@ -270,7 +288,17 @@ fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> any
     };
     let kind = kind_of(&args);
     let steps = args.steps.unwrap_or(75);
-    let policy = AnyPolicy::from_artifact(artifact)?;
+    let policy = match policy {
+        PointMasses::Fqi(p) => p,
+        PointMasses::Additive(file) => {
+            if args.plant == Some(PlantArg::Rapier) {
+                anyhow::bail!("--plant rapier runs fuzzy Q-iteration policies only");
+            }
+            let model = file.validate()?;
+            let (t, m) = rollout_additive(&model, &file.q, &x0, steps, file.fql.gamma)?;
+            return point_mass_outputs(&args, &t, &m, None, kind);
+        }
+    };
     let (trajectory, metrics, collisions) = match args.plant.unwrap_or(PlantArg::Model) {
         PlantArg::Model => {
             let (t, m) = rollout_any(&policy, &x0, steps, kind)?;
@@ -283,26 +311,37 @@ fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> any
                     .unwrap_or(PointMassPlantConfig::default().radius),
                 ..PointMassPlantConfig::default()
             };
-            let (t, m, c) = match &policy {
+            let (t, m, c) = match &*policy {
                 AnyPolicy::F32(p) => rollout_plant(p, &x0, steps, kind, &plant)?,
                 AnyPolicy::F64(p) => rollout_plant(p, &x0, steps, kind, &plant)?,
             };
             (t, m, Some(c))
         }
     };
+    point_mass_outputs(&args, &trajectory, &metrics, collisions.as_ref(), kind)
+}
+
+/// Writes a point-mass rollout's CSV, figure and metrics, and prints its report.
+fn point_mass_outputs(
+    args: &RolloutArgs,
+    trajectory: &Trajectory,
+    metrics: &RolloutMetrics,
+    collisions: Option<&Collisions>,
+    kind: PolicyKind,
+) -> anyhow::Result<()> {
     if let Some(p) = &args.csv {
-        write_file(p, csv(&trajectory, ["ux", "uy"]).as_bytes(), "CSV")?;
+        write_file(p, csv(trajectory, ["ux", "uy"]).as_bytes(), "CSV")?;
     }
     if let Some(p) = &args.plot {
-        plot::rollout_figure(p, &trajectory, kind)?;
+        plot::rollout_figure(p, trajectory, kind)?;
     }
     if let Some(p) = &args.json {
-        match &collisions {
-            None => write_json(p, &metrics)?,
+        match collisions {
+            None => write_json(p, metrics)?,
             Some(c) => write_json(
                 p,
                 &PlantMetrics {
-                    metrics: &metrics,
+                    metrics,
                     plant: "rapier",
                     collisions: c,
                 },
@@ -310,8 +349,8 @@ fn point_mass(args: RolloutArgs, artifact: PolicyArtifact, agents: usize) -> any
         }
     }
     if !args.quiet {
-        let mut text = report(&metrics);
-        if let Some(c) = &collisions {
+        let mut text = report(metrics);
+        if let Some(c) = collisions {
             let _ = writeln!(text, "rapier plant: {} collisions", c.total);
         }
         crate::print_stdout(&text)?;

@@ -2,7 +2,7 @@
 
 use std::io::IsTerminal;
 use std::ops::ControlFlow;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
@@ -64,15 +64,24 @@ pub(crate) struct TrainArgs {
     /// config's `[env.arena]`.
     #[arg(long, value_name = "FILE.toml")]
     arena: Option<PathBuf>,
-    /// The learner: joint fuzzy Q-iteration on the model (`fqi`), or model-free fuzzy
-    /// Q-learning with the additive layout on the robots' quantised observations (`fql`,
-    /// khepera only; writes a TOML policy of the learned parameters).
+    /// The learner: joint fuzzy Q-iteration on the model (`fqi`); model-free fuzzy
+    /// Q-learning with the additive layout (`fql`: on the point masses' own states, or on the
+    /// robots' quantised observations); VQQL (`vqql`, point masses: k-means cells per agent
+    /// and tabular Q-learning). `fql` and `vqql` write a TOML policy of the learned
+    /// parameters.
     #[arg(long, value_enum, default_value_t = LearnerArg::Fqi)]
     learner: LearnerArg,
-    /// fql: number of episodes [default: 2000].
+    /// fql, vqql: number of episodes [default: 3000 for the point masses, 2000 for the
+    /// robots].
     #[arg(long, value_name = "N")]
     episodes: Option<usize>,
-    /// fql: seed of exploration and starts.
+    /// fql, vqql: the update as printed in the paper (eqs 24-26) instead of the corrected one.
+    #[arg(long)]
+    literal: bool,
+    /// vqql: cells per agent [default: the own-state cores of the grid].
+    #[arg(long, value_name = "K")]
+    cells: Option<usize>,
+    /// fql, vqql: seed of exploration and starts.
     #[arg(long, value_name = "S", default_value_t = 0)]
     seed: u64,
     /// fql: write the learning curve (one row per episode) as CSV.
@@ -98,6 +107,8 @@ enum LearnerArg {
     Fqi,
     /// Model-free fuzzy Q-learning (additive layout).
     Fql,
+    /// VQQL: k-means cells and tabular Q-learning (point masses).
+    Vqql,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -151,22 +162,28 @@ struct Summary<'a> {
     extrapolated: &'a [usize],
 }
 
-fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
-    let mut config = match &args.config {
+/// The configuration file `path` (or the defaults of `env`), which must describe `env`.
+pub(crate) fn load_config(path: Option<&Path>, env: Env) -> anyhow::Result<TrainConfig> {
+    let config = match path {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read config {}", path.display()))?;
             TrainConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))?
         }
-        None => TrainConfig::default_for(args.env.name())?,
+        None => TrainConfig::default_for(env.name())?,
     };
-    if config.env.name() != args.env.name() {
+    if config.env.name() != env.name() {
         anyhow::bail!(
             "the config describes env \"{}\" but --env is {}",
             config.env.name(),
-            args.env.name()
+            env.name()
         );
     }
+    Ok(config)
+}
+
+fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
+    let mut config = load_config(args.config.as_deref(), args.env)?;
     if let Some(path) = &args.arena {
         match &mut config.env {
             EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::arena::Arena::from_file(path)?,
@@ -242,16 +259,18 @@ fn fmt_delta(p: &Progress) -> String {
 
 pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let config = build_config(&args)?;
-    if args.learner == LearnerArg::Fql {
+    if args.learner != LearnerArg::Fqi {
         return run_fql(&args, &config);
     }
     for (set, flag) in [
         (args.episodes.is_some(), "--episodes"),
+        (args.literal, "--literal"),
+        (args.cells.is_some(), "--cells"),
         (args.curve.is_some(), "--curve"),
         (args.plot.is_some(), "--plot"),
     ] {
         if set {
-            anyhow::bail!("{flag} applies to --learner fql only");
+            anyhow::bail!("{flag} applies to --learner fql or vqql only");
         }
     }
     check_writable(&args.out, "policy")?;
@@ -405,12 +424,57 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `fuzzyq train --learner fql`: model-free fuzzy Q-learning on the robots.
+/// A model-free learner's run: what it trains on, and how its policy file is written.
+enum SampleLearner<'a> {
+    Khepera(&'a fuzzyq_sim::khepera::KheperaConfig),
+    PointMass {
+        model: Box<fuzzyq_sim::PointMass>,
+        features: Option<fuzzyq_sim::fql::FeatureSpace>,
+        vqql: Option<fuzzyq_sim::vqql::VqqlConfig>,
+    },
+}
+
+/// `fuzzyq train --learner fql|vqql`: model-free learning with the additive layout.
 fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
-    use fuzzyq_sim::khepera_fql::{FqlPolicyFile, default_fql_config, train_fql};
-    let EnvConfig::Khepera(k) = &config.env else {
-        anyhow::bail!("--learner fql is available for --env khepera only");
+    use fuzzyq_sim::pointmass_fql::{self, PointMassPolicyFile};
+    use fuzzyq_sim::vqql::{self, VqqlConfig};
+    let (learner, mut fql) = match (&config.env, args.learner) {
+        (EnvConfig::Khepera(k), LearnerArg::Fql) => (
+            SampleLearner::Khepera(k),
+            fuzzyq_sim::khepera_fql::default_fql_config(),
+        ),
+        (EnvConfig::Khepera(_), _) => {
+            anyhow::bail!("--learner vqql is available for --env pointmass only")
+        }
+        (EnvConfig::Pointmass(p), learner) => {
+            let model = Box::new(fuzzyq_sim::PointMass::new(p.clone())?);
+            let g = &config.grid;
+            let (features, vqql) = if learner == LearnerArg::Vqql {
+                let cells = g.position_cores.len().pow(2) * g.velocity_cores.len().pow(2);
+                let v = VqqlConfig {
+                    cells: args.cells.unwrap_or(cells),
+                    seed: args.seed,
+                    ..VqqlConfig::default()
+                };
+                v.validate()?;
+                (None, Some(v))
+            } else {
+                let f = pointmass_fql::feature_space(&model, &g.position_cores, &g.velocity_cores)?;
+                (Some(f), None)
+            };
+            (
+                SampleLearner::PointMass {
+                    model,
+                    features,
+                    vqql,
+                },
+                pointmass_fql::default_fql_config(),
+            )
+        }
     };
+    if args.cells.is_some() && args.learner != LearnerArg::Vqql {
+        anyhow::bail!("--cells applies to --learner vqql only");
+    }
     check_writable(&args.out, "policy")?;
     for (p, what) in [
         (&args.curve, "curve"),
@@ -424,11 +488,13 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
         crate::plot::check_extension(p)?;
     }
-    let mut fql = default_fql_config();
     fql.seed = args.seed;
     fql.gamma = config.solver.gamma;
     if let Some(n) = args.episodes {
         fql.episodes = n;
+    }
+    if args.literal {
+        fql.update = fuzzyq_sim::fql::Update::Literal;
     }
     fql.validate()?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -452,16 +518,21 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
         );
         b
     };
+    let (env, what) = match (&learner, args.learner) {
+        (SampleLearner::Khepera(_), _) => ("khepera", "model-free fuzzy Q-learning"),
+        (_, LearnerArg::Vqql) => ("pointmass", "VQQL (k-means cells, tabular Q-learning)"),
+        _ => ("pointmass", "model-free fuzzy Q-learning"),
+    };
     if !args.quiet {
         eprintln!(
-            "fuzzyq train: khepera, model-free fuzzy Q-learning ({:?} update, additive layout), \
-             {} episodes of at most {} steps, seed {}",
+            "fuzzyq train: {env}, {what} ({:?} update, additive layout), {} episodes of at most \
+             {} steps, seed {}",
             fql.update, fql.episodes, fql.max_steps, fql.seed
         );
     }
     let plain = !args.quiet && !tty;
     let started = std::time::Instant::now();
-    let outcome = train_fql(k, &fql, |r| {
+    let progress = |r: &fuzzyq_sim::fql::EpisodeRecord| {
         bar.set_position(r.episode as u64 + 1);
         if let Some(s) = r.eval_success_rate {
             bar.set_message(format!("greedy success {:.0}%", 100.0 * s));
@@ -478,7 +549,30 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
         } else {
             ControlFlow::Continue(())
         }
-    })?;
+    };
+    let starts = pointmass_fql::default_starts();
+    let outcome = match &learner {
+        SampleLearner::Khepera(k) => fuzzyq_sim::khepera_fql::train_fql(k, &fql, progress)?,
+        SampleLearner::PointMass {
+            model,
+            features: Some(f),
+            ..
+        } => pointmass_fql::train_fql(model, f, &starts, &fql, progress)?,
+        SampleLearner::PointMass {
+            model,
+            vqql: Some(v),
+            ..
+        } => {
+            if !args.quiet {
+                eprintln!(
+                    "building the codebooks: k-means with {} cells per agent on {} explored states",
+                    v.cells, v.samples
+                );
+            }
+            vqql::train_vqql(model, &starts, v, &fql, progress)?.0
+        }
+        SampleLearner::PointMass { .. } => unreachable!("fql has features, vqql a codebook"),
+    };
     bar.finish_and_clear();
     if stop.load(Ordering::SeqCst) {
         return Err(Failure::Interrupted(format!(
@@ -488,27 +582,57 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
         .into());
     }
     let seconds = started.elapsed().as_secs_f64();
-    FqlPolicyFile::from_outcome(k, &fql, &outcome).save(&args.out)?;
+    match &learner {
+        SampleLearner::Khepera(k) => {
+            fuzzyq_sim::khepera_fql::FqlPolicyFile::from_outcome(k, &fql, &outcome)
+                .save(&args.out)?;
+        }
+        SampleLearner::PointMass { model, vqql, .. } => PointMassPolicyFile::from_outcome(
+            model.config(),
+            &starts,
+            &fql,
+            vqql.as_ref(),
+            &outcome,
+        )
+        .save(&args.out)?,
+    }
     if let Some(p) = &args.curve {
         let mut text = Vec::new();
         fuzzyq_sim::fql::write_curve_csv(&outcome.curve, &mut text)?;
         crate::write_file(p, &text, "curve")?;
     }
+    let learner_name = match args.learner {
+        LearnerArg::Vqql => "vqql",
+        _ => "fql",
+    };
     if let Some(p) = &args.plot {
-        crate::plot::learning_curve_figure(
-            p,
-            &outcome.curve,
-            &format!("Fuzzy Q-learning on two Khepera robots (seed {})", fql.seed),
-        )?;
+        let title = match &learner {
+            SampleLearner::Khepera(_) => {
+                format!("Fuzzy Q-learning on two Khepera robots (seed {})", fql.seed)
+            }
+            SampleLearner::PointMass { model, .. } => format!(
+                "{} on {} point masses (seed {})",
+                if learner_name == "vqql" {
+                    "VQQL"
+                } else {
+                    "Fuzzy Q-learning"
+                },
+                model.config().agents,
+                fql.seed
+            ),
+        };
+        crate::plot::learning_curve_figure(p, &outcome.curve, &title)?;
     }
     let last_eval = outcome.curve.iter().rev().find_map(|r| r.eval_success_rate);
     #[derive(Serialize)]
     struct FqlSummary {
         env: &'static str,
         learner: &'static str,
+        update: fuzzyq_sim::fql::Update,
         policy: String,
         episodes: usize,
         steps_total: usize,
+        rewarded_episodes: usize,
         converged_at: Option<usize>,
         final_eval_success_rate: Option<f64>,
         seconds: f64,
@@ -518,11 +642,13 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
         write_json(
             j,
             &FqlSummary {
-                env: "khepera",
-                learner: "fql",
+                env,
+                learner: learner_name,
+                update: fql.update,
                 policy: args.out.display().to_string(),
                 episodes: outcome.curve.len(),
                 steps_total: outcome.steps_total,
+                rewarded_episodes: outcome.curve.iter().filter(|r| r.ret > 0.0).count(),
                 converged_at: outcome.converged_at,
                 final_eval_success_rate: last_eval,
                 seconds,
@@ -532,10 +658,11 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     }
     if !args.quiet {
         eprintln!(
-            "learned in {seconds:.1} s: {} episodes, {} steps, converged {}, last greedy \
-             evaluation success {}; wrote {}",
+            "learned in {seconds:.1} s: {} episodes, {} steps ({} met the reward), converged {}, \
+             last greedy evaluation success {}; wrote {}",
             outcome.curve.len(),
             outcome.steps_total,
+            outcome.curve.iter().filter(|r| r.ret > 0.0).count(),
             outcome
                 .converged_at
                 .map_or_else(|| "no".to_string(), |e| format!("at episode {e}")),

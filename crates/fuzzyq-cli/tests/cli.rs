@@ -456,15 +456,221 @@ fn khepera_train_rollout_and_starts() {
             &[
                 "train",
                 "--env",
-                "pointmass",
+                "khepera",
                 "--learner",
-                "fql",
+                "vqql",
                 "--out",
                 "y.toml",
             ],
             d,
         ),
-        "khepera only",
+        "pointmass only",
     );
     assert!(!d.join("y.toml").exists());
+}
+
+#[test]
+fn compare_writes_the_table_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let o = fuzzyq(
+        &[
+            "compare",
+            "--config",
+            "one.toml",
+            "--x0=-4,5,0,0",
+            "--starts",
+            "6",
+            "--steps",
+            "80",
+            "--episodes",
+            "60",
+            "--cells",
+            "64",
+            "--out",
+            "cmp",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let table = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        table.contains("| paper: CMOMMT | paper: fuzzy |"),
+        "{table}"
+    );
+    let out = d.join("cmp");
+    for f in ["table1.md", "table1.csv", "paths.png"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let learners = ["fqi", "crisp", "fql", "fql-literal", "vqql"];
+    for l in learners {
+        assert!(out.join(format!("rollout-{l}.png")).is_file(), "{l}");
+    }
+    let csv = std::fs::read_to_string(out.join("table1.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + learners.len());
+    let j = json(&out.join("table1.json"));
+    let reports = j["reports"].as_array().unwrap();
+    let names: Vec<&str> = reports
+        .iter()
+        .map(|r| r["learner"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, learners);
+    // One agent from (-4, 5) at rest: fuzzy Q-iteration brings it into the reward region.
+    let fqi = &reports[0];
+    assert_eq!(fqi["iteration_unit"], "sweeps");
+    assert!(fqi["time_to_goal_s"].as_f64().is_some(), "{fqi}");
+    assert!(fqi["final_error_cm"].as_f64().unwrap() < 10.0, "{fqi}");
+    // 2025 cores x 25 actions for every grid learner; 64 cells x 25 actions for VQQL.
+    assert_eq!(fqi["parameters"], 2025 * 25);
+    assert_eq!(reports[2]["parameters"], 2025 * 25);
+    assert_eq!(reports[4]["parameters"], 64 * 25);
+    assert_eq!(reports[2]["iterations"], 60);
+    assert_eq!(j["trajectories"].as_array().unwrap().len(), learners.len());
+
+    // Bad input: exit code 2, one line, nothing written.
+    let fresh = d.join("fresh");
+    for (args, needle) in [
+        (vec!["--learners", "fqi,foo"], "unknown learner \"foo\""),
+        (vec!["--learners", "fqi,fqi"], "fqi is named twice"),
+        (vec!["--env", "khepera"], "point-mass task only"),
+        (vec!["--x0", "1,2,3"], "x0"),
+        (vec!["--steps", "0"], "steps"),
+        (vec!["--start-position", "9"], "start_position"),
+    ] {
+        let mut all = vec!["compare", "--config", "one.toml", "--out", "fresh"];
+        if args[0] == "--x0" {
+            all.push("--x0=1,2,3");
+        } else {
+            all.push("--x0=-4,5,0,0");
+            all.extend(args.iter().copied());
+        }
+        let o = fuzzyq(&all, d);
+        assert_fails(&o, needle);
+        assert!(!fresh.exists(), "{args:?} created the output directory");
+    }
+    std::fs::write(d.join("file"), "x").unwrap();
+    let o = fuzzyq(
+        &[
+            "compare",
+            "--config",
+            "one.toml",
+            "--x0=-4,5,0,0",
+            "--out",
+            "file",
+        ],
+        d,
+    );
+    assert_fails(&o, "not a directory");
+}
+
+#[test]
+fn point_mass_learners_from_samples_train_and_roll_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    for (learner, extra) in [
+        ("fql", vec![]),
+        ("fql", vec!["--literal"]),
+        ("vqql", vec!["--cells", "16"]),
+    ] {
+        let mut args = vec![
+            "train",
+            "--config",
+            "one.toml",
+            "--learner",
+            learner,
+            "--episodes",
+            "30",
+            "--seed",
+            "3",
+            "--out",
+            "p.toml",
+            "--curve",
+            "c.csv",
+            "--plot",
+            "c.png",
+            "--json",
+            "s.json",
+            "-q",
+        ];
+        args.extend(extra.iter().copied());
+        let o = fuzzyq(&args, d);
+        assert!(o.status.success(), "{learner}: {}", stderr(&o));
+        let s = json(&d.join("s.json"));
+        assert_eq!(s["learner"], learner);
+        assert_eq!(s["episodes"], 30);
+        let literal = if extra.first() == Some(&"--literal") {
+            "literal"
+        } else {
+            "corrected"
+        };
+        assert_eq!(s["update"], literal);
+        assert_eq!(
+            std::fs::read_to_string(d.join("c.csv"))
+                .unwrap()
+                .lines()
+                .count(),
+            31
+        );
+        assert!(d.join("c.png").is_file());
+        let o = fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                "p.toml",
+                "--x0=-4,5,0,0",
+                "--steps",
+                "20",
+                "--json",
+                "r.json",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{learner}: {}", stderr(&o));
+        let r = json(&d.join("r.json"));
+        assert_eq!(r["steps"], 20);
+        assert_eq!(r["policy_kind"], "greedy");
+        assert_fails(
+            &fuzzyq(
+                &[
+                    "rollout",
+                    "--policy",
+                    "p.toml",
+                    "--x0=-4,5,0,0",
+                    "--plant",
+                    "rapier",
+                ],
+                d,
+            ),
+            "fuzzy Q-iteration policies only",
+        );
+    }
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train", "--config", "one.toml", "--cells", "5", "--out", "z.toml",
+            ],
+            d,
+        ),
+        "--cells applies",
+    );
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train",
+                "--config",
+                "one.toml",
+                "--learner",
+                "vqql",
+                "--cells",
+                "0",
+                "--out",
+                "z.toml",
+            ],
+            d,
+        ),
+        "vqql.cells",
+    );
+    assert!(!d.join("z.toml").exists());
 }

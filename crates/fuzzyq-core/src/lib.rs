@@ -67,5 +67,5 @@ pub use action::{ActionSet, JointActions, MAX_AGENTS};
 pub use backup::Backup;
 pub use error::{CoresError, EvalError, PartitionError};
 pub use model::{Block, Model, Tabulated};
-pub use partition::{ActiveCores, MAX_DIMS, Partition, ProductPartition, Segment};
+pub use partition::{ActiveCores, MAX_DIMS, Membership, Partition, ProductPartition, Segment};
 pub use real::Real;

@@ -6,6 +6,15 @@
 //! memberships are non-zero and they sum to 1. Values outside `[c_0, c_{n-1}]` saturate: they
 //! belong to the edge core with degree 1.
 //!
+//! # Crisp boxes
+//! A partition can also be **crisp** ([`Membership::Crisp`]): every value belongs, with degree
+//! 1, to its nearest core alone. The box of core `c_k` is `[m_{k-1}, m_k)`, where `m_k` is the
+//! midpoint of `c_k` and `c_{k+1}` (a value exactly on a midpoint belongs to the upper core),
+//! and the edge boxes extend to infinity. The same cores then define a state aggregation (a
+//! crisp grid), so the solver and the policies run unchanged on it: the clean crisp-versus-fuzzy
+//! control of the paper's Table 1. Everything below holds for both kinds; a crisp state has
+//! exactly one active core.
+//!
 //! # Product grid
 //! A [`ProductPartition`] combines one partition per state variable. Its joint cores are
 //! numbered in **row-major (C) order**: with per-variable core indices `(i_0, ..., i_{E-1})` the
@@ -29,10 +38,32 @@ use crate::real::Real;
 /// The largest number of state variables a [`ProductPartition`] supports.
 pub const MAX_DIMS: usize = 16;
 
-/// A triangular fuzzy partition of one state variable: a validated view of its cores.
+/// The membership functions a [`Partition`] puts on its cores.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Membership {
+    /// Triangles: 1 at a core, 0 at its neighbours, linear between (the fuzzy partition).
+    #[default]
+    Triangular,
+    /// Crisp boxes: degree 1 in the nearest core, 0 elsewhere (see the [module docs](self)).
+    Crisp,
+}
+
+impl Membership {
+    /// `"triangular"` or `"crisp"`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Triangular => "triangular",
+            Self::Crisp => "crisp",
+        }
+    }
+}
+
+/// A fuzzy (or crisp) partition of one state variable: a validated view of its cores.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Partition<'a, T> {
     cores: &'a [T],
+    membership: Membership,
 }
 
 /// Where a value falls between the cores of a [`Partition`].
@@ -65,6 +96,12 @@ impl<T: Real> Segment<T> {
 }
 
 impl<'a, T: Real> Partition<'a, T> {
+    /// Filler for unused dimensions of a [`ProductPartition`] (never validated or read).
+    const EMPTY: Self = Self {
+        cores: &[],
+        membership: Membership::Triangular,
+    };
+
     /// Validates `cores` (at least two, finite, strictly increasing) and wraps them.
     pub fn try_from_cores(cores: &'a [T]) -> Result<Self, CoresError> {
         if cores.len() < 2 {
@@ -78,7 +115,32 @@ impl<'a, T: Real> Partition<'a, T> {
                 return Err(CoresError::NotIncreasing { index });
             }
         }
-        Ok(Self { cores })
+        Ok(Self {
+            cores,
+            membership: Membership::Triangular,
+        })
+    }
+
+    /// The same cores with membership functions of kind `membership`.
+    ///
+    /// ```
+    /// use fuzzyq_core::partition::{Membership, Partition};
+    /// let cores = [0.0_f64, 1.0, 3.0];
+    /// let crisp = Partition::try_from_cores(&cores).unwrap().with_membership(Membership::Crisp);
+    /// assert_eq!(crisp.membership(1, 0.6), 1.0); // nearest core: 1.0
+    /// assert_eq!(crisp.membership(1, 2.0), 0.0); // the midpoint belongs to the upper core
+    /// ```
+    #[must_use]
+    pub fn with_membership(mut self, membership: Membership) -> Self {
+        self.membership = membership;
+        self
+    }
+
+    /// The kind of membership functions.
+    #[inline]
+    #[must_use]
+    pub fn membership_kind(&self) -> Membership {
+        self.membership
     }
 
     /// The cores, in increasing order.
@@ -112,6 +174,7 @@ impl<'a, T: Real> Partition<'a, T> {
     /// Locates a finite value between the cores (values outside saturate to the edge).
     ///
     /// The result is exact at cores: a value equal to `c_k` gives `lower = k` and weight 0.
+    /// A crisp partition always gives weight 0 and `lower` = the nearest core.
     #[inline]
     #[must_use]
     pub fn locate(&self, x: T) -> Segment<T> {
@@ -134,6 +197,14 @@ impl<'a, T: Real> Partition<'a, T> {
         let above = c.partition_point(|&ck| ck <= x).max(1);
         let lower = above - 1;
         let w = (x - c[lower]) / (c[above] - c[lower]);
+        if self.membership == Membership::Crisp {
+            // The nearest core; the midpoint (w = 1/2) belongs to the upper one.
+            let half = T::ONE / (T::ONE + T::ONE);
+            return Segment {
+                lower: if w < half { lower } else { above },
+                upper_weight: T::ZERO,
+            };
+        }
         if w >= T::ONE {
             // x is within rounding of the upper core: it is that core (otherwise the lower
             // core would be "active" with membership 0).
@@ -209,7 +280,7 @@ impl<'a, T: Real> ProductPartition<'a, T> {
         if cores.len() > MAX_DIMS {
             return Err(PartitionError::TooManyDimensions { found: cores.len() });
         }
-        let mut dims = [Partition { cores: &[] as &[T] }; MAX_DIMS];
+        let mut dims = [Partition::EMPTY; MAX_DIMS];
         for (dim, c) in cores.iter().enumerate() {
             dims[dim] = Partition::try_from_cores(c)
                 .map_err(|error| PartitionError::Cores { dim, error })?;
@@ -225,7 +296,7 @@ impl<'a, T: Real> ProductPartition<'a, T> {
         if parts.len() > MAX_DIMS {
             return Err(PartitionError::TooManyDimensions { found: parts.len() });
         }
-        let mut dims = [Partition { cores: &[] as &[T] }; MAX_DIMS];
+        let mut dims = [Partition::EMPTY; MAX_DIMS];
         dims[..parts.len()].copy_from_slice(parts);
         let mut strides = [0usize; MAX_DIMS];
         let mut n: u64 = 1;
@@ -242,6 +313,24 @@ impl<'a, T: Real> ProductPartition<'a, T> {
             n_dims: parts.len(),
             n_cores: n as usize,
         })
+    }
+
+    /// The same grid with membership functions of kind `membership` on every variable.
+    #[must_use]
+    pub fn with_membership(mut self, membership: Membership) -> Self {
+        for d in &mut self.dims[..self.n_dims] {
+            *d = d.with_membership(membership);
+        }
+        self
+    }
+
+    /// The kind of membership functions (that of the first variable; [`with_membership`]
+    /// sets all alike).
+    ///
+    /// [`with_membership`]: Self::with_membership
+    #[must_use]
+    pub fn membership_kind(&self) -> Membership {
+        self.dims[0].membership
     }
 
     /// Number of state variables `E`.
@@ -379,6 +468,21 @@ pub struct ActiveCores<T> {
 }
 
 impl<T: Real> ActiveCores<T> {
+    /// One active core with membership 1: the crisp cell `index` of a partition that is not a
+    /// product of triangles (for example a vector quantiser's codebook).
+    #[inline]
+    #[must_use]
+    pub fn single(index: usize) -> Self {
+        Self {
+            base: index,
+            base_weight: T::ONE,
+            split_stride: [0; MAX_DIMS],
+            split_lower: [T::ZERO; MAX_DIMS],
+            split_upper: [T::ZERO; MAX_DIMS],
+            n_split: 0,
+        }
+    }
+
     /// Number of active cores: `2^s` where `s` is the number of variables that fall strictly
     /// between two cores.
     #[inline]

@@ -296,6 +296,45 @@ impl PolicyArtifact {
     }
 }
 
+/// Writes `value` as TOML text into `path` atomically (a policy file learned from samples);
+/// `what` names the file kind in a serialisation error.
+pub(crate) fn save_toml<T: Serialize>(
+    value: &T,
+    path: &Path,
+    what: &str,
+) -> Result<(), PolicyFileError> {
+    let text = toml::to_string(value).map_err(|e| PolicyFileError::Malformed {
+        path: path.to_path_buf(),
+        reason: format!("{what}: {e}"),
+    })?;
+    write_atomically(path, text.as_bytes()).map_err(|source| PolicyFileError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Reads a TOML file written by [`save_toml`] and checks it with `validate`; every error
+/// names the file.
+pub(crate) fn load_toml<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    validate: impl FnOnce(&T) -> Result<(), String>,
+) -> Result<T, PolicyFileError> {
+    let malformed = |reason: String| PolicyFileError::Malformed {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let bytes = std::fs::read(path).map_err(|source| PolicyFileError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let text =
+        std::str::from_utf8(&bytes).map_err(|e| malformed(format!("not UTF-8 text: {e}")))?;
+    let value: T =
+        toml::from_str(text).map_err(|e| malformed(e.message().trim_end().to_string()))?;
+    validate(&value).map_err(malformed)?;
+    Ok(value)
+}
+
 /// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
 /// the destination holds either its old content or all of the new.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
@@ -336,6 +375,7 @@ mod tests {
                 velocity_cores: vec![-1.0, 1.0],
                 heading_divisions: None,
                 cores: None,
+                membership: Default::default(),
             },
             ..TrainConfig::default()
         };

@@ -35,6 +35,7 @@ eta = 1.0                                   # kg/s
 # Triangular membership cores, the same on every agent and axis (paper figure 1).
 position_cores = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0]
 velocity_cores = [-3.0, -1.0, 0.0, 1.0, 3.0]
+membership = "triangular"                   # "triangular" (fuzzy) or "crisp" (nearest-core boxes)
 
 [solver]
 gamma = 0.96                                # discount factor
@@ -153,6 +154,39 @@ pub struct GridConfig {
     /// above (which must still be valid cores).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cores: Option<Vec<Vec<f64>>>,
+    /// Membership functions on the cores: `"triangular"` (the fuzzy grid, default) or
+    /// `"crisp"` (each state belongs to its nearest core alone: crisp grid Q-iteration over
+    /// the same cores, the crisp control of the paper's Table 1).
+    #[serde(default, skip_serializing_if = "MembershipKind::is_triangular")]
+    pub membership: MembershipKind,
+}
+
+/// The membership functions of a grid, as written in a config file (`grid.membership`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MembershipKind {
+    /// Triangular fuzzy memberships (fuzzy Q-iteration).
+    #[default]
+    Triangular,
+    /// Crisp nearest-core boxes (crisp grid Q-iteration).
+    Crisp,
+}
+
+impl MembershipKind {
+    /// Whether this is the default, triangular kind.
+    #[must_use]
+    pub fn is_triangular(&self) -> bool {
+        *self == Self::Triangular
+    }
+
+    /// The core's membership kind.
+    #[must_use]
+    pub fn to_core(self) -> fuzzyq_core::Membership {
+        match self {
+            Self::Triangular => fuzzyq_core::Membership::Triangular,
+            Self::Crisp => fuzzyq_core::Membership::Crisp,
+        }
+    }
 }
 
 impl GridConfig {
@@ -167,6 +201,7 @@ impl GridConfig {
             velocity_cores: pick(2),
             heading_divisions: None,
             cores: Some(cores),
+            membership: MembershipKind::Triangular,
         }
     }
 }
@@ -327,6 +362,7 @@ impl Default for TrainConfig {
                 velocity_cores: vec![-3.0, -1.0, 0.0, 1.0, 3.0],
                 heading_divisions: None,
                 cores: None,
+                membership: Default::default(),
             },
             solver: SolverSettings::default(),
         }

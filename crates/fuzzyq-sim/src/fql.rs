@@ -60,6 +60,16 @@
 //! gets the *same* increment, whatever its membership: the printed form keeps no credit
 //! assignment, so it need not learn well. It is kept to measure exactly that.
 //!
+//! # Codebook features: tabular Q-learning ([`FeatureSpace::codebook`], VQQL)
+//! The cells of an observation need not be fuzzy. With codebook features each agent's
+//! observation activates exactly one cell, its nearest [`Codebook`] centroid, with membership
+//! 1 ([`ActiveCores::single`]), so `Q(x, u) = sum_i phi[i][c_i(x) * M_i + u_i]` and the
+//! corrected update `phi[i][c_i(x_k) * M_i + u_{k,i}] += alpha_k * delta` is exactly tabular
+//! Q-learning over the cells (with the same additive joint value and decentralised greedy
+//! action). The literal update then adds its increment to the cell of the next state. Every
+//! other part of [`learn`] (exploration, schedules, evaluations, the convergence window, the
+//! curve) is shared; the fuzzy path is compiled separately and unchanged.
+//!
 //! # Exploration and step sizes
 //! Epsilon-greedy per agent: each agent independently takes a uniformly random action with
 //! probability `epsilon_k` and its greedy action otherwise. `epsilon_k` decays linearly from
@@ -133,6 +143,9 @@ use fuzzyq_core::partition::{ActiveCores, ProductPartition};
 use fuzzyq_core::{EvalError, MAX_DIMS};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
+use serde::de::value::{MapAccessDeserializer, SeqAccessDeserializer};
+use serde::de::{self, MapAccess, SeqAccess, Visitor};
+use serde::ser::SerializeStruct;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use crate::error::{ConfigError, SimError};
@@ -353,14 +366,29 @@ pub fn eval_seed(seed: u64) -> u64 {
     seed ^ 0x9E37_79B9_7F4A_7C15
 }
 
-/// The fuzzy partitions of every agent's observation: per agent, the cores of each
-/// observation dimension, validated as a product partition.
+/// How every agent's observation is turned into active cells: fuzzy partitions (the paper's
+/// triangular grids) or crisp codebooks (vector quantisers, for VQQL). All agents use the same
+/// kind.
 ///
-/// Serialised as the nested core lists (`[agent][dimension][core]`); deserialising validates.
+/// - Fuzzy ([`FeatureSpace::new`]): per agent, the cores of each observation dimension,
+///   validated as a product partition; the active cores of an observation are its at most
+///   `2^E` cores with non-zero membership. Serialised as the nested core lists
+///   (`[agent][dimension][core]`), the format of every fuzzy policy file.
+/// - Codebook ([`FeatureSpace::codebook`]): per agent a [`Codebook`]; the active set of an
+///   observation is the single cell of its nearest centroid with membership 1
+///   ([`ActiveCores::single`]). Serialised as a table `{ codebooks = [...] }`.
+///
+/// Deserialising accepts either form and validates it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FeatureSpace {
-    cores: Vec<Vec<Vec<f64>>>,
+    kind: Kind,
     n_cores: Vec<usize>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum Kind {
+    Fuzzy(Vec<Vec<Vec<f64>>>),
+    Codebook(Vec<Codebook>),
 }
 
 /// Builds the product partition of one agent's cores (at most [`MAX_DIMS`] dimensions).
@@ -396,7 +424,21 @@ impl FeatureSpace {
             n_cores.push(grid_of(&format!("features[{i}]"), cores)?.n_cores());
         }
         Ok(Self {
-            cores: per_agent_cores,
+            kind: Kind::Fuzzy(per_agent_cores),
+            n_cores,
+        })
+    }
+
+    /// Crisp features: agent `i` quantises its observation with `codebooks[i]` (at least one
+    /// agent). Its "cores" are the codebook's cells, and the additive Q-function over them is
+    /// a table: [`learn`] then runs tabular Q-learning (see the [module docs](self)).
+    pub fn codebook(codebooks: Vec<Codebook>) -> Result<Self, SimError> {
+        if codebooks.is_empty() {
+            return Err(ConfigError::invalid("features", "needs at least one agent").into());
+        }
+        let n_cores = codebooks.iter().map(Codebook::n_cells).collect();
+        Ok(Self {
+            kind: Kind::Codebook(codebooks),
             n_cores,
         })
     }
@@ -404,40 +446,106 @@ impl FeatureSpace {
     /// Number of agents.
     #[must_use]
     pub fn n_agents(&self) -> usize {
-        self.cores.len()
+        self.n_cores.len()
     }
 
-    /// The cores, `[agent][dimension][core]`.
+    /// Whether the features are codebooks (crisp cells) rather than fuzzy partitions.
+    #[must_use]
+    pub fn is_codebook(&self) -> bool {
+        matches!(self.kind, Kind::Codebook(_))
+    }
+
+    /// The fuzzy cores, `[agent][dimension][core]`; empty for codebook features.
     #[must_use]
     pub fn cores(&self) -> &[Vec<Vec<f64>>] {
-        &self.cores
+        match &self.kind {
+            Kind::Fuzzy(cores) => cores,
+            Kind::Codebook(_) => &[],
+        }
+    }
+
+    /// The codebooks, one per agent; empty for fuzzy features.
+    #[must_use]
+    pub fn codebooks(&self) -> &[Codebook] {
+        match &self.kind {
+            Kind::Fuzzy(_) => &[],
+            Kind::Codebook(books) => books,
+        }
     }
 
     /// Observation length of agent `agent`, or `None` if there is no such agent.
     #[must_use]
     pub fn obs_dim(&self, agent: usize) -> Option<usize> {
-        self.cores.get(agent).map(Vec::len)
+        match &self.kind {
+            Kind::Fuzzy(cores) => cores.get(agent).map(Vec::len),
+            Kind::Codebook(books) => books.get(agent).map(Codebook::dim),
+        }
     }
 
-    /// Number of joint cores `N_i` of agent `agent`, or `None` if there is no such agent.
+    /// Number of joint cores `N_i` of agent `agent` (cells, for a codebook), or `None` if
+    /// there is no such agent.
     #[must_use]
     pub fn n_cores(&self, agent: usize) -> Option<usize> {
         self.n_cores.get(agent).copied()
     }
 
     /// The product partition of agent `agent` (row-major core order, see
-    /// [`fuzzyq_core::partition`]).
+    /// [`fuzzyq_core::partition`]). Fails for codebook features.
     pub fn grid(&self, agent: usize) -> Result<ProductPartition<'_, f64>, SimError> {
-        let cores = self.cores.get(agent).ok_or(EvalError::OutOfRange {
+        let cores = match &self.kind {
+            Kind::Fuzzy(cores) => cores,
+            Kind::Codebook(_) => {
+                return Err(ConfigError::invalid(
+                    "features",
+                    "codebook features have no fuzzy grid",
+                )
+                .into());
+            }
+        };
+        let cores = cores.get(agent).ok_or(EvalError::OutOfRange {
             what: "agent",
             index: agent,
-            len: self.cores.len(),
+            len: cores.len(),
         })?;
         grid_of(&format!("features[{agent}]"), cores)
     }
 
     fn grids(&self) -> Result<Vec<ProductPartition<'_, f64>>, SimError> {
         (0..self.n_agents()).map(|i| self.grid(i)).collect()
+    }
+
+    /// The active cores of agent `agent` at its observation `obs` (checked length, finite
+    /// values): the fuzzy cores with non-zero membership, or the nearest codebook cell with
+    /// membership 1.
+    pub fn active(&self, agent: usize, obs: &[f64]) -> Result<ActiveCores<f64>, SimError> {
+        let observation = |e: EvalError| match e {
+            EvalError::Length {
+                expected, found, ..
+            } => EvalError::Length {
+                what: "observation",
+                expected,
+                found,
+            },
+            EvalError::NotFinite { index, .. } => EvalError::NotFinite {
+                what: "observation",
+                index,
+            },
+            other => other,
+        };
+        match &self.kind {
+            Kind::Fuzzy(_) => {
+                let grid = self.grid(agent)?;
+                Ok(grid.active(obs).map_err(observation)?)
+            }
+            Kind::Codebook(books) => {
+                let book = books.get(agent).ok_or(EvalError::OutOfRange {
+                    what: "agent",
+                    index: agent,
+                    len: books.len(),
+                })?;
+                Ok(ActiveCores::single(book.nearest(obs)?))
+            }
+        }
     }
 
     /// Number of parameters `sum_i N_i * M_i` of the additive layout for `actions[i] = M_i`
@@ -472,16 +580,499 @@ impl FeatureSpace {
     }
 }
 
+/// The serialised form of codebook features.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CodebookFeatures<B> {
+    codebooks: B,
+}
+
 impl Serialize for FeatureSpace {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        self.cores.serialize(s)
+        match &self.kind {
+            Kind::Fuzzy(cores) => cores.serialize(s),
+            Kind::Codebook(books) => CodebookFeatures { codebooks: books }.serialize(s),
+        }
     }
 }
 
 impl<'de> Deserialize<'de> for FeatureSpace {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let cores = Vec::<Vec<Vec<f64>>>::deserialize(d)?;
-        Self::new(cores).map_err(serde::de::Error::custom)
+        struct Either;
+        impl<'de> Visitor<'de> for Either {
+            type Value = FeatureSpace;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str("fuzzy cores [agent][dimension][core] or a table { codebooks = [...] }")
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<Self::Value, A::Error> {
+                let cores = Vec::<Vec<Vec<f64>>>::deserialize(SeqAccessDeserializer::new(seq))?;
+                FeatureSpace::new(cores).map_err(de::Error::custom)
+            }
+            fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+                let data = CodebookFeatures::<Vec<Codebook>>::deserialize(
+                    MapAccessDeserializer::new(map),
+                )?;
+                FeatureSpace::codebook(data.codebooks).map_err(de::Error::custom)
+            }
+        }
+        d.deserialize_any(Either)
+    }
+}
+
+/// A vector quantiser of one agent's observation: `K` centroids `c_j` in `E` dimensions and a
+/// positive scale per dimension.
+///
+/// An observation `x` falls in the cell of its nearest centroid under the scaled squared
+/// Euclidean distance `d(x, c_j) = sum_e (x_e / s_e - c_je / s_e)^2`, computed as
+/// `sum_e (x_e * w_e - z_je)^2` with `w_e = 1 / s_e` and the scaled centroids
+/// `z_je = c_je * w_e` (both rounded once, in that order; every lookup and [`distance`]
+/// use exactly this arithmetic). Ties go to the lowest centroid index. The scale makes
+/// dimensions of different ranges (positions in m, velocities in m/s) weigh comparably;
+/// a scale of 1 everywhere is the plain Euclidean distance.
+///
+/// Lookups use a k-d tree over the scaled centroids that returns exactly the centroid a
+/// brute-force scan would (same distances, same tie rule). Serialised as
+/// `{ scale = [...], centroids = [[...], ...] }` (centroids in the observation's units);
+/// deserialising validates.
+///
+/// [`distance`]: Self::distance
+#[derive(Clone, Debug)]
+pub struct Codebook {
+    dim: usize,
+    scale: Vec<f64>,
+    /// Centroids in the observation's units, row-major (`K x E`).
+    centroids: Vec<f64>,
+    /// `1 / scale`.
+    weights: Vec<f64>,
+    tree: KdTree,
+}
+
+impl PartialEq for Codebook {
+    fn eq(&self, other: &Self) -> bool {
+        // Everything else is derived from these.
+        self.dim == other.dim && self.scale == other.scale && self.centroids == other.centroids
+    }
+}
+
+impl Codebook {
+    /// Validates the centroids (at least one; all of the same length, 1 to [`MAX_DIMS`];
+    /// finite) and the scale (one positive, finite value per dimension) and builds the
+    /// lookup. Errors name the field (`codebook.centroids`, `codebook.scale`).
+    pub fn new(centroids: Vec<Vec<f64>>, scale: Vec<f64>) -> Result<Self, SimError> {
+        let dim = centroids.first().map_or(0, Vec::len);
+        if let Some(j) = centroids.iter().position(|c| c.len() != dim) {
+            return Err(ConfigError::invalid(
+                "codebook.centroids",
+                format!(
+                    "centroid {j} has {} values, centroid 0 has {dim}",
+                    centroids[j].len()
+                ),
+            )
+            .into());
+        }
+        Self::from_flat(dim, centroids.concat(), scale)
+    }
+
+    /// [`new`](Self::new) with the centroids row-major in one slice (`K x dim` values).
+    pub fn from_flat(dim: usize, centroids: Vec<f64>, scale: Vec<f64>) -> Result<Self, SimError> {
+        let field = "codebook.centroids";
+        if dim == 0 || dim > MAX_DIMS {
+            return Err(ConfigError::invalid(
+                field,
+                format!("centroids need 1 to {MAX_DIMS} dimensions, found {dim}"),
+            )
+            .into());
+        }
+        if centroids.is_empty() || !centroids.len().is_multiple_of(dim) {
+            return Err(ConfigError::invalid(
+                field,
+                format!(
+                    "needs at least one centroid of {dim} values, found {} values",
+                    centroids.len()
+                ),
+            )
+            .into());
+        }
+        let k = centroids.len() / dim;
+        if k > u32::MAX as usize {
+            return Err(ConfigError::invalid(field, format!("{k} centroids are too many")).into());
+        }
+        if scale.len() != dim {
+            return Err(ConfigError::invalid(
+                "codebook.scale",
+                format!(
+                    "needs one value per dimension ({dim}), found {}",
+                    scale.len()
+                ),
+            )
+            .into());
+        }
+        if let Some(s) = scale.iter().find(|s| !(**s > 0.0 && s.is_finite())) {
+            return Err(ConfigError::invalid(
+                "codebook.scale",
+                format!("must be positive finite numbers, found {s}"),
+            )
+            .into());
+        }
+        let weights: Vec<f64> = scale.iter().map(|s| 1.0 / s).collect();
+        let mut scaled = centroids.clone();
+        for (k, v) in scaled.iter_mut().enumerate() {
+            *v *= weights[k % dim];
+            if !v.is_finite() {
+                return Err(ConfigError::invalid(
+                    field,
+                    format!(
+                        "centroid {} element {} is {} (must be finite, also after scaling)",
+                        k / dim,
+                        k % dim,
+                        centroids[k]
+                    ),
+                )
+                .into());
+            }
+        }
+        let tree = KdTree::build(dim, scaled);
+        Ok(Self {
+            dim,
+            scale,
+            centroids,
+            weights,
+            tree,
+        })
+    }
+
+    /// Number of cells (centroids) `K`.
+    #[must_use]
+    pub fn n_cells(&self) -> usize {
+        self.centroids.len() / self.dim
+    }
+
+    /// Observation length `E`.
+    #[must_use]
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// The scale `s_e` of each dimension.
+    #[must_use]
+    pub fn scale(&self) -> &[f64] {
+        &self.scale
+    }
+
+    /// The centroids in the observation's units, row-major: centroid `j` is
+    /// `centroids()[j * E..(j + 1) * E]`.
+    #[must_use]
+    pub fn centroids(&self) -> &[f64] {
+        &self.centroids
+    }
+
+    /// Centroid `j`, or `None` if there is no such cell.
+    #[must_use]
+    pub fn centroid(&self, j: usize) -> Option<&[f64]> {
+        self.centroids.get(j * self.dim..(j + 1) * self.dim)
+    }
+
+    fn check(&self, x: &[f64]) -> Result<(), EvalError> {
+        if x.len() != self.dim {
+            return Err(EvalError::Length {
+                what: "observation",
+                expected: self.dim,
+                found: x.len(),
+            });
+        }
+        if let Some(index) = x.iter().position(|v| !v.is_finite()) {
+            return Err(EvalError::NotFinite {
+                what: "observation",
+                index,
+            });
+        }
+        Ok(())
+    }
+
+    /// The scaled coordinates `x_e * w_e` of an observation.
+    #[inline]
+    fn scaled(&self, x: &[f64]) -> [f64; MAX_DIMS] {
+        let mut q = [0.0; MAX_DIMS];
+        for ((q, &x), &w) in q.iter_mut().zip(x).zip(&self.weights) {
+            *q = x * w;
+        }
+        q
+    }
+
+    /// The cell of `x` (length `E`, finite): its nearest centroid, the lowest index on ties.
+    pub fn nearest(&self, x: &[f64]) -> Result<usize, SimError> {
+        self.check(x)?;
+        Ok(self.nearest_unchecked(x).0)
+    }
+
+    /// [`nearest`](Self::nearest) and its distance, for an observation the caller checked.
+    #[inline]
+    pub(crate) fn nearest_unchecked(&self, x: &[f64]) -> (usize, f64) {
+        let q = self.scaled(x);
+        self.tree.nearest(&q[..self.dim])
+    }
+
+    /// The nearest cell by scanning every centroid (the reference the k-d tree must match).
+    #[cfg(test)]
+    pub(crate) fn nearest_brute_force(&self, x: &[f64]) -> (usize, f64) {
+        let q = self.scaled(x);
+        self.tree.nearest_brute_force(&q[..self.dim])
+    }
+
+    /// The scaled squared distance `d(x, c_cell)` (see the [type docs](Self)).
+    pub fn distance(&self, x: &[f64], cell: usize) -> Result<f64, SimError> {
+        self.check(x)?;
+        if cell >= self.n_cells() {
+            return Err(EvalError::OutOfRange {
+                what: "cell",
+                index: cell,
+                len: self.n_cells(),
+            }
+            .into());
+        }
+        let q = self.scaled(x);
+        let t = self.tree.slot_of(cell);
+        Ok(sq_dist(&q[..self.dim], self.tree.point(t)))
+    }
+}
+
+/// `sum_e (a_e - b_e)^2`, summed in dimension order: the one distance of every codebook
+/// lookup, so that the k-d tree and a brute-force scan agree bit for bit.
+#[inline]
+pub(crate) fn sq_dist(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = 0.0;
+    for (x, y) in a.iter().zip(b) {
+        let t = x - y;
+        s += t * t;
+    }
+    s
+}
+
+/// Leaves hold at most this many centroids.
+const KD_LEAF: usize = 8;
+
+/// A k-d tree over scaled centroids for exact nearest-centroid queries.
+#[derive(Clone, Debug)]
+struct KdTree {
+    dim: usize,
+    /// Scaled centroids in tree order, row-major.
+    points: Vec<f64>,
+    /// Centroid index of each tree slot.
+    index: Vec<usize>,
+    /// Tree slot of each centroid index.
+    slot: Vec<usize>,
+    nodes: Vec<KdNode>,
+}
+
+/// A node: the tree slots `start..end`; an inner node splits them at `split` along
+/// `split_dim` (left: coordinates `<= split`, right: `>= split`).
+#[derive(Clone, Copy, Debug)]
+struct KdNode {
+    start: usize,
+    end: usize,
+    split_dim: usize,
+    split: f64,
+    /// Child node indices, `None` for a leaf.
+    children: Option<(usize, usize)>,
+}
+
+impl KdTree {
+    fn build(dim: usize, scaled: Vec<f64>) -> Self {
+        let k = scaled.len() / dim;
+        let mut order: Vec<usize> = (0..k).collect();
+        let mut nodes = Vec::with_capacity(2 * k / KD_LEAF + 1);
+        Self::build_node(&mut nodes, &mut order, 0, k, &scaled, dim);
+        let mut points = Vec::with_capacity(scaled.len());
+        let mut slot = vec![0; k];
+        for (t, &j) in order.iter().enumerate() {
+            points.extend_from_slice(&scaled[j * dim..(j + 1) * dim]);
+            slot[j] = t;
+        }
+        Self {
+            dim,
+            points,
+            index: order,
+            slot,
+            nodes,
+        }
+    }
+
+    fn build_node(
+        nodes: &mut Vec<KdNode>,
+        order: &mut [usize],
+        start: usize,
+        end: usize,
+        scaled: &[f64],
+        dim: usize,
+    ) -> usize {
+        let id = nodes.len();
+        nodes.push(KdNode {
+            start,
+            end,
+            split_dim: 0,
+            split: 0.0,
+            children: None,
+        });
+        if end - start <= KD_LEAF {
+            return id;
+        }
+        // Split the widest dimension at its median (ties ordered by index: deterministic).
+        let (mut best, mut spread) = (0, 0.0);
+        for e in 0..dim {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for &j in &order[start..end] {
+                let v = scaled[j * dim + e];
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+            if hi - lo > spread {
+                (best, spread) = (e, hi - lo);
+            }
+        }
+        if spread <= 0.0 {
+            // All centroids of this node coincide: one leaf, scanned in full.
+            return id;
+        }
+        let mid = start + (end - start) / 2;
+        order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
+            scaled[a * dim + best]
+                .total_cmp(&scaled[b * dim + best])
+                .then(a.cmp(&b))
+        });
+        let split = scaled[order[mid] * dim + best];
+        let left = Self::build_node(nodes, order, start, mid, scaled, dim);
+        let right = Self::build_node(nodes, order, mid, end, scaled, dim);
+        nodes[id] = KdNode {
+            start,
+            end,
+            split_dim: best,
+            split,
+            children: Some((left, right)),
+        };
+        id
+    }
+
+    #[inline]
+    fn point(&self, t: usize) -> &[f64] {
+        &self.points[t * self.dim..(t + 1) * self.dim]
+    }
+
+    fn slot_of(&self, cell: usize) -> usize {
+        self.slot[cell]
+    }
+
+    /// The nearest centroid of the scaled query `q` and its distance (lowest index on ties).
+    #[inline]
+    fn nearest(&self, q: &[f64]) -> (usize, f64) {
+        let mut best = (usize::MAX, f64::INFINITY);
+        self.search(0, q, &mut best);
+        best
+    }
+
+    fn search(&self, node: usize, q: &[f64], best: &mut (usize, f64)) {
+        let n = self.nodes[node];
+        match n.children {
+            None => self.scan(n.start, n.end, q, best),
+            Some((left, right)) => {
+                let diff = q[n.split_dim] - n.split;
+                let (near, far) = if diff < 0.0 {
+                    (left, right)
+                } else {
+                    (right, left)
+                };
+                self.search(near, q, best);
+                // Every centroid on the far side is at least |diff| away along this axis, and
+                // the rounded distance is monotone in each term, so `diff^2` is a true lower
+                // bound. Equal distances must be visited: a lower index may win the tie.
+                if diff * diff <= best.1 {
+                    self.search(far, q, best);
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn scan(&self, start: usize, end: usize, q: &[f64], best: &mut (usize, f64)) {
+        for t in start..end {
+            let d = sq_dist(q, self.point(t));
+            let j = self.index[t];
+            if d < best.1 || (d == best.1 && j < best.0) {
+                *best = (j, d);
+            }
+        }
+    }
+
+    #[cfg(test)]
+    fn nearest_brute_force(&self, q: &[f64]) -> (usize, f64) {
+        let mut best = (usize::MAX, f64::INFINITY);
+        for j in 0..self.index.len() {
+            let d = sq_dist(q, self.point(self.slot[j]));
+            if d < best.1 || best.0 == usize::MAX {
+                best = (j, d);
+            }
+        }
+        best
+    }
+}
+
+/// Serialises the row-major centroids as one list per centroid.
+struct Rows<'a>(&'a [f64], usize);
+
+impl Serialize for Rows<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.0.chunks(self.1))
+    }
+}
+
+impl Serialize for Codebook {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut st = s.serialize_struct("Codebook", 2)?;
+        st.serialize_field("scale", &self.scale)?;
+        st.serialize_field("centroids", &Rows(&self.centroids, self.dim))?;
+        st.end()
+    }
+}
+
+impl<'de> Deserialize<'de> for Codebook {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct Data {
+            scale: Vec<f64>,
+            centroids: Vec<Vec<f64>>,
+        }
+        let data = Data::deserialize(d)?;
+        Self::new(data.centroids, data.scale).map_err(de::Error::custom)
+    }
+}
+
+/// How [`learn`] and [`evaluate`] find the active cells of an observation the learner has
+/// already checked (right length, finite): monomorphised per feature kind, so the fuzzy path
+/// is the plain grid lookup.
+trait Lookup {
+    fn n_dims(&self) -> usize;
+    fn lookup(&self, obs: &[f64]) -> ActiveCores<f64>;
+}
+
+impl Lookup for ProductPartition<'_, f64> {
+    #[inline]
+    fn n_dims(&self) -> usize {
+        ProductPartition::n_dims(self)
+    }
+    #[inline]
+    fn lookup(&self, obs: &[f64]) -> ActiveCores<f64> {
+        self.active_unchecked(obs)
+    }
+}
+
+impl Lookup for Codebook {
+    #[inline]
+    fn n_dims(&self) -> usize {
+        self.dim
+    }
+    #[inline]
+    fn lookup(&self, obs: &[f64]) -> ActiveCores<f64> {
+        ActiveCores::single(self.nearest_unchecked(obs).0)
     }
 }
 
@@ -753,21 +1344,7 @@ impl AdditiveQ {
 
     /// The active cores of agent `agent` at `obs` (checked length, finite values).
     fn active(&self, agent: usize, obs: &[f64]) -> Result<ActiveCores<f64>, SimError> {
-        let grid = self.features.grid(agent)?;
-        Ok(grid.active(obs).map_err(|e| match e {
-            EvalError::Length {
-                expected, found, ..
-            } => EvalError::Length {
-                what: "observation",
-                expected,
-                found,
-            },
-            EvalError::NotFinite { index, .. } => EvalError::NotFinite {
-                what: "observation",
-                index,
-            },
-            other => other,
-        })?)
+        self.features.active(agent, obs)
     }
 
     fn check_joint(&self, obs: &[&[f64]], what: &'static str) -> Result<(), EvalError> {
@@ -1089,13 +1666,10 @@ struct Buffers {
 }
 
 impl Buffers {
-    fn new(grids: &[ProductPartition<'_, f64>], m: &[usize]) -> Self {
+    fn new<L: Lookup>(grids: &[L], m: &[usize]) -> Self {
         let obs: Vec<Vec<f64>> = grids.iter().map(|g| vec![0.0; g.n_dims()]).collect();
-        let active: Vec<ActiveCores<f64>> = grids
-            .iter()
-            .zip(&obs)
-            .map(|(g, o)| g.active_unchecked(o))
-            .collect();
+        let active: Vec<ActiveCores<f64>> =
+            grids.iter().zip(&obs).map(|(g, o)| g.lookup(o)).collect();
         let q: Vec<Vec<f64>> = m.iter().map(|&mi| vec![0.0; mi]).collect();
         Self {
             m: m.to_vec(),
@@ -1129,9 +1703,9 @@ impl fmt::Display for At {
 }
 
 /// Observes every agent into `obs` and fuzzifies into `active`, rejecting non-finite values.
-fn observe_all<E: Environment>(
+fn observe_all<E: Environment, L: Lookup>(
     env: &E,
-    grids: &[ProductPartition<'_, f64>],
+    grids: &[L],
     obs: &mut [Vec<f64>],
     active: &mut [ActiveCores<f64>],
     at: At,
@@ -1148,7 +1722,7 @@ fn observe_all<E: Environment>(
             )
             .into());
         }
-        *a = grids[i].active_unchecked(o);
+        *a = grids[i].lookup(o);
     }
     Ok(())
 }
@@ -1179,7 +1753,7 @@ fn check_env<E: Environment>(env: &E, features: &FeatureSpace) -> Result<Vec<usi
     }
     let mut m = Vec::with_capacity(n);
     for i in 0..n {
-        let (dim, expected) = (env.obs_dim(i), features.cores[i].len());
+        let (dim, expected) = (env.obs_dim(i), features.obs_dim(i).unwrap_or(0));
         if dim != expected {
             return Err(ConfigError::invalid(
                 format!("features[{i}]"),
@@ -1199,9 +1773,9 @@ fn check_env<E: Environment>(env: &E, features: &FeatureSpace) -> Result<Vec<usi
 }
 
 /// Runs `episodes` greedy episodes from a fresh RNG seeded with `seed`.
-fn evaluate_with<E: Environment>(
+fn evaluate_with<E: Environment, L: Lookup>(
     env: &mut E,
-    grids: &[ProductPartition<'_, f64>],
+    grids: &[L],
     phi: &[Vec<f64>],
     bufs: &mut Buffers,
     episodes: usize,
@@ -1263,9 +1837,17 @@ pub fn evaluate<E: Environment>(
         )
         .into());
     }
-    let grids = q.features.grids()?;
-    let mut bufs = Buffers::new(&grids, &m);
-    evaluate_with(env, &grids, &q.phi, &mut bufs, episodes, max_steps, seed)
+    match &q.features.kind {
+        Kind::Fuzzy(_) => {
+            let grids = q.features.grids()?;
+            let mut bufs = Buffers::new(&grids, &m);
+            evaluate_with(env, &grids, &q.phi, &mut bufs, episodes, max_steps, seed)
+        }
+        Kind::Codebook(books) => {
+            let mut bufs = Buffers::new(books, &m);
+            evaluate_with(env, books, &q.phi, &mut bufs, episodes, max_steps, seed)
+        }
+    }
 }
 
 /// Learns an [`AdditiveQ`] on `env` by fuzzy Q-learning (see the [module docs](self)).
@@ -1279,13 +1861,30 @@ pub fn learn<E: Environment>(
     env: &mut E,
     features: &FeatureSpace,
     config: &FqlConfig,
-    mut progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
 ) -> Result<FqlOutcome, SimError> {
     config.validate()?;
     let m = check_env(env, features)?;
-    let mut q = AdditiveQ::new(features.clone(), m.clone())?;
-    let grids = features.grids()?;
-    let mut bufs = Buffers::new(&grids, &m);
+    let q = AdditiveQ::new(features.clone(), m.clone())?;
+    match &features.kind {
+        Kind::Fuzzy(_) => {
+            let grids = features.grids()?;
+            learn_with(env, &grids, q, m, config, progress)
+        }
+        Kind::Codebook(books) => learn_with(env, books, q, m, config, progress),
+    }
+}
+
+/// The learning loop of [`learn`] for one kind of features.
+fn learn_with<E: Environment, L: Lookup>(
+    env: &mut E,
+    grids: &[L],
+    mut q: AdditiveQ,
+    m: Vec<usize>,
+    config: &FqlConfig,
+    mut progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+) -> Result<FqlOutcome, SimError> {
+    let mut bufs = Buffers::new(grids, &m);
     let mut log = WindowLog::new(config.window, &q.phi);
     let mut rng = Pcg64Mcg::seed_from_u64(config.seed);
     let eval_seed = eval_seed(config.seed);
@@ -1302,7 +1901,7 @@ pub fn learn<E: Environment>(
         let alpha = config.alpha_at(episode);
         env.reset(&mut rng);
         let at = At::Learning { episode, step: 0 };
-        observe_all(env, &grids, &mut bufs.obs, &mut bufs.active, at)?;
+        observe_all(env, grids, &mut bufs.obs, &mut bufs.active, at)?;
         for i in 0..n {
             agent_q(&bufs.active[i], &q.phi[i], m[i], &mut bufs.q[i]);
         }
@@ -1332,7 +1931,7 @@ pub fn learn<E: Environment>(
             ret += tr.reward;
             discounted += discount * tr.reward;
             discount *= config.gamma;
-            observe_all(env, &grids, &mut bufs.next_obs, &mut bufs.next_active, at)?;
+            observe_all(env, grids, &mut bufs.next_obs, &mut bufs.next_active, at)?;
             for i in 0..n {
                 agent_q(&bufs.next_active[i], &q.phi[i], m[i], &mut bufs.q_next[i]);
             }
@@ -1394,7 +1993,7 @@ pub fn learn<E: Environment>(
             if config.eval_every > 0 && ((episode + 1) % config.eval_every == 0 || last) {
                 Some(evaluate_with(
                     env,
-                    &grids,
+                    grids,
                     &q.phi,
                     &mut bufs,
                     config.eval_episodes,
@@ -2196,5 +2795,230 @@ mod tests {
         assert!(toml::from_str::<AdditiveQ>(bad_cores).is_err());
         let bad_shape = "features = [[[0.0, 1.0]]]\nactions = [3]\nphi = [[0.0]]";
         assert!(toml::from_str::<AdditiveQ>(bad_shape).is_err());
+    }
+
+    /// A codebook of `k` pseudo-random centroids in `dim` dimensions (coordinates on a coarse
+    /// lattice, so that exact ties and duplicates occur).
+    fn lattice_codebook(k: usize, dim: usize, scale: Vec<f64>, seed: u64) -> Codebook {
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let centroids: Vec<f64> = (0..k * dim)
+            .map(|_| f64::from(rng.random_range(-6i32..=6)) * 0.5)
+            .collect();
+        Codebook::from_flat(dim, centroids, scale).unwrap()
+    }
+
+    #[test]
+    fn codebook_lookup_matches_brute_force_including_ties() {
+        let mut rng = Pcg64Mcg::seed_from_u64(3);
+        for (k, dim, scale) in [
+            (1, 1, vec![1.0]),
+            (9, 2, vec![1.0, 0.5]),
+            (300, 4, vec![3.0, 3.0, 0.7, 0.7]),
+            (2025, 4, vec![1.0; 4]),
+            (500, 7, vec![0.3; 7]),
+        ] {
+            let book = lattice_codebook(k, dim, scale, k as u64);
+            assert_eq!(book.n_cells(), k);
+            let mut queries: Vec<Vec<f64>> = (0..2000)
+                .map(|_| (0..dim).map(|_| rng.random_range(-4.0..4.0)).collect())
+                .collect();
+            // Lattice points (many exact ties) and every centroid itself.
+            queries.extend((0..500).map(|_| {
+                (0..dim)
+                    .map(|_| f64::from(rng.random_range(-8i32..=8)) * 0.25)
+                    .collect()
+            }));
+            queries.extend((0..k).map(|j| book.centroid(j).unwrap().to_vec()));
+            for x in &queries {
+                let (j, d) = book.nearest_brute_force(x);
+                let (jt, dt) = book.nearest_unchecked(x);
+                assert_eq!((jt, dt.to_bits()), (j, d.to_bits()), "k {k}, x {x:?}");
+                assert_eq!(book.nearest(x).unwrap(), j);
+                assert_eq!(book.distance(x, j).unwrap().to_bits(), d.to_bits());
+                // The lowest index among the equally near.
+                for other in 0..k {
+                    let e = book.distance(x, other).unwrap();
+                    assert!(
+                        e > d || (e == d && other >= j),
+                        "k {k}, x {x:?}: {other} beats {j}"
+                    );
+                }
+            }
+        }
+        // Duplicated centroids: the first copy wins, the second cell is never chosen.
+        let book = Codebook::new(vec![vec![1.0], vec![0.0], vec![1.0]], vec![1.0]).unwrap();
+        assert_eq!(book.nearest(&[0.9]).unwrap(), 0);
+        assert_eq!(book.nearest(&[0.5]).unwrap(), 0); // tie between cells 0 and 1
+        assert_eq!(book.nearest(&[0.4]).unwrap(), 1);
+        // The scale weighs the dimensions: x is nearer to c1 in raw units, to c0 once the
+        // second dimension is divided by 10.
+        let c = vec![vec![0.0, 5.0], vec![2.0, 0.0]];
+        assert_eq!(
+            Codebook::new(c.clone(), vec![1.0, 1.0])
+                .unwrap()
+                .nearest(&[1.5, 4.0])
+                .unwrap(),
+            0
+        );
+        assert_eq!(
+            Codebook::new(c, vec![1.0, 10.0])
+                .unwrap()
+                .nearest(&[1.5, 4.0])
+                .unwrap(),
+            1
+        );
+    }
+
+    #[test]
+    fn bad_codebooks_are_errors() {
+        let err = |r: Result<Codebook, SimError>| r.expect_err("expected an error").to_string();
+        assert!(err(Codebook::new(vec![], vec![])).starts_with("codebook.centroids:"));
+        assert!(err(Codebook::new(vec![vec![]], vec![])).starts_with("codebook.centroids:"));
+        assert!(
+            err(Codebook::new(
+                vec![vec![0.0, 1.0], vec![0.0]],
+                vec![1.0, 1.0]
+            ))
+            .starts_with("codebook.centroids:")
+        );
+        assert!(
+            err(Codebook::new(vec![vec![0.0, f64::NAN]], vec![1.0, 1.0]))
+                .starts_with("codebook.centroids:")
+        );
+        assert!(err(Codebook::new(vec![vec![0.0]], vec![0.0])).starts_with("codebook.scale:"));
+        assert!(err(Codebook::new(vec![vec![0.0]], vec![f64::NAN])).starts_with("codebook.scale:"));
+        assert!(err(Codebook::new(vec![vec![0.0]], vec![1.0, 1.0])).starts_with("codebook.scale:"));
+        assert!(
+            err(Codebook::new(vec![vec![1e300]], vec![1e-300])).starts_with("codebook.centroids:")
+        );
+        assert!(
+            err(Codebook::new(vec![vec![0.0; 17]], vec![1.0; 17]))
+                .starts_with("codebook.centroids:")
+        );
+        assert!(
+            err(Codebook::from_flat(2, vec![0.0; 3], vec![1.0; 2]))
+                .starts_with("codebook.centroids:")
+        );
+        let book = Codebook::new(vec![vec![0.0, 0.0]], vec![1.0, 1.0]).unwrap();
+        assert!(book.nearest(&[0.0]).is_err());
+        assert!(book.nearest(&[0.0, f64::NAN]).is_err());
+        assert!(book.distance(&[0.0, 0.0], 1).is_err());
+        assert_eq!(book.nearest(&[f64::MAX, -f64::MAX]).unwrap(), 0);
+        assert!(FeatureSpace::codebook(vec![]).is_err());
+    }
+
+    fn two_cell_features() -> FeatureSpace {
+        FeatureSpace::codebook(vec![
+            Codebook::new(vec![vec![0.0], vec![1.0]], vec![1.0]).unwrap(),
+            Codebook::new(
+                vec![vec![0.0, 0.0], vec![1.0, 0.0], vec![0.0, 2.0]],
+                vec![1.0, 2.0],
+            )
+            .unwrap(),
+        ])
+        .unwrap()
+    }
+
+    #[test]
+    fn codebook_features_are_crisp_cells_and_serialise_in_their_own_form() {
+        let features = two_cell_features();
+        assert!(features.is_codebook());
+        assert!(features.cores().is_empty());
+        assert_eq!(features.codebooks().len(), 2);
+        assert_eq!(features.n_agents(), 2);
+        assert_eq!(
+            (features.obs_dim(1), features.n_cores(1)),
+            (Some(2), Some(3))
+        );
+        assert_eq!(features.n_params(&[2, 4]).unwrap(), 2 * 2 + 3 * 4);
+        assert!(features.grid(0).is_err());
+        let mut seen = Vec::new();
+        features
+            .active(1, &[0.2, 1.5])
+            .unwrap()
+            .for_each(|d, w| seen.push((d, w)));
+        assert_eq!(seen, [(2, 1.0)]);
+        assert!(features.active(1, &[0.2]).is_err());
+        assert!(features.active(0, &[f64::INFINITY]).is_err());
+        assert!(features.active(2, &[0.0]).is_err());
+        let fuzzy = FeatureSpace::new(vec![vec![uniform_cores(3)]]).unwrap();
+        assert!(!fuzzy.is_codebook() && fuzzy.codebooks().is_empty());
+
+        // Round trip through TOML, inside an AdditiveQ.
+        let phi = vec![vec![0.5, -1.0, 2.0, 0.25], (0..12).map(f64::from).collect()];
+        let q = AdditiveQ::from_params(features.clone(), vec![2, 4], phi).unwrap();
+        let text = toml::to_string(&q).unwrap();
+        assert!(text.contains("codebooks"), "{text}");
+        let back: AdditiveQ = toml::from_str(&text).unwrap();
+        assert_eq!(back, q);
+        assert_eq!(
+            toml::from_str::<FeatureSpace>(&toml::to_string(&features).unwrap()).unwrap(),
+            features
+        );
+        // The fuzzy form is still the nested core lists.
+        let text = toml::to_string(&AdditiveQ::new(fuzzy, vec![1]).unwrap()).unwrap();
+        assert!(text.starts_with("features = [[[0.0, 0.5, 1.0]]]"), "{text}");
+        // Bad codebook files are refused with the reason.
+        let bad = "actions = [1]\nphi = [[0.0]]\n[features]\ncodebooks = [{ scale = [0.0], centroids = [[1.0]] }]";
+        let e = toml::from_str::<AdditiveQ>(bad).unwrap_err().to_string();
+        assert!(e.contains("codebook.scale"), "{e}");
+        let unknown = "actions = [1]\nphi = [[0.0]]\n[features]\ncodebook = []";
+        let e = toml::from_str::<AdditiveQ>(unknown)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("codebook"), "{e}");
+        let good = "actions = [1]\nphi = [[0.0, 3.0]]\n[features]\ncodebooks = [{ scale = [1.0], centroids = [[1.0], [2.0]] }]";
+        let q = toml::from_str::<AdditiveQ>(good).unwrap();
+        assert_eq!(q.greedy(0, &[1.9]).unwrap(), 0);
+        assert_eq!(q.value(&[&[1.9]]).unwrap(), 3.0);
+        let mixed = "actions = [1]\nphi = [[0.0, 0.0]]\n[features]\ncodebooks = [{ scale = [1.0], centroids = [[1.0], [1.0, 2.0]] }]";
+        assert!(toml::from_str::<AdditiveQ>(mixed).is_err());
+        assert!(toml::from_str::<AdditiveQ>("features = 3\nactions = [1]\nphi = [[0.0]]").is_err());
+    }
+
+    #[test]
+    fn codebook_update_is_tabular_q_learning() {
+        // One cell of membership 1 per agent: Q(x, u) = phi0[c0 * 2 + u0] + phi1[c1 * 4 + u1].
+        let features = two_cell_features();
+        let phi = vec![vec![0.5, -1.0, 2.0, 0.25], (0..12).map(f64::from).collect()];
+        let mut q = AdditiveQ::from_params(features, vec![2, 4], phi).unwrap();
+        let before = q.params().to_vec();
+        // x_k: agent 0 in cell 1 (0.8), agent 1 in cell 0 ((0.1, 0.5): scaled distances 0.0725
+        // to (0, 0), 0.8725 to (1, 0) and 0.5725 to (0, 2)); actions (1, 3): Q = 0.25 + 3.
+        // x_{k+1}: cell 0 (max 0.5) and cell 2 (max 11): max Q = 11.5.
+        let sample = Sample {
+            obs: &[&[0.8], &[0.1, 0.5]],
+            actions: &[1, 3],
+            reward: 2.0,
+            next_obs: &[&[-0.3], &[0.0, 1.9]],
+            terminal: false,
+        };
+        let delta = q.update(Update::Corrected, &sample, 0.9, 0.5).unwrap();
+        assert!(close(delta, 2.0 + 0.9 * 11.5 - 3.25), "delta {delta}");
+        let mut expected = before.clone();
+        expected[0][3] += 0.5 * delta;
+        expected[1][3] += 0.5 * delta;
+        assert_eq!(q.params(), &expected[..]);
+
+        // Learning the corridor over an 11-cell codebook (the cores of the fuzzy test, crisp).
+        let cells: Vec<Vec<f64>> = uniform_cores(11).into_iter().map(|c| vec![c]).collect();
+        let features =
+            FeatureSpace::codebook(vec![Codebook::new(cells, vec![1.0]).unwrap()]).unwrap();
+        let config = line_config();
+        let out = learn(&mut Lines::new(1), &features, &config, continue_all).unwrap();
+        for j in 0..=90 {
+            let start = j as f64 / 100.0;
+            let optimal = ((GOAL - start) / STEP).ceil() as usize;
+            let steps = greedy_steps(&out.q, &[start], 30);
+            assert!(
+                steps.is_some_and(|s| s <= optimal + 2),
+                "start {start}: {steps:?}"
+            );
+        }
+        assert_eq!(out.curve.last().unwrap().eval_success_rate, Some(1.0));
+        let again = learn(&mut Lines::new(1), &features, &config, continue_all).unwrap();
+        assert_eq!(params_bits(&again.q), params_bits(&out.q));
+        let eval = evaluate(&mut Lines::new(1), &out.q, 20, 40, eval_seed(config.seed)).unwrap();
+        assert_eq!(eval.success_rate, 1.0);
     }
 }

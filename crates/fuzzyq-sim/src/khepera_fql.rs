@@ -77,7 +77,7 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::write_atomically;
+use crate::artifact::{load_toml, save_toml};
 use crate::error::{ConfigError, PolicyFileError, SimError};
 use crate::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
@@ -429,21 +429,16 @@ impl Environment for KheperaEnv {
 #[must_use]
 pub fn default_fql_config() -> FqlConfig {
     FqlConfig {
-        update: fql::Update::Corrected,
-        gamma: 0.96,
         episodes: 2000,
         max_steps: 400,
         alpha: 0.2,
         alpha_decay: 1000.0,
         epsilon: 1.0,
-        epsilon_min: 0.05,
         epsilon_decay_episodes: 1500,
-        seed: 0,
-        tolerance: 1e-3,
-        window: 50,
         stop_at_convergence: false,
         eval_every: 100,
         eval_episodes: 20,
+        ..FqlConfig::default()
     }
 }
 
@@ -604,35 +599,17 @@ impl FqlPolicyFile {
 
     /// Writes the file atomically (a temporary file in the same directory, then a rename).
     pub fn save(&self, path: &Path) -> Result<(), PolicyFileError> {
-        let text = self.to_toml().map_err(|e| PolicyFileError::Malformed {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-        write_atomically(path, text.as_bytes()).map_err(|source| PolicyFileError::Write {
-            path: path.to_path_buf(),
-            source,
-        })
+        save_toml(self, path, "fql policy")
     }
 
     /// Reads and checks a file written by [`save`](Self::save): it must parse, its
     /// configurations must be valid and its Q-function must have the feature space and actions
     /// of its configuration. Errors name the file.
     pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
-        let malformed = |reason: String| PolicyFileError::Malformed {
-            path: path.to_path_buf(),
-            reason,
-        };
-        let bytes = std::fs::read(path).map_err(|source| PolicyFileError::Read {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let text =
-            std::str::from_utf8(&bytes).map_err(|e| malformed(format!("not UTF-8 text: {e}")))?;
-        let file: Self =
-            toml::from_str(text).map_err(|e| malformed(e.message().trim_end().to_string()))?;
-        file.fql.validate().map_err(|e| malformed(e.to_string()))?;
-        check_q(&file.q, &file.config).map_err(|e| malformed(e.to_string()))?;
-        Ok(file)
+        load_toml(path, |file: &Self| {
+            file.fql.validate().map_err(|e| e.to_string())?;
+            check_q(&file.q, &file.config).map_err(|e| e.to_string())
+        })
     }
 }
 

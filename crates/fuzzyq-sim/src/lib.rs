@@ -12,7 +12,12 @@
 //! - [`policy`] and [`rollout`]: greedy and interpolated policies, simulated runs and their
 //!   metrics.
 //! - [`fql`]: model-free fuzzy Q-learning (section 2.5) on any episodic [`fql::Environment`].
+//! - [`compare`]: the paper's Table 1 rerun: fuzzy and crisp learners side by side.
 //! - [`khepera_fql`]: model-free fuzzy Q-learning of the Khepera task on the rapier plant.
+//! - [`pointmass_fql`]: the point-mass task as a model-free environment, its fuzzy features,
+//!   learning defaults and policy file.
+//! - [`vqql`]: the crisp baseline of Table 1 (a k-means vector quantiser of each agent's state
+//!   plus tabular Q-learning).
 //! - [`physics`]: rapier2d plants (colliding point masses, Khepera robots with sonars) that
 //!   move exactly as the models do in open space.
 //!
@@ -30,6 +35,7 @@
 //!     velocity_cores: vec![-3.0, 0.0, 3.0],
 //!     heading_divisions: None,
 //!     cores: None,
+//!     membership: Default::default(),
 //! };
 //! let artifact = fuzzyq_sim::train::train(&config, |_| std::ops::ControlFlow::Continue(()))?;
 //! assert!(artifact.summary.converged);
@@ -44,6 +50,7 @@
 
 pub mod arena;
 pub mod artifact;
+pub mod compare;
 pub mod config;
 pub mod env;
 pub mod error;
@@ -52,10 +59,12 @@ pub mod khepera;
 pub mod khepera_fql;
 pub mod physics;
 pub mod pointmass;
+pub mod pointmass_fql;
 pub mod policy;
 pub mod robots;
 pub mod rollout;
 pub mod train;
+pub mod vqql;
 
 pub use artifact::PolicyArtifact;
 pub use config::TrainConfig;

@@ -27,7 +27,7 @@ pub fn build_grid<T: Real>(config: &TrainConfig) -> Result<Grid<T>, SimError> {
         .into_iter()
         .map(|c| c.into_iter().map(T::from_f64).collect())
         .collect();
-    Ok(Grid::new(cores)?)
+    Ok(Grid::new(cores)?.with_membership(config.grid.membership.to_core()))
 }
 
 /// Runs fuzzy Q-iteration as configured; `observer` sees every sweep and may stop the run

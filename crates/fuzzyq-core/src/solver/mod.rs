@@ -86,7 +86,7 @@ use crate::action::JointActions;
 use crate::backup::Backup;
 use crate::error::{EvalError, PartitionError};
 use crate::model::{Model, joint_actions};
-use crate::partition::ProductPartition;
+use crate::partition::{Membership, ProductPartition};
 use crate::real::Real;
 
 use block::BlockOperator;
@@ -100,6 +100,7 @@ const GENERIC_SLAB: usize = 256;
 pub struct Grid<T> {
     cores: Vec<Vec<T>>,
     n_cores: usize,
+    membership: Membership,
 }
 
 impl<T: Real> Grid<T> {
@@ -109,7 +110,25 @@ impl<T: Real> Grid<T> {
             let views: Vec<&[T]> = cores.iter().map(Vec::as_slice).collect();
             ProductPartition::try_new(&views)?.n_cores()
         };
-        Ok(Self { cores, n_cores })
+        Ok(Self {
+            cores,
+            n_cores,
+            membership: Membership::Triangular,
+        })
+    }
+
+    /// The same cores with membership functions of kind `membership` (triangular by
+    /// default; [`Membership::Crisp`] makes the grid a crisp state aggregation).
+    #[must_use]
+    pub fn with_membership(mut self, membership: Membership) -> Self {
+        self.membership = membership;
+        self
+    }
+
+    /// The kind of membership functions.
+    #[must_use]
+    pub fn membership(&self) -> Membership {
+        self.membership
     }
 
     /// The borrowed product partition over these cores.
@@ -121,6 +140,7 @@ impl<T: Real> Grid<T> {
         }
         ProductPartition::try_new(&views[..self.cores.len()])
             .expect("cores were validated when the grid was built")
+            .with_membership(self.membership)
     }
 
     /// The cores of every state variable.

@@ -1,0 +1,190 @@
+//! `fuzzyq compare`: the paper's Table 1, rerun on the point-mass task.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use fuzzyq_sim::compare::{self, CompareConfig, Comparison, Event, Learner};
+
+use crate::rollout::parse_list;
+use crate::train::load_config;
+use crate::{Env, check_writable, plot, write_file, write_json};
+
+#[derive(Args, Debug)]
+pub(crate) struct CompareArgs {
+    /// The environment (the comparison runs on the point-mass task).
+    #[arg(long, value_enum, default_value_t = Env::Pointmass)]
+    env: Env,
+    /// A TOML configuration (see `fuzzyq config`): the task, the grid of the grid-based
+    /// learners and the solver settings (gamma is every learner's discount).
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
+    /// Start of the single rollout, comma-separated [default: the paper's Table 1 start
+    /// -4,5,0,0,5,-3,0,0].
+    #[arg(long, value_name = "X0", allow_hyphen_values = true)]
+    x0: Option<String>,
+    /// Rollout length in sample times (for x0 and every random start).
+    #[arg(long, value_name = "K", default_value_t = 100)]
+    steps: usize,
+    /// Number of seeded random starts (at rest) every policy is also rolled out from.
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    starts: usize,
+    /// Seed of the random starts and of the learners from samples.
+    #[arg(long, value_name = "S", default_value_t = 7)]
+    seed: u64,
+    /// Random starts put each agent uniformly within this distance of the goal per axis (m).
+    #[arg(long, value_name = "M", default_value_t = 5.0)]
+    start_position: f64,
+    /// The learners, comma-separated, in table order: fqi, crisp, fql, fql-literal, vqql
+    /// [default: all].
+    #[arg(long, value_name = "L,...", value_delimiter = ',')]
+    learners: Option<Vec<String>>,
+    /// Episodes of the learners from samples (fql, fql-literal, vqql) [default: 3000].
+    #[arg(long, value_name = "N")]
+    episodes: Option<usize>,
+    /// fql, fql-literal, vqql: learning episodes start at rest with each agent uniformly
+    /// within this distance of the goal per axis (m) [default: the whole field, 6].
+    #[arg(long, value_name = "M")]
+    learn_position: Option<f64>,
+    /// VQQL: k-means cells per agent [default: the number of own-state fuzzy cores, so that
+    /// VQQL has as many parameters as the additive fuzzy layout].
+    #[arg(long, value_name = "K")]
+    cells: Option<usize>,
+    /// Output directory (created if missing): table1.md, table1.csv, table1.json,
+    /// paths.png and one rollout figure per learner.
+    #[arg(long, value_name = "DIR", default_value = "compare")]
+    out: PathBuf,
+    /// No progress output.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
+    if args.env != Env::Pointmass {
+        anyhow::bail!(
+            "--env {}: the comparison runs on the point-mass task only",
+            args.env.name()
+        );
+    }
+    let mut c = CompareConfig {
+        steps: args.steps,
+        starts: args.starts,
+        seed: args.seed,
+        start_position: args.start_position,
+        ..CompareConfig::new(load_config(args.config.as_deref(), args.env)?)
+    };
+    if let Some(x0) = &args.x0 {
+        c.x0 = parse_list(x0, "--x0")?;
+    }
+    if let Some(names) = &args.learners {
+        c.learners = names
+            .iter()
+            .map(|n| Learner::parse(n.trim()))
+            .collect::<Result<_, _>>()
+            .context("--learners")?;
+    }
+    if let Some(e) = args.episodes {
+        c.fql.episodes = e;
+    }
+    if let Some(m) = args.learn_position {
+        c.fql_starts = fuzzyq_sim::pointmass_fql::Starts::Uniform {
+            position: m,
+            velocity: 0.0,
+        };
+    }
+    if let Some(k) = args.cells {
+        c.vqql.cells = k;
+    }
+    c.fql.seed = args.seed;
+    c.vqql.seed = args.seed;
+    c.validate()?;
+    Ok(c)
+}
+
+/// The files the comparison writes into the output directory.
+fn outputs(dir: &Path, learners: &[Learner]) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = ["table1.md", "table1.csv", "table1.json", "paths.png"]
+        .iter()
+        .map(|f| dir.join(f))
+        .collect();
+    files.extend(
+        learners
+            .iter()
+            .map(|l| dir.join(format!("rollout-{}.png", l.name()))),
+    );
+    files
+}
+
+pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
+    let config = build(&args)?;
+    if args.out.exists() && !args.out.is_dir() {
+        anyhow::bail!("--out {} is not a directory", args.out.display());
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create --out {}", args.out.display()))?;
+    let files = outputs(&args.out, &config.learners);
+    for f in &files {
+        check_writable(f, "output")?;
+    }
+    let t0 = Instant::now();
+    let quiet = args.quiet;
+    let comparison = compare::compare(&config, |e| {
+        if quiet {
+            return;
+        }
+        match e {
+            Event::Training(l) => eprintln!("{}: training ({})", l.name(), l.description()),
+            Event::Trained(l, n, s) => {
+                let unit = if l.is_model_based() {
+                    "sweeps"
+                } else {
+                    "episodes"
+                };
+                eprintln!("{}: {n} {unit} in {s:.1} s", l.name());
+            }
+            Event::Evaluating(l) => eprintln!(
+                "{}: rolling out from x0 and {} random starts",
+                l.name(),
+                config.starts
+            ),
+        }
+    })?;
+    write(&args.out, &comparison)?;
+    let table = comparison.to_markdown();
+    crate::print_stdout(&table)?;
+    if !quiet {
+        eprintln!(
+            "compared {} learners in {:.1} s; wrote {}",
+            comparison.reports.len(),
+            t0.elapsed().as_secs_f64(),
+            files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    Ok(())
+}
+
+fn write(dir: &Path, c: &Comparison) -> anyhow::Result<()> {
+    write_file(&dir.join("table1.md"), c.to_markdown().as_bytes(), "table")?;
+    write_file(&dir.join("table1.csv"), c.to_csv().as_bytes(), "table")?;
+    write_json(&dir.join("table1.json"), c)?;
+    plot::compare_figure(&dir.join("paths.png"), c)?;
+    for (r, t) in c.reports.iter().zip(&c.trajectories) {
+        let title = format!(
+            "{}: {} (greedy policy, T = {} s)",
+            r.learner.name(),
+            r.learner.description(),
+            t.dt
+        );
+        plot::rollout_figure_titled(
+            &dir.join(format!("rollout-{}.png", r.learner.name())),
+            t,
+            &title,
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,731 @@
+//! The paper's Table 1, rerun: several learners on one point-mass task, every policy rolled
+//! out from the same start and from the same seeded random starts.
+//!
+//! Section 4 of the paper compares its fuzzy learner with CMOMMT (a crisp state-aggregation
+//! learner) from the start [`TABLE1_X0`] and reports final error, time to goal and
+//! iterations. [`compare`] trains each [`Learner`] on the task of one [`TrainConfig`] (same
+//! model, actions, reward, discount and, where a grid applies, the same cores), then measures:
+//!
+//! - from [`CompareConfig::x0`]: the greedy rollout's final distance of each agent to the
+//!   goal and the time the reward region (`||x||_2 < 0.1` over the whole state) is first
+//!   reached;
+//! - over [`CompareConfig::starts`] random starts at rest (drawn once, the same for every
+//!   learner): the success rate (reward region reached within the rollout), the mean time to
+//!   it over the successes and the mean final error;
+//! - the work: iterations and what one counts (a synchronous sweep over every core for the
+//!   model-based learners, an episode for the model-free ones), wall-clock training seconds,
+//!   and the number of parameters of the Q-function each learner represents.
+//!
+//! | learner | what it is | parameters |
+//! |---|---|---|
+//! | [`Learner::Fqi`] | joint fuzzy Q-iteration (the paper's method, [`crate::train`]) | `N * M` (cores x joint actions); only `V` is stored |
+//! | [`Learner::Crisp`] | grid Q-iteration on the same cores as crisp nearest-core boxes ([`MembershipKind::Crisp`]) | `N * M` |
+//! | [`Learner::Fql`] | fuzzy Q-learning, additive layout, corrected update ([`crate::fql`]) | `sum_i N_i * M_i` |
+//! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
+//! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::vqql`]) | `sum_i K_i * M_i` |
+//!
+//! Everything is seeded: the same configuration gives the same table (bar the seconds).
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::{EnvConfig, MembershipKind, TrainConfig};
+use crate::error::{ConfigError, SimError};
+use crate::fql::{AdditiveQ, FqlConfig, Update};
+use crate::pointmass::PointMass;
+use crate::pointmass_fql::{self, Starts};
+use crate::policy::{AnyPolicy, PolicyKind};
+use crate::rollout::{self, RolloutMetrics, Trajectory};
+use crate::vqql::{self, VqqlConfig};
+
+/// The initial state of the paper's Table 1 (section 4): both agents at rest.
+pub const TABLE1_X0: [f64; 8] = [-4.0, 5.0, 0.0, 0.0, 5.0, -3.0, 0.0, 0.0];
+
+/// The paper's Table 1: `(metric, CMOMMT, fuzzy)`.
+pub const PAPER_TABLE1: [(&str, f64, f64); 3] = [
+    ("final error (cm)", 18.0, 6.0),
+    ("time to goal (s)", 25.0, 12.0),
+    ("iterations", 34.0, 27.0),
+];
+
+/// A learner of the comparison.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Learner {
+    /// Joint fuzzy Q-iteration on the configured grid (the paper's method).
+    Fqi,
+    /// Grid Q-iteration on the same cores as crisp nearest-core boxes.
+    Crisp,
+    /// Fuzzy Q-learning, additive layout, corrected update.
+    Fql,
+    /// Fuzzy Q-learning, additive layout, the update as printed in the paper.
+    FqlLiteral,
+    /// VQQL: per-agent k-means cells and tabular Q-learning (CMOMMT's learner).
+    Vqql,
+}
+
+impl Learner {
+    /// Every learner, in table order.
+    pub const ALL: [Self; 5] = [
+        Self::Fqi,
+        Self::Crisp,
+        Self::Fql,
+        Self::FqlLiteral,
+        Self::Vqql,
+    ];
+
+    /// The name used on the command line and in the tables.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Fqi => "fqi",
+            Self::Crisp => "crisp",
+            Self::Fql => "fql",
+            Self::FqlLiteral => "fql-literal",
+            Self::Vqql => "vqql",
+        }
+    }
+
+    /// A one-line description.
+    #[must_use]
+    pub fn description(self) -> &'static str {
+        match self {
+            Self::Fqi => "joint fuzzy Q-iteration (the paper's method)",
+            Self::Crisp => "grid Q-iteration, same cores as crisp boxes",
+            Self::Fql => "fuzzy Q-learning, additive layout, corrected update",
+            Self::FqlLiteral => "fuzzy Q-learning, additive layout, update as printed",
+            Self::Vqql => "VQQL (CMOMMT): k-means cells + tabular Q-learning",
+        }
+    }
+
+    /// Parses a [`name`](Self::name).
+    pub fn parse(name: &str) -> Result<Self, ConfigError> {
+        Self::ALL
+            .into_iter()
+            .find(|l| l.name() == name)
+            .ok_or_else(|| {
+                ConfigError::invalid(
+                    "learners",
+                    format!(
+                        "unknown learner {name:?} (expected {})",
+                        Self::ALL.map(Self::name).join(", ")
+                    ),
+                )
+            })
+    }
+
+    /// Whether the learner is model-based (iterates over a grid with the model).
+    #[must_use]
+    pub fn is_model_based(self) -> bool {
+        matches!(self, Self::Fqi | Self::Crisp)
+    }
+}
+
+/// What [`compare`] runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompareConfig {
+    /// The task: a point-mass environment, the grid of the grid-based learners and the
+    /// solver settings (its `gamma` is every learner's discount).
+    pub task: TrainConfig,
+    /// The start of the single rollout (the paper's Table 1 start by default).
+    pub x0: Vec<f64>,
+    /// Rollout length in sample times, for the single rollout and the random starts.
+    pub steps: usize,
+    /// Number of random starts.
+    pub starts: usize,
+    /// Seed of the random starts.
+    pub seed: u64,
+    /// Random starts put each agent uniformly in `[-start_position, start_position]^2`, at rest.
+    pub start_position: f64,
+    /// The learners, in table order (no repeats).
+    pub learners: Vec<Learner>,
+    /// Fuzzy Q-learning settings (both FQL learners and the Q-learning of VQQL; the update
+    /// is set per learner and the discount is the task's).
+    pub fql: FqlConfig,
+    /// Where the model-free learners' episodes start.
+    pub fql_starts: Starts,
+    /// VQQL's quantiser.
+    pub vqql: VqqlConfig,
+}
+
+impl Default for CompareConfig {
+    /// [`CompareConfig::new`] on the paper's task and grid.
+    fn default() -> Self {
+        Self::new(TrainConfig::default())
+    }
+}
+
+impl CompareConfig {
+    /// The comparison on `task`: the Table 1 start, 100 random starts (seed 7) within 5 m of
+    /// the goal, 100 steps (40 s) per rollout, every learner with its defaults, and VQQL with
+    /// as many cells per agent as the task's grid has own-state cores (`n_pos^2 * n_vel^2`),
+    /// so that its table has exactly as many parameters as the additive fuzzy layout.
+    #[must_use]
+    pub fn new(task: TrainConfig) -> Self {
+        let own_cores =
+            task.grid.position_cores.len().pow(2) * task.grid.velocity_cores.len().pow(2);
+        let vqql = VqqlConfig {
+            cells: own_cores,
+            ..VqqlConfig::default()
+        };
+        Self {
+            task,
+            x0: TABLE1_X0.to_vec(),
+            steps: 100,
+            starts: 100,
+            seed: 7,
+            start_position: 5.0,
+            learners: Learner::ALL.to_vec(),
+            fql: pointmass_fql::default_fql_config(),
+            fql_starts: pointmass_fql::default_starts(),
+            vqql,
+        }
+    }
+
+    /// Checks the configuration; errors name the field.
+    pub fn validate(&self) -> Result<(), SimError> {
+        self.task.validate()?;
+        let model = self.model()?;
+        rollout::check_x0(&model, &self.x0)?;
+        if self.steps == 0 {
+            return Err(ConfigError::invalid("steps", "must be at least 1").into());
+        }
+        if self.learners.is_empty() {
+            return Err(ConfigError::invalid("learners", "name at least one learner").into());
+        }
+        for (i, l) in self.learners.iter().enumerate() {
+            if self.learners[..i].contains(l) {
+                return Err(ConfigError::invalid(
+                    "learners",
+                    format!("{} is named twice", l.name()),
+                )
+                .into());
+            }
+        }
+        let bound = pointmass_bound(&model);
+        if !(self.start_position > 0.0 && self.start_position <= bound) {
+            return Err(ConfigError::invalid(
+                "start_position",
+                format!(
+                    "must be in (0, {bound}] (the position range), got {}",
+                    self.start_position
+                ),
+            )
+            .into());
+        }
+        self.fql.validate()?;
+        self.fql_starts.validate(&model)?;
+        if self.learners.contains(&Learner::Vqql) {
+            self.vqql.validate()?;
+        }
+        Ok(())
+    }
+
+    fn model(&self) -> Result<PointMass, SimError> {
+        match &self.task.env {
+            EnvConfig::Pointmass(p) => Ok(PointMass::new(p.clone())?),
+            other => Err(ConfigError::invalid(
+                "env",
+                format!(
+                    "the comparison runs on the point-mass task, not {}",
+                    other.name()
+                ),
+            )
+            .into()),
+        }
+    }
+}
+
+/// The largest position magnitude of the model's state space.
+fn pointmass_bound(model: &PointMass) -> f64 {
+    let (lo, hi) = fuzzyq_core::Model::<f64>::state_bounds(model, 0);
+    lo.abs().min(hi.abs())
+}
+
+/// One learner's row of the table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LearnerReport {
+    /// The learner.
+    pub learner: Learner,
+    /// What it is.
+    pub description: String,
+    /// Iterations performed.
+    pub iterations: usize,
+    /// What one iteration is: `"sweeps"` (over every core) or `"episodes"`.
+    pub iteration_unit: String,
+    /// Whether the learner's stopping rule was met (`||theta_{k+1} - theta_k|| <= xi` for the
+    /// iterations; the windowed eq-27 test for the learners from samples).
+    pub converged: bool,
+    /// Wall-clock training seconds (model tables or exploration included).
+    pub train_seconds: f64,
+    /// Parameters of the Q-function the learner represents.
+    pub parameters: u64,
+    /// Values it keeps in memory for its policy (`V` per core for the iterations; the
+    /// parameters, plus the codebook for VQQL).
+    pub stored_values: u64,
+    /// The greedy rollout from [`CompareConfig::x0`].
+    pub from_x0: RolloutMetrics,
+    /// Mean over agents of the final distance to the goal from `x0` (cm).
+    pub final_error_cm: f64,
+    /// First time in the reward region from `x0` (s).
+    pub time_to_goal_s: Option<f64>,
+    /// Fraction of the random starts that reach the reward region.
+    pub success_rate: f64,
+    /// Mean time to the reward region over the successful random starts (s).
+    pub mean_time_to_goal_s: Option<f64>,
+    /// Mean over random starts and agents of the final distance to the goal (cm).
+    pub mean_final_error_cm: f64,
+    /// Learner-specific notes (k-means iterations and distortion for VQQL, ...).
+    pub notes: Vec<String>,
+}
+
+/// The outcome of [`compare`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Comparison {
+    /// The start of the single rollout.
+    pub x0: Vec<f64>,
+    /// Rollout length in sample times.
+    pub steps: usize,
+    /// Sample time (s).
+    pub dt: f64,
+    /// Number of random starts.
+    pub starts: usize,
+    /// Their seed.
+    pub seed: u64,
+    /// Their position range.
+    pub start_position: f64,
+    /// One report per learner, in the configured order.
+    pub reports: Vec<LearnerReport>,
+    /// The rollout from `x0` of each learner, in the same order.
+    pub trajectories: Vec<Trajectory>,
+}
+
+/// What [`compare`] is doing, for progress output.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Event {
+    /// A learner starts training.
+    Training(Learner),
+    /// A learner has trained: `(learner, iterations, seconds)`.
+    Trained(Learner, usize, f64),
+    /// A learner's policy is rolled out from the random starts.
+    Evaluating(Learner),
+}
+
+/// A trained learner, ready to act.
+enum Trained {
+    Grid(Box<AnyPolicy>),
+    Additive(Box<AdditiveQ>),
+}
+
+/// Trains every configured learner and measures its greedy policy (see the
+/// [module docs](self)). `progress` sees what is running.
+pub fn compare(
+    config: &CompareConfig,
+    mut progress: impl FnMut(Event),
+) -> Result<Comparison, SimError> {
+    config.validate()?;
+    let model = config.model()?;
+    let starts =
+        pointmass_fql::random_starts(&model, config.starts, config.seed, config.start_position)?;
+    let gamma = config.task.solver.gamma;
+    let mut reports = Vec::with_capacity(config.learners.len());
+    let mut trajectories = Vec::with_capacity(config.learners.len());
+    for &learner in &config.learners {
+        progress(Event::Training(learner));
+        let t0 = Instant::now();
+        let (trained, mut report) = train_one(config, &model, learner)?;
+        report.train_seconds = t0.elapsed().as_secs_f64();
+        progress(Event::Trained(
+            learner,
+            report.iterations,
+            report.train_seconds,
+        ));
+        let run = |x0: &[f64]| -> Result<(Trajectory, RolloutMetrics), SimError> {
+            match &trained {
+                Trained::Grid(p) => rollout::rollout_any(p, x0, config.steps, PolicyKind::Greedy),
+                Trained::Additive(q) => {
+                    rollout::rollout_additive(&model, q, x0, config.steps, gamma)
+                }
+            }
+        };
+        let (trajectory, from_x0) = run(&config.x0)?;
+        progress(Event::Evaluating(learner));
+        let mut runs = Vec::with_capacity(starts.len());
+        for s in &starts {
+            runs.push(run(s)?.1);
+        }
+        report.final_error_cm = mean_error_cm(&from_x0);
+        report.time_to_goal_s = from_x0.reach_time_s;
+        report.from_x0 = from_x0;
+        let reached: Vec<f64> = runs.iter().filter_map(|m| m.reach_time_s).collect();
+        report.success_rate = if runs.is_empty() {
+            0.0
+        } else {
+            reached.len() as f64 / runs.len() as f64
+        };
+        report.mean_time_to_goal_s =
+            (!reached.is_empty()).then(|| reached.iter().sum::<f64>() / reached.len() as f64);
+        report.mean_final_error_cm = if runs.is_empty() {
+            f64::NAN
+        } else {
+            runs.iter().map(mean_error_cm).sum::<f64>() / runs.len() as f64
+        };
+        reports.push(report);
+        trajectories.push(trajectory);
+    }
+    Ok(Comparison {
+        x0: config.x0.clone(),
+        steps: config.steps,
+        dt: model.config().sample_time,
+        starts: config.starts,
+        seed: config.seed,
+        start_position: config.start_position,
+        reports,
+        trajectories,
+    })
+}
+
+fn mean_error_cm(m: &RolloutMetrics) -> f64 {
+    100.0 * m.final_error_m.iter().sum::<f64>() / m.final_error_m.len().max(1) as f64
+}
+
+/// A report with the training fields filled in and the measurements still empty.
+fn blank(learner: Learner) -> LearnerReport {
+    LearnerReport {
+        learner,
+        description: learner.description().into(),
+        iterations: 0,
+        iteration_unit: String::new(),
+        converged: false,
+        train_seconds: 0.0,
+        parameters: 0,
+        stored_values: 0,
+        from_x0: RolloutMetrics {
+            policy_kind: PolicyKind::Greedy,
+            x0: Vec::new(),
+            steps: 0,
+            dt: 0.0,
+            reach_step: None,
+            reach_time_s: None,
+            arrival_time_s: Vec::new(),
+            final_error_m: Vec::new(),
+            discounted_return: 0.0,
+            steps_in_goal: 0,
+            value_x0: 0.0,
+        },
+        final_error_cm: f64::NAN,
+        time_to_goal_s: None,
+        success_rate: 0.0,
+        mean_time_to_goal_s: None,
+        mean_final_error_cm: f64::NAN,
+        notes: Vec::new(),
+    }
+}
+
+fn train_one(
+    config: &CompareConfig,
+    model: &PointMass,
+    learner: Learner,
+) -> Result<(Trained, LearnerReport), SimError> {
+    let mut report = blank(learner);
+    match learner {
+        Learner::Fqi | Learner::Crisp => {
+            let mut task = config.task.clone();
+            task.grid.membership = if learner == Learner::Crisp {
+                MembershipKind::Crisp
+            } else {
+                MembershipKind::Triangular
+            };
+            let artifact = crate::train::train(&task, |_| std::ops::ControlFlow::Continue(()))?;
+            let n = task.n_cores() as u64;
+            report.iterations = artifact.summary.sweeps;
+            report.iteration_unit = "sweeps".into();
+            report.converged = artifact.summary.converged;
+            report.parameters = n * artifact.n_joint_actions() as u64;
+            report.stored_values = n;
+            let policy = AnyPolicy::from_artifact(artifact)?;
+            Ok((Trained::Grid(Box::new(policy)), report))
+        }
+        Learner::Fql | Learner::FqlLiteral | Learner::Vqql => {
+            let mut fql = config.fql.clone();
+            fql.gamma = config.task.solver.gamma;
+            fql.update = if learner == Learner::FqlLiteral {
+                Update::Literal
+            } else {
+                Update::Corrected
+            };
+            let outcome = if learner == Learner::Vqql {
+                let (outcome, lloyd) =
+                    vqql::train_vqql(model, &config.fql_starts, &config.vqql, &fql, |_| {
+                        std::ops::ControlFlow::Continue(())
+                    })?;
+                report.notes.push(format!(
+                    "k-means: {} cells per agent, {} Lloyd iterations, distortion {:.4}",
+                    config.vqql.cells, lloyd.iterations, lloyd.distortion
+                ));
+                report.stored_values += lloyd.codebook_values as u64;
+                outcome
+            } else {
+                let grid = &config.task.grid;
+                let features = pointmass_fql::feature_space(
+                    model,
+                    &grid.position_cores,
+                    &grid.velocity_cores,
+                )?;
+                pointmass_fql::train_fql(model, &features, &config.fql_starts, &fql, |_| {
+                    std::ops::ControlFlow::Continue(())
+                })?
+            };
+            report.iterations = outcome.curve.len();
+            report.iteration_unit = "episodes".into();
+            report.converged = outcome.converged_at.is_some();
+            report.parameters = outcome.q.params().iter().map(|p| p.len() as u64).sum();
+            report.stored_values += report.parameters;
+            let rewarded = outcome.curve.iter().filter(|r| r.ret > 0.0).count();
+            let largest = outcome
+                .q
+                .params()
+                .iter()
+                .flatten()
+                .fold(0.0_f64, |m, p| m.max(p.abs()));
+            report.notes.push(format!(
+                "{rewarded} of {} learning episodes met the reward; largest |parameter| {largest:.3e}",
+                outcome.curve.len()
+            ));
+            Ok((Trained::Additive(Box::new(outcome.q)), report))
+        }
+    }
+}
+
+fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "never".into(), |v| format!("{v:.digits$}"))
+}
+
+fn fmt_count(n: u64) -> String {
+    let s = n.to_string();
+    let mut out = String::new();
+    for (i, c) in s.chars().enumerate() {
+        if i > 0 && (s.len() - i).is_multiple_of(3) {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+impl Comparison {
+    /// The table as Markdown: one column per learner, then the paper's two columns.
+    #[must_use]
+    pub fn to_markdown(&self) -> String {
+        let mut rows: Vec<(String, Vec<String>, [String; 2])> = Vec::new();
+        let paper = |i: usize| {
+            let (_, c, f) = PAPER_TABLE1[i];
+            [format!("{c}"), format!("{f}")]
+        };
+        let none = || [String::from("-"), String::from("-")];
+        let col = |f: &dyn Fn(&LearnerReport) -> String| self.reports.iter().map(f).collect();
+        rows.push((
+            "final error from x0 (cm)".into(),
+            col(&|r| format!("{:.1}", r.final_error_cm)),
+            paper(0),
+        ));
+        rows.push((
+            "time to goal from x0 (s)".into(),
+            col(&|r| fmt_opt(r.time_to_goal_s, 1)),
+            paper(1),
+        ));
+        rows.push((
+            "iterations".into(),
+            col(&|r| {
+                format!(
+                    "{} {}{}",
+                    r.iterations,
+                    r.iteration_unit,
+                    if r.converged { "" } else { " (not converged)" }
+                )
+            }),
+            paper(2),
+        ));
+        rows.push((
+            "training (s)".into(),
+            col(&|r| format!("{:.1}", r.train_seconds)),
+            none(),
+        ));
+        rows.push((
+            "parameters".into(),
+            col(&|r| fmt_count(r.parameters)),
+            none(),
+        ));
+        rows.push((
+            format!("success over {} starts", self.starts),
+            col(&|r| format!("{:.0}%", 100.0 * r.success_rate)),
+            none(),
+        ));
+        rows.push((
+            "mean time to goal (s)".into(),
+            col(&|r| fmt_opt(r.mean_time_to_goal_s, 1)),
+            none(),
+        ));
+        rows.push((
+            "mean final error (cm)".into(),
+            col(&|r| format!("{:.1}", r.mean_final_error_cm)),
+            none(),
+        ));
+        let mut out = String::from("| |");
+        for r in &self.reports {
+            out.push_str(&format!(" {} |", r.learner.name()));
+        }
+        out.push_str(" paper: CMOMMT | paper: fuzzy |\n|---|");
+        out.push_str(&"---|".repeat(self.reports.len() + 2));
+        out.push('\n');
+        for (name, cells, paper) in rows {
+            out.push_str(&format!("| {name} |"));
+            for c in cells {
+                out.push_str(&format!(" {c} |"));
+            }
+            out.push_str(&format!(" {} | {} |\n", paper[0], paper[1]));
+        }
+        out.push_str(&format!(
+            "\nx0 = {:?}; {} steps of {} s; {} random starts at rest within {} m (seed {}); \
+             goal: the reward region ||x||_2 < 0.1 over the whole state.\n",
+            self.x0, self.steps, self.dt, self.starts, self.start_position, self.seed
+        ));
+        for r in &self.reports {
+            for n in &r.notes {
+                out.push_str(&format!("- {}: {n}\n", r.learner.name()));
+            }
+        }
+        out
+    }
+
+    /// The table as CSV: one row per learner.
+    #[must_use]
+    pub fn to_csv(&self) -> String {
+        let mut out = String::from(
+            "learner,final_error_cm,time_to_goal_s,iterations,iteration_unit,converged,\
+             train_seconds,parameters,stored_values,success_rate,mean_time_to_goal_s,\
+             mean_final_error_cm\n",
+        );
+        let opt = |v: Option<f64>| v.map_or_else(String::new, |v| v.to_string());
+        for r in &self.reports {
+            out.push_str(&format!(
+                "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                r.learner.name(),
+                r.final_error_cm,
+                opt(r.time_to_goal_s),
+                r.iterations,
+                r.iteration_unit,
+                r.converged,
+                r.train_seconds,
+                r.parameters,
+                r.stored_values,
+                r.success_rate,
+                opt(r.mean_time_to_goal_s),
+                r.mean_final_error_cm,
+            ));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::GridConfig;
+
+    /// One agent on a coarse grid: every learner trains in a fraction of a second.
+    fn tiny() -> CompareConfig {
+        let mut task = TrainConfig::default();
+        if let EnvConfig::Pointmass(p) = &mut task.env {
+            p.agents = 1;
+        }
+        task.grid = GridConfig {
+            position_cores: vec![-6.0, -2.0, -0.5, 0.0, 0.5, 2.0, 6.0],
+            velocity_cores: vec![-3.0, 0.0, 3.0],
+            heading_divisions: None,
+            cores: None,
+            membership: MembershipKind::Triangular,
+        };
+        let mut c = CompareConfig::new(task);
+        c.x0 = vec![-4.0, 3.0, 0.0, 0.0];
+        c.starts = 5;
+        c.steps = 60;
+        c.fql.episodes = 40;
+        c.vqql.samples = 2000;
+        c
+    }
+
+    #[test]
+    fn vqql_gets_as_many_cells_as_the_grid_has_own_state_cores() {
+        assert_eq!(CompareConfig::default().vqql.cells, 9 * 9 * 5 * 5);
+        assert_eq!(tiny().vqql.cells, 7 * 7 * 3 * 3);
+    }
+
+    #[test]
+    fn same_configuration_same_table() {
+        let c = tiny();
+        let strip = |mut c: Comparison| {
+            for r in &mut c.reports {
+                r.train_seconds = 0.0;
+            }
+            c
+        };
+        let mut events = Vec::new();
+        let a = strip(compare(&c, |e| events.push(e)).unwrap());
+        let b = strip(compare(&c, |_| {}).unwrap());
+        assert_eq!(a, b);
+        assert_eq!(a.reports.len(), Learner::ALL.len());
+        assert_eq!(events.len(), 3 * Learner::ALL.len());
+        assert_eq!(events[0], Event::Training(Learner::Fqi));
+        // The model-based learners represent cores x actions; the crisp one is a different
+        // learner on the same cores.
+        let (fqi, crisp) = (&a.reports[0], &a.reports[1]);
+        assert_eq!(fqi.parameters, 441 * 25);
+        assert_eq!(crisp.parameters, fqi.parameters);
+        assert_eq!(fqi.iteration_unit, "sweeps");
+        assert_eq!(a.reports[2].iteration_unit, "episodes");
+        assert_eq!(a.reports[2].iterations, 40);
+        assert_eq!(a.reports[4].parameters, 441 * 25);
+        // The table has one column per learner and the paper's two.
+        let md = a.to_markdown();
+        let header = md.lines().next().unwrap();
+        assert_eq!(header.matches('|').count(), Learner::ALL.len() + 4);
+        assert_eq!(a.to_csv().lines().count(), 1 + Learner::ALL.len());
+    }
+
+    #[test]
+    fn bad_configurations_name_the_field() {
+        let check = |c: CompareConfig, needle: &str| {
+            let e = compare(&c, |_| {}).unwrap_err().to_string();
+            assert!(e.contains(needle), "{e} does not mention {needle}");
+        };
+        let mut c = tiny();
+        c.learners = vec![Learner::Fqi, Learner::Fqi];
+        check(c, "fqi is named twice");
+        let mut c = tiny();
+        c.learners.clear();
+        check(c, "learners");
+        let mut c = tiny();
+        c.x0 = vec![0.0; 3];
+        check(c, "x0");
+        let mut c = tiny();
+        c.start_position = f64::NAN;
+        check(c, "start_position");
+        let mut c = tiny();
+        c.steps = 0;
+        check(c, "steps");
+        let mut c = tiny();
+        c.task = TrainConfig::default_for("khepera").unwrap();
+        check(c, "point-mass task");
+        assert!(
+            Learner::parse("cmommt")
+                .unwrap_err()
+                .to_string()
+                .contains("fql-literal")
+        );
+        for l in Learner::ALL {
+            assert_eq!(Learner::parse(l.name()).unwrap(), l);
+        }
+    }
+}
