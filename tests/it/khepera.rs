@@ -60,7 +60,7 @@ fn two_robot_smoke_run_is_deterministic() {
     let starts = random_starts(
         match &c.env {
             EnvConfig::Khepera(k) => k,
-            EnvConfig::Pointmass(_) => unreachable!(),
+            _ => unreachable!("a khepera config"),
         },
         3,
         5,

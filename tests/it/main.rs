@@ -1,5 +1,6 @@
 //! Integration and property tests of fuzzyq: one binary, several modules.
 
+mod approxrl;
 mod khepera;
 mod memberships;
 mod solver;

@@ -688,3 +688,504 @@ impl Model<f64> for Chain {
         f64::from(u8::from(x[0] == 8.0))
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Terminal states.
+
+/// Independent "cliff" coordinates: each moves as `x' = a x + u + c` and the episode ends when
+/// any coordinate leaves `[0, 4]` (+10 for leaving at the top of the last coordinate, -5
+/// otherwise). One state variable per block, one action component per block; 1 or 2
+/// coordinates. Optional: an action-independent reward, an absorbing goal core, terminal
+/// states switched off (same `is_terminal`, but not declared), and the first coordinate
+/// clamped to `[0, 4]` instead (so that only some slabs of the block path see terminal pairs).
+struct Cliff<T> {
+    dims: usize,
+    actions: Vec<T>,
+    action_reward: bool,
+    terminal: bool,
+    clamp_first: bool,
+}
+
+const CLIFF_A: [f64; 2] = [1.05, 0.95];
+const CLIFF_C: [f64; 2] = [0.0, 0.2];
+const CLIFF_LEVELS: [[f64; 3]; 2] = [[-1.0, 0.0, 0.8], [-0.9, 0.0, 1.2]];
+
+impl<T: Real> Cliff<T> {
+    fn new(dims: usize, action_reward: bool) -> Self {
+        let actions = if dims == 1 {
+            [-1.3, -0.4, 0.0, 0.5, 1.1]
+                .iter()
+                .map(|&a| T::from_f64(a))
+                .collect()
+        } else {
+            let mut a = Vec::new();
+            for ux in CLIFF_LEVELS[0] {
+                for uy in CLIFF_LEVELS[1] {
+                    a.push(T::from_f64(ux));
+                    a.push(T::from_f64(uy));
+                }
+            }
+            a
+        };
+        Self {
+            dims,
+            actions,
+            action_reward,
+            terminal: true,
+            clamp_first: false,
+        }
+    }
+
+    fn grid(&self) -> Grid<T> {
+        let cores: [&[f64]; 2] = [
+            &[0.0, 0.5, 1.2, 2.0, 2.6, 3.3, 4.0],
+            &[0.0, 1.0, 1.8, 2.9, 4.0],
+        ];
+        Grid::new(
+            cores[..self.dims]
+                .iter()
+                .map(|c| c.iter().map(|&v| T::from_f64(v)).collect())
+                .collect(),
+        )
+        .unwrap()
+    }
+
+    fn next(&self, x: &[T], u: &[T], i: usize) -> f64 {
+        let n = CLIFF_A[i] * x[i].to_f64() + u[i].to_f64() + CLIFF_C[i];
+        if i == 0 && self.clamp_first {
+            n.clamp(0.0, 4.0)
+        } else {
+            n
+        }
+    }
+
+    fn outside(v: f64) -> bool {
+        !(0.0..=4.0).contains(&v)
+    }
+}
+
+impl<T: Real> Model<T> for Cliff<T> {
+    fn state_dim(&self) -> usize {
+        self.dims
+    }
+    fn n_agents(&self) -> usize {
+        1
+    }
+    fn action_set(&self, _: usize) -> ActionSet<'_, T> {
+        ActionSet::try_new(&self.actions, self.dims).unwrap()
+    }
+    fn state_bounds(&self, _: usize) -> (T, T) {
+        (T::ZERO, T::from_f64(4.0))
+    }
+    fn step(&self, x: &[T], u: &[T], next: &mut [T]) {
+        for (i, n) in next.iter_mut().enumerate() {
+            *n = T::from_f64(self.next(x, u, i));
+        }
+    }
+    fn reward(&self, x: &[T], u: &[T]) -> T {
+        if !self.action_reward {
+            return T::from_f64(x[0].to_f64() / 4.0 - 1.0);
+        }
+        let next: Vec<f64> = (0..self.dims).map(|i| self.next(x, u, i)).collect();
+        let (last, others) = next.split_last().unwrap();
+        let r = if *last > 4.0 && !others.iter().any(|&v| Self::outside(v)) {
+            10.0
+        } else if next.iter().any(|&v| Self::outside(v)) {
+            -5.0
+        } else {
+            -0.1 - 0.01 * u.iter().map(|v| v.to_f64().powi(2)).sum::<f64>()
+        };
+        T::from_f64(r)
+    }
+    fn reward_depends_on_action(&self) -> bool {
+        self.action_reward
+    }
+    fn is_goal(&self, x: &[T]) -> bool {
+        x[0].to_f64() == 2.0
+    }
+    fn is_terminal(&self, x: &[T]) -> bool {
+        x.iter().any(|v| Self::outside(v.to_f64()))
+    }
+    fn has_terminal_states(&self) -> bool {
+        self.terminal
+    }
+    fn n_blocks(&self) -> usize {
+        self.dims
+    }
+    fn block(&self, b: usize) -> Block<'_> {
+        const DIMS: [[usize; 1]; 2] = [[0], [1]];
+        Block {
+            state_dims: &DIMS[b],
+            action_components: &DIMS[b],
+        }
+    }
+}
+
+/// Brute-force fuzzy Q-iteration storing every Q-value, with terminal successors worth
+/// nothing: `theta[d, u] = rho + gamma * (0 if f(x_d, u) terminal else sum mu V)` (only `rho`
+/// at an absorbing goal core). Returns `theta_K`, `theta_{K+1}` and every sweep's change.
+fn brute_force_terminal<T: Real, M: Model<T>>(
+    model: &M,
+    grid: &Grid<T>,
+    gamma: f64,
+    xi: f64,
+    absorbing_goal: bool,
+) -> (Vec<T>, Vec<T>, Vec<f64>) {
+    let g = grid.view();
+    let joint = fuzzyq_core::model::joint_actions(model).unwrap();
+    let (n, m, e) = (g.n_cores(), joint.n_joint(), g.n_dims());
+    let gamma = T::from_f64(gamma);
+    let (mut x, mut next, mut u) = (
+        vec![T::ZERO; e],
+        vec![T::ZERO; e],
+        vec![T::ZERO; joint.dim()],
+    );
+    // Per pair: reward and, unless terminal, the successor's memberships.
+    type Pair<T> = (T, Option<Vec<(usize, T)>>);
+    let mut pairs: Vec<Pair<T>> = Vec::new();
+    let mut goal = Vec::new();
+    for d in 0..n {
+        g.core_state(d, &mut x).unwrap();
+        goal.push(absorbing_goal && model.is_goal(&x));
+        for a in 0..m {
+            joint.vector(a, &mut u).unwrap();
+            model.step(&x, &u, &mut next);
+            let succ = (!model.is_terminal(&next)).then(|| {
+                let mut s = Vec::new();
+                g.active(&next).unwrap().for_each(|k, w| s.push((k, w)));
+                s
+            });
+            pairs.push((model.reward(&x, &u), succ));
+        }
+    }
+    let sweep = |theta: &[T]| -> Vec<T> {
+        let v: Vec<T> = theta
+            .chunks(m)
+            .map(|r| r.iter().copied().fold(r[0], T::max_of))
+            .collect();
+        (0..n * m)
+            .map(|i| match (&pairs[i], goal[i / m]) {
+                ((r, _), true) | ((r, None), false) => *r,
+                ((r, Some(s)), false) => {
+                    let mut ev = T::ZERO;
+                    for &(k, w) in s {
+                        ev += w * v[k];
+                    }
+                    *r + gamma * ev
+                }
+            })
+            .collect()
+    };
+    let mut theta = vec![T::ZERO; n * m];
+    let mut deltas = Vec::new();
+    loop {
+        let new = sweep(&theta);
+        deltas.push(max_diff(&new, &theta));
+        theta = new;
+        if *deltas.last().unwrap() <= xi || deltas.len() >= 10_000 {
+            break;
+        }
+    }
+    let next = sweep(&theta);
+    (theta, next, deltas)
+}
+
+/// Every `greedy[d]` attains `max_u theta[d, u]` within `tol`.
+fn assert_maximisers(greedy: &[u32], theta: &[f64], m: usize, tol: f64) {
+    for (d, (&u, row)) in greedy.iter().zip(theta.chunks(m)).enumerate() {
+        let best = row.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert!(
+            row[u as usize] >= best - tol,
+            "core {d}: {row:?}, greedy {u}"
+        );
+    }
+}
+
+/// Terminal successors: the generic path is the brute-force iteration bit for bit (sweeps, V,
+/// greedy actions), the block path matches it to rounding, both with and without an absorbing
+/// goal and for action-dependent and state-only rewards; asynchronous sweeps reach the same
+/// fixed point.
+#[test]
+fn terminal_states_match_brute_force_on_every_path() {
+    for (dims, clamp_first) in [(1, false), (2, false), (2, true)] {
+        for action_reward in [true, false] {
+            for absorbing in [false, true] {
+                let m = Cliff {
+                    clamp_first,
+                    ..Cliff::<f64>::new(dims, action_reward)
+                };
+                let g = m.grid();
+                let nj = fuzzyq_core::model::joint_actions(&m).unwrap().n_joint();
+                let c = SolverConfig {
+                    absorbing_goal: absorbing,
+                    xi: 1e-6,
+                    // Ignored: terminal states break the shift property.
+                    extrapolate: true,
+                    ..config(BackupPath::Generic, SweepMode::Synchronous)
+                };
+                let (theta, theta_next, deltas) =
+                    brute_force_terminal(&m, &g, c.gamma, c.xi, absorbing);
+                let (v, _) = max_and_argmax(&theta, nj);
+                let (_, greedy) = max_and_argmax(&theta_next, nj);
+                let what = format!(
+                    "dims {dims}, clamp {clamp_first}, action reward {action_reward}, \
+                     absorbing {absorbing}"
+                );
+                let s = run(&m, &g, &c);
+                assert_eq!(s.path, BackupPath::Generic);
+                assert_eq!(s.sweeps.len(), deltas.len(), "{what}");
+                assert!(s.sweeps.iter().all(|r| !r.extrapolated), "{what}");
+                assert_eq!(s.v, v, "{what}: V is bit-identical");
+                if action_reward {
+                    assert_eq!(s.greedy, greedy, "{what}");
+                } else {
+                    // Decided on the expected value (see the solver's docs): a maximiser of
+                    // theta up to its rounding.
+                    assert_maximisers(&s.greedy, &theta_next, nj, 1e-12);
+                }
+                assert!(
+                    (s.final_delta - deltas.last().unwrap()).abs() < 1e-12,
+                    "{what}"
+                );
+                let b = run(
+                    &m,
+                    &g,
+                    &SolverConfig {
+                        path: BackupPath::Block,
+                        ..c
+                    },
+                );
+                assert_eq!(b.path, BackupPath::Block);
+                assert_eq!(b.sweeps.len(), deltas.len(), "{what}");
+                assert_close(&b.v, &v, 1e-10);
+                assert_maximisers(&b.greedy, &theta_next, nj, 1e-10);
+                for path in [BackupPath::Generic, BackupPath::Block] {
+                    let a = run(
+                        &m,
+                        &g,
+                        &SolverConfig {
+                            path,
+                            sweep: SweepMode::Asynchronous,
+                            ..c
+                        },
+                    );
+                    assert!(a.converged());
+                    assert!(max_diff(&a.v, &v) <= 2.0 * c.gamma / (1.0 - c.gamma) * c.xi);
+                }
+                // Terminal states matter here: not declaring them changes the fixed point.
+                let plain = Cliff {
+                    terminal: false,
+                    clamp_first,
+                    ..Cliff::new(dims, action_reward)
+                };
+                let p = run(&plain, &g, &c);
+                assert!(max_diff(&p.v, &v) > 0.1, "{what}");
+            }
+        }
+    }
+}
+
+/// On a model with blocks and terminal states, the block and generic backups, greedy actions
+/// and decisions at any state agree; every kernel instance and thread count gives the same
+/// bits.
+#[test]
+fn block_and_generic_agree_with_terminal_states() {
+    for (absorbing, clamp_first) in [(false, false), (true, false), (false, true), (true, true)] {
+        let m = Cliff {
+            clamp_first,
+            ..Cliff::<f64>::new(2, true)
+        };
+        let g = m.grid();
+        let backup = Backup {
+            gamma: 0.9,
+            absorbing_goal: absorbing,
+        };
+        let block = Operator::new(&m, g.view(), backup, BackupPath::Block).unwrap();
+        let generic = Operator::new(&m, g.view(), backup, BackupPath::Generic).unwrap();
+        let v = values::<f64>(g.n_cores(), 5, -20.0, 30.0);
+        assert_close(
+            &block.apply(&v).unwrap(),
+            &generic.apply(&v).unwrap(),
+            1e-12,
+        );
+        assert_eq!(block.greedy(&v).unwrap(), generic.greedy(&v).unwrap());
+        let (mut qb, mut qg) = (vec![0.0; 9], vec![0.0; 9]);
+        for x in values::<f64>(2 * 40, 9, -0.5, 4.5).chunks(2) {
+            block.q_values(&v, x, &mut qb).unwrap();
+            generic.q_values(&v, x, &mut qg).unwrap();
+            assert_close(&qb, &qg, 1e-12);
+        }
+        // At a core whose transitions all end, Q is the reward.
+        let x = [4.0, 4.0];
+        block.q_values(&v, &x, &mut qb).unwrap();
+        for (u, q) in qb.iter().enumerate() {
+            let mut a = [0.0; 2];
+            fuzzyq_core::model::joint_actions(&m)
+                .unwrap()
+                .vector(u, &mut a)
+                .unwrap();
+            if a[1] > 0.0 {
+                assert_eq!(*q, m.reward(&x, &a));
+            }
+        }
+    }
+    let m = Cliff::<f32>::new(2, true);
+    let g = m.grid();
+    let runs: Vec<Solution<f32>> = Kernel::ALL
+        .into_iter()
+        .filter(|k| k.is_available())
+        .flat_map(|k| {
+            let c = SolverConfig {
+                kernel: Some(k),
+                xi: 1e-4,
+                ..config(BackupPath::Block, SweepMode::Synchronous)
+            };
+            [1, 3].map(|n| with_threads(n, || run(&m, &g, &c)))
+        })
+        .collect();
+    for r in &runs[1..] {
+        assert_eq!(r.v, runs[0].v);
+        assert_eq!(r.greedy, runs[0].greedy);
+        assert_eq!(r.sweeps.len(), runs[0].sweeps.len());
+    }
+}
+
+/// A model that declares terminal states but never reaches one solves exactly as the model
+/// without the declaration, on both paths (the block path keeps its fused kernels).
+#[test]
+fn declared_but_unreached_terminal_states_change_nothing() {
+    struct Never(PointMass);
+    impl Model<f32> for Never {
+        fn state_dim(&self) -> usize {
+            Model::<f32>::state_dim(&self.0)
+        }
+        fn n_agents(&self) -> usize {
+            Model::<f32>::n_agents(&self.0)
+        }
+        fn action_set(&self, a: usize) -> ActionSet<'_, f32> {
+            self.0.action_set(a)
+        }
+        fn state_bounds(&self, d: usize) -> (f32, f32) {
+            self.0.state_bounds(d)
+        }
+        fn step(&self, x: &[f32], u: &[f32], next: &mut [f32]) {
+            self.0.step(x, u, next)
+        }
+        fn reward(&self, x: &[f32], u: &[f32]) -> f32 {
+            self.0.reward(x, u)
+        }
+        fn reward_depends_on_action(&self) -> bool {
+            Model::<f32>::reward_depends_on_action(&self.0)
+        }
+        fn is_terminal(&self, x: &[f32]) -> bool {
+            x.iter().any(|v| v.abs() > 100.0)
+        }
+        fn has_terminal_states(&self) -> bool {
+            true
+        }
+        fn n_blocks(&self) -> usize {
+            Model::<f32>::n_blocks(&self.0)
+        }
+        fn block(&self, b: usize) -> Block<'_> {
+            Model::<f32>::block(&self.0, b)
+        }
+    }
+    let (m, g) = medium_two_agent::<f32>();
+    let (_, small) = small_one_agent::<f32>();
+    let one = fuzzyq_tests::point_mass(1);
+    for (plain, wrapped, grid, path) in [
+        (&m, Never(m.clone()), &g, BackupPath::Block),
+        (&one, Never(one.clone()), &small, BackupPath::Generic),
+    ] {
+        let c = config(path, SweepMode::Synchronous);
+        let (a, b) = (run(plain, grid, &c), run(&wrapped, grid, &c));
+        assert_eq!(a.v, b.v, "{path:?}");
+        assert_eq!(a.greedy, b.greedy);
+        assert_eq!(a.sweeps.len(), b.sweeps.len());
+    }
+}
+
+/// A tabulated model's terminal successors get no memberships: it solves like the model it
+/// tabulates.
+#[test]
+fn tabulated_models_honour_terminal_states() {
+    use fuzzyq_core::Tabulated;
+    use fuzzyq_core::solver::TabulatedModel;
+    struct WithTerminals(TabulatedModel<f64>);
+    impl Model<f64> for WithTerminals {
+        fn state_dim(&self) -> usize {
+            self.0.state_dim()
+        }
+        fn n_agents(&self) -> usize {
+            self.0.n_agents()
+        }
+        fn action_set(&self, a: usize) -> ActionSet<'_, f64> {
+            self.0.action_set(a)
+        }
+        fn state_bounds(&self, d: usize) -> (f64, f64) {
+            self.0.state_bounds(d)
+        }
+        fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+            self.0.step(x, u, next)
+        }
+        fn reward(&self, x: &[f64], u: &[f64]) -> f64 {
+            self.0.reward(x, u)
+        }
+        fn is_terminal(&self, x: &[f64]) -> bool {
+            x.iter().any(|&v| !(0.0..=4.0).contains(&v))
+        }
+        fn has_terminal_states(&self) -> bool {
+            true
+        }
+        fn tabulated(&self) -> Option<Tabulated<'_, f64>> {
+            self.0.tabulated()
+        }
+    }
+    let m = Cliff::<f64>::new(2, true);
+    let g = m.grid();
+    let view = g.view();
+    let joint = fuzzyq_core::model::joint_actions(&m).unwrap();
+    let (n, mj, e) = (g.n_cores(), joint.n_joint(), g.n_dims());
+    let mut next = vec![0.0; n * mj * e];
+    let mut rewards = vec![0.0; n * mj];
+    let (mut x, mut u) = (vec![0.0; e], vec![0.0; 2]);
+    for d in 0..n {
+        view.core_state(d, &mut x).unwrap();
+        for a in 0..mj {
+            joint.vector(a, &mut u).unwrap();
+            let i = d * mj + a;
+            m.step(&x, &u, &mut next[i * e..(i + 1) * e]);
+            rewards[i] = m.reward(&x, &u);
+        }
+    }
+    let t = TabulatedModel::new(g.clone(), vec![(m.actions.clone(), 2)], next, rewards).unwrap();
+    let c = config(BackupPath::Generic, SweepMode::Synchronous);
+    let (a, b) = (run(&m, &g, &c), run(&WithTerminals(t), &g, &c));
+    assert_eq!(a.v, b.v);
+    assert_eq!(a.greedy, b.greedy);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// With terminal successors the backup is still a `gamma`-contraction on every path.
+    #[test]
+    fn terminal_backup_is_a_gamma_contraction(
+        seed in any::<u64>(),
+        gamma in 0.0..0.999f64,
+        absorbing in any::<bool>(),
+        generic in any::<bool>(),
+        action_reward in any::<bool>(),
+    ) {
+        let m = Cliff::<f64>::new(2, action_reward);
+        let g = m.grid();
+        let path = if generic { BackupPath::Generic } else { BackupPath::Block };
+        let op = Operator::new(&m, g.view(), Backup { gamma, absorbing_goal: absorbing }, path)
+            .unwrap();
+        let v1 = values::<f64>(g.n_cores(), seed, -100.0, 100.0);
+        let v2 = values::<f64>(g.n_cores(), seed ^ 0xABCD, -100.0, 100.0);
+        let lhs = max_diff(&op.apply(&v1).unwrap(), &op.apply(&v2).unwrap());
+        let rhs = gamma * max_diff(&v1, &v2);
+        prop_assert!(lhs <= rhs + 1e-9, "{lhs} > {rhs}");
+    }
+}

@@ -72,7 +72,7 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
         starts: args.starts,
         seed: args.seed,
         start_position: args.start_position,
-        ..CompareConfig::new(load_config(args.config.as_deref(), args.env)?)
+        ..CompareConfig::new(load_config(args.config.as_deref(), args.env, None)?)
     };
     if let Some(x0) = &args.x0 {
         c.x0 = parse_list(x0, "--x0")?;

@@ -37,6 +37,9 @@ enum Command {
         /// The environment.
         #[arg(long, value_enum, default_value_t = Env::Pointmass)]
         env: Env,
+        /// dcmotor, pendulum: the named grid, actions, gamma and xi [default: fine].
+        #[arg(long, value_name = "NAME")]
+        preset: Option<String>,
     },
 }
 
@@ -47,6 +50,14 @@ pub(crate) enum Env {
     Pointmass,
     /// Two Khepera IV robots with sonars (paper sections 3.2-3.3).
     Khepera,
+    /// The DC motor of the classic benchmarks (presets: toolbox-demo, fine).
+    Dcmotor,
+    /// The inverted pendulum swing-up (presets: toolbox-demo, fine).
+    Pendulum,
+    /// The car on the hill (presets: fine, coarse).
+    Carhill,
+    /// The two-link robot arm (presets: fine, coarse).
+    Arm,
 }
 
 impl Env {
@@ -54,6 +65,10 @@ impl Env {
         match self {
             Self::Pointmass => "pointmass",
             Self::Khepera => "khepera",
+            Self::Dcmotor => "dcmotor",
+            Self::Pendulum => "pendulum",
+            Self::Carhill => "carhill",
+            Self::Arm => "arm",
         }
     }
 }
@@ -105,8 +120,29 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Train(args) => train::run(args),
         Command::Rollout(args) => rollout::run(args),
         Command::Compare(args) => compare::run(args),
-        Command::Config { env } => {
-            print_stdout(fuzzyq_sim::config::TrainConfig::default_toml(env.name())?)?;
+        Command::Config { env, preset } => {
+            use fuzzyq_sim::config::TrainConfig;
+            match (env, preset) {
+                (Env::Pointmass | Env::Khepera, Some(_)) => {
+                    anyhow::bail!("--preset applies to --env dcmotor or pendulum only")
+                }
+                (Env::Pointmass | Env::Khepera, None) => {
+                    print_stdout(TrainConfig::default_toml(env.name())?)?;
+                }
+                (_, preset) => {
+                    let name = preset
+                        .as_deref()
+                        .unwrap_or(fuzzyq_sim::config::DEFAULT_PRESET);
+                    let c = TrainConfig::from_preset(env.name(), name)?;
+                    print_stdout(&format!(
+                        "# fuzzyq training configuration: {}, preset \"{name}\".\n\
+                         # Edit and pass back with `fuzzyq train --env {} --config FILE.toml`.\n\n{}",
+                        env.name(),
+                        env.name(),
+                        c.to_toml()
+                    ))?;
+                }
+            }
             Ok(())
         }
     }

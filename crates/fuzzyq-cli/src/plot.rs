@@ -25,6 +25,7 @@ use fuzzyq_sim::rollout::Trajectory;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
+use plotters::style::colors::colormaps::ViridisRGB;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 const FONT: &str = "sans-serif";
@@ -1509,6 +1510,185 @@ fn draw_compare<DB: DrawingBackend>(
             )))
             .map_err(err)?;
         legend_at(&mut chart, SeriesLabelPosition::LowerRight)?;
+    }
+    Ok(())
+}
+
+/// The time series of a classic benchmark's run: one panel per state variable, the action
+/// (held over each sample time) and the reward.
+pub(crate) fn series_figure(
+    path: &Path,
+    t: &Trajectory,
+    title: &str,
+    state_names: &[&str],
+    action_names: &[&str],
+) -> anyhow::Result<()> {
+    if t.states.is_empty() || t.actions.is_empty() {
+        bail!("cannot plot an empty run");
+    }
+    let panels = state_names.len() + action_names.len() + 1;
+    let cols = 2;
+    let rows = panels.div_ceil(cols);
+    let size = (1200, 360 * rows as u32 + 50);
+    write_figure(
+        path,
+        size,
+        |root| draw_series_figure(root, t, title, state_names, action_names, (rows, cols)),
+        |root| draw_series_figure(root, t, title, state_names, action_names, (rows, cols)),
+    )
+}
+
+fn draw_series_figure<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    t: &Trajectory,
+    title: &str,
+    state_names: &[&str],
+    action_names: &[&str],
+    layout: (usize, usize),
+) -> anyhow::Result<()> {
+    root.fill(&WHITE).map_err(err)?;
+    let root = titled(root, title)?;
+    let areas = root.split_evenly(layout);
+    let t_end = t.time(t.states.len() - 1).max(t.dt);
+    let mut panel = 0;
+    for (j, name) in state_names.iter().enumerate() {
+        let values: Vec<(f64, f64)> = t
+            .states
+            .iter()
+            .enumerate()
+            .map(|(k, x)| (t.time(k), x[j]))
+            .collect();
+        line_panel(&areas[panel], name, values, COLORS[j % COLORS.len()], t_end)?;
+        panel += 1;
+    }
+    for (j, name) in action_names.iter().enumerate() {
+        let values = steps(t.actions.iter().map(|u| u[j]), t.dt);
+        line_panel(
+            &areas[panel],
+            name,
+            values,
+            COLORS[(j + 2) % COLORS.len()],
+            t_end,
+        )?;
+        panel += 1;
+    }
+    let rewards = steps(t.rewards.iter().copied(), t.dt);
+    line_panel(&areas[panel], "reward", rewards, PURPLE, t_end)
+}
+
+/// One time series in its own panel.
+fn line_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    name: &str,
+    values: Vec<(f64, f64)>,
+    color: RGBColor,
+    t_end: f64,
+) -> anyhow::Result<()> {
+    let y = range(values.iter().map(|p| p.1));
+    let mut chart = time_chart(area, name, name, 0.0..t_end, y)?;
+    chart
+        .draw_series(LineSeries::new(values, color.stroke_width(2)))
+        .map_err(err)?;
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Heat maps over a 2-D state space (value function and policy of the classic benchmarks).
+
+/// One heat map: `values[j * xs.len() + i]` is the value at `(xs[i], ys[j])`, sampled on a
+/// regular lattice.
+pub(crate) struct HeatMap {
+    /// Panel caption.
+    pub caption: String,
+    /// Sample abscissae, increasing and evenly spaced.
+    pub xs: Vec<f64>,
+    /// Sample ordinates, increasing and evenly spaced.
+    pub ys: Vec<f64>,
+    /// Row-major samples (`ys` rows of `xs` values).
+    pub values: Vec<f64>,
+}
+
+/// Draws heat maps side by side, each with its own colour bar, into `path` (PNG or SVG).
+pub(crate) fn heat_maps_figure(
+    path: &Path,
+    title: &str,
+    axes: (&str, &str),
+    maps: &[HeatMap],
+) -> anyhow::Result<()> {
+    for m in maps {
+        if m.xs.len() < 2 || m.ys.len() < 2 || m.values.len() != m.xs.len() * m.ys.len() {
+            bail!(
+                "cannot draw a heat map of {} x {} samples",
+                m.xs.len(),
+                m.ys.len()
+            );
+        }
+    }
+    let size = (600 * maps.len().max(1) as u32 + 40, 560);
+    write_figure(
+        path,
+        size,
+        |root| draw_heat_maps(root, title, axes, maps),
+        |root| draw_heat_maps(root, title, axes, maps),
+    )
+}
+
+fn draw_heat_maps<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+    axes: (&str, &str),
+    maps: &[HeatMap],
+) -> anyhow::Result<()> {
+    root.fill(&WHITE).map_err(err)?;
+    let root = titled(root, title)?;
+    for (area, m) in root.split_evenly((1, maps.len())).iter().zip(maps) {
+        let (w, _) = area.dim_in_pixel();
+        let (plot, bar) = area.split_horizontally(w.saturating_sub(120));
+        let (dx, dy) = ((m.xs[1] - m.xs[0]) / 2.0, (m.ys[1] - m.ys[0]) / 2.0);
+        let (x0, x1) = (m.xs[0] - dx, m.xs[m.xs.len() - 1] + dx);
+        let (y0, y1) = (m.ys[0] - dy, m.ys[m.ys.len() - 1] + dy);
+        let mut chart = chart(&plot, &m.caption, axes, x0..x1, y0..y1)?;
+        let finite = m.values.iter().copied().filter(|v| v.is_finite());
+        let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+        let (lo, hi) = if lo.is_finite() && hi > lo {
+            (lo, hi)
+        } else {
+            (lo.min(0.0) - 0.5, lo.max(0.0) + 0.5)
+        };
+        let nx = m.xs.len();
+        chart
+            .draw_series(m.values.iter().enumerate().map(|(k, &v)| {
+                let (x, y) = (m.xs[k % nx], m.ys[k / nx]);
+                let c = ViridisRGB::get_color_normalized(v, lo, hi);
+                Rectangle::new([(x - dx, y - dy), (x + dx, y + dy)], c.filled())
+            }))
+            .map_err(err)?;
+        // The colour bar: 100 bands from lo (bottom) to hi (top), labelled on its right.
+        let mut bar_chart = ChartBuilder::on(&bar.margin(40, 40, 10, 5))
+            .build_cartesian_2d(0.0..3.0, lo..hi)
+            .map_err(err)?;
+        let step = (hi - lo) / 100.0;
+        bar_chart
+            .draw_series((0..100).map(|b| {
+                let v = lo + step * f64::from(b);
+                let c = ViridisRGB::get_color_normalized(v + step / 2.0, lo, hi);
+                Rectangle::new([(0.0, v), (1.0, v + step)], c.filled())
+            }))
+            .map_err(err)?;
+        let style = TextStyle::from((FONT, 13).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+        bar_chart
+            .draw_series((0..=4).map(|k| {
+                let v = lo + (hi - lo) * f64::from(k) / 4.0;
+                let text = if hi - lo >= 10.0 {
+                    format!("{v:.0}")
+                } else {
+                    format!("{v:.2}")
+                };
+                Text::new(text, (1.2, v), style.clone())
+            }))
+            .map_err(err)?;
     }
     Ok(())
 }

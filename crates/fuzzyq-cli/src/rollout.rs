@@ -59,6 +59,10 @@ pub(crate) struct RolloutArgs {
     /// Draw states and forces over time per agent and the paths in the plane (PNG or SVG).
     #[arg(long, value_name = "FILE.png|FILE.svg")]
     plot: Option<PathBuf>,
+    /// dcmotor, pendulum: draw the value function and the policy as heat maps over the state
+    /// space (PNG or SVG).
+    #[arg(long, value_name = "FILE.png|FILE.svg")]
+    maps: Option<PathBuf>,
     /// Write the metrics as JSON.
     #[arg(long, value_name = "METRICS.json")]
     json: Option<PathBuf>,
@@ -210,7 +214,229 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
             let policy = AnyPolicy::from_artifact(artifact)?;
             khepera(args, &Robots::Fqi(Box::new(policy)), &k)
         }
+        EnvConfig::Dcmotor(_)
+        | EnvConfig::Pendulum(_)
+        | EnvConfig::Carhill(_)
+        | EnvConfig::Arm(_) => classic(args, artifact),
     }
+}
+
+/// Runs `$body` with `$p` bound to the policy of either precision.
+macro_rules! with_policy {
+    ($policy:expr, $p:ident => $body:expr) => {
+        match $policy {
+            AnyPolicy::F32($p) => $body,
+            AnyPolicy::F64($p) => $body,
+        }
+    };
+}
+
+/// A classic benchmark's state and action names (figures, CSV) and its default start.
+fn classic_names(env: &str) -> (Vec<&'static str>, Vec<&'static str>, Vec<f64>) {
+    use std::f64::consts::PI;
+    match env {
+        "pendulum" => (
+            vec!["angle (rad, 0 = up)", "angular velocity (rad/s)"],
+            vec!["voltage (V)"],
+            vec![-PI, 0.0],
+        ),
+        "carhill" => (
+            vec!["position (m)", "velocity (m/s)"],
+            vec!["force (N)"],
+            vec![-0.5, 0.0],
+        ),
+        "arm" => (
+            vec![
+                "angle 1 (rad)",
+                "angular velocity 1 (rad/s)",
+                "angle 2 (rad)",
+                "angular velocity 2 (rad/s)",
+            ],
+            vec!["torque 1 (N m)", "torque 2 (N m)"],
+            vec![-1.0, 0.0, 1.0, 0.0],
+        ),
+        _ => (
+            vec!["angle (rad)", "angular velocity (rad/s)"],
+            vec!["voltage (V)"],
+            vec![-PI, 0.0],
+        ),
+    }
+}
+
+/// `fuzzyq rollout` on a classic benchmark's policy: one run (figure, CSV, metrics), the
+/// Monte-Carlo evaluation over a lattice of starts (`--starts N`), and heat maps of the value
+/// function and the policy (`--maps`).
+fn classic(args: RolloutArgs, artifact: PolicyArtifact) -> anyhow::Result<()> {
+    let env = artifact.config.env.name();
+    for (set, flag) in [
+        (args.headings.is_some(), "--headings"),
+        (args.plant.is_some(), "--plant"),
+        (args.radius.is_some(), "--radius"),
+        (args.seed.is_some(), "--seed"),
+    ] {
+        if set {
+            anyhow::bail!("{flag} does not apply to {env} policies");
+        }
+    }
+    let (state_names, action_names, default_x0) = classic_names(env);
+    if let Some(p) = &args.maps {
+        if state_names.len() != 2 {
+            anyhow::bail!(
+                "--maps draws 2-D state spaces; the {env} state has {} variables",
+                state_names.len()
+            );
+        }
+        plot::check_extension(p)?;
+        check_writable(p, "maps")?;
+    }
+    let kind = kind_of(&args);
+    // The toolbox's replays: 2 s for the motor, 3 s for the pendulum; 10 s for the car and
+    // the arm.
+    let steps = args.steps.unwrap_or(match env {
+        "pendulum" => 600,
+        "carhill" => 100,
+        "arm" => 200,
+        _ => 400,
+    });
+    let policy = AnyPolicy::from_artifact(artifact)?;
+    if let Some(p) = &args.maps {
+        let maps = with_policy!(&policy, p => value_and_policy_maps(p, kind)?);
+        plot::heat_maps_figure(
+            p,
+            &format!("{env}: value function and {} policy", kind.name()),
+            (state_names[0], state_names[1]),
+            &maps,
+        )?;
+    }
+    if let Some(n) = args.starts {
+        if args.x0.is_some() || args.csv.is_some() || args.plot.is_some() {
+            anyhow::bail!(
+                "--starts evaluates over a lattice of starts; --x0, --csv and --plot apply to one run"
+            );
+        }
+        let mc = with_policy!(&policy, p => {
+            let starts = fuzzyq_sim::evaluate::lattice(p.model(), n)?;
+            fuzzyq_sim::evaluate::monte_carlo(p, &starts, steps, kind)?
+        });
+        if let Some(p) = &args.json {
+            write_json(p, &mc)?;
+        }
+        if !args.quiet {
+            crate::print_stdout(&format!(
+                "{} policy, {} starts ({n} per state variable, over the state bounds), {steps} \
+                 steps each: mean discounted return {:.4} (min {:.4}, max {:.4})\n",
+                kind.name(),
+                mc.runs.len(),
+                mc.mean_return,
+                mc.min_return,
+                mc.max_return
+            ))?;
+        }
+        return Ok(());
+    }
+    let x0 = match &args.x0 {
+        Some(t) => parse_list(t, "--x0")?,
+        None => default_x0,
+    };
+    let (t, run) = with_policy!(&policy, p => fuzzyq_sim::evaluate::run(p, &x0, steps, kind)?);
+    if let Some(p) = &args.csv {
+        let mut out = String::from("t");
+        for i in 1..=state_names.len() {
+            let _ = write!(out, ",x{i}");
+        }
+        for i in 1..=action_names.len() {
+            let _ = write!(out, ",u{i}");
+        }
+        out.push_str(",reward\n");
+        for (k, x) in t.states.iter().enumerate() {
+            let _ = write!(out, "{}", t.time(k));
+            for v in x {
+                let _ = write!(out, ",{v}");
+            }
+            match (t.actions.get(k), t.rewards.get(k)) {
+                (Some(u), Some(r)) => {
+                    for v in u {
+                        let _ = write!(out, ",{v}");
+                    }
+                    let _ = writeln!(out, ",{r}");
+                }
+                _ => {
+                    out.push_str(&",".repeat(action_names.len() + 1));
+                    out.push('\n');
+                }
+            }
+        }
+        write_file(p, out.as_bytes(), "CSV")?;
+    }
+    if let Some(p) = &args.plot {
+        let title = format!("{env} ({} policy, T = {} s)", kind.name(), t.dt);
+        plot::series_figure(p, &t, &title, &state_names, &action_names)?;
+    }
+    if let Some(p) = &args.json {
+        write_json(p, &run)?;
+    }
+    if !args.quiet {
+        crate::print_stdout(&format!(
+            "{} policy, {} steps of {} s from {x0:?}{}: discounted return {:.4}, final state \
+             {:?}, V(x0) {:.4}\n",
+            kind.name(),
+            run.steps,
+            t.dt,
+            if run.terminal {
+                " (ended in a terminal state)"
+            } else {
+                ""
+            },
+            run.discounted_return,
+            run.final_state,
+            run.value_x0
+        ))?;
+    }
+    Ok(())
+}
+
+/// `V` and the policy's action sampled on a 101 x 101 lattice over a 2-D state space.
+fn value_and_policy_maps<T: fuzzyq_core::Real>(
+    p: &fuzzyq_sim::policy::Policy<T>,
+    kind: PolicyKind,
+) -> anyhow::Result<Vec<plot::HeatMap>>
+where
+    fuzzyq_sim::env::EnvModel: fuzzyq_core::Model<T>,
+{
+    use fuzzyq_core::Model;
+    const N: usize = 101;
+    let model = p.model();
+    let axis = |d: usize| {
+        let (lo, hi) = Model::<f64>::state_bounds(model, d);
+        (0..N)
+            .map(|i| lo + (hi - lo) * i as f64 / (N - 1) as f64)
+            .collect::<Vec<f64>>()
+    };
+    let (xs, ys) = (axis(0), axis(1));
+    let mut actor = p.actor(kind)?;
+    let mut u = vec![0.0; actor.action_dim()];
+    let (mut v, mut a) = (Vec::with_capacity(N * N), Vec::with_capacity(N * N));
+    for &y in &ys {
+        for &x in &xs {
+            v.push(p.value(&[x, y])?);
+            actor.act(&[x, y], &mut u)?;
+            a.push(u[0]);
+        }
+    }
+    Ok(vec![
+        plot::HeatMap {
+            caption: "V(x)".into(),
+            xs: xs.clone(),
+            ys: ys.clone(),
+            values: v,
+        },
+        plot::HeatMap {
+            caption: format!("{} action", kind.name()),
+            xs,
+            ys,
+            values: a,
+        },
+    ])
 }
 
 /// A trained point-mass policy: fuzzy Q-iteration, or a learner from samples.
@@ -265,6 +491,9 @@ fn kind_of(args: &RolloutArgs) -> PolicyKind {
 }
 
 fn point_mass(args: RolloutArgs, policy: PointMasses, agents: usize) -> anyhow::Result<()> {
+    if args.maps.is_some() {
+        anyhow::bail!("--maps applies to dcmotor and pendulum policies only");
+    }
     for (set, flag) in [
         (args.headings.is_some(), "--headings"),
         (args.starts.is_some(), "--starts"),
@@ -365,6 +594,9 @@ fn khepera(
 ) -> anyhow::Result<()> {
     if args.plant == Some(PlantArg::Model) {
         anyhow::bail!("--plant model: khepera policies run on the rapier plant only");
+    }
+    if args.maps.is_some() {
+        anyhow::bail!("--maps applies to dcmotor and pendulum policies only");
     }
     if args.radius.is_some() {
         anyhow::bail!("--radius applies to point-mass policies on --plant rapier only");

@@ -25,6 +25,10 @@ pub(crate) struct TrainArgs {
     /// A TOML configuration (see `fuzzyq config`); flags below override its values.
     #[arg(long, value_name = "FILE.toml")]
     config: Option<PathBuf>,
+    /// dcmotor, pendulum: the named grid, actions, gamma and xi (`toolbox-demo`: the
+    /// toolbox demo's coarse grid; `fine`: the toolbox's default fine grid) [default: fine].
+    #[arg(long, value_name = "NAME")]
+    preset: Option<String>,
     /// Discount factor in [0, 1).
     #[arg(long, value_name = "G")]
     gamma: Option<f64>,
@@ -162,15 +166,22 @@ struct Summary<'a> {
     extrapolated: &'a [usize],
 }
 
-/// The configuration file `path` (or the defaults of `env`), which must describe `env`.
-pub(crate) fn load_config(path: Option<&Path>, env: Env) -> anyhow::Result<TrainConfig> {
-    let config = match path {
-        Some(path) => {
+/// The configuration file `path` (or the defaults of `env`, or its named preset), which must
+/// describe `env`.
+pub(crate) fn load_config(
+    path: Option<&Path>,
+    env: Env,
+    preset: Option<&str>,
+) -> anyhow::Result<TrainConfig> {
+    let config = match (path, preset) {
+        (Some(_), Some(_)) => anyhow::bail!("give either --config or --preset, not both"),
+        (Some(path), None) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read config {}", path.display()))?;
             TrainConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))?
         }
-        None => TrainConfig::default_for(env.name())?,
+        (None, Some(p)) => TrainConfig::from_preset(env.name(), p)?,
+        (None, None) => TrainConfig::default_for(env.name())?,
     };
     if config.env.name() != env.name() {
         anyhow::bail!(
@@ -183,13 +194,11 @@ pub(crate) fn load_config(path: Option<&Path>, env: Env) -> anyhow::Result<Train
 }
 
 fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
-    let mut config = load_config(args.config.as_deref(), args.env)?;
+    let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
     if let Some(path) = &args.arena {
         match &mut config.env {
             EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::arena::Arena::from_file(path)?,
-            EnvConfig::Pointmass(_) => {
-                anyhow::bail!("--arena applies to --env khepera only")
-            }
+            _ => anyhow::bail!("--arena applies to --env khepera only"),
         }
     }
     let s = &mut config.solver;
@@ -304,6 +313,10 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let joint = match &config.env {
         EnvConfig::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
         EnvConfig::Khepera(k) => fuzzyq_sim::khepera::N_ACTIONS.pow(k.agents as u32),
+        EnvConfig::Dcmotor(c) => c.actions.len(),
+        EnvConfig::Pendulum(c) => c.actions.len(),
+        EnvConfig::Carhill(c) => c.actions.len(),
+        EnvConfig::Arm(c) => c.actions.len().pow(2),
     };
     let tty = std::io::stderr().is_terminal();
     if !args.quiet {
@@ -445,6 +458,17 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
         ),
         (EnvConfig::Khepera(_), _) => {
             anyhow::bail!("--learner vqql is available for --env pointmass only")
+        }
+        (
+            EnvConfig::Dcmotor(_)
+            | EnvConfig::Pendulum(_)
+            | EnvConfig::Carhill(_)
+            | EnvConfig::Arm(_),
+            _,
+        ) => {
+            anyhow::bail!(
+                "--learner fql and vqql are available for --env pointmass and khepera only"
+            )
         }
         (EnvConfig::Pointmass(p), learner) => {
             let model = Box::new(fuzzyq_sim::PointMass::new(p.clone())?);

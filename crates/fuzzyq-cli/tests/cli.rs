@@ -674,3 +674,131 @@ fn point_mass_learners_from_samples_train_and_roll_out() {
     );
     assert!(!d.join("z.toml").exists());
 }
+
+#[test]
+fn classic_benchmarks_train_roll_out_and_evaluate() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for env in ["dcmotor", "pendulum"] {
+        let o = fuzzyq(&["config", "--env", env, "--preset", "toolbox-demo"], d);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = String::from_utf8(o.stdout).unwrap();
+        assert!(text.contains(&format!("kind = \"{env}\"")), "{text}");
+        std::fs::write(d.join("c.toml"), &text).unwrap();
+        let o = fuzzyq(
+            &[
+                "train", "--env", env, "--config", "c.toml", "--out", "p.fzq", "--json", "t.json",
+                "-q",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let t = json(&d.join("t.json"));
+        assert_eq!(t["converged"], true);
+        let o = fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                "p.fzq",
+                "--x0=-1,0",
+                "--steps",
+                "100",
+                "--plot",
+                "r.png",
+                "--maps",
+                "m.png",
+                "--csv",
+                "r.csv",
+                "--json",
+                "r.json",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(d.join("r.png").is_file() && d.join("m.png").is_file());
+        assert_eq!(
+            std::fs::read_to_string(d.join("r.csv"))
+                .unwrap()
+                .lines()
+                .count(),
+            102
+        );
+        let r = json(&d.join("r.json"));
+        assert_eq!(r["steps"], 100);
+        assert!(r["return"].as_f64().unwrap() < 0.0);
+        let o = fuzzyq(
+            &[
+                "rollout", "--policy", "p.fzq", "--starts", "3", "--steps", "50", "--json",
+                "mc.json",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let mc = json(&d.join("mc.json"));
+        assert_eq!(mc["runs"].as_array().unwrap().len(), 9);
+        for (args, needle) in [
+            (vec!["--x0=9,0"], "outside the state range"),
+            (vec!["--x0=1"], "needs 2 values"),
+            (vec!["--plant", "rapier"], "--plant does not apply"),
+            (vec!["--starts", "1"], "at least 2 values"),
+            (vec!["--starts", "3", "--x0=0,0"], "--starts evaluates"),
+        ] {
+            let mut all = vec!["rollout", "--policy", "p.fzq"];
+            all.extend(args);
+            assert_fails(&fuzzyq(&all, d), needle);
+        }
+    }
+    // The car ends its run at the top of the hill; the arm has a 4-D state and two torques.
+    for (env, x0, cols) in [("carhill", "--x0=-0.5,0", 5), ("arm", "--x0=-1,0,1,0", 8)] {
+        let o = fuzzyq(
+            &[
+                "train", "--env", env, "--preset", "coarse", "--out", "p.fzq", "-q",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{env}: {}", stderr(&o));
+        let o = fuzzyq(
+            &[
+                "rollout", "--policy", "p.fzq", x0, "--plot", "r.png", "--csv", "r.csv", "--json",
+                "r.json",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{env}: {}", stderr(&o));
+        let csv = std::fs::read_to_string(d.join("r.csv")).unwrap();
+        assert_eq!(
+            csv.lines().next().unwrap().split(',').count(),
+            cols,
+            "{csv}"
+        );
+        let r = json(&d.join("r.json"));
+        if env == "carhill" {
+            assert_eq!(r["terminal"], true, "{r}");
+            assert!(r["return"].as_f64().unwrap() > 0.0, "{r}");
+        } else {
+            assert_fails(
+                &fuzzyq(&["rollout", "--policy", "p.fzq", "--maps", "m.png"], d),
+                "2-D",
+            );
+        }
+    }
+    assert_fails(
+        &fuzzyq(&["config", "--env", "dcmotor", "--preset", "huge"], d),
+        "unknown DC motor preset",
+    );
+    assert_fails(
+        &fuzzyq(&["config", "--env", "pointmass", "--preset", "fine"], d),
+        "--preset applies",
+    );
+    assert_fails(
+        &fuzzyq(
+            &[
+                "train", "--env", "dcmotor", "--preset", "fine", "--config", "c.toml", "--out",
+                "x.fzq",
+            ],
+            d,
+        ),
+        "either --config or --preset",
+    );
+    assert!(!d.join("x.fzq").exists());
+}

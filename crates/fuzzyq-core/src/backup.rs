@@ -6,7 +6,8 @@
 //! compute the expectation `V~(f(x_d, u))` live here:
 //!
 //! - the **generic** path, [`expected_values`]: step the model, find the successor's at most
-//!   `2^E` active cores, sum. Works for any model.
+//!   `2^E` active cores, sum (zero for a [terminal](Model::is_terminal) successor). Works for
+//!   any model.
 //! - the **block** path, [`contract`]: when the model declares independent dynamics blocks,
 //!   the successor memberships factor into per-block tables and the expectation over all cores
 //!   and joint actions is a sequence of small sparse products, one block at a time. The solver
@@ -38,10 +39,13 @@ pub const fn scratch_len(state_dim: usize, action_dim: usize) -> usize {
     2 * state_dim + action_dim
 }
 
-/// Generic path: `ev[u] = V~(f(x, u))` for every joint action `u` (`ev.len() == M`).
+/// Generic path: `ev[u] = V~(f(x, u))` for every joint action `u` (`ev.len() == M`), and
+/// `ev[u] = 0` when the successor is terminal ([`Model::is_terminal`], for a model that
+/// [declares terminal states](Model::has_terminal_states)).
 ///
-/// `scratch` needs `E + A` entries (see [`scratch_len`]). The successor states come from the model, which
-/// must keep them finite; a non-finite successor is reported as an error.
+/// `scratch` needs `E + A` entries (see [`scratch_len`]). The successor states come from the
+/// model, which must keep them finite; a non-finite successor is reported as an error (unless
+/// the model calls it terminal: its value is not used then).
 pub fn expected_values<T: Real, M: Model<T> + ?Sized>(
     model: &M,
     grid: &ProductPartition<'_, T>,
@@ -58,17 +62,23 @@ pub fn expected_values<T: Real, M: Model<T> + ?Sized>(
     check_at_least("scratch", e + joint.dim(), scratch.len())?;
     let (next, rest) = scratch.split_at_mut(e);
     let uvec = &mut rest[..joint.dim()];
+    let terminal = model.has_terminal_states();
     for (u, out) in ev.iter_mut().enumerate() {
         joint.vector_unchecked(u, uvec);
         model.step(x, uvec, next);
-        *out = grid.active(next)?.interpolate(v);
+        *out = if terminal && model.is_terminal(next) {
+            T::ZERO
+        } else {
+            grid.active(next)?.interpolate(v)
+        };
     }
     Ok(())
 }
 
 /// `out[u] = Q(x, u) = sum_d mu_d(x) theta[d, u]` for the `joint` layout when only `V` is
 /// stored: each active core's row is recomputed from the model,
-/// `theta[d, u] = rho(x_d, u) + gamma V~(f(x_d, u))` (only `rho` for an absorbing goal core).
+/// `theta[d, u] = rho(x_d, u) + gamma V~(f(x_d, u))` (only `rho` for an absorbing goal core or
+/// a terminal successor).
 ///
 /// `row` (length `M`) and `scratch` ([`scratch_len`]) are work buffers. Cost: up to `2^E`
 /// active cores times `M` model steps times `2^E` look-ups; the solver's block structure gives

@@ -16,6 +16,12 @@
 //!
 //! For the gather-free fast path, declare blocks in the order of the joint action's mixed
 //! radix, slowest first (for point masses: agent 1 x, agent 1 y, agent 2 x, ...).
+//!
+//! # Terminal states
+//! An episodic model declares [terminal states](Model::is_terminal): a transition into one is
+//! worth its reward and nothing after it. This is independent of the blocks (the block backup
+//! handles terminal transitions as a correction, see `solver`) and of the absorbing-goal option
+//! ([`Model::is_goal`]).
 
 use crate::action::{ActionSet, JointActions, MAX_AGENTS};
 use crate::error::EvalError;
@@ -74,8 +80,41 @@ pub trait Model<T: Real> {
 
     /// Whether `x` is a goal state. With the absorbing-goal option of the solver, a goal state
     /// collects its reward and then nothing (zero future value). Rollout metrics also use it.
+    ///
+    /// See [`is_terminal`](Self::is_terminal) for how this differs from a terminal state.
     fn is_goal(&self, x: &[T]) -> bool {
         let _ = x;
+        false
+    }
+
+    /// Whether `x` is a **terminal** state: an episode ends on reaching it, so a transition
+    /// *into* it is worth its reward and no future value,
+    /// `theta[d, u] = rho(x_d, u) + gamma * (0 if f(x_d, u) is terminal else V~(f(x_d, u)))`
+    /// (Busoniu et al. 2010, ch. 4; the ApproxRL toolbox's `cfg.term = 'zero'`). The car on
+    /// the hill, for instance, ends when the car leaves `|p| <= 1` or `|p'| <= 3`.
+    ///
+    /// Terminal states are consulted only when [`has_terminal_states`](Self::has_terminal_states)
+    /// returns `true`; override both together.
+    ///
+    /// **Terminal versus goal.** The two are independent:
+    /// - terminality is a property of the *successor* `f(x_d, u)` of a transition and is part
+    ///   of the model: whenever the model declares terminal states, every backup (generic,
+    ///   block, tabulated, greedy and `Q(x, .)` evaluation, asynchronous sweeps) drops the
+    ///   future value of transitions that end in one. The successor is usually off the grid's
+    ///   cores and its own value is never used.
+    /// - [`is_goal`](Self::is_goal) is a property of the *current* state `x_d` (a core) and
+    ///   only matters with the solver's absorbing-goal option: a goal core keeps
+    ///   `theta[d, u] = rho(x_d, u)` for every action, whatever its successor.
+    fn is_terminal(&self, x: &[T]) -> bool {
+        let _ = x;
+        false
+    }
+
+    /// Whether the model has terminal states ([`is_terminal`](Self::is_terminal)). When it
+    /// does not (the default), the solver never calls `is_terminal`, and the block backup
+    /// keeps its fused fast path everywhere. When it does, the backup is no longer a shift
+    /// commuting operator, so the solver does not extrapolate (like with an absorbing goal).
+    fn has_terminal_states(&self) -> bool {
         false
     }
 

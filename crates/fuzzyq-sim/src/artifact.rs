@@ -195,6 +195,10 @@ impl PolicyArtifact {
         match &self.config.env {
             crate::config::EnvConfig::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
             crate::config::EnvConfig::Khepera(k) => crate::khepera::N_ACTIONS.pow(k.agents as u32),
+            crate::config::EnvConfig::Dcmotor(c) => c.actions.len(),
+            crate::config::EnvConfig::Pendulum(c) => c.actions.len(),
+            crate::config::EnvConfig::Carhill(c) => c.actions.len(),
+            crate::config::EnvConfig::Arm(c) => c.actions.len().pow(2),
         }
     }
 

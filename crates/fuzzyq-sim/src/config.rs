@@ -6,6 +6,10 @@ use fuzzyq_core::Partition;
 use fuzzyq_core::solver::{BackupPath, SolverConfig, SweepMode};
 use serde::{Deserialize, Serialize};
 
+use crate::classic::arm::ArmConfig;
+use crate::classic::carhill::CarHillConfig;
+use crate::classic::dcmotor::DcMotorConfig;
+use crate::classic::pendulum::PendulumConfig;
 use crate::error::ConfigError;
 use crate::khepera::KheperaConfig;
 use crate::pointmass::PointMassConfig;
@@ -123,7 +127,39 @@ pub enum EnvConfig {
     Pointmass(PointMassConfig),
     /// Khepera IV robots (sections 3.2-3.3).
     Khepera(KheperaConfig),
+    /// The DC motor of the classic benchmarks ([`crate::classic::dcmotor`]).
+    Dcmotor(ClassicEnv<DcMotorConfig>),
+    /// The inverted pendulum swing-up ([`crate::classic::pendulum`]).
+    Pendulum(ClassicEnv<PendulumConfig>),
+    /// The car on the hill ([`crate::classic::carhill`]).
+    Carhill(ClassicEnv<CarHillConfig>),
+    /// The two-link robot arm ([`crate::classic::arm`]); its `actions` are torque levels as
+    /// fractions of each joint's maximum torque, combined per joint.
+    Arm(ClassicEnv<ArmConfig>),
 }
+
+/// A classic single-agent benchmark in a config file: its discrete actions under `[env]`, its
+/// physical parameters under `[env.model]` (every field optional, defaulting to the classic
+/// values). Its grid is given explicitly as `[grid] cores = [[...], [...]]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClassicEnv<C> {
+    /// The discrete actions, increasing.
+    pub actions: Vec<f64>,
+    /// The model's parameters.
+    #[serde(default)]
+    pub model: C,
+}
+
+/// The names `--env` accepts.
+pub const ENV_NAMES: [&str; 6] = [
+    "pointmass",
+    "khepera",
+    "dcmotor",
+    "pendulum",
+    "carhill",
+    "arm",
+];
 
 impl EnvConfig {
     /// The name used on the command line (`--env`).
@@ -132,6 +168,30 @@ impl EnvConfig {
         match self {
             Self::Pointmass(_) => "pointmass",
             Self::Khepera(_) => "khepera",
+            Self::Dcmotor(_) => "dcmotor",
+            Self::Pendulum(_) => "pendulum",
+            Self::Carhill(_) => "carhill",
+            Self::Arm(_) => "arm",
+        }
+    }
+
+    /// Whether this is a classic single-agent benchmark (explicit grid, presets).
+    #[must_use]
+    pub fn is_classic(&self) -> bool {
+        matches!(
+            self,
+            Self::Dcmotor(_) | Self::Pendulum(_) | Self::Carhill(_) | Self::Arm(_)
+        )
+    }
+
+    /// Length of the state vector.
+    #[must_use]
+    pub fn state_dim(&self) -> usize {
+        match self {
+            Self::Pointmass(p) => p.state_dim(),
+            Self::Khepera(k) => k.state_dim(),
+            Self::Dcmotor(_) | Self::Pendulum(_) | Self::Carhill(_) => 2,
+            Self::Arm(_) => 4,
         }
     }
 }
@@ -141,7 +201,8 @@ impl EnvConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GridConfig {
-    /// Cores of every position variable (m).
+    /// Cores of every position variable (m; point masses and robots).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub position_cores: Vec<f64>,
     /// Cores of every velocity variable (m/s; point masses).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -375,11 +436,73 @@ impl TrainConfig {
         match env {
             "pointmass" => Ok(Self::default()),
             "khepera" => Self::from_toml(DEFAULT_KHEPERA_TOML),
-            other => Err(ConfigError::invalid(
-                "env",
-                format!("unknown environment {other:?} (expected pointmass or khepera)"),
-            )),
+            "dcmotor" | "pendulum" | "carhill" | "arm" => Self::from_preset(env, DEFAULT_PRESET),
+            other => Err(unknown_env(other)),
         }
+    }
+
+    /// A classic benchmark (`dcmotor`, `pendulum`) with the named preset's grid, actions,
+    /// `gamma` and `xi`, the classic model parameters, and the toolbox's iteration
+    /// (synchronous plain sweeps, at most 1000).
+    pub fn from_preset(env: &str, preset: &str) -> Result<Self, ConfigError> {
+        use crate::classic::{arm, carhill, dcmotor, pendulum};
+        let (p, env) = match env {
+            "dcmotor" => {
+                let p = dcmotor::preset(preset)?;
+                let env = EnvConfig::Dcmotor(ClassicEnv {
+                    actions: p.actions.clone(),
+                    model: DcMotorConfig::default(),
+                });
+                (p, env)
+            }
+            "pendulum" => {
+                let p = pendulum::preset(preset)?;
+                let env = EnvConfig::Pendulum(ClassicEnv {
+                    actions: p.actions.clone(),
+                    model: PendulumConfig::default(),
+                });
+                (p, env)
+            }
+            "carhill" => {
+                let p = carhill::preset(preset)?;
+                let env = EnvConfig::Carhill(ClassicEnv {
+                    actions: p.actions.clone(),
+                    model: CarHillConfig::default(),
+                });
+                (p, env)
+            }
+            "arm" => {
+                let p = arm::preset(preset)?;
+                let env = EnvConfig::Arm(ClassicEnv {
+                    actions: p.actions.clone(),
+                    model: ArmConfig::default(),
+                });
+                (p, env)
+            }
+            "pointmass" | "khepera" => {
+                return Err(ConfigError::invalid(
+                    "preset",
+                    format!("applies to the classic benchmarks, not {env}"),
+                ));
+            }
+            other => return Err(unknown_env(other)),
+        };
+        let mut grid = GridConfig::explicit(p.cores);
+        grid.position_cores.clear();
+        grid.velocity_cores.clear();
+        let c = Self {
+            env,
+            grid,
+            solver: SolverSettings {
+                gamma: p.gamma,
+                xi: p.xi,
+                extrapolate: false,
+                precision: Precision::F64,
+                ..SolverSettings::default()
+            },
+        };
+        c.validate()?;
+        Ok(c)
     }
 
     /// The commented default TOML of environment `env`.
@@ -387,12 +510,26 @@ impl TrainConfig {
         match env {
             "pointmass" => Ok(DEFAULT_POINTMASS_TOML),
             "khepera" => Ok(DEFAULT_KHEPERA_TOML),
-            other => Err(ConfigError::invalid(
+            "dcmotor" | "pendulum" | "carhill" | "arm" => Err(ConfigError::invalid(
                 "env",
-                format!("unknown environment {other:?} (expected pointmass or khepera)"),
+                format!("{env} has presets: see TrainConfig::from_preset"),
             )),
+            other => Err(unknown_env(other)),
         }
     }
+}
+
+/// The preset of a classic benchmark when none is named: the toolbox's default fine grid.
+pub const DEFAULT_PRESET: &str = "fine";
+
+fn unknown_env(name: &str) -> ConfigError {
+    ConfigError::invalid(
+        "env",
+        format!(
+            "unknown environment {name:?} (expected {})",
+            ENV_NAMES.join(", ")
+        ),
+    )
 }
 
 /// The default number of heading divisions of the Khepera grid.
@@ -441,6 +578,22 @@ impl TrainConfig {
                     ));
                 }
             }
+            EnvConfig::Dcmotor(c) => {
+                c.model.validate()?;
+                crate::classic::validate_actions("env.actions", &c.actions)?;
+            }
+            EnvConfig::Pendulum(c) => {
+                c.model.validate()?;
+                crate::classic::validate_actions("env.actions", &c.actions)?;
+            }
+            EnvConfig::Carhill(c) => {
+                c.model.validate()?;
+                crate::classic::validate_actions("env.actions", &c.actions)?;
+            }
+            EnvConfig::Arm(c) => {
+                c.model.validate()?;
+                crate::classic::validate_actions("env.actions", &c.actions)?;
+            }
             EnvConfig::Khepera(k) => {
                 k.validate()?;
                 if let Some(d) = self.grid.heading_divisions
@@ -453,12 +606,27 @@ impl TrainConfig {
                 }
             }
         }
-        check_cores("grid.position_cores", &self.grid.position_cores)?;
+        if self.env.is_classic() {
+            if self.grid.cores.is_none() {
+                return Err(ConfigError::invalid(
+                    "grid.cores",
+                    format!(
+                        "the {} environment needs its cores given per state variable",
+                        self.env.name()
+                    ),
+                ));
+            }
+            if self.grid.heading_divisions.is_some() {
+                return Err(ConfigError::invalid(
+                    "grid.heading_divisions",
+                    "applies to the khepera environment only",
+                ));
+            }
+        } else {
+            check_cores("grid.position_cores", &self.grid.position_cores)?;
+        }
         if let Some(cores) = &self.grid.cores {
-            let want = match &self.env {
-                EnvConfig::Pointmass(p) => p.state_dim(),
-                EnvConfig::Khepera(k) => k.state_dim(),
-            };
+            let want = self.env.state_dim();
             if cores.len() != want {
                 return Err(ConfigError::invalid(
                     "grid.cores",
@@ -503,6 +671,10 @@ impl TrainConfig {
                     ]
                 })
                 .collect(),
+            EnvConfig::Dcmotor(_)
+            | EnvConfig::Pendulum(_)
+            | EnvConfig::Carhill(_)
+            | EnvConfig::Arm(_) => Vec::new(),
             EnvConfig::Khepera(k) => {
                 let d = self
                     .grid

@@ -5,6 +5,10 @@
 
 use fuzzyq_core::{ActionSet, Block, Model, Tabulated};
 
+use crate::classic::arm::Arm;
+use crate::classic::carhill::CarHill;
+use crate::classic::dcmotor::DcMotor;
+use crate::classic::pendulum::Pendulum;
 use crate::khepera::KheperaModel;
 use crate::pointmass::PointMass;
 
@@ -15,6 +19,14 @@ pub enum EnvModel {
     PointMass(PointMass),
     /// Khepera IV robots (sections 3.2-3.3).
     Khepera(KheperaModel),
+    /// The DC motor benchmark.
+    DcMotor(DcMotor),
+    /// The inverted pendulum swing-up benchmark.
+    Pendulum(Pendulum),
+    /// The car on the hill benchmark.
+    CarHill(CarHill),
+    /// The two-link robot arm benchmark.
+    Arm(Arm),
 }
 
 impl EnvModel {
@@ -23,7 +35,7 @@ impl EnvModel {
     pub fn point_mass(&self) -> Option<&PointMass> {
         match self {
             Self::PointMass(m) => Some(m),
-            Self::Khepera(_) => None,
+            _ => None,
         }
     }
 
@@ -32,7 +44,7 @@ impl EnvModel {
     pub fn khepera(&self) -> Option<&KheperaModel> {
         match self {
             Self::Khepera(m) => Some(m),
-            Self::PointMass(_) => None,
+            _ => None,
         }
     }
 
@@ -42,6 +54,23 @@ impl EnvModel {
         match self {
             Self::PointMass(_) => "pointmass",
             Self::Khepera(_) => "khepera",
+            Self::DcMotor(_) => "dcmotor",
+            Self::Pendulum(_) => "pendulum",
+            Self::CarHill(_) => "carhill",
+            Self::Arm(_) => "arm",
+        }
+    }
+
+    /// The sample time of one step (s).
+    #[must_use]
+    pub fn sample_time(&self) -> f64 {
+        match self {
+            Self::PointMass(m) => m.config().sample_time,
+            Self::Khepera(m) => m.config().sample_time,
+            Self::DcMotor(m) => m.config().sample_time,
+            Self::Pendulum(m) => m.config().sample_time,
+            Self::CarHill(m) => m.config().sample_time,
+            Self::Arm(m) => m.config().sample_time,
         }
     }
 }
@@ -51,6 +80,10 @@ macro_rules! dispatch {
         match $self {
             EnvModel::PointMass($m) => $e,
             EnvModel::Khepera($m) => $e,
+            EnvModel::DcMotor($m) => $e,
+            EnvModel::Pendulum($m) => $e,
+            EnvModel::CarHill($m) => $e,
+            EnvModel::Arm($m) => $e,
         }
     };
 }
@@ -81,6 +114,12 @@ macro_rules! impl_model {
             }
             fn is_goal(&self, x: &[$t]) -> bool {
                 dispatch!(self, m => Model::<$t>::is_goal(m, x))
+            }
+            fn is_terminal(&self, x: &[$t]) -> bool {
+                dispatch!(self, m => Model::<$t>::is_terminal(m, x))
+            }
+            fn has_terminal_states(&self) -> bool {
+                dispatch!(self, m => Model::<$t>::has_terminal_states(m))
             }
             fn n_blocks(&self) -> usize {
                 dispatch!(self, m => Model::<$t>::n_blocks(m))

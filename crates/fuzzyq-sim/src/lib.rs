@@ -3,6 +3,8 @@
 //! Models and environments for fuzzyq, and the glue from a configuration to a trained policy
 //! and back to actions:
 //!
+//! - [`classic`]: the classic single-agent benchmarks of Busoniu et al. 2010 (ApproxRL): the DC
+//!   motor and the inverted pendulum swing-up, with the toolbox's grids as presets;
 //! - [`pointmass`]: the paper's point-mass task (section 3.1) for `n` agents, with the exact
 //!   zero-order-hold step or RK4 for a position-dependent friction, declaring its independent
 //!   dynamics blocks to the solver;
@@ -12,6 +14,7 @@
 //! - [`policy`] and [`rollout`]: greedy and interpolated policies, simulated runs and their
 //!   metrics.
 //! - [`fql`]: model-free fuzzy Q-learning (section 2.5) on any episodic [`fql::Environment`].
+//! - [`evaluate`]: rollouts and Monte-Carlo evaluation of a policy on any environment.
 //! - [`compare`]: the paper's Table 1 rerun: fuzzy and crisp learners side by side.
 //! - [`khepera_fql`]: model-free fuzzy Q-learning of the Khepera task on the rapier plant.
 //! - [`pointmass_fql`]: the point-mass task as a model-free environment, its fuzzy features,
@@ -50,10 +53,12 @@
 
 pub mod arena;
 pub mod artifact;
+pub mod classic;
 pub mod compare;
 pub mod config;
 pub mod env;
 pub mod error;
+pub mod evaluate;
 pub mod fql;
 pub mod khepera;
 pub mod khepera_fql;

@@ -68,25 +68,7 @@ pub struct RolloutMetrics {
 
 /// Checks an initial state against the model's state space.
 pub fn check_x0(model: &PointMass, x0: &[f64]) -> Result<(), SimError> {
-    let n = Model::<f64>::state_dim(model);
-    if x0.len() != n {
-        return Err(ConfigError::invalid(
-            "x0",
-            format!("needs {n} values (the state length), got {}", x0.len()),
-        )
-        .into());
-    }
-    for (i, &v) in x0.iter().enumerate() {
-        let (lo, hi) = Model::<f64>::state_bounds(model, i);
-        if !(v >= lo && v <= hi) {
-            return Err(ConfigError::invalid(
-                "x0",
-                format!("x0[{i}] = {v} is outside the state range [{lo}, {hi}]"),
-            )
-            .into());
-        }
-    }
-    Ok(())
+    crate::evaluate::check_state(model, x0)
 }
 
 /// The point-mass model of a policy, or an error naming the policy's environment.

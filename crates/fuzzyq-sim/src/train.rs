@@ -6,6 +6,10 @@ use fuzzyq_core::Real;
 use fuzzyq_core::solver::{self, Grid, Progress, Solution};
 
 use crate::artifact::{PolicyArtifact, TrainSummary, Values};
+use crate::classic::arm::Arm;
+use crate::classic::carhill::CarHill;
+use crate::classic::dcmotor::DcMotor;
+use crate::classic::pendulum::Pendulum;
 use crate::config::{EnvConfig, Precision, TrainConfig};
 use crate::env::EnvModel;
 use crate::error::SimError;
@@ -17,6 +21,18 @@ pub fn build_model(config: &TrainConfig) -> Result<EnvModel, SimError> {
     match &config.env {
         EnvConfig::Pointmass(p) => Ok(EnvModel::PointMass(PointMass::new(p.clone())?)),
         EnvConfig::Khepera(k) => Ok(EnvModel::Khepera(KheperaModel::new(k.clone())?)),
+        EnvConfig::Dcmotor(c) => Ok(EnvModel::DcMotor(
+            DcMotor::new(c.model.clone())?.with_actions(&c.actions)?,
+        )),
+        EnvConfig::Pendulum(c) => Ok(EnvModel::Pendulum(
+            Pendulum::new(c.model.clone())?.with_actions(&c.actions)?,
+        )),
+        EnvConfig::Carhill(c) => Ok(EnvModel::CarHill(
+            CarHill::new(c.model.clone())?.with_actions(&c.actions)?,
+        )),
+        EnvConfig::Arm(c) => Ok(EnvModel::Arm(
+            Arm::new(c.model.clone())?.with_levels(&c.actions)?,
+        )),
     }
 }
 

@@ -21,6 +21,15 @@
 //! action index `p = sum_b a_b prod_{i<b} |A_i|`, which equals the joint index when the blocks
 //! were declared in the joint action's radix order (no gather is needed then).
 //!
+//! # Terminal states
+//! A terminal test on the joint successor does not factor over blocks. For a model that
+//! declares terminal states, the tables also keep every block row's successor, and a one-time
+//! scan assembles the joint successor of every (core, joint action) pair from them and records
+//! the terminal pairs per core. Slabs without terminal pairs run exactly as before (fused last
+//! stage); the others deliver full rows, whose terminal entries are set to 0 before the
+//! reduction. [`BlockOperator::q_values`] takes the terminal pairs of the active cores back
+//! out, as it does for absorbing goal cores.
+//!
 //! Cost per sweep on the paper grid (4 blocks of 45 cores and 5 actions, at most 4 successor
 //! entries per row): about 1.25e10 multiply-adds, 82% of them in the last stage.
 
@@ -46,6 +55,9 @@ struct BlockTable<T> {
     grid_offset: Vec<usize>,
     /// One row per (block core, block action): the successor's memberships.
     rows: RowsBuf<T>,
+    /// The block's successor values per (block core, block action), `dims.len()` each; kept
+    /// only for a model with terminal states.
+    succ: Vec<T>,
 }
 
 impl<T: Real> BlockTable<T> {
@@ -107,10 +119,21 @@ pub(super) struct BlockOperator<T: 'static> {
     r_len: Vec<usize>,
     /// Per stage: product of the earlier blocks' action counts.
     p_len: Vec<usize>,
-    /// Product action count.
-    product_len: usize,
     /// Joint index -> product index, `None` when they coincide.
     map: Option<Vec<u32>>,
+    /// The (core, joint action) pairs whose successor is terminal, if the model has terminal
+    /// states.
+    terminals: Option<Terminals>,
+}
+
+/// The terminal (core, joint action) pairs, by internal core index.
+struct Terminals {
+    /// Core `i`'s terminal joint actions are `actions[ptr[i]..ptr[i + 1]]`, increasing.
+    ptr: Vec<usize>,
+    /// Joint action indices.
+    actions: Vec<u32>,
+    /// Per slab: whether any of its cores has a terminal pair.
+    slab: Vec<bool>,
 }
 
 /// Sub-partition over a block's state variables.
@@ -150,7 +173,7 @@ fn x_block<T: Real>(x: &[T], dims: &[usize]) -> Vec<T> {
 }
 
 impl<T: Real> BlockOperator<T> {
-    pub(super) fn new<M: Model<T> + ?Sized>(
+    pub(super) fn new<M: Model<T> + Sync + ?Sized>(
         model: &M,
         grid: &ProductPartition<'_, T>,
         joint: &JointActions<'_, T>,
@@ -191,6 +214,7 @@ impl<T: Real> BlockOperator<T> {
 
         let m = joint.n_joint();
         let a_dim = joint.dim();
+        let terminal = model.has_terminal_states();
         let mut uvec = vec![T::ZERO; a_dim];
         let mut base_u = vec![T::ZERO; a_dim];
         joint.vector_unchecked(0, &mut base_u);
@@ -246,6 +270,7 @@ impl<T: Real> BlockOperator<T> {
             let mut ptr = Vec::with_capacity(n_cores * n_actions + 1);
             let mut col = Vec::new();
             let mut weight = Vec::new();
+            let mut succ = Vec::new();
             ptr.push(0u32);
             let mut x = base_x.clone();
             let mut next = vec![T::ZERO; e];
@@ -276,6 +301,9 @@ impl<T: Real> BlockOperator<T> {
                             return Err(SolveError::NonFinite { what: "successor" });
                         }
                         sub_x[j] = next[d];
+                    }
+                    if terminal {
+                        succ.extend_from_slice(&sub_x);
                     }
                     for kind in 0..3 {
                         context(kind, c * n_actions + a, &mut alt_x, &mut alt_u);
@@ -310,6 +338,7 @@ impl<T: Real> BlockOperator<T> {
                 n_actions,
                 grid_offset,
                 rows,
+                succ,
             });
         }
 
@@ -337,14 +366,112 @@ impl<T: Real> BlockOperator<T> {
             })
             .collect();
         let identity = product_len == m && map.iter().enumerate().all(|(u, &p)| p as usize == u);
-        Ok(Self {
+        let mut op = Self {
             tables,
             kernels: T::kernels(None).expect("the scalar kernels always exist"),
             r_len,
             p_len,
-            product_len,
             map: (!identity).then_some(map),
-        })
+            terminals: None,
+        };
+        if terminal {
+            op.terminals = Some(op.scan_terminals(model, e, m));
+        }
+        Ok(op)
+    }
+
+    /// The product index of joint action `u`.
+    fn product_index(&self, u: usize) -> usize {
+        self.map.as_ref().map_or(u, |m| m[u] as usize)
+    }
+
+    /// Writes the joint successor of block cores `cores` (contraction order) under joint
+    /// action `u` into `x`, from the blocks' stored successors.
+    fn assemble_successor(&self, cores: &[usize], u: usize, x: &mut [T]) {
+        let p = self.product_index(u);
+        for (b, t) in self.tables.iter().enumerate() {
+            let a = (p / self.p_len[b]) % t.n_actions;
+            let k = t.dims.len();
+            let s = &t.succ[(cores[b] * t.n_actions + a) * k..][..k];
+            for (&d, &v) in t.dims.iter().zip(s) {
+                x[d] = v;
+            }
+        }
+    }
+
+    /// Finds every (core, joint action) pair whose successor is terminal (once, in parallel
+    /// over slabs).
+    fn scan_terminals<M: Model<T> + Sync + ?Sized>(
+        &self,
+        model: &M,
+        e: usize,
+        m: usize,
+    ) -> Terminals {
+        let nb = self.tables.len();
+        let slab = self.slab_len();
+        let per_slab = par::map_indexed(
+            self.tables[0].n_cores,
+            1,
+            || (vec![T::ZERO; e], vec![0usize; nb]),
+            |(x, cores), c0| {
+                cores.fill(0);
+                cores[0] = c0;
+                let mut lens = Vec::with_capacity(slab);
+                let mut actions = Vec::new();
+                for _ in 0..slab {
+                    let before = actions.len();
+                    for u in 0..m {
+                        self.assemble_successor(cores, u, x);
+                        if model.is_terminal(x) {
+                            actions.push(u as u32);
+                        }
+                    }
+                    lens.push(actions.len() - before);
+                    // Next core of the slab: an odometer over the later blocks.
+                    for b in (1..nb).rev() {
+                        cores[b] += 1;
+                        if cores[b] < self.tables[b].n_cores {
+                            break;
+                        }
+                        cores[b] = 0;
+                    }
+                }
+                (lens, actions)
+            },
+        );
+        let mut ptr = Vec::with_capacity(self.tables[0].n_cores * slab + 1);
+        let mut actions = Vec::new();
+        let mut has = Vec::with_capacity(per_slab.len());
+        ptr.push(0);
+        for (lens, a) in per_slab {
+            has.push(!a.is_empty());
+            for l in lens {
+                ptr.push(ptr.last().expect("non-empty") + l);
+            }
+            actions.extend(a);
+        }
+        Terminals {
+            ptr,
+            actions,
+            slab: has,
+        }
+    }
+
+    /// The terminal joint actions of core `internal` (empty without terminal states).
+    fn terminal_actions(&self, internal: usize) -> &[u32] {
+        match &self.terminals {
+            None => &[],
+            Some(t) => &t.actions[t.ptr[internal]..t.ptr[internal + 1]],
+        }
+    }
+
+    /// How slab `c0`'s last stage delivers for the reduction `kind`: fused unless the slab
+    /// has terminal pairs (their entries must be zeroed in full rows first).
+    fn last_for(&self, fused: Option<Last>, c0: usize) -> Last {
+        match &self.terminals {
+            Some(t) if t.slab[c0] => Last::Rows,
+            _ => fused.unwrap_or(Last::Rows),
+        }
     }
 
     pub(super) fn joint_to_product(&self) -> Option<&[u32]> {
@@ -558,13 +685,18 @@ impl<T: Real> BlockOperator<T> {
     /// Whether the last stage can be fused with the reduction `kind`: the maximum over the
     /// product actions is the maximum over joint actions (identity map) and, for `Max`, the
     /// reward does not depend on the action.
+    ///
+    /// A single block is never fused: there a slab is one core, and the fused kernel bounds
+    /// every row of its input (all of `V`) on each call, which would make a sweep quadratic
+    /// in the number of cores. Full rows cost only the table's entries, and the stage kernel
+    /// sums them in the same order (same bits).
     fn fused<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         kind: Reduce,
     ) -> Option<Last> {
         match kind {
-            _ if self.map.is_some() => None,
+            _ if self.map.is_some() || self.tables.len() == 1 => None,
             Reduce::Max if op.rewards.is_some() => Some(Last::Max { abs: false }),
             Reduce::Argmax if op.rewards.is_some() => Some(Last::Argmax),
             Reduce::AbsMax => Some(Last::Max { abs: true }),
@@ -576,6 +708,7 @@ impl<T: Real> BlockOperator<T> {
     /// by `shift`), reducing rows as `kind` says.
     #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out
     fn deliver<U, M: Model<T> + Sync + ?Sized>(
+        &self,
         op: &Operator<'_, T, M>,
         kind: Reduce,
         base: usize,
@@ -588,7 +721,25 @@ impl<T: Real> BlockOperator<T> {
     ) {
         let at = first - shift;
         match values {
-            Out::Row(ev) => out[at] = pick(op.reduce(base + first, ev, kind, work)),
+            Out::Row(ev) => {
+                let core = base + first;
+                let terminal = self.terminal_actions(core);
+                let r = if terminal.is_empty() {
+                    op.reduce(core, ev, kind, work)
+                } else {
+                    // Transitions into terminal states have no future value.
+                    let mut row = core::mem::take(&mut work.ev);
+                    row.clear();
+                    row.extend_from_slice(ev);
+                    for &u in terminal {
+                        row[self.product_index(u as usize)] = T::ZERO;
+                    }
+                    let r = op.reduce(core, &row, kind, work);
+                    work.ev = row;
+                    r
+                };
+                out[at] = pick(r);
+            }
             Out::Max(m) => {
                 let abs = kind == Reduce::AbsMax;
                 for (i, &x) in m.iter().enumerate() {
@@ -641,7 +792,7 @@ impl<T: Real> BlockOperator<T> {
         chunk: &mut [U],
         pick: &impl Fn((T, u32)) -> U,
     ) {
-        let last = self.fused(op, kind).unwrap_or(Last::Rows);
+        let last = self.last_for(self.fused(op, kind), c0);
         let base = c0 * self.slab_len();
         let Work {
             stages,
@@ -649,7 +800,7 @@ impl<T: Real> BlockOperator<T> {
             reduce,
         } = w;
         self.run(0, c0, v, stages, extra, 0, last, &mut |first, values| {
-            Self::deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
+            self.deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
         });
     }
 
@@ -660,17 +811,18 @@ impl<T: Real> BlockOperator<T> {
     ) -> f64 {
         let slab = self.slab_len();
         let n0 = self.tables[0].n_cores;
-        let last = self.fused(op, Reduce::Max).unwrap_or(Last::Rows);
+        let fused = self.fused(op, Reduce::Max);
         let mut w = self.work(op);
         let mut reduce = op.reduce_work();
         let mut dv = 0.0f64;
         let mut fresh = vec![T::ZERO; slab];
         let keep = |r: (T, u32)| r.0;
         for c0 in 0..n0 {
+            let last = self.last_for(fused, c0);
             if self.tables.len() == 1 {
                 // One block: the slab is one core; plain Gauss-Seidel.
                 self.slab(c0, v, &mut w, last, &mut |first, values| {
-                    Self::deliver(
+                    self.deliver(
                         op,
                         Reduce::Max,
                         c0 * slab,
@@ -709,7 +861,7 @@ impl<T: Real> BlockOperator<T> {
                             c1,
                             last,
                             &mut |first, values| {
-                                Self::deliver(
+                                self.deliver(
                                     op,
                                     Reduce::Max,
                                     c0 * slab,
@@ -874,14 +1026,17 @@ impl<T: Real> BlockOperator<T> {
             (m.ptr.clone(), m.col.clone(), m.weight.clone())
         });
 
-        // Rewards of the active cores, and the goal cores' expectations to take back out.
+        // Rewards of the active cores, and the expectations of goal cores and of transitions
+        // into terminal states, to take back out (per joint action).
         let e = op.state_dim();
         let mj = op.joint.n_joint();
         let mut xd = vec![T::ZERO; e];
         let mut uvec = vec![T::ZERO; op.joint.dim()];
         let mut reward_mix = vec![T::ZERO; mj];
-        let mut goal_ev = vec![T::ZERO; self.product_len];
+        let mut goal_ev = vec![T::ZERO; mj];
         let mut any_goal = false;
+        let mut succ = vec![T::ZERO; e];
+        let mut drop = vec![false; mj];
         let depends = op.model.reward_depends_on_action();
         let mut cores = Vec::new();
         active.for_each(|d, mu| cores.push((d, mu)));
@@ -899,8 +1054,8 @@ impl<T: Real> BlockOperator<T> {
                     *r += mu * rd;
                 }
             }
-            if op.backup.absorbing_goal && op.model.is_goal(&xd) {
-                any_goal = true;
+            let goal = op.backup.absorbing_goal && op.model.is_goal(&xd);
+            if goal || self.terminals.is_some() {
                 // This core's block cores, to contract its pure rows.
                 let block_cores: Vec<usize> = self
                     .tables
@@ -913,6 +1068,20 @@ impl<T: Real> BlockOperator<T> {
                         c
                     })
                     .collect();
+                // The joint actions whose expectation drops out: all of them at a goal core,
+                // else those leading to a terminal state.
+                let mut any = goal;
+                for (u, d) in drop.iter_mut().enumerate() {
+                    *d = goal || {
+                        self.assemble_successor(&block_cores, u, &mut succ);
+                        op.model.is_terminal(&succ)
+                    };
+                    any |= *d;
+                }
+                if !any {
+                    continue;
+                }
+                any_goal = true;
                 let ev_d = contract_box(&|b| {
                     let t = &self.tables[b];
                     let rows = (0..t.n_actions).map(|a| {
@@ -921,16 +1090,18 @@ impl<T: Real> BlockOperator<T> {
                     });
                     local_rows(rows, &mixed[b].local)
                 });
-                for (g, &x) in goal_ev.iter_mut().zip(&ev_d) {
-                    *g += mu * x;
+                for (u, g) in goal_ev.iter_mut().enumerate() {
+                    if drop[u] {
+                        *g += mu * ev_d[self.product_index(u)];
+                    }
                 }
             }
         }
         let gamma = op.gamma;
         for (u, o) in out.iter_mut().enumerate() {
-            let p = self.map.as_ref().map_or(u, |m| m[u] as usize);
+            let p = self.product_index(u);
             let ev = if any_goal {
-                ev_mixed[p] - goal_ev[p]
+                ev_mixed[p] - goal_ev[u]
             } else {
                 ev_mixed[p]
             };

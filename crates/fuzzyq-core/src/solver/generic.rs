@@ -2,7 +2,8 @@
 //! over the successor's active cores. Internal order is the grid's row-major order.
 //!
 //! For a [tabulated](crate::Model::tabulated) model the successors' active cores and weights
-//! are computed once, at construction, and every sweep reads them.
+//! are computed once, at construction, and every sweep reads them. A
+//! [terminal](crate::Model::is_terminal) successor gets no entries, so its expected value is 0.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::vec::Vec;
@@ -34,11 +35,13 @@ struct Work<T> {
 
 impl<T: Real> GenericOperator<T> {
     /// The generic path; for a tabulated model, with its successors' memberships precomputed.
-    pub(super) fn new(
+    pub(super) fn new<M: Model<T> + Sync + ?Sized>(
+        model: &M,
         grid: &crate::partition::ProductPartition<'_, T>,
         n_joint: usize,
         table: Option<crate::model::Tabulated<'_, T>>,
     ) -> Self {
+        let terminal = model.has_terminal_states();
         let table = table.map(|t| {
             let e = grid.n_dims();
             let per_core = par::map_indexed(
@@ -51,12 +54,14 @@ impl<T: Real> GenericOperator<T> {
                     for u in 0..n_joint {
                         let i = (d * n_joint + u) * e;
                         let before = entries.len();
-                        grid.active_unchecked(&t.next_states[i..i + e])
-                            .for_each(|k, w| {
+                        let next = &t.next_states[i..i + e];
+                        if !(terminal && model.is_terminal(next)) {
+                            grid.active_unchecked(next).for_each(|k, w| {
                                 if w != T::ZERO {
                                     entries.push((k as u32, w));
                                 }
                             });
+                        }
                         lens.push(entries.len() - before);
                     }
                     (lens, entries)

@@ -44,7 +44,18 @@
 //!   become 37). The stopping rule is tested only on sweeps whose input was not shifted, where
 //!   `theta_{k+1} = H(theta_k)` holds, so the a-posteriori bound
 //!   `||theta_K - theta*|| <= gamma/(1-gamma) * delta_K` keeps holding. Not used with an
-//!   absorbing goal, where the shift property fails.
+//!   absorbing goal or terminal states, where the shift property fails.
+//!
+//! # Terminal states
+//! For a model that [declares terminal states](Model::has_terminal_states), a transition into
+//! a terminal state contributes no future value:
+//! `theta[d, u] = rho(x_d, u) + gamma * (0 if f(x_d, u) is terminal else V~(f(x_d, u)))`.
+//! The generic path tests every successor it computes. The block path cannot factor a
+//! terminal test over blocks, so it precomputes, once, the (core, joint action) pairs whose
+//! successor (assembled from the blocks' successors) is terminal; slabs without such pairs
+//! keep the fused kernels, the others deliver full rows with those entries set to 0 before
+//! the reduction. A tabulated model's terminal successors get no memberships. Models without
+//! terminal states run exactly as before, bit for bit.
 //!
 //! All converge to the same fixed point (Theorems 1-2 of the paper; the operator is a
 //! `gamma`-contraction in the infinity norm). With `theta_0 = 0` the a-priori bound of eq 37,
@@ -235,8 +246,9 @@ pub struct SolverConfig {
     /// Force a kernel instance (default: the fastest this CPU supports).
     pub kernel: Option<Kernel>,
     /// Extrapolate synchronous sweeps to the midpoint of MacQueen's bounds every other
-    /// sweep (ignored with an absorbing goal). The stopping rule is tested only on sweeps
-    /// whose input was not shifted, so it keeps its meaning and its error bound.
+    /// sweep (ignored with an absorbing goal or a model with
+    /// [terminal states](Model::has_terminal_states)). The stopping rule is tested only on
+    /// sweeps whose input was not shifted, so it keeps its meaning and its error bound.
     pub extrapolate: bool,
 }
 
@@ -567,7 +579,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let path = if use_blocks {
             Path::Block(BlockOperator::new(model, &grid, &joint)?)
         } else {
-            Path::Generic(GenericOperator::new(&grid, joint.n_joint(), table))
+            Path::Generic(GenericOperator::new(model, &grid, joint.n_joint(), table))
         };
         let mut op = Self {
             model,
@@ -834,6 +846,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         ReduceWork {
             x: vec![T::ZERO; self.state_dim()],
             u: vec![T::ZERO; self.joint.dim()],
+            ev: Vec::new(),
         }
     }
 
@@ -963,6 +976,8 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
 struct ReduceWork<T> {
     x: Vec<T>,
     u: Vec<T>,
+    /// A row of expected values with terminal entries zeroed (block path; grows on first use).
+    ev: Vec<T>,
 }
 
 /// `(max |a - (b - s)|, min (a - b), max (a - b))`, in `f64`.
@@ -1018,7 +1033,12 @@ where
     let mut v_next = op.zeros();
     // Shift added to `v_cur` after it was computed (extrapolation), 0 if none.
     let mut shift_in = T::ZERO;
-    let extrapolate = config.extrapolate && !config.absorbing_goal && config.gamma > 0.0;
+    // Absorbing goals and terminal successors break the shift property MacQueen's bounds
+    // rest on (their rows of P sum to less than 1).
+    let extrapolate = config.extrapolate
+        && !config.absorbing_goal
+        && !model.has_terminal_states()
+        && config.gamma > 0.0;
     let mut sweep_seconds = 0.0;
     for sweep in 1..=config.max_sweeps {
         let t0 = Instant::now();

@@ -1,0 +1,431 @@
+//! The DC motor of Busoniu et al. 2010 (section 4.5.3 and ApproxRL's `dc_problem` with the
+//! linear model `dc_linmdp` and the LQR reward).
+//!
+//! A DC motor with inertia `J`, viscous damping `b`, torque constant `K` and rotor resistance
+//! `Re`, driven by a voltage `u` (the inductance is neglected):
+//! `alpha_ddot = -(b/J + K^2/(Re J)) alpha_dot + K/(Re J) u`. The state is
+//! `x = [alpha, alpha_dot]` (rad, rad/s).
+//!
+//! # Discretisation
+//! - [`Integrator::Zoh`] (the toolbox's choice): the exact zero-order hold over `Ts`,
+//!   `x' = A x + B u`, in closed form. With `a = b/J + K^2/(Re J)`, `c = K/(Re J)` and
+//!   `z = a Ts`: `A = [[1, Ts phi1(z)], [0, e^-z]]`, `B = [c Ts^2 phi2(z), c Ts phi1(z)]` where
+//!   `phi1(z) = (1 - e^-z)/z` and `phi2(z) = (e^-z - 1 + z)/z^2` (a series for small `z`, so
+//!   no digits cancel). The toolbox gets the same matrices from Octave's `c2d`; they agree
+//!   to a few ulps.
+//! - [`Integrator::Rk4`]: classical RK4 on the continuous model.
+//!
+//! # Transition and reward
+//! `x' = sat(A x + B u, -maxx, maxx)` elementwise with `maxx = [pi, 16 pi]` (the angle is
+//! saturated, not wrapped; `u` is not limited). The reward is evaluated at the current state
+//! with the applied `u`: `rho(x, u) = -x' Q x - R u^2`, `Q = diag(5, 0.01)`, `R = 0.01`.
+//!
+//! # Presets
+//! - `"toolbox-demo"`: the configuration of the toolbox demo `qi_demo.m` run by the parity
+//!   tests: 21 x 21 equidistant cores on `[-pi, pi] x [-16 pi, 16 pi]` (`symequidgrid`),
+//!   5 equidistant actions on `[-10, 10]`, `gamma = 0.98`, `xi = 0.01`.
+//! - `"fine"`: the default fuzzy grid of `dc_problem('fuzzy')`: cores `-pi : 5*pi/180 : pi`
+//!   and `-16 pi : pi/6 : 16 pi` (73 x 193), actions `[-10, -5, -1, -0.1, 0, 0.1, 1, 5, 10]`,
+//!   `gamma = 0.95` (`dc_problem`'s default) and `fuzzyqi`'s default `eps = 0.01`.
+
+use std::f64::consts::PI;
+
+use fuzzyq_core::{ActionSet, Block, Model};
+use serde::{Deserialize, Serialize};
+
+use super::{
+    Integrator, Preset, colon, non_negative, positive, rk4, rk4_step_sizes, sat, symequidgrid,
+    validate_actions,
+};
+use crate::error::ConfigError;
+
+/// The names of the DC motor's presets.
+pub const PRESETS: [&str; 2] = ["toolbox-demo", "fine"];
+
+/// The DC motor's physical parameters, bounds, reward weights and integrator.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DcMotorConfig {
+    /// Rotor and load inertia `J` (kg m^2), `> 0`.
+    pub inertia: f64,
+    /// Viscous damping `b` (N m s/rad), `>= 0`.
+    pub damping: f64,
+    /// Torque constant `K` (N m/A), `> 0`.
+    pub torque_constant: f64,
+    /// Rotor resistance `Re` (Ohm), `> 0`.
+    pub resistance: f64,
+    /// Sample time `Ts` (s), `> 0`.
+    pub sample_time: f64,
+    /// The angle is saturated to `[-max_angle, max_angle]` (rad), `> 0`.
+    pub max_angle: f64,
+    /// The angular velocity is saturated to `[-max_velocity, max_velocity]` (rad/s), `> 0`.
+    pub max_velocity: f64,
+    /// The diagonal of the state weight `Q` of the reward, each `>= 0`.
+    pub q: [f64; 2],
+    /// The action weight `R` of the reward, `>= 0`.
+    pub r: f64,
+    /// How a sample time is integrated.
+    pub integrator: Integrator,
+}
+
+impl Default for DcMotorConfig {
+    /// The toolbox's values (`dc_problem`): `J = 3.24e-5`, `b = 3e-6`, `K = 0.0536`,
+    /// `Re = 9.5`, `Ts = 0.005`, bounds `pi` and `16 pi`, `Q = diag(5, 0.01)`, `R = 0.01`,
+    /// exact zero-order hold.
+    fn default() -> Self {
+        Self {
+            inertia: 3.24e-5,
+            damping: 3.0e-6,
+            torque_constant: 53.6e-3,
+            resistance: 9.50,
+            sample_time: 0.005,
+            max_angle: PI,
+            max_velocity: 16.0 * PI,
+            q: [5.0, 0.01],
+            r: 0.01,
+            integrator: Integrator::Zoh,
+        }
+    }
+}
+
+impl DcMotorConfig {
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("env.inertia", self.inertia)?;
+        non_negative("env.damping", self.damping)?;
+        positive("env.torque_constant", self.torque_constant)?;
+        positive("env.resistance", self.resistance)?;
+        positive("env.sample_time", self.sample_time)?;
+        positive("env.max_angle", self.max_angle)?;
+        positive("env.max_velocity", self.max_velocity)?;
+        non_negative("env.q", self.q[0])?;
+        non_negative("env.q", self.q[1])?;
+        non_negative("env.r", self.r)?;
+        self.integrator.validate("env.integrator")?;
+        let (a, c) = self.continuous();
+        if !(a.is_finite() && c.is_finite() && (a * self.sample_time).is_finite()) {
+            return Err(ConfigError::invalid(
+                "env.inertia",
+                "the motor's time constant overflows with these parameters",
+            ));
+        }
+        Ok(())
+    }
+
+    /// `(a, c)` of the continuous model `alpha_ddot = -a alpha_dot + c u`:
+    /// `a = b/J + K^2/(Re J)`, `c = K/(Re J)` (evaluated as the toolbox writes them).
+    #[must_use]
+    pub fn continuous(&self) -> (f64, f64) {
+        let (j, b, k, re) = (
+            self.inertia,
+            self.damping,
+            self.torque_constant,
+            self.resistance,
+        );
+        (b / j + (k * k) / (re * j), k / (re * j))
+    }
+}
+
+/// The named preset `name` (see the [module docs](self) for where each value comes from).
+pub fn preset(name: &str) -> Result<Preset, ConfigError> {
+    match name {
+        "toolbox-demo" => Ok(Preset {
+            name: name.to_owned(),
+            cores: vec![symequidgrid(PI, 21)?, symequidgrid(16.0 * PI, 21)?],
+            actions: symequidgrid(10.0, 5)?,
+            gamma: 0.98,
+            xi: 0.01,
+        }),
+        "fine" => Ok(Preset {
+            name: name.to_owned(),
+            cores: vec![
+                colon(-PI, 5.0 * PI / 180.0, PI)?,
+                colon(-16.0 * PI, PI / 6.0, 16.0 * PI)?,
+            ],
+            actions: vec![-10.0, -5.0, -1.0, -0.1, 0.0, 0.1, 1.0, 5.0, 10.0],
+            gamma: 0.95,
+            xi: 0.01,
+        }),
+        _ => Err(ConfigError::invalid(
+            "preset",
+            format!(
+                "unknown DC motor preset \"{name}\" (known: {})",
+                PRESETS.join(", ")
+            ),
+        )),
+    }
+}
+
+/// The DC motor model (implements [`Model`] for `f32` and `f64`).
+#[derive(Clone, Debug)]
+pub struct DcMotor {
+    config: DcMotorConfig,
+    /// The zero-order-hold matrices.
+    a: [[f64; 2]; 2],
+    b: [f64; 2],
+    /// `(a, c)` of the continuous model.
+    cont: (f64, f64),
+    /// RK4 step sizes (empty for the zero-order hold).
+    steps: Vec<f64>,
+    actions_f64: Vec<f64>,
+    actions_f32: Vec<f32>,
+}
+
+/// `phi1(z) = (1 - e^-z) / z` (1 at 0).
+fn phi1(z: f64) -> f64 {
+    if z == 0.0 { 1.0 } else { -(-z).exp_m1() / z }
+}
+
+/// `phi2(z) = (e^-z - 1 + z) / z^2` (1/2 at 0): the series `sum_k (-z)^k / (k+2)!` below 1,
+/// where the closed form would cancel digits.
+fn phi2(z: f64) -> f64 {
+    if z.abs() < 1.0 {
+        // Horner from the smallest term: coefficients 1/(k+2)! for k = 0..24.
+        let mut coef = [0.0f64; 25];
+        let mut f = 2.0;
+        for (k, c) in coef.iter_mut().enumerate() {
+            *c = 1.0 / f;
+            f *= (k + 3) as f64;
+        }
+        coef.iter().rev().fold(0.0, |p, &c| c - z * p)
+    } else {
+        ((-z).exp_m1() + z) / (z * z)
+    }
+}
+
+impl DcMotor {
+    /// Builds the model with the `"toolbox-demo"` actions (5 equidistant voltages on
+    /// `[-10, 10]`); see [`with_actions`](Self::with_actions) and
+    /// [`for_preset`](Self::for_preset).
+    pub fn new(config: DcMotorConfig) -> Result<Self, ConfigError> {
+        config.validate()?;
+        let (a, c) = config.continuous();
+        let ts = config.sample_time;
+        let z = a * ts;
+        let p1 = phi1(z);
+        let steps = match config.integrator {
+            Integrator::Zoh => Vec::new(),
+            Integrator::Rk4 { substeps } => rk4_step_sizes(ts, substeps),
+        };
+        let actions = symequidgrid(10.0, 5)?;
+        Ok(Self {
+            a: [[1.0, ts * p1], [0.0, (-z).exp()]],
+            b: [c * ts * ts * phi2(z), c * ts * p1],
+            cont: (a, c),
+            steps,
+            actions_f32: actions.iter().map(|&u| u as f32).collect(),
+            actions_f64: actions,
+            config,
+        })
+    }
+
+    /// The same model with the discrete action set `actions` (voltages; 1 to 4096 finite
+    /// values).
+    pub fn with_actions(mut self, actions: &[f64]) -> Result<Self, ConfigError> {
+        validate_actions("actions", actions)?;
+        self.actions_f64 = actions.to_vec();
+        self.actions_f32 = actions.iter().map(|&u| u as f32).collect();
+        Ok(self)
+    }
+
+    /// The model for a preset: `config` with the preset's actions.
+    pub fn for_preset(config: DcMotorConfig, preset: &Preset) -> Result<Self, ConfigError> {
+        preset.validate()?;
+        if preset.cores.len() != 2 {
+            return Err(ConfigError::invalid(
+                "preset.cores",
+                format!(
+                    "the DC motor has 2 state variables, the preset {}",
+                    preset.cores.len()
+                ),
+            ));
+        }
+        Self::new(config)?.with_actions(&preset.actions)
+    }
+
+    /// The parameters.
+    #[must_use]
+    pub fn config(&self) -> &DcMotorConfig {
+        &self.config
+    }
+
+    /// The exact zero-order-hold matrices `(A, B)` of `x' = A x + B u` (before saturation),
+    /// whatever the integrator.
+    #[must_use]
+    pub fn zoh_matrices(&self) -> ([[f64; 2]; 2], [f64; 2]) {
+        (self.a, self.b)
+    }
+
+    /// The discrete actions.
+    #[must_use]
+    pub fn actions(&self) -> &[f64] {
+        &self.actions_f64
+    }
+
+    /// The successor of `x` under voltage `u`, saturated to the state bounds.
+    #[must_use]
+    pub fn step_f64(&self, x: [f64; 2], u: f64) -> [f64; 2] {
+        let y = if self.steps.is_empty() {
+            let (a, b) = (&self.a, &self.b);
+            [
+                (a[0][0] * x[0] + a[0][1] * x[1]) + b[0] * u,
+                (a[1][0] * x[0] + a[1][1] * x[1]) + b[1] * u,
+            ]
+        } else {
+            let (a, c) = self.cont;
+            rk4(|y| [y[1], -a * y[1] + c * u], x, &self.steps)
+        };
+        let c = &self.config;
+        [
+            sat(y[0], -c.max_angle, c.max_angle),
+            sat(y[1], -c.max_velocity, c.max_velocity),
+        ]
+    }
+
+    /// The reward at the current state `x` under voltage `u`: `-x' Q x - R u^2`.
+    #[must_use]
+    pub fn reward_f64(&self, x: [f64; 2], u: f64) -> f64 {
+        let c = &self.config;
+        -(c.q[0] * x[0] * x[0] + c.q[1] * x[1] * x[1]) - c.r * u * u
+    }
+}
+
+/// The one dynamics block: both state variables and the voltage. Declaring it lets the
+/// solver tabulate the transitions once (the toolbox's precomputed activation matrix)
+/// instead of stepping the model on every sweep.
+const BLOCK_DIMS: [usize; 2] = [0, 1];
+const BLOCK_COMPS: [usize; 1] = [0];
+
+macro_rules! impl_model {
+    ($t:ty, $actions:ident) => {
+        impl Model<$t> for DcMotor {
+            fn state_dim(&self) -> usize {
+                2
+            }
+
+            fn n_agents(&self) -> usize {
+                1
+            }
+
+            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
+                ActionSet::try_new(&self.$actions, 1).expect("validated actions")
+            }
+
+            fn state_bounds(&self, dim: usize) -> ($t, $t) {
+                let lim = if dim == 0 {
+                    self.config.max_angle
+                } else {
+                    self.config.max_velocity
+                };
+                (-lim as $t, lim as $t)
+            }
+
+            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
+                let y = self.step_f64([f64::from(x[0]), f64::from(x[1])], f64::from(u[0]));
+                next[0] = y[0] as $t;
+                next[1] = y[1] as $t;
+            }
+
+            fn reward(&self, x: &[$t], u: &[$t]) -> $t {
+                self.reward_f64([f64::from(x[0]), f64::from(x[1])], f64::from(u[0])) as $t
+            }
+
+            fn reward_depends_on_action(&self) -> bool {
+                true
+            }
+
+            fn n_blocks(&self) -> usize {
+                1
+            }
+
+            fn block(&self, _b: usize) -> Block<'_> {
+                Block {
+                    state_dims: &BLOCK_DIMS,
+                    action_components: &BLOCK_COMPS,
+                }
+            }
+        }
+    };
+}
+
+impl_model!(f32, actions_f32);
+impl_model!(f64, actions_f64);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zoh_matches_fine_rk4() {
+        let zoh = DcMotor::new(DcMotorConfig::default()).unwrap();
+        let rk = DcMotor::new(DcMotorConfig {
+            integrator: Integrator::Rk4 { substeps: 50 },
+            ..DcMotorConfig::default()
+        })
+        .unwrap();
+        for (x, u) in [([0.3, -5.0], 7.0), ([-1.0, 20.0], -10.0), ([0.0, 0.0], 0.1)] {
+            let (a, b) = (zoh.step_f64(x, u), rk.step_f64(x, u));
+            for j in 0..2 {
+                assert!(
+                    (a[j] - b[j]).abs() <= 1e-12 * (1.0 + a[j].abs()),
+                    "{a:?} vs {b:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn phi_series_and_closed_form_agree_at_the_switch() {
+        for z in [0.5f64, 0.9, 0.999] {
+            let closed = ((-z).exp_m1() + z) / (z * z);
+            assert!((phi2(z) - closed).abs() <= 4e-15 * closed, "{z}");
+        }
+        // Continuous across the switch at 1 (the slope is about -0.13).
+        assert!((phi2(1.0 - 1e-9) - phi2(1.0 + 1e-9)).abs() < 1e-9);
+        assert_eq!(phi2(0.0), 0.5);
+        assert_eq!(phi1(0.0), 1.0);
+    }
+
+    #[test]
+    fn saturates_and_rewards_at_the_current_state() {
+        let m = DcMotor::new(DcMotorConfig::default()).unwrap();
+        let y = m.step_f64([PI, 16.0 * PI], 10.0);
+        assert_eq!(y, [PI, 16.0 * PI]);
+        assert_eq!(m.reward_f64([1.0, 2.0], 3.0), -(5.0 + 0.04) - 0.09);
+    }
+
+    #[test]
+    fn presets_have_the_documented_sizes() {
+        let demo = preset("toolbox-demo").unwrap();
+        assert_eq!((demo.cores[0].len(), demo.cores[1].len()), (21, 21));
+        assert_eq!(demo.actions, [-10.0, -5.0, 0.0, 5.0, 10.0]);
+        let fine = preset("fine").unwrap();
+        assert_eq!((fine.cores[0].len(), fine.cores[1].len()), (73, 193));
+        assert_eq!(fine.actions.len(), 9);
+        assert_eq!(fine.gamma, 0.95);
+        assert!(preset("coarse").is_err());
+        let m = DcMotor::for_preset(DcMotorConfig::default(), &fine).unwrap();
+        assert_eq!(Model::<f64>::action_set(&m, 0).n_actions(), 9);
+    }
+
+    #[test]
+    fn rejects_bad_configs() {
+        let bad = |f: fn(&mut DcMotorConfig)| {
+            let mut c = DcMotorConfig::default();
+            f(&mut c);
+            DcMotor::new(c).unwrap_err().to_string()
+        };
+        assert!(bad(|c| c.inertia = 0.0).contains("env.inertia"));
+        assert!(bad(|c| c.resistance = f64::NAN).contains("env.resistance"));
+        assert!(bad(|c| c.q = [-1.0, 0.0]).contains("env.q"));
+        assert!(bad(|c| c.integrator = Integrator::Rk4 { substeps: 0 }).contains("env.integrator"));
+        assert!(bad(|c| c.inertia = 1e-320).contains("env.inertia"));
+        let m = DcMotor::new(DcMotorConfig::default()).unwrap();
+        assert!(m.with_actions(&[]).is_err());
+        let toml_text = "inertia = 1e-4\nintegrator = { rk4 = { substeps = 2 } }";
+        let c: DcMotorConfig = toml::from_str(toml_text).unwrap();
+        assert_eq!(c.inertia, 1e-4);
+        assert_eq!(c.resistance, 9.5);
+        assert!(toml::from_str::<DcMotorConfig>("mass = 1.0").is_err());
+    }
+}
