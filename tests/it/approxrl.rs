@@ -44,7 +44,7 @@
 
 use std::ops::ControlFlow;
 
-use fuzzyq_core::solver::{BackupPath, Grid, Operator, SolveError, solve};
+use fuzzyq_core::solver::{BackupPath, Grid, Operator, SolveError, solve, solve_q};
 use fuzzyq_core::{ActionSet, Backup, JointActions, Model, ProductPartition, q};
 use fuzzyq_sim::classic::{
     DcMotor, DcMotorConfig, Pendulum, PendulumConfig, Preset, core_index_from_toolbox, dcmotor,
@@ -396,27 +396,32 @@ fn check_toolbox_iteration<M: Model<f64>>(case: &Case, model: &M, preset: &Prese
     let grid = preset.grid::<f64>().unwrap();
     let qi = ToolboxQi::new(model, &grid.view(), &preset.actions);
     let (theta, deltas) = qi.run(preset.gamma, preset.xi, 1000);
+    check_against_oracle(case, preset, &theta, &deltas);
+    theta
+}
+
+/// An iteration's `theta_K` and deltas against the oracle: the iteration count, every delta,
+/// `theta_K`, and the first argmax of every core (the interpolated policy's per-core action)
+/// except at the cores config.json lists as near ties.
+fn check_against_oracle(case: &Case, preset: &Preset, theta: &[f64], deltas: &[f64]) {
     let oracle = oracle_deltas(case);
     assert_eq!(oracle.len(), case.iterations);
     assert_eq!(deltas.len(), case.iterations, "{}: iterations", case.dir);
     // A delta is a difference of nearly equal values of `theta` (about 1e3 against 1e-2 at the
     // end), so its relative agreement is about 1e-11 where `theta`'s is about 1e-15.
-    let rel = max_rel_diff(&deltas, &oracle);
+    let rel = max_rel_diff(deltas, &oracle);
     assert!(
         rel <= 1e-9,
         "{}: deltas differ by {rel:e} relative",
         case.dir
     );
     let oracle_theta = oracle_theta(case, preset);
-    let rel = max_rel_diff(&theta, &oracle_theta);
+    let rel = max_rel_diff(theta, &oracle_theta);
     assert!(
         rel <= 1e-12,
         "{}: theta differs by {rel:e} relative",
         case.dir
     );
-
-    // The first argmax of every core (the interpolated policy's per-core action) agrees,
-    // except at the cores config.json lists as near ties.
     let (dims, m) = (dims(preset), preset.actions.len());
     for d in 0..preset.n_cores() {
         let ours = q::argmax(&theta[d * m..(d + 1) * m]);
@@ -426,7 +431,6 @@ fn check_toolbox_iteration<M: Model<f64>>(case: &Case, model: &M, preset: &Prese
             assert_eq!(ours, theirs, "{}: greedy action of core {t}", case.dir);
         }
     }
-    theta
 }
 
 #[test]
@@ -437,6 +441,69 @@ fn toolbox_iteration_matches_the_oracle() {
     let (pend, p) = ip();
     let theta = check_toolbox_iteration(&IP, &pend, &p);
     check_replays(&IP, &pend, &p, &theta);
+}
+
+/// The library's `solve_q` (Busoniu's operator with `theta` stored) is the toolbox's
+/// iteration: the same iteration count, every delta and `theta_K` within the tolerances
+/// above, the same per-core greedy actions (bar the listed near ties) and the same replays.
+fn check_solve_q<M: Model<f64>>(case: &Case, model: &M, preset: &Preset) {
+    let grid = preset.grid::<f64>().unwrap();
+    let s = solve_q(model, &grid, &preset.solver_config(), |_, _| {
+        ControlFlow::Continue(())
+    })
+    .unwrap();
+    assert_eq!(s.iterations(), case.iterations, "{}: iterations", case.dir);
+    check_against_oracle(case, preset, &s.theta, &s.deltas);
+    let m = preset.actions.len();
+    for (d, &g) in s.greedy.iter().enumerate() {
+        assert_eq!(Some(g as usize), q::argmax(&s.theta[d * m..(d + 1) * m]));
+    }
+    // `q_values` is the crisp policy's Q-function.
+    let mut q_here = vec![0.0; m];
+    let x = [0.3, -1.0];
+    s.q_values(&grid, &x, &mut q_here).unwrap();
+    let active = grid.view().active(&x).unwrap();
+    for (a, &qa) in q_here.iter().enumerate() {
+        let mut want = 0.0;
+        active.for_each(|d, w| want += w * s.theta[d * m + a]);
+        assert!((qa - want).abs() <= 1e-12 * want.abs().max(1.0));
+    }
+    check_replays(case, model, preset, &s.theta);
+}
+
+/// `solver.operator = "q-values"` trains the toolbox's iteration from a config: the oracle's
+/// iteration count and final delta, and the per-core greedy actions of `solve_q`.
+#[test]
+fn q_values_operator_trains_the_toolbox_iteration() {
+    use fuzzyq_sim::config::{IterationOperator, TrainConfig};
+    for (env, case) in [("dcmotor", &DC), ("pendulum", &IP)] {
+        let mut c = TrainConfig::from_preset(env, "toolbox-demo").unwrap();
+        c.solver.operator = IterationOperator::QValues;
+        let again = TrainConfig::from_toml(&c.to_toml()).unwrap();
+        assert_eq!(again, c);
+        let a = fuzzyq_sim::train::train(&c, |_| ControlFlow::Continue(())).unwrap();
+        assert_eq!(a.summary.sweeps, case.iterations, "{env}");
+        let oracle = oracle_deltas(case);
+        let last = *oracle.last().unwrap();
+        assert!((a.summary.final_delta - last).abs() <= 1e-9 * last, "{env}");
+        assert_eq!(a.summary.kernel, "q-values");
+        let mut bad = c.clone();
+        bad.solver.sweep = fuzzyq_sim::config::Sweep::Async;
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("solver.operator")
+        );
+    }
+}
+
+#[test]
+fn solve_q_is_the_toolbox_iteration() {
+    let (motor, p) = dc();
+    check_solve_q(&DC, &motor, &p);
+    let (pend, p) = ip();
+    check_solve_q(&IP, &pend, &p);
 }
 
 /// Replays every rollout of the case with `theta` (row-major) and our dynamics, as the

@@ -38,6 +38,10 @@ pub(crate) struct TrainArgs {
     /// Sweep limit.
     #[arg(long, value_name = "K")]
     max_sweeps: Option<usize>,
+    /// The iteration: `values` (default; only V is stored, any grid size) or `q-values`
+    /// (Busoniu's fuzzy Q-iteration as the ApproxRL toolbox runs it, theta stored).
+    #[arg(long, value_enum)]
+    operator: Option<OperatorArg>,
     /// Asynchronous (Gauss-Seidel) sweeps instead of synchronous ones.
     #[arg(long = "async")]
     asynchronous: bool,
@@ -113,6 +117,12 @@ enum LearnerArg {
     Fql,
     /// VQQL: k-means cells and tabular Q-learning (point masses).
     Vqql,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum OperatorArg {
+    Values,
+    QValues,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -213,6 +223,12 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if args.asynchronous {
         s.sweep = Sweep::Async;
+    }
+    if let Some(o) = args.operator {
+        s.operator = match o {
+            OperatorArg::Values => fuzzyq_sim::config::IterationOperator::Values,
+            OperatorArg::QValues => fuzzyq_sim::config::IterationOperator::QValues,
+        };
     }
     if args.absorbing_goal {
         s.absorbing_goal = true;

@@ -695,6 +695,27 @@ fn classic_benchmarks_train_roll_out_and_evaluate() {
         assert!(o.status.success(), "{}", stderr(&o));
         let t = json(&d.join("t.json"));
         assert_eq!(t["converged"], true);
+        // The toolbox's own iteration: 79 and 364 iterations on these presets.
+        let o = fuzzyq(
+            &[
+                "train",
+                "--env",
+                env,
+                "--config",
+                "c.toml",
+                "--operator",
+                "q-values",
+                "--out",
+                "q.fzq",
+                "--json",
+                "q.json",
+                "-q",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let want = if env == "dcmotor" { 79 } else { 364 };
+        assert_eq!(json(&d.join("q.json"))["sweeps"], want);
         let o = fuzzyq(
             &[
                 "rollout",

@@ -99,6 +99,7 @@ fn parse_settings(
             Some("avx512") => Some(KernelChoice::Avx512),
             Some(other) => return Err(bad("kernel", "\"scalar\", \"avx2\", \"avx512\"", other)),
         },
+        operator: fuzzyq_sim::config::IterationOperator::Values,
     })
 }
 

@@ -267,6 +267,25 @@ impl GridConfig {
     }
 }
 
+/// Which fuzzy Q-iteration operator to run (`solver.operator`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum IterationOperator {
+    /// `theta[d, u] = rho + gamma sum_d' mu_d'(x') V[d']`: only `V` is stored.
+    #[default]
+    Values,
+    /// `theta[d, u] = rho + gamma max_u' sum_d' mu_d'(x') theta[d', u']` (Busoniu, ApproxRL).
+    QValues,
+}
+
+impl IterationOperator {
+    /// Whether this is the default operator.
+    #[must_use]
+    pub fn is_values(&self) -> bool {
+        *self == Self::Values
+    }
+}
+
 /// Solver settings as written in a config file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -291,6 +310,13 @@ pub struct SolverSettings {
     /// Force a kernel instance (`"scalar"`, `"avx2"`, `"avx512"`); all give the same results.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<KernelChoice>,
+    /// The iteration: `"values"` (default) interpolates the per-core maxima and keeps only
+    /// `V` (NOTES.md section 2; any grid size); `"q-values"` is Busoniu's fuzzy Q-iteration,
+    /// as the ApproxRL toolbox runs it, maximising interpolated Q-values with `theta` stored
+    /// (`cores x joint actions` values; synchronous, no extrapolation; see
+    /// [`fuzzyq_core::solver::solve_q`]).
+    #[serde(default, skip_serializing_if = "IterationOperator::is_values")]
+    pub operator: IterationOperator,
 }
 
 /// Kernel instance (config spelling of [`fuzzyq_core::solver::Kernel`]).
@@ -363,6 +389,7 @@ impl Default for SolverSettings {
             precision: Precision::F32,
             extrapolate: true,
             kernel: None,
+            operator: IterationOperator::Values,
         }
     }
 }
@@ -391,6 +418,12 @@ impl SolverSettings {
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
+        if self.operator == IterationOperator::QValues && self.sweep == Sweep::Async {
+            return Err(ConfigError::invalid(
+                "solver.operator",
+                "\"q-values\" runs synchronous sweeps; set sweep = \"sync\"",
+            ));
+        }
         if !(self.gamma >= 0.0 && self.gamma < 1.0) {
             return Err(ConfigError::invalid(
                 "solver.gamma",

@@ -3,14 +3,14 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::Real;
-use fuzzyq_core::solver::{self, Grid, Progress, Solution};
+use fuzzyq_core::solver::{self, Delta, Grid, Progress, Solution, SweepRecord};
 
 use crate::artifact::{PolicyArtifact, TrainSummary, Values};
 use crate::classic::arm::Arm;
 use crate::classic::carhill::CarHill;
 use crate::classic::dcmotor::DcMotor;
 use crate::classic::pendulum::Pendulum;
-use crate::config::{EnvConfig, Precision, TrainConfig};
+use crate::config::{EnvConfig, IterationOperator, Precision, TrainConfig};
 use crate::env::EnvModel;
 use crate::error::SimError;
 use crate::khepera::KheperaModel;
@@ -69,19 +69,60 @@ pub fn train(
 
 fn solve<T: Real>(
     config: &TrainConfig,
-    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+    mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<Solution<T>, SimError>
 where
     EnvModel: fuzzyq_core::Model<T>,
 {
     let model = build_model(config)?;
     let grid = build_grid::<T>(config)?;
-    Ok(solver::solve(
-        &model,
-        &grid,
-        &config.solver.solver_config(),
-        observer,
-    )?)
+    let solver_config = config.solver.solver_config();
+    if config.solver.operator == IterationOperator::Values {
+        return Ok(solver::solve(&model, &grid, &solver_config, observer)?);
+    }
+    // Busoniu's operator: theta stored; reported in the solver's terms (exact deltas).
+    let start = std::time::Instant::now();
+    let mut records: Vec<SweepRecord> = Vec::new();
+    let mut bound = 0;
+    let q = solver::solve_q(&model, &grid, &solver_config, |k, delta| {
+        if k == 1 {
+            // theta_1 = rho, so the first change is max |rho|.
+            bound = solver_config.sweep_bound(delta);
+        }
+        let record = SweepRecord {
+            sweep: k,
+            delta: Delta {
+                lower: delta,
+                upper: delta,
+            },
+            delta_v: f64::NAN,
+            seconds: start.elapsed().as_secs_f64(),
+            extrapolated: false,
+        };
+        records.push(record);
+        observer(&Progress {
+            record,
+            bound,
+            xi: solver_config.xi,
+        })
+    })?;
+    for (r, &dv) in records.iter_mut().zip(&q.v_deltas) {
+        r.delta_v = dv;
+    }
+    Ok(Solution {
+        v: q.v,
+        greedy: q.greedy,
+        final_delta: q.deltas.last().copied().unwrap_or(f64::NAN),
+        reward_bound: q.deltas.first().copied().unwrap_or(0.0),
+        sweeps: records,
+        stop: q.stop,
+        bound,
+        path: solver::BackupPath::Generic,
+        kernel: "q-values",
+        multiply_adds_per_sweep: None,
+        sweep_seconds: q.seconds,
+        seconds: start.elapsed().as_secs_f64(),
+    })
 }
 
 fn artifact<T>(

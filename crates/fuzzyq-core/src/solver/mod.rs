@@ -84,9 +84,11 @@
 mod block;
 mod generic;
 mod par;
+mod qiter;
 pub(crate) mod simd;
 mod table;
 
+pub use qiter::{QSolution, solve_q};
 pub use table::TabulatedModel;
 
 use core::ops::ControlFlow;
