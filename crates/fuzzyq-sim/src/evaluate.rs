@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
-use crate::policy::{Policy, PolicyKind};
+use crate::policy::{Actor, Policy, PolicyKind};
 use crate::rollout::Trajectory;
 
 /// What one run achieved.
@@ -86,9 +86,23 @@ pub fn run<T: Real>(
 where
     EnvModel: Model<T>,
 {
+    let mut actor = policy.actor(kind)?;
+    run_with(policy, &mut actor, x0, steps)
+}
+
+/// [`run`] with a prepared actor, so that many runs share its set-up (the greedy policy's
+/// backup operator).
+fn run_with<T: Real>(
+    policy: &Policy<T>,
+    actor: &mut Actor<'_, T>,
+    x0: &[f64],
+    steps: usize,
+) -> Result<(Trajectory, RunSummary), SimError>
+where
+    EnvModel: Model<T>,
+{
     let model = policy.model();
     check_state(model, x0)?;
-    let mut actor = policy.actor(kind)?;
     let mut states = vec![x0.to_vec()];
     let mut actions = Vec::with_capacity(steps);
     let mut rewards = Vec::with_capacity(steps);
@@ -140,9 +154,10 @@ where
     if starts.is_empty() {
         return Err(ConfigError::invalid("starts", "needs at least one initial state").into());
     }
+    let mut actor = policy.actor(kind)?;
     let mut runs = Vec::with_capacity(starts.len());
     for x0 in starts {
-        runs.push(run(policy, x0, steps, kind)?.1);
+        runs.push(run_with(policy, &mut actor, x0, steps)?.1);
     }
     let returns = runs.iter().map(|r| r.discounted_return);
     Ok(MonteCarlo {
