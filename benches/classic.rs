@@ -8,7 +8,9 @@ use std::ops::ControlFlow;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use fuzzyq_core::solver::{solve, solve_q};
-use fuzzyq_sim::classic::{DcMotor, DcMotorConfig, Pendulum, PendulumConfig, dcmotor, pendulum};
+use fuzzyq_sim::model::classic::{
+    DcMotor, DcMotorConfig, Pendulum, PendulumConfig, dcmotor, pendulum,
+};
 
 fn fine_presets(c: &mut Criterion) {
     let mut g = c.benchmark_group("classic_end_to_end");

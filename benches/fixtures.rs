@@ -5,7 +5,7 @@
 use fuzzyq_core::Real;
 use fuzzyq_core::solver::Grid;
 use fuzzyq_sim::PointMass;
-use fuzzyq_sim::config::TrainConfig;
+use fuzzyq_sim::io::config::TrainConfig;
 
 /// The paper's initial state.
 pub const X0: [f64; 8] = [-4.0, -6.0, -2.0, 2.0, 5.0, 3.0, 2.0, -1.0];

@@ -43,7 +43,10 @@ fn sweeps(c: &mut Criterion) {
     g.sample_size(20);
     let grid = reduced_grid::<f32>();
     let v = realistic_v(&grid);
-    for k in Kernel::ALL.into_iter().filter(|k| k.is_available()) {
+    for &k in <Kernel as fuzzyq_core::NamedOption>::ALL
+        .iter()
+        .filter(|k| k.is_available())
+    {
         let block = Operator::new(&m, grid.view(), BACKUP, BackupPath::Block)
             .unwrap()
             .with_kernel(k)

@@ -5,7 +5,7 @@
 use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::solver::Grid;
 use fuzzyq_core::{Model, ProductPartition, Real};
-use fuzzyq_sim::pointmass::{PointMass, PointMassConfig};
+use fuzzyq_sim::model::pointmass::{PointMass, PointMassConfig};
 
 /// Asserts `|a - b| <= tol` elementwise, naming the first offending index.
 #[track_caller]

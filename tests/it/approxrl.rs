@@ -46,7 +46,7 @@ use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{BackupPath, Grid, Operator, SolveError, solve, solve_q};
 use fuzzyq_core::{ActionSet, Backup, JointActions, Model, ProductPartition, q};
-use fuzzyq_sim::classic::{
+use fuzzyq_sim::model::classic::{
     DcMotor, DcMotorConfig, Pendulum, PendulumConfig, Preset, core_index_from_toolbox, dcmotor,
     pendulum, toolbox_core_index,
 };
@@ -475,7 +475,7 @@ fn check_solve_q<M: Model<f64>>(case: &Case, model: &M, preset: &Preset) {
 /// iteration count and final delta, and the per-core greedy actions of `solve_q`.
 #[test]
 fn q_values_operator_trains_the_toolbox_iteration() {
-    use fuzzyq_sim::config::{IterationOperator, TrainConfig};
+    use fuzzyq_sim::io::config::{IterationOperator, TrainConfig};
     for (env, case) in [("dcmotor", &DC), ("pendulum", &IP)] {
         let mut c = TrainConfig::from_preset(env, "toolbox-demo").unwrap();
         c.solver.operator = IterationOperator::QValues;
@@ -488,7 +488,7 @@ fn q_values_operator_trains_the_toolbox_iteration() {
         assert!((a.summary.final_delta - last).abs() <= 1e-9 * last, "{env}");
         assert_eq!(a.summary.kernel, "q-values");
         let mut bad = c.clone();
-        bad.solver.sweep = fuzzyq_sim::config::Sweep::Async;
+        bad.solver.sweep = fuzzyq_sim::io::config::Sweep::Async;
         assert!(
             bad.validate()
                 .unwrap_err()

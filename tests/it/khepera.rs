@@ -3,10 +3,10 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_sim::PolicyArtifact;
-use fuzzyq_sim::arena::{Arena, Obstacle};
-use fuzzyq_sim::config::{Backup, EnvConfig, TrainConfig};
-use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
-use fuzzyq_sim::robots::{random_starts, rollout_khepera_any, success_over_starts};
+use fuzzyq_sim::io::config::{Backup, EnvConfig, TrainConfig};
+use fuzzyq_sim::model::arena::{Arena, Obstacle};
+use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
+use fuzzyq_sim::run::robots::{random_starts, rollout_khepera_any, success_over_starts};
 
 fn khepera(agents: usize, position_cores: Vec<f64>, headings: usize) -> TrainConfig {
     let mut c = TrainConfig::default_for("khepera").expect("default");
@@ -68,7 +68,8 @@ fn two_robot_smoke_run_is_deterministic() {
     .unwrap();
     assert_eq!(starts.len(), 3);
     // A point-mass rollout refuses a khepera policy with a clear error.
-    let Err(e) = fuzzyq_sim::rollout::rollout_any(&policy, &[0.0; 8], 5, PolicyKind::Greedy) else {
+    let Err(e) = fuzzyq_sim::run::rollout::rollout_any(&policy, &[0.0; 8], 5, PolicyKind::Greedy)
+    else {
         panic!("a khepera policy must be refused")
     };
     assert!(e.to_string().contains("khepera"), "{e}");
@@ -89,13 +90,15 @@ fn block_and_generic_backups_agree_with_an_obstacle() {
     }
     c.solver.extrapolate = false;
     c.solver.max_sweeps = 30;
-    c.solver.precision = fuzzyq_sim::config::Precision::F64;
+    c.solver.precision = fuzzyq_sim::io::config::Precision::F64;
     c.solver.backup = Backup::Block;
     let b = train(&c);
     c.solver.backup = Backup::Generic;
     let g = train(&c);
-    let (fuzzyq_sim::artifact::Values::F64(vb), fuzzyq_sim::artifact::Values::F64(vg)) =
-        (&b.values, &g.values)
+    let (
+        fuzzyq_sim::io::policy_file::Values::F64(vb),
+        fuzzyq_sim::io::policy_file::Values::F64(vg),
+    ) = (&b.values, &g.values)
     else {
         panic!("f64 values")
     };

@@ -1,13 +1,14 @@
 //! The solver against a brute-force reference, its two backup paths against each other, and
 //! its invariants: contraction, determinism across thread counts, sync/async agreement.
 
+use fuzzyq_core::NamedOption;
 use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{
     BackupPath, Grid, Kernel, Operator, Solution, SolveError, SolverConfig, Stop, SweepMode, solve,
 };
 use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
-use fuzzyq_sim::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
+use fuzzyq_sim::model::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
 use fuzzyq_tests::{
     assert_close, brute_force, max_and_argmax, max_diff, medium_two_agent, small_one_agent,
     small_two_agent, with_threads,
@@ -396,7 +397,7 @@ fn wrong_block_declarations_are_refused() {
         integrator: Integrator::Rk4,
         friction: FrictionConfig::Patches {
             base: 1.0,
-            patches: vec![fuzzyq_sim::pointmass::FrictionPatch {
+            patches: vec![fuzzyq_sim::model::pointmass::FrictionPatch {
                 center: [0.5, 0.5],
                 radius: 1.0,
                 eta: 4.0,
@@ -444,7 +445,8 @@ fn grid_must_span_a_valid_partition() {
 fn kernel_instances_give_identical_solutions() {
     let (m, g) = medium_two_agent::<f32>();
     let runs: Vec<(Kernel, Solution<f32>)> = Kernel::ALL
-        .into_iter()
+        .iter()
+        .copied()
         .filter(|k| k.is_available())
         .map(|k| {
             let c = SolverConfig {
@@ -1032,7 +1034,8 @@ fn block_and_generic_agree_with_terminal_states() {
     let m = Cliff::<f32>::new(2, true);
     let g = m.grid();
     let runs: Vec<Solution<f32>> = Kernel::ALL
-        .into_iter()
+        .iter()
+        .copied()
         .filter(|k| k.is_available())
         .flat_map(|k| {
             let c = SolverConfig {

@@ -2,10 +2,10 @@
 
 use std::ops::ControlFlow;
 
-use fuzzyq_sim::config::{EnvConfig, GridConfig, Precision, TrainConfig};
-use fuzzyq_sim::pointmass::{Integrator, PointMass, PointMassConfig};
-use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
-use fuzzyq_sim::rollout::{PAPER_X0, rollout_any};
+use fuzzyq_sim::io::config::{EnvConfig, GridConfig, Precision, TrainConfig};
+use fuzzyq_sim::model::pointmass::{Integrator, PointMass, PointMassConfig};
+use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
+use fuzzyq_sim::run::rollout::{PAPER_X0, rollout_any};
 use fuzzyq_sim::{PolicyArtifact, SimError};
 use proptest::prelude::*;
 
@@ -101,9 +101,9 @@ fn position_dependent_friction_trains_with_rk4() {
         };
         p.agents = 1;
         p.integrator = Integrator::Rk4;
-        p.friction = fuzzyq_sim::pointmass::FrictionConfig::Patches {
+        p.friction = fuzzyq_sim::model::pointmass::FrictionConfig::Patches {
             base: 1.0,
-            patches: vec![fuzzyq_sim::pointmass::FrictionPatch {
+            patches: vec![fuzzyq_sim::model::pointmass::FrictionPatch {
                 center: [-2.0, -2.0],
                 radius: 1.5,
                 eta: 3.0,
@@ -138,7 +138,7 @@ proptest! {
         let base = PointMassConfig {
             agents: 1,
             mass,
-            friction: fuzzyq_sim::pointmass::FrictionConfig::Constant { eta },
+            friction: fuzzyq_sim::model::pointmass::FrictionConfig::Constant { eta },
             ..PointMassConfig::default()
         };
         let exact = PointMass::new(base.clone()).unwrap();

@@ -88,7 +88,7 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
         c.fql.episodes = e;
     }
     if let Some(m) = args.learn_position {
-        c.fql_starts = fuzzyq_sim::pointmass_fql::Starts::Uniform {
+        c.fql_starts = fuzzyq_sim::learn::tasks::pointmass::Starts::Uniform {
             position: m,
             velocity: 0.0,
         };

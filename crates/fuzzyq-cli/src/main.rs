@@ -121,7 +121,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Rollout(args) => rollout::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Config { env, preset } => {
-            use fuzzyq_sim::config::TrainConfig;
+            use fuzzyq_sim::io::config::TrainConfig;
             match (env, preset) {
                 (Env::Pointmass | Env::Khepera, Some(_)) => {
                     anyhow::bail!("--preset applies to --env dcmotor or pendulum only")
@@ -132,7 +132,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 (_, preset) => {
                     let name = preset
                         .as_deref()
-                        .unwrap_or(fuzzyq_sim::config::DEFAULT_PRESET);
+                        .unwrap_or(fuzzyq_sim::io::config::DEFAULT_PRESET);
                     let c = TrainConfig::from_preset(env.name(), name)?;
                     print_stdout(&format!(
                         "# fuzzyq training configuration: {}, preset \"{name}\".\n\
@@ -196,7 +196,7 @@ fn tempfile_probe(dir: &Path) -> std::io::Result<()> {
 
 /// Writes a file atomically, naming it in the error.
 pub(crate) fn write_file(path: &Path, bytes: &[u8], what: &str) -> anyhow::Result<()> {
-    fuzzyq_sim::artifact::write_atomically(path, bytes)
+    fuzzyq_sim::io::policy_file::write_atomically(path, bytes)
         .with_context(|| format!("cannot write {what} {}", path.display()))
 }
 

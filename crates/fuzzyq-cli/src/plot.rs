@@ -15,13 +15,13 @@ use std::path::Path;
 use std::sync::Once;
 
 use anyhow::{Context, anyhow, bail};
-use fuzzyq_sim::arena::{Arena, Obstacle};
 use fuzzyq_sim::compare::Comparison;
-use fuzzyq_sim::fql::EpisodeRecord;
-use fuzzyq_sim::khepera::ACTION_NAMES;
-use fuzzyq_sim::policy::PolicyKind;
-use fuzzyq_sim::robots::KheperaRun;
-use fuzzyq_sim::rollout::Trajectory;
+use fuzzyq_sim::learn::fql::EpisodeRecord;
+use fuzzyq_sim::model::arena::{Arena, Obstacle};
+use fuzzyq_sim::model::khepera::ACTION_NAMES;
+use fuzzyq_sim::run::policy::PolicyKind;
+use fuzzyq_sim::run::robots::KheperaRun;
+use fuzzyq_sim::run::rollout::Trajectory;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -109,7 +109,7 @@ fn write_figure(
     register_font();
     // Render next to the destination (the bitmap encoder picks the format from the
     // extension), then rename over it.
-    let tmp = fuzzyq_sim::artifact::temp_file_beside(path, &format!(".{ext}"))
+    let tmp = fuzzyq_sim::io::policy_file::temp_file_beside(path, &format!(".{ext}"))
         .with_context(|| format!("cannot write plot {}", path.display()))?;
     {
         if ext == "svg" {
@@ -1711,7 +1711,7 @@ mod tests {
                         let r = (x0.hypot(y0)) * (1.0 - 0.97 * s);
                         let a = y0.atan2(x0) + (1.0 + i as f64) * 2.5 * s;
                         let (x, y) = (r * a.cos(), r * a.sin());
-                        let heading = fuzzyq_sim::khepera::wrap_angle(a + 2.0 + 3.0 * s);
+                        let heading = fuzzyq_sim::model::khepera::wrap_angle(a + 2.0 + 3.0 * s);
                         [x, y, heading]
                     })
                     .collect()

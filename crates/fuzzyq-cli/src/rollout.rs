@@ -5,16 +5,18 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use fuzzyq_sim::config::EnvConfig;
-use fuzzyq_sim::khepera_fql::{FqlPolicyFile, fql_success_over_starts, rollout_fql};
-use fuzzyq_sim::physics::{Collisions, PointMassPlantConfig, rollout_plant};
-use fuzzyq_sim::pointmass_fql::PointMassPolicyFile;
-use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
-use fuzzyq_sim::robots::{
+use fuzzyq_sim::io::config::EnvConfig;
+use fuzzyq_sim::learn::tasks::khepera::{FqlPolicyFile, fql_success_over_starts, rollout_fql};
+use fuzzyq_sim::learn::tasks::pointmass::PointMassPolicyFile;
+use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
+use fuzzyq_sim::run::robots::{
     KheperaMetrics, KheperaRun, PAPER_KHEPERA_X0, SuccessReport, poses_from_paper, random_starts,
     rollout_khepera_any, success_over_starts,
 };
-use fuzzyq_sim::rollout::{PAPER_X0, RolloutMetrics, Trajectory, rollout_additive, rollout_any};
+use fuzzyq_sim::run::rollout::{
+    PAPER_X0, RolloutMetrics, Trajectory, rollout_additive, rollout_any,
+};
+use fuzzyq_sim::world::{Collisions, PointMassPlantConfig, rollout_plant};
 use fuzzyq_sim::{PolicyArtifact, PolicyFileError};
 use serde::Serialize;
 
@@ -315,8 +317,8 @@ fn classic(args: RolloutArgs, artifact: PolicyArtifact) -> anyhow::Result<()> {
             );
         }
         let mc = with_policy!(&policy, p => {
-            let starts = fuzzyq_sim::evaluate::lattice(p.model(), n)?;
-            fuzzyq_sim::evaluate::monte_carlo(p, &starts, steps, kind)?
+            let starts = fuzzyq_sim::run::evaluate::lattice(p.model(), n)?;
+            fuzzyq_sim::run::evaluate::monte_carlo(p, &starts, steps, kind)?
         });
         if let Some(p) = &args.json {
             write_json(p, &mc)?;
@@ -338,7 +340,7 @@ fn classic(args: RolloutArgs, artifact: PolicyArtifact) -> anyhow::Result<()> {
         Some(t) => parse_list(t, "--x0")?,
         None => default_x0,
     };
-    let (t, run) = with_policy!(&policy, p => fuzzyq_sim::evaluate::run(p, &x0, steps, kind)?);
+    let (t, run) = with_policy!(&policy, p => fuzzyq_sim::run::evaluate::run(p, &x0, steps, kind)?);
     if let Some(p) = &args.csv {
         let mut out = String::from("t");
         for i in 1..=state_names.len() {
@@ -397,11 +399,11 @@ fn classic(args: RolloutArgs, artifact: PolicyArtifact) -> anyhow::Result<()> {
 
 /// `V` and the policy's action sampled on a 101 x 101 lattice over a 2-D state space.
 fn value_and_policy_maps<T: fuzzyq_core::Real>(
-    p: &fuzzyq_sim::policy::Policy<T>,
+    p: &fuzzyq_sim::run::policy::Policy<T>,
     kind: PolicyKind,
 ) -> anyhow::Result<Vec<plot::HeatMap>>
 where
-    fuzzyq_sim::env::EnvModel: fuzzyq_core::Model<T>,
+    fuzzyq_sim::model::EnvModel: fuzzyq_core::Model<T>,
 {
     use fuzzyq_core::Model;
     const N: usize = 101;
@@ -590,7 +592,7 @@ fn point_mass_outputs(
 fn khepera(
     args: RolloutArgs,
     policy: &Robots,
-    config: &fuzzyq_sim::khepera::KheperaConfig,
+    config: &fuzzyq_sim::model::khepera::KheperaConfig,
 ) -> anyhow::Result<()> {
     if args.plant == Some(PlantArg::Model) {
         anyhow::bail!("--plant model: khepera policies run on the rapier plant only");

@@ -10,7 +10,7 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use fuzzyq_core::solver::{Progress, SolveError};
-use fuzzyq_sim::config::{Backup, EnvConfig, KernelChoice, Precision, Sweep, TrainConfig};
+use fuzzyq_sim::io::config::{Backup, EnvConfig, KernelChoice, Precision, Sweep, TrainConfig};
 use fuzzyq_sim::{PolicyArtifact, SimError};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
@@ -207,7 +207,7 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
     if let Some(path) = &args.arena {
         match &mut config.env {
-            EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::arena::Arena::from_file(path)?,
+            EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::model::arena::Arena::from_file(path)?,
             _ => anyhow::bail!("--arena applies to --env khepera only"),
         }
     }
@@ -226,8 +226,8 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(o) = args.operator {
         s.operator = match o {
-            OperatorArg::Values => fuzzyq_sim::config::IterationOperator::Values,
-            OperatorArg::QValues => fuzzyq_sim::config::IterationOperator::QValues,
+            OperatorArg::Values => fuzzyq_sim::io::config::IterationOperator::Values,
+            OperatorArg::QValues => fuzzyq_sim::io::config::IterationOperator::QValues,
         };
     }
     if args.absorbing_goal {
@@ -328,7 +328,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let env = config.env.name();
     let joint = match &config.env {
         EnvConfig::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
-        EnvConfig::Khepera(k) => fuzzyq_sim::khepera::N_ACTIONS.pow(k.agents as u32),
+        EnvConfig::Khepera(k) => fuzzyq_sim::model::khepera::N_ACTIONS.pow(k.agents as u32),
         EnvConfig::Dcmotor(c) => c.actions.len(),
         EnvConfig::Pendulum(c) => c.actions.len(),
         EnvConfig::Carhill(c) => c.actions.len(),
@@ -455,22 +455,22 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
 
 /// A model-free learner's run: what it trains on, and how its policy file is written.
 enum SampleLearner<'a> {
-    Khepera(&'a fuzzyq_sim::khepera::KheperaConfig),
+    Khepera(&'a fuzzyq_sim::model::khepera::KheperaConfig),
     PointMass {
         model: Box<fuzzyq_sim::PointMass>,
-        features: Option<fuzzyq_sim::fql::FeatureSpace>,
-        vqql: Option<fuzzyq_sim::vqql::VqqlConfig>,
+        features: Option<fuzzyq_sim::learn::fql::FeatureSpace>,
+        vqql: Option<fuzzyq_sim::learn::vqql::VqqlConfig>,
     },
 }
 
 /// `fuzzyq train --learner fql|vqql`: model-free learning with the additive layout.
 fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
-    use fuzzyq_sim::pointmass_fql::{self, PointMassPolicyFile};
-    use fuzzyq_sim::vqql::{self, VqqlConfig};
+    use fuzzyq_sim::learn::tasks::pointmass::{self as pointmass_fql, PointMassPolicyFile};
+    use fuzzyq_sim::learn::vqql::{self, VqqlConfig};
     let (learner, mut fql) = match (&config.env, args.learner) {
         (EnvConfig::Khepera(k), LearnerArg::Fql) => (
             SampleLearner::Khepera(k),
-            fuzzyq_sim::khepera_fql::default_fql_config(),
+            fuzzyq_sim::learn::tasks::khepera::default_fql_config(),
         ),
         (EnvConfig::Khepera(_), _) => {
             anyhow::bail!("--learner vqql is available for --env pointmass only")
@@ -534,7 +534,7 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
         fql.episodes = n;
     }
     if args.literal {
-        fql.update = fuzzyq_sim::fql::Update::Literal;
+        fql.update = fuzzyq_sim::learn::fql::Update::Literal;
     }
     fql.validate()?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -572,7 +572,7 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     }
     let plain = !args.quiet && !tty;
     let started = std::time::Instant::now();
-    let progress = |r: &fuzzyq_sim::fql::EpisodeRecord| {
+    let progress = |r: &fuzzyq_sim::learn::fql::EpisodeRecord| {
         bar.set_position(r.episode as u64 + 1);
         if let Some(s) = r.eval_success_rate {
             bar.set_message(format!("greedy success {:.0}%", 100.0 * s));
@@ -592,7 +592,9 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     };
     let starts = pointmass_fql::default_starts();
     let outcome = match &learner {
-        SampleLearner::Khepera(k) => fuzzyq_sim::khepera_fql::train_fql(k, &fql, progress)?,
+        SampleLearner::Khepera(k) => {
+            fuzzyq_sim::learn::tasks::khepera::train_fql(k, &fql, progress)?
+        }
         SampleLearner::PointMass {
             model,
             features: Some(f),
@@ -624,7 +626,7 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     let seconds = started.elapsed().as_secs_f64();
     match &learner {
         SampleLearner::Khepera(k) => {
-            fuzzyq_sim::khepera_fql::FqlPolicyFile::from_outcome(k, &fql, &outcome)
+            fuzzyq_sim::learn::tasks::khepera::FqlPolicyFile::from_outcome(k, &fql, &outcome)
                 .save(&args.out)?;
         }
         SampleLearner::PointMass { model, vqql, .. } => PointMassPolicyFile::from_outcome(
@@ -638,7 +640,7 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     }
     if let Some(p) = &args.curve {
         let mut text = Vec::new();
-        fuzzyq_sim::fql::write_curve_csv(&outcome.curve, &mut text)?;
+        fuzzyq_sim::learn::fql::write_curve_csv(&outcome.curve, &mut text)?;
         crate::write_file(p, &text, "curve")?;
     }
     let learner_name = match args.learner {
@@ -668,7 +670,7 @@ fn run_fql(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     struct FqlSummary {
         env: &'static str,
         learner: &'static str,
-        update: fuzzyq_sim::fql::Update,
+        update: fuzzyq_sim::learn::fql::Update,
         policy: String,
         episodes: usize,
         steps_total: usize,

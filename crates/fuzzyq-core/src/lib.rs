@@ -13,8 +13,13 @@
 //!   of a state.
 //! - [`ActionSet`] / [`JointActions`]: per-agent discrete actions and the joint action set.
 //! - [`Model`]: a deterministic model `f`, `rho` with optional independent dynamics blocks.
-//! - [`q`]: Q evaluation for the `joint` and `additive` layouts, the greedy policy with
-//!   lowest-index tie-breaking, and the interpolated policy of eq 22.
+//! - [`q`]: Q evaluation for the `joint` layout, the greedy policy with lowest-index
+//!   tie-breaking, and the interpolated policy of eq 22.
+//! - [`additive`]: the `additive` layout (eqs 12-13 per agent) and the sample updates of its
+//!   parameters (the corrected and the printed form of eqs 23-27): what a robot needs to
+//!   learn on board.
+//! - [`options`]: the named settings (sweep order, backup path, membership kind, update,
+//!   policy kind, ...), each spelled once for files, the command line and Python.
 //! - [`backup`]: the backup kernels (generic and per-block) on caller buffers.
 //! - `solver` (feature `std`, parallel with `parallel`): the fuzzy Q-iteration driver that keeps
 //!   only `V` and exploits the block structure of the dynamics.
@@ -54,9 +59,11 @@
 #![deny(missing_docs)]
 
 pub mod action;
+pub mod additive;
 pub mod backup;
 pub mod error;
 pub mod model;
+pub mod options;
 pub mod partition;
 pub mod q;
 pub mod real;
@@ -67,5 +74,6 @@ pub use action::{ActionSet, JointActions, MAX_AGENTS};
 pub use backup::Backup;
 pub use error::{CoresError, EvalError, PartitionError};
 pub use model::{Block, Model, Tabulated};
+pub use options::NamedOption;
 pub use partition::{ActiveCores, MAX_DIMS, Membership, Partition, ProductPartition, Segment};
 pub use real::Real;

@@ -38,24 +38,15 @@ use crate::real::Real;
 /// The largest number of state variables a [`ProductPartition`] supports.
 pub const MAX_DIMS: usize = 16;
 
-/// The membership functions a [`Partition`] puts on its cores.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Membership {
-    /// Triangles: 1 at a core, 0 at its neighbours, linear between (the fuzzy partition).
-    #[default]
-    Triangular,
-    /// Crisp boxes: degree 1 in the nearest core, 0 elsewhere (see the [module docs](self)).
-    Crisp,
-}
-
-impl Membership {
-    /// `"triangular"` or `"crisp"`.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Triangular => "triangular",
-            Self::Crisp => "crisp",
-        }
+crate::named_option! {
+    /// The membership functions a [`Partition`] puts on its cores.
+    #[derive(Default)]
+    pub enum Membership: "membership" {
+        /// Triangles: 1 at a core, 0 at its neighbours, linear between (the fuzzy partition).
+        #[default]
+        Triangular = "triangular" => "triangles: 1 at a core, 0 at its neighbours (fuzzy Q-iteration)",
+        /// Crisp boxes: degree 1 in the nearest core, 0 elsewhere (see the [module docs](self)).
+        Crisp = "crisp" => "nearest-core boxes (crisp grid Q-iteration)",
     }
 }
 

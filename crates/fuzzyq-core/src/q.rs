@@ -1,4 +1,4 @@
-//! Q evaluation and policies for the two parameter layouts.
+//! Q evaluation and the policies of the `joint` layout.
 //!
 //! # `joint` layout (eqs 7, 8, 20)
 //! `theta[d, u]` over joint cores `d` and joint actions `u`, stored row-major
@@ -6,11 +6,8 @@
 //! `theta` (the paper's has 2.56e9 entries) the solver keeps only `V[d] = max_u theta[d, u]`;
 //! [`crate::backup::q_values_from_v`] evaluates `Q(x, .)` from `V` and the model.
 //!
-//! # `additive` layout (eqs 12-13)
-//! One parameter vector `phi` of `z = n N M` entries: agent `i`, core `d` of the agent's own
-//! state partition (`N` cores), own action `j` (`M` per agent) at the paper's eq 12 index
-//! `d + j N + i N M` (0-based). `Q(x, u) = sum_i sum_d mu_d(x_i) phi[i, d, u_i]` where `x_i` is
-//! agent `i`'s own state. The greedy joint action decomposes into per-agent argmaxes.
+//! The `additive` layout (eqs 12-13 read per agent) and its sample updates are in
+//! [`crate::additive`].
 //!
 //! # Policies
 //! - greedy (eq 7): the joint action maximising `Q(x, .)`, ties broken towards the lowest
@@ -25,6 +22,18 @@ use crate::action::JointActions;
 use crate::error::{EvalError, check_len};
 use crate::partition::ProductPartition;
 use crate::real::Real;
+
+crate::named_option! {
+    /// Which policy acts on a solution (see the [module docs](self)).
+    #[derive(Default)]
+    pub enum PolicyKind: "policy" {
+        /// The joint action maximising `Q(x, .)`, lowest index on ties (eq 7).
+        #[default]
+        Greedy = "greedy" => "the joint action maximising Q(x, .), lowest index on ties (eq 7)",
+        /// The membership-weighted average of the active cores' greedy actions (eq 22).
+        Interpolated = "interpolated" => "the membership-weighted average of the active cores' greedy actions (eq 22)",
+    }
+}
 
 /// Index of the largest value, the lowest index among ties; NaNs never win. `None` if `q` is
 /// empty or all NaN.
@@ -122,113 +131,6 @@ pub fn interpolated_action<T: Real>(
     Ok(())
 }
 
-/// The `additive` layout (paper eqs 12-13): per-agent parameters over the agent's own state.
-pub mod additive {
-    use super::*;
-
-    /// The paper's eq 12 index of `phi[i, d, j]` (all 0-based): `d + j N + i N M`.
-    #[inline]
-    #[must_use]
-    pub const fn index(
-        agent: usize,
-        core: usize,
-        action: usize,
-        n_cores: usize,
-        n_actions: usize,
-    ) -> usize {
-        core + action * n_cores + agent * n_cores * n_actions
-    }
-
-    /// Length `z = n N M` of the parameter vector.
-    #[inline]
-    #[must_use]
-    pub const fn len(n_agents: usize, n_cores: usize, n_actions: usize) -> usize {
-        n_agents * n_cores * n_actions
-    }
-
-    /// Agent `agent`'s contributions `out[j] = sum_d mu_d(x_i) phi[agent, d, j]` at its own
-    /// state `x_i` (`out.len() == M`, `phi.len() == n N M`).
-    pub fn agent_q_values<T: Real>(
-        grid: &ProductPartition<'_, T>,
-        phi: &[T],
-        n_agents: usize,
-        agent: usize,
-        x_i: &[T],
-        out: &mut [T],
-    ) -> Result<(), EvalError> {
-        let n = grid.n_cores();
-        let m = out.len();
-        check_len("phi", len(n_agents, n, m), phi.len())?;
-        if agent >= n_agents {
-            return Err(EvalError::OutOfRange {
-                what: "agent",
-                index: agent,
-                len: n_agents,
-            });
-        }
-        let active = grid.active(x_i)?;
-        out.fill(T::ZERO);
-        active.for_each(|d, w| {
-            for (j, o) in out.iter_mut().enumerate() {
-                *o += w * phi[index(agent, d, j, n, m)];
-            }
-        });
-        Ok(())
-    }
-
-    /// `Q(x, u)` of eq 13 for per-agent actions `u` (one index per agent); `agent_states`
-    /// concatenates the agents' own states (`n * E_agent` values).
-    pub fn q_value<T: Real>(
-        grid: &ProductPartition<'_, T>,
-        phi: &[T],
-        n_actions: usize,
-        agent_states: &[T],
-        u: &[usize],
-    ) -> Result<T, EvalError> {
-        let n_agents = u.len();
-        let e = grid.n_dims();
-        let n = grid.n_cores();
-        check_len("agent states", n_agents * e, agent_states.len())?;
-        check_len("phi", len(n_agents, n, n_actions), phi.len())?;
-        let mut q = T::ZERO;
-        for (i, &j) in u.iter().enumerate() {
-            if j >= n_actions {
-                return Err(EvalError::OutOfRange {
-                    what: "agent action",
-                    index: j,
-                    len: n_actions,
-                });
-            }
-            let active = grid.active(&agent_states[i * e..(i + 1) * e])?;
-            active.for_each(|d, w| q += w * phi[index(i, d, j, n, n_actions)]);
-        }
-        Ok(q)
-    }
-
-    /// The greedy per-agent actions (each agent's argmax of its own contribution, lowest index
-    /// on ties), written into `out` (one per agent); `q` (length `M`) is scratch.
-    pub fn greedy_actions<T: Real>(
-        grid: &ProductPartition<'_, T>,
-        phi: &[T],
-        agent_states: &[T],
-        q: &mut [T],
-        out: &mut [usize],
-    ) -> Result<(), EvalError> {
-        let n_agents = out.len();
-        let e = grid.n_dims();
-        check_len("agent states", n_agents * e, agent_states.len())?;
-        for (i, o) in out.iter_mut().enumerate() {
-            agent_q_values(grid, phi, n_agents, i, &agent_states[i * e..(i + 1) * e], q)?;
-            *o = argmax(q).ok_or(EvalError::Length {
-                what: "Q-values",
-                expected: 1,
-                found: 0,
-            })?;
-        }
-        Ok(())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -266,36 +168,5 @@ mod tests {
         interpolated_action(&g, &j, &[0, 2], &[0.25], &mut out).unwrap();
         assert!((out[0] - (0.75 * -2.0 + 0.25 * 2.0)).abs() < 1e-12);
         assert!(interpolated_action(&g, &j, &[0, 3], &[0.25], &mut out).is_err());
-    }
-
-    #[test]
-    fn additive_index_matches_eq12() {
-        // [i, d, j] = [d + (j - 1) N] + (i - 1) N M with 1-based i, d, j.
-        let (n, m) = (7, 3);
-        for i in 1..=2 {
-            for d in 1..=n {
-                for j in 1..=m {
-                    let one_based = (d + (j - 1) * n) + (i - 1) * n * m;
-                    assert_eq!(additive::index(i - 1, d - 1, j - 1, n, m) + 1, one_based);
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn additive_q_sums_agents() {
-        let c = [0.0f64, 1.0];
-        let g = ProductPartition::try_new(&[&c[..]]).unwrap();
-        let (n, m) = (2, 2);
-        let mut phi = [0.0; 8];
-        phi[additive::index(0, 1, 1, n, m)] = 4.0;
-        phi[additive::index(1, 0, 0, n, m)] = 2.0;
-        let states = [1.0, 0.5];
-        let q = additive::q_value(&g, &phi, m, &states, &[1, 0]).unwrap();
-        assert!((q - (4.0 + 1.0)).abs() < 1e-12);
-        let mut out = [9; 2];
-        let mut scratch = [0.0; 2];
-        additive::greedy_actions(&g, &phi, &states, &mut scratch, &mut out).unwrap();
-        assert_eq!(out, [1, 0]);
     }
 }

@@ -13,31 +13,10 @@ use core::iter::Sum;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 mod sealed {
-    /// Seals [`Real`](super::Real) to `f32` and `f64`, and carries what the solver needs per
-    /// type without exposing it.
-    pub trait Sealed: Sized {
-        /// The block-backup kernels for this type, chosen for this CPU.
-        #[cfg(feature = "std")]
-        fn kernels(
-            choice: Option<crate::solver::Kernel>,
-        ) -> Option<&'static crate::solver::simd::Kernels<Self>>;
-    }
-    impl Sealed for f32 {
-        #[cfg(feature = "std")]
-        fn kernels(
-            choice: Option<crate::solver::Kernel>,
-        ) -> Option<&'static crate::solver::simd::Kernels<Self>> {
-            crate::solver::simd::select::<f32>(choice)
-        }
-    }
-    impl Sealed for f64 {
-        #[cfg(feature = "std")]
-        fn kernels(
-            choice: Option<crate::solver::Kernel>,
-        ) -> Option<&'static crate::solver::simd::Kernels<Self>> {
-            crate::solver::simd::select::<f64>(choice)
-        }
-    }
+    /// Seals [`Real`](super::Real) to `f32` and `f64`.
+    pub trait Sealed {}
+    impl Sealed for f32 {}
+    impl Sealed for f64 {}
 }
 
 /// A floating-point scalar: `f32` or `f64`.

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::{ActionSet, JointActions, Model};
-use fuzzyq_sim::pointmass::{FrictionConfig, FrictionPatch, Integrator, PointMassConfig};
+use fuzzyq_sim::model::pointmass::{FrictionConfig, FrictionPatch, Integrator, PointMassConfig};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;

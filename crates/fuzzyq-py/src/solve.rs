@@ -7,11 +7,11 @@ use std::sync::{Arc, Mutex, OnceLock};
 use fuzzyq_core::solver::{self, Kernel, Progress, SolveError, TabulatedModel};
 use fuzzyq_core::{Backup, Real};
 use fuzzyq_sim::PolicyArtifact;
-use fuzzyq_sim::artifact::{TrainSummary, Values};
-use fuzzyq_sim::config::{
+use fuzzyq_sim::io::config::{
     Backup as BackupSetting, EnvConfig, GridConfig, KernelChoice, Precision, SolverSettings, Sweep,
     TrainConfig,
 };
+use fuzzyq_sim::io::policy_file::{TrainSummary, Values};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -99,7 +99,7 @@ fn parse_settings(
             Some("avx512") => Some(KernelChoice::Avx512),
             Some(other) => return Err(bad("kernel", "\"scalar\", \"avx2\", \"avx512\"", other)),
         },
-        operator: fuzzyq_sim::config::IterationOperator::Values,
+        operator: fuzzyq_sim::io::config::IterationOperator::Values,
     })
 }
 
@@ -307,8 +307,9 @@ pub(crate) fn load(py: Python<'_>, path: PathBuf) -> PyResult<Solution> {
 /// The kernel instances this CPU runs, fastest first (`"avx512"`, `"avx2"`, `"scalar"`).
 #[pyfunction]
 pub(crate) fn available_kernels() -> Vec<&'static str> {
-    Kernel::ALL
-        .into_iter()
+    <Kernel as fuzzyq_core::NamedOption>::ALL
+        .iter()
+        .copied()
         .filter(|k| k.is_available())
         .map(Kernel::name)
         .collect()
@@ -348,7 +349,7 @@ impl Solution {
             Some(m) => m,
             None => {
                 match fuzzyq_sim::train::build_model(&a.config).map_err(|e| sim_error(py, &e))? {
-                    fuzzyq_sim::env::EnvModel::PointMass(m) => Arc::new(m),
+                    fuzzyq_sim::model::EnvModel::PointMass(m) => Arc::new(m),
                     other => {
                         let e = fuzzyq_sim::SimError::from(fuzzyq_sim::ConfigError::invalid(
                             "env",

@@ -20,9 +20,9 @@
 //! |---|---|---|
 //! | [`Learner::Fqi`] | joint fuzzy Q-iteration (the paper's method, [`crate::train`]) | `N * M` (cores x joint actions); only `V` is stored |
 //! | [`Learner::Crisp`] | grid Q-iteration on the same cores as crisp nearest-core boxes ([`MembershipKind::Crisp`]) | `N * M` |
-//! | [`Learner::Fql`] | fuzzy Q-learning, additive layout, corrected update ([`crate::fql`]) | `sum_i N_i * M_i` |
+//! | [`Learner::Fql`] | fuzzy Q-learning, additive layout, corrected update ([`crate::learn::fql`]) | `sum_i N_i * M_i` |
 //! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
-//! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::vqql`]) | `sum_i K_i * M_i` |
+//! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
 //!
 //! Everything is seeded: the same configuration gives the same table (bar the seconds).
 
@@ -30,14 +30,14 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{EnvConfig, MembershipKind, TrainConfig};
 use crate::error::{ConfigError, SimError};
-use crate::fql::{AdditiveQ, FqlConfig, Update};
-use crate::pointmass::PointMass;
-use crate::pointmass_fql::{self, Starts};
-use crate::policy::{AnyPolicy, PolicyKind};
-use crate::rollout::{self, RolloutMetrics, Trajectory};
-use crate::vqql::{self, VqqlConfig};
+use crate::io::config::{EnvConfig, MembershipKind, TrainConfig};
+use crate::learn::fql::{AdditiveQ, FqlConfig, Update};
+use crate::learn::tasks::pointmass::{self as pointmass_fql, Starts};
+use crate::learn::vqql::{self, VqqlConfig};
+use crate::model::pointmass::PointMass;
+use crate::run::policy::{AnyPolicy, PolicyKind};
+use crate::run::rollout::{self, RolloutMetrics, Trajectory};
 
 /// The initial state of the paper's Table 1 (section 4): both agents at rest.
 pub const TABLE1_X0: [f64; 8] = [-4.0, 5.0, 0.0, 0.0, 5.0, -3.0, 0.0, 0.0];
@@ -632,7 +632,7 @@ impl Comparison {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::GridConfig;
+    use crate::io::config::GridConfig;
 
     /// One agent on a coarse grid: every learner trains in a fraction of a second.
     fn tiny() -> CompareConfig {

@@ -25,12 +25,12 @@
 //!   move exactly as the models do in open space.
 //!
 //! ```
-//! use fuzzyq_sim::config::{GridConfig, TrainConfig};
-//! use fuzzyq_sim::policy::{AnyPolicy, PolicyKind};
+//! use fuzzyq_sim::io::config::{GridConfig, TrainConfig};
+//! use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
 //!
 //! // The paper's task with one agent on a coarse grid.
 //! let mut config = TrainConfig::default();
-//! if let fuzzyq_sim::config::EnvConfig::Pointmass(p) = &mut config.env {
+//! if let fuzzyq_sim::io::config::EnvConfig::Pointmass(p) = &mut config.env {
 //!     p.agents = 1;
 //! }
 //! config.grid = GridConfig {
@@ -44,37 +44,26 @@
 //! assert!(artifact.summary.converged);
 //! let policy = AnyPolicy::from_artifact(artifact)?;
 //! let (trajectory, metrics) =
-//!     fuzzyq_sim::rollout::rollout_any(&policy, &[-4.0, 3.0, 0.0, 0.0], 40, PolicyKind::Greedy)?;
+//!     fuzzyq_sim::run::rollout::rollout_any(&policy, &[-4.0, 3.0, 0.0, 0.0], 40, PolicyKind::Greedy)?;
 //! assert_eq!(trajectory.states.len(), 41);
 //! assert!(metrics.final_error_m[0] < 4.0);
 //! # Ok::<(), fuzzyq_sim::SimError>(())
 //! ```
 #![deny(missing_docs)]
 
-pub mod arena;
-pub mod artifact;
-pub mod classic;
 pub mod compare;
-pub mod config;
-pub mod env;
 pub mod error;
-pub mod evaluate;
-pub mod fql;
-pub mod khepera;
-pub mod khepera_fql;
-pub mod physics;
-pub mod pointmass;
-pub mod pointmass_fql;
-pub mod policy;
-pub mod robots;
-pub mod rollout;
+pub mod io;
+pub mod learn;
+pub mod model;
+pub mod run;
 pub mod train;
-pub mod vqql;
+pub mod world;
 
-pub use artifact::PolicyArtifact;
-pub use config::TrainConfig;
 pub use error::{ConfigError, PolicyFileError, SimError};
-pub use pointmass::{PointMass, PointMassConfig};
+pub use io::config::TrainConfig;
+pub use io::policy_file::PolicyArtifact;
+pub use model::pointmass::{PointMass, PointMassConfig};
 
 /// The README's Rust examples, compiled as doctests so that they cannot drift from the API.
 #[cfg(doctest)]

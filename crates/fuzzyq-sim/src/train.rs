@@ -5,16 +5,16 @@ use std::ops::ControlFlow;
 use fuzzyq_core::Real;
 use fuzzyq_core::solver::{self, Delta, Grid, Progress, Solution, SweepRecord};
 
-use crate::artifact::{PolicyArtifact, TrainSummary, Values};
-use crate::classic::arm::Arm;
-use crate::classic::carhill::CarHill;
-use crate::classic::dcmotor::DcMotor;
-use crate::classic::pendulum::Pendulum;
-use crate::config::{EnvConfig, IterationOperator, Precision, TrainConfig};
-use crate::env::EnvModel;
 use crate::error::SimError;
-use crate::khepera::KheperaModel;
-use crate::pointmass::PointMass;
+use crate::io::config::{EnvConfig, IterationOperator, Precision, TrainConfig};
+use crate::io::policy_file::{PolicyArtifact, TrainSummary, Values};
+use crate::model::EnvModel;
+use crate::model::classic::arm::Arm;
+use crate::model::classic::carhill::CarHill;
+use crate::model::classic::dcmotor::DcMotor;
+use crate::model::classic::pendulum::Pendulum;
+use crate::model::khepera::KheperaModel;
+use crate::model::pointmass::PointMass;
 
 /// Builds the model a configuration describes.
 pub fn build_model(config: &TrainConfig) -> Result<EnvModel, SimError> {

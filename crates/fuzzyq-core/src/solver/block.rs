@@ -368,7 +368,7 @@ impl<T: Real> BlockOperator<T> {
         let identity = product_len == m && map.iter().enumerate().all(|(u, &p)| p as usize == u);
         let mut op = Self {
             tables,
-            kernels: T::kernels(None).expect("the scalar kernels always exist"),
+            kernels: super::simd::select_real::<T>(None).expect("the scalar kernels always exist"),
             r_len,
             p_len,
             map: (!identity).then_some(map),
@@ -517,7 +517,8 @@ impl<T: Real> BlockOperator<T> {
 
     /// Uses the kernels `choice`, if this CPU can run them.
     pub(super) fn set_kernel(&mut self, choice: super::Kernel) -> Result<(), SolveError> {
-        self.kernels = T::kernels(Some(choice)).ok_or(SolveError::KernelUnavailable(choice))?;
+        self.kernels = super::simd::select_real::<T>(Some(choice))
+            .ok_or(SolveError::KernelUnavailable(choice))?;
         Ok(())
     }
 

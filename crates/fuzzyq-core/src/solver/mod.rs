@@ -175,58 +175,77 @@ impl<T: Real> Grid<T> {
     }
 }
 
-/// Synchronous (Jacobi) or asynchronous (Gauss-Seidel) sweeps.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum SweepMode {
-    /// Every core reads the previous sweep's values (the paper's eq 20).
-    #[default]
-    Synchronous,
-    /// Slabs update in place and later slabs read the new values.
-    Asynchronous,
+crate::named_option! {
+    /// Synchronous (Jacobi) or asynchronous (Gauss-Seidel) sweeps.
+    #[derive(Default)]
+    pub enum SweepMode: "sweep" {
+        /// Every core reads the previous sweep's values (the paper's eq 20).
+        #[default]
+        Synchronous = "sync" => "every core reads the previous sweep's values (Jacobi, the paper's eq 20)",
+        /// Slabs update in place and later slabs read the new values.
+        Asynchronous = "async" => "slabs update in place, later ones read the new values (Gauss-Seidel)",
+    }
 }
 
-/// Which backup implementation to use.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum BackupPath {
-    /// The block path when the model declares blocks, the generic path otherwise.
-    #[default]
-    Auto,
-    /// Per-block sparse products; an error if the model declares no blocks.
-    Block,
-    /// Step the model and interpolate over all active successor cores.
-    Generic,
+crate::named_option! {
+    /// Which backup implementation to use.
+    #[derive(Default)]
+    pub enum BackupPath: "backup" {
+        /// The block path when the model declares blocks, the generic path otherwise.
+        #[default]
+        Auto = "auto" => "the block path when the model declares blocks, else the generic one",
+        /// Per-block sparse products; an error if the model declares no blocks.
+        Block = "block" => "per-block sparse products (the model must declare blocks)",
+        /// Step the model and interpolate over all active successor cores.
+        Generic = "generic" => "step the model and interpolate over every active successor core",
+    }
 }
 
-/// An instruction set for the block path's kernels (see [`Operator::with_kernel`]). Every
-/// instance computes bit-identical results; they differ only in speed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Kernel {
-    /// Portable scalar code (fused multiply-add through `mul_add`).
-    Scalar,
-    /// x86-64 AVX2 with FMA.
-    Avx2,
-    /// x86-64 AVX-512F.
-    Avx512,
+crate::named_option! {
+    /// An instruction set for the block path's kernels (see [`Operator::with_kernel`]). Every
+    /// instance computes bit-identical results; they differ only in speed. [`ALL`](Self::ALL)
+    /// lists them fastest first.
+    pub enum Kernel: "kernel" {
+        /// x86-64 AVX-512F.
+        Avx512 = "avx512" => "x86-64 AVX-512F",
+        /// x86-64 AVX2 with FMA.
+        Avx2 = "avx2" => "x86-64 AVX2 with FMA",
+        /// Portable scalar code (fused multiply-add through `mul_add`).
+        Scalar = "scalar" => "portable scalar code",
+    }
 }
 
 impl Kernel {
-    /// The name used in reports and on the command line.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Scalar => "scalar",
-            Self::Avx2 => "avx2",
-            Self::Avx512 => "avx512",
-        }
-    }
-
-    /// Every instance, fastest first.
-    pub const ALL: [Kernel; 3] = [Self::Avx512, Self::Avx2, Self::Scalar];
-
     /// Whether this CPU can run the instance.
     #[must_use]
     pub fn is_available(self) -> bool {
         simd::select::<f32>(Some(self)).is_some()
+    }
+}
+
+crate::named_option! {
+    /// Which fuzzy Q-iteration operator a run iterates (see the crate docs of `fuzzyq-sim`
+    /// and `docs/design.md` for how the two differ).
+    #[derive(Default)]
+    pub enum IterationOperator: "operator" {
+        /// `theta[d, u] = rho + gamma sum_d' mu_d'(x') V[d']`: only `V` is stored ([`solve`]).
+        #[default]
+        Values = "values" => "interpolate the per-core maxima; only V is stored (any grid size)",
+        /// `theta[d, u] = rho + gamma max_u' sum_d' mu_d'(x') theta[d', u']` with `theta`
+        /// stored ([`solve_q`], Busoniu's operator as the ApproxRL toolbox runs it).
+        QValues = "q-values" => "Busoniu's fuzzy Q-iteration, theta stored (the ApproxRL toolbox's)",
+    }
+}
+
+crate::named_option! {
+    /// The floating-point type a solver runs in.
+    #[derive(Default)]
+    pub enum Precision: "precision" {
+        /// Single precision (half the memory, twice the SIMD width).
+        #[default]
+        F32 = "f32" => "single precision: half the memory, twice the SIMD width",
+        /// Double precision.
+        F64 = "f64" => "double precision",
     }
 }
 

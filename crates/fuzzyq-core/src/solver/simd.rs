@@ -1468,6 +1468,17 @@ pub(crate) fn select<T: KernelSet>(choice: Option<super::Kernel>) -> Option<&'st
     }
 }
 
+/// [`select`] for any [`Real`]: the solver is generic over `Real`, whose two types both have
+/// kernel sets; the `f32` or `f64` instance is found by its type, so `Real` (which is
+/// `no_std`) need not know about the kernels.
+pub(crate) fn select_real<T: Real>(choice: Option<super::Kernel>) -> Option<&'static Kernels<T>> {
+    use core::any::Any;
+    let f32s: Option<&'static dyn Any> = select::<f32>(choice).map(|k| k as &dyn Any);
+    let f64s: Option<&'static dyn Any> = select::<f64>(choice).map(|k| k as &dyn Any);
+    f32s.and_then(|k| k.downcast_ref::<Kernels<T>>())
+        .or_else(|| f64s.and_then(|k| k.downcast_ref::<Kernels<T>>()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

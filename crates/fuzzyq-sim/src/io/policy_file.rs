@@ -20,8 +20,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Precision, TrainConfig};
 use crate::error::PolicyFileError;
+use crate::io::config::{Precision, TrainConfig};
 
 /// The magic tag every policy file starts with.
 pub const MAGIC: [u8; 8] = *b"\x89FUZZYQ\n";
@@ -193,12 +193,16 @@ impl PolicyArtifact {
     #[must_use]
     pub fn n_joint_actions(&self) -> usize {
         match &self.config.env {
-            crate::config::EnvConfig::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
-            crate::config::EnvConfig::Khepera(k) => crate::khepera::N_ACTIONS.pow(k.agents as u32),
-            crate::config::EnvConfig::Dcmotor(c) => c.actions.len(),
-            crate::config::EnvConfig::Pendulum(c) => c.actions.len(),
-            crate::config::EnvConfig::Carhill(c) => c.actions.len(),
-            crate::config::EnvConfig::Arm(c) => c.actions.len().pow(2),
+            crate::io::config::EnvConfig::Pointmass(p) => {
+                p.force_levels.len().pow(2 * p.agents as u32)
+            }
+            crate::io::config::EnvConfig::Khepera(k) => {
+                crate::model::khepera::N_ACTIONS.pow(k.agents as u32)
+            }
+            crate::io::config::EnvConfig::Dcmotor(c) => c.actions.len(),
+            crate::io::config::EnvConfig::Pendulum(c) => c.actions.len(),
+            crate::io::config::EnvConfig::Carhill(c) => c.actions.len(),
+            crate::io::config::EnvConfig::Arm(c) => c.actions.len().pow(2),
         }
     }
 
@@ -370,7 +374,7 @@ pub fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{GridConfig, TrainConfig};
+    use crate::io::config::{GridConfig, TrainConfig};
 
     fn tiny() -> PolicyArtifact {
         let config = TrainConfig {

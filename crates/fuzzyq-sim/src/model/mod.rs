@@ -3,14 +3,19 @@
 //! [`EnvModel`] dispatches the [`Model`] trait to the point masses or the Khepera robots, so
 //! that training, policies and policy files handle every environment alike.
 
+pub mod arena;
+pub mod classic;
+pub mod khepera;
+pub mod pointmass;
+
 use fuzzyq_core::{ActionSet, Block, Model, Tabulated};
 
-use crate::classic::arm::Arm;
-use crate::classic::carhill::CarHill;
-use crate::classic::dcmotor::DcMotor;
-use crate::classic::pendulum::Pendulum;
-use crate::khepera::KheperaModel;
-use crate::pointmass::PointMass;
+use crate::model::classic::arm::Arm;
+use crate::model::classic::carhill::CarHill;
+use crate::model::classic::dcmotor::DcMotor;
+use crate::model::classic::pendulum::Pendulum;
+use crate::model::khepera::KheperaModel;
+use crate::model::pointmass::PointMass;
 
 /// A built-in environment's model.
 #[derive(Clone, Debug)]

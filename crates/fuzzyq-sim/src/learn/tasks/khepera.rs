@@ -1,11 +1,11 @@
-//! Model-free fuzzy Q-learning ([`crate::fql`]) on the Khepera robots of the rapier plant
+//! Model-free fuzzy Q-learning ([`crate::learn::fql`]) on the Khepera robots of the rapier plant
 //! ([`KheperaWorld`]): the paper's future work (a model-free variant, stochastic dynamics) on
 //! its robot task (sections 3.2-3.3).
 //!
 //! Fuzzy Q-iteration ([`crate::train`]) learns the Khepera task on the joint pose with the
 //! kinematic model. Here each robot learns from what it senses instead, as the paper's robots
 //! do: no model, the plant's contacts and (optionally noisy) sonars, and the additive,
-//! decentralised layout of [`crate::fql`] (project notes, section 2).
+//! decentralised layout of [`crate::learn::fql`] (project notes, section 2).
 //!
 //! # Observations ([`observation`], [`observation_cores`])
 //! Robot `i` observes `E = S + 2` continuous values: its `S` sonar readings (5 by default, in
@@ -52,14 +52,14 @@
 //! # Rollouts
 //! [`rollout_fql`] runs the greedy decentralised policy (each robot the argmax of its own term,
 //! lowest index on ties) on the plant and reports it exactly as
-//! [`crate::robots::rollout_khepera`] reports a fuzzy Q-iteration policy: the paper's 8-D state
+//! [`crate::run::robots::rollout_khepera`] reports a fuzzy Q-iteration policy: the paper's 8-D state
 //! with the measured velocities, rewards `rho(x_k)` of the state before each action, the same
 //! metrics and success rule (final 8-D state in the region, no collision during the run).
 //! Unlike a learning episode, a rollout does not stop at the region.
 //!
 //! ```no_run
-//! use fuzzyq_sim::khepera::KheperaConfig;
-//! use fuzzyq_sim::khepera_fql::{default_fql_config, fql_success_over_starts, train_fql};
+//! use fuzzyq_sim::model::khepera::KheperaConfig;
+//! use fuzzyq_sim::learn::tasks::khepera::{default_fql_config, fql_success_over_starts, train_fql};
 //!
 //! let config = KheperaConfig::default();
 //! let fql = default_fql_config();
@@ -77,21 +77,21 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{load_toml, save_toml};
 use crate::error::{ConfigError, PolicyFileError, SimError};
-use crate::fql::{
+use crate::io::policy_file::{load_toml, save_toml};
+use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
-use crate::khepera::{KheperaConfig, KheperaModel, N_ACTIONS, goal_polar};
+use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS, goal_polar};
 #[cfg(doc)]
-use crate::khepera::{angle_level, distance_level, sonar_level};
-use crate::physics::KheperaWorld;
-#[cfg(doc)]
-use crate::physics::StepContacts;
-use crate::policy::PolicyKind;
-use crate::robots::{
+use crate::model::khepera::{angle_level, distance_level, sonar_level};
+use crate::run::policy::PolicyKind;
+use crate::run::robots::{
     KheperaMetrics, KheperaRun, SuccessReport, measure_run, random_starts, run_on_plant,
 };
+use crate::world::KheperaWorld;
+#[cfg(doc)]
+use crate::world::StepContacts;
 
 /// The goal of the task: the origin.
 pub const GOAL: [f64; 2] = [0.0, 0.0];
@@ -495,7 +495,7 @@ fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
 
 /// Runs the greedy decentralised policy of `q` (each robot the argmax of its own term at its
 /// own observation) for `steps` control periods from `start` on the plant seeded with `seed`,
-/// and measures the run as [`crate::robots::rollout_khepera`] does (see the
+/// and measures the run as [`crate::run::robots::rollout_khepera`] does (see the
 /// [module docs](self)); `gamma` discounts the return and `value_x0` is
 /// [`AdditiveQ::value`] at the start observations.
 pub fn rollout_fql(
@@ -541,7 +541,7 @@ pub fn rollout_fql(
 
 /// Rolls the greedy policy of `q` out from the `count` starts of
 /// [`random_starts(config, count, seed)`](random_starts), run `k` on the plant seeded with
-/// `seed + k`: the starts and plants of [`crate::robots::success_over_starts`].
+/// `seed + k`: the starts and plants of [`crate::run::robots::success_over_starts`].
 pub fn fql_success_over_starts(
     q: &AdditiveQ,
     config: &KheperaConfig,
@@ -616,7 +616,7 @@ impl FqlPolicyFile {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::khepera::{angle_level, distance_level, sonar_level};
+    use crate::model::khepera::{angle_level, distance_level, sonar_level};
 
     /// `t` lies strictly between two neighbouring cores.
     fn between(cores: &[f64], t: f64) -> bool {

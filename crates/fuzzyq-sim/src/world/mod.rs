@@ -55,7 +55,7 @@
 //! outward against the walls, the obstacles and the other robots (a query filter excludes the
 //! robot's own body). The reading is the nearest hit measured from the rim, clamped to
 //! `[sonar_min_range, sonar_max_range]`, the maximum when nothing is hit within range; the
-//! [`NoiseConfig`](crate::khepera::NoiseConfig) of the configuration then applies, drawn from the
+//! [`NoiseConfig`](crate::model::khepera::NoiseConfig) of the configuration then applies, drawn from the
 //! world's own seeded generator.
 
 use fuzzyq_core::{EvalError, Model, Real};
@@ -69,13 +69,13 @@ use rapier2d::prelude::{
 };
 use serde::{Deserialize, Serialize};
 
-use crate::arena::{Arena, Obstacle};
-use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
-use crate::khepera::{self, KheperaConfig, MAX_ROBOTS};
-use crate::pointmass::{FrictionConfig, PointMass, PointMassConfig};
-use crate::policy::{Policy, PolicyKind};
-use crate::rollout::{RolloutMetrics, Trajectory, point_mass_of, rollout_on};
+use crate::model::EnvModel;
+use crate::model::arena::{Arena, Obstacle};
+use crate::model::khepera::{self, KheperaConfig, MAX_ROBOTS};
+use crate::model::pointmass::{FrictionConfig, PointMass, PointMassConfig};
+use crate::run::policy::{Policy, PolicyKind};
+use crate::run::rollout::{RolloutMetrics, Trajectory, point_mass_of, rollout_on};
 
 /// Thickness of the wall cuboids (m).
 pub const WALL_THICKNESS: f64 = 0.5;
@@ -804,7 +804,7 @@ impl PointMassPlant {
 }
 
 /// Runs `policy` for `steps` steps from `x0` on the point-mass plant: as
-/// [`rollout`](crate::rollout::rollout), with the discs colliding; also returns the
+/// [`rollout`](crate::run::rollout::rollout), with the discs colliding; also returns the
 /// collisions.
 pub fn rollout_plant<T: Real>(
     policy: &Policy<T>,
@@ -1146,7 +1146,7 @@ mod tests {
     use std::f64::consts::PI;
 
     use super::*;
-    use crate::rollout::PAPER_X0;
+    use crate::run::rollout::PAPER_X0;
 
     fn paper_plant() -> (PointMass, PointMassPlant) {
         let model = PointMass::paper();
@@ -1270,15 +1270,15 @@ mod tests {
 
     #[test]
     fn rollout_plant_equals_rollout_without_contacts() {
-        use crate::config::{EnvConfig, GridConfig, TrainConfig};
-        use crate::policy::AnyPolicy;
+        use crate::io::config::{EnvConfig, GridConfig, TrainConfig};
+        use crate::run::policy::AnyPolicy;
 
         fn both<T: Real>(p: &Policy<T>)
         where
             EnvModel: Model<T>,
         {
             let x0 = [-4.0, 3.0, 0.0, 0.0];
-            let (a, ma) = crate::rollout::rollout(p, &x0, 40, PolicyKind::Greedy).unwrap();
+            let (a, ma) = crate::run::rollout::rollout(p, &x0, 40, PolicyKind::Greedy).unwrap();
             let (b, mb, col) = rollout_plant(
                 p,
                 &x0,

@@ -4,10 +4,10 @@ use fuzzyq_core::solver::{BackupPath, Grid, Operator};
 use fuzzyq_core::{Backup, JointActions, Model, Real, q};
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{PolicyArtifact, Values};
-use crate::config::TrainConfig;
-use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
+use crate::io::config::TrainConfig;
+use crate::io::policy_file::{PolicyArtifact, Values};
+use crate::model::EnvModel;
 use crate::train::{build_grid, build_model};
 
 /// Which policy to derive from a solution.

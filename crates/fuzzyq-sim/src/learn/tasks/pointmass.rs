@@ -1,4 +1,4 @@
-//! Model-free learning ([`crate::fql`]) on the paper's point-mass task (section 3.1): the
+//! Model-free learning ([`crate::learn::fql`]) on the paper's point-mass task (section 3.1): the
 //! learners of Table 1 (section 4) run on the same plant as fuzzy Q-iteration.
 //!
 //! # The environment ([`PointMassEnv`])
@@ -26,13 +26,13 @@
 //! cores and, with 25 actions, the paper's "50625 pairs per agent".
 //!
 //! The crisp baseline of Table 1 (VQQL) runs on the same environment with codebook features
-//! ([`crate::vqql`]); every learned Q-function rolls out with
-//! [`rollout_additive`](crate::rollout::rollout_additive) and is saved as a
+//! ([`crate::learn::vqql`]); every learned Q-function rolls out with
+//! [`rollout_additive`](crate::run::rollout::rollout_additive) and is saved as a
 //! [`PointMassPolicyFile`].
 //!
 //! ```no_run
 //! use fuzzyq_sim::PointMass;
-//! use fuzzyq_sim::pointmass_fql::{self, Starts, TABLE1_X0};
+//! use fuzzyq_sim::learn::tasks::pointmass::{self, Starts, TABLE1_X0};
 //!
 //! let model = PointMass::paper();
 //! let features = pointmass_fql::feature_space(
@@ -46,7 +46,7 @@
 //!     std::ops::ControlFlow::Continue(())
 //! })?;
 //! let (_, metrics) =
-//!     fuzzyq_sim::rollout::rollout_additive(&model, &outcome.q, &TABLE1_X0, 100, fql.gamma)?;
+//!     fuzzyq_sim::run::rollout::rollout_additive(&model, &outcome.q, &TABLE1_X0, 100, fql.gamma)?;
 //! println!("final errors {:?}", metrics.final_error_m);
 //! # Ok::<(), fuzzyq_sim::SimError>(())
 //! ```
@@ -60,14 +60,14 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{load_toml, save_toml};
 use crate::error::{ConfigError, PolicyFileError, SimError};
-use crate::fql::{
+use crate::io::policy_file::{load_toml, save_toml};
+use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
-use crate::pointmass::{PointMass, PointMassConfig};
-use crate::rollout::check_additive;
-use crate::vqql::VqqlConfig;
+use crate::learn::vqql::VqqlConfig;
+use crate::model::pointmass::{PointMass, PointMassConfig};
+use crate::run::rollout::check_additive;
 
 /// The paper's position cores per axis (project notes, section 1), in m.
 pub const PAPER_POSITION_CORES: [f64; 9] = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
@@ -280,7 +280,7 @@ impl PointMassEnv {
 
     /// Places the system at `x0` (checked against the state space).
     pub fn reset_to(&mut self, x0: &[f64]) -> Result<(), SimError> {
-        crate::rollout::check_x0(&self.model, x0)?;
+        crate::run::rollout::check_x0(&self.model, x0)?;
         self.x.copy_from_slice(x0);
         Ok(())
     }
@@ -393,7 +393,7 @@ pub fn default_fql_config() -> FqlConfig {
 
 /// Learns the point-mass task by fuzzy Q-learning on a [`PointMassEnv`] with `starts`
 /// and the per-agent `features` (usually [`feature_space`]; codebook features give tabular
-/// Q-learning, see [`crate::vqql::train_vqql`]). `progress` sees every episode's record and
+/// Q-learning, see [`crate::learn::vqql::train_vqql`]). `progress` sees every episode's record and
 /// may stop the run (see [`fql::learn`]). Errors: invalid starts or learning settings, or
 /// features that do not fit the model (agents, 4 observations per agent).
 pub fn train_fql(
@@ -412,7 +412,7 @@ pub fn train_fql(
 }
 
 /// A learned point-mass policy (fuzzy Q-learning or VQQL) with what produced it, saved as
-/// TOML text (as [`crate::khepera_fql::FqlPolicyFile`] is).
+/// TOML text (as [`crate::learn::tasks::khepera::FqlPolicyFile`] is).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PointMassPolicyFile {
@@ -437,7 +437,7 @@ pub struct PointMassPolicyFile {
 
 impl PointMassPolicyFile {
     /// The file of a [`train_fql`] run (`vqql = None`) or a
-    /// [`train_vqql`](crate::vqql::train_vqql) run (`vqql = Some(..)`).
+    /// [`train_vqql`](crate::learn::vqql::train_vqql) run (`vqql = Some(..)`).
     #[must_use]
     pub fn from_outcome(
         config: &PointMassConfig,
@@ -525,8 +525,8 @@ impl PointMassPolicyFile {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rollout::rollout_additive;
-    use crate::vqql::{self, VqqlConfig};
+    use crate::learn::vqql::{self, VqqlConfig};
+    use crate::run::rollout::rollout_additive;
 
     fn continue_all(_: &EpisodeRecord) -> ControlFlow<()> {
         ControlFlow::Continue(())

@@ -12,12 +12,12 @@ use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
-use crate::khepera::{KheperaConfig, KheperaModel, wrap_angle};
-use crate::physics::{Collisions, KheperaWorld};
-use crate::policy::{Actor, AnyPolicy, Policy, PolicyKind};
-use crate::rollout::{RolloutMetrics, Trajectory, measure_with};
+use crate::model::EnvModel;
+use crate::model::khepera::{KheperaConfig, KheperaModel, wrap_angle};
+use crate::run::policy::{Actor, AnyPolicy, Policy, PolicyKind};
+use crate::run::rollout::{RolloutMetrics, Trajectory, measure_with};
+use crate::world::{Collisions, KheperaWorld};
 
 /// The paper's start for the robot experiment (section 3.3): `[-4, 5, 0, 0, 5, 3, 0, 0]`.
 pub const PAPER_KHEPERA_X0: [f64; 8] = [-4.0, 5.0, 0.0, 0.0, 5.0, 3.0, 0.0, 0.0];
@@ -29,7 +29,7 @@ pub struct KheperaRun {
     pub trajectory: Trajectory,
     /// Poses `(x, y, heading)` per robot, `steps + 1` of them.
     pub poses: Vec<Vec<[f64; 3]>>,
-    /// Discrete action index per robot and step (see [`crate::khepera::ACTION_NAMES`]); for
+    /// Discrete action index per robot and step (see [`crate::model::khepera::ACTION_NAMES`]); for
     /// the interpolated policy, the nearest of the four to the averaged wheel speeds.
     pub action_indices: Vec<Vec<usize>>,
     /// Sonar readings per robot at every state (m).
@@ -279,7 +279,7 @@ pub fn rollout_khepera_any(
 
 /// The action whose wheel speeds are nearest to `w`.
 fn nearest_action(config: &KheperaConfig, w: [f64; 2]) -> usize {
-    (0..crate::khepera::N_ACTIONS)
+    (0..crate::model::khepera::N_ACTIONS)
         .min_by(|&a, &b| {
             let d = |k: usize| {
                 let c = config.wheels(k);

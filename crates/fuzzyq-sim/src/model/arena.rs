@@ -2,7 +2,7 @@
 //!
 //! The arena is a rectangle bounded by walls; obstacles are boxes (optionally rotated) and
 //! discs. The same description builds the rapier colliders of the physics plants
-//! ([`crate::physics`]) and answers the geometric questions of the models that learn on it
+//! ([`crate::world`]) and answers the geometric questions of the models that learn on it
 //! (does a robot disc at this pose touch anything; how far does a ray go), so that the model a
 //! policy is trained on and the plant it runs on see the same world.
 //!

@@ -6,13 +6,13 @@ use fuzzyq_core::Partition;
 use fuzzyq_core::solver::{BackupPath, SolverConfig, SweepMode};
 use serde::{Deserialize, Serialize};
 
-use crate::classic::arm::ArmConfig;
-use crate::classic::carhill::CarHillConfig;
-use crate::classic::dcmotor::DcMotorConfig;
-use crate::classic::pendulum::PendulumConfig;
 use crate::error::ConfigError;
-use crate::khepera::KheperaConfig;
-use crate::pointmass::PointMassConfig;
+use crate::model::classic::arm::ArmConfig;
+use crate::model::classic::carhill::CarHillConfig;
+use crate::model::classic::dcmotor::DcMotorConfig;
+use crate::model::classic::pendulum::PendulumConfig;
+use crate::model::khepera::KheperaConfig;
+use crate::model::pointmass::PointMassConfig;
 
 /// The default point-mass configuration: the paper's section 3.1.
 pub const DEFAULT_POINTMASS_TOML: &str = r#"# fuzzyq training configuration: the point-mass task of Luviano-Cruz et al. 2018, section 3.1.
@@ -127,13 +127,13 @@ pub enum EnvConfig {
     Pointmass(PointMassConfig),
     /// Khepera IV robots (sections 3.2-3.3).
     Khepera(KheperaConfig),
-    /// The DC motor of the classic benchmarks ([`crate::classic::dcmotor`]).
+    /// The DC motor of the classic benchmarks ([`crate::model::classic::dcmotor`]).
     Dcmotor(ClassicEnv<DcMotorConfig>),
-    /// The inverted pendulum swing-up ([`crate::classic::pendulum`]).
+    /// The inverted pendulum swing-up ([`crate::model::classic::pendulum`]).
     Pendulum(ClassicEnv<PendulumConfig>),
-    /// The car on the hill ([`crate::classic::carhill`]).
+    /// The car on the hill ([`crate::model::classic::carhill`]).
     Carhill(ClassicEnv<CarHillConfig>),
-    /// The two-link robot arm ([`crate::classic::arm`]); its `actions` are torque levels as
+    /// The two-link robot arm ([`crate::model::classic::arm`]); its `actions` are torque levels as
     /// fractions of each joint's maximum torque, combined per joint.
     Arm(ClassicEnv<ArmConfig>),
 }
@@ -478,7 +478,7 @@ impl TrainConfig {
     /// `gamma` and `xi`, the classic model parameters, and the toolbox's iteration
     /// (synchronous plain sweeps, at most 1000).
     pub fn from_preset(env: &str, preset: &str) -> Result<Self, ConfigError> {
-        use crate::classic::{arm, carhill, dcmotor, pendulum};
+        use crate::model::classic::{arm, carhill, dcmotor, pendulum};
         let (p, env) = match env {
             "dcmotor" => {
                 let p = dcmotor::preset(preset)?;
@@ -613,19 +613,19 @@ impl TrainConfig {
             }
             EnvConfig::Dcmotor(c) => {
                 c.model.validate()?;
-                crate::classic::validate_actions("env.actions", &c.actions)?;
+                crate::model::classic::validate_actions("env.actions", &c.actions)?;
             }
             EnvConfig::Pendulum(c) => {
                 c.model.validate()?;
-                crate::classic::validate_actions("env.actions", &c.actions)?;
+                crate::model::classic::validate_actions("env.actions", &c.actions)?;
             }
             EnvConfig::Carhill(c) => {
                 c.model.validate()?;
-                crate::classic::validate_actions("env.actions", &c.actions)?;
+                crate::model::classic::validate_actions("env.actions", &c.actions)?;
             }
             EnvConfig::Arm(c) => {
                 c.model.validate()?;
-                crate::classic::validate_actions("env.actions", &c.actions)?;
+                crate::model::classic::validate_actions("env.actions", &c.actions)?;
             }
             EnvConfig::Khepera(k) => {
                 k.validate()?;

@@ -36,8 +36,8 @@ use std::f64::consts::PI;
 use fuzzyq_core::{ActionSet, Block, Model};
 use serde::{Deserialize, Serialize};
 
-use crate::arena::Arena;
 use crate::error::ConfigError;
+use crate::model::arena::Arena;
 
 /// Optional sensor and actuator noise (the paper's future work: stochastic dynamics).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -377,7 +377,7 @@ pub fn robots_overlap(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
 ///
 /// Robot-robot contacts are not part of the transition (they would couple the blocks); the
 /// reward's collision penalty keeps the joint policy apart, and the physics plant
-/// ([`crate::physics::KheperaWorld`]) resolves contacts for real and counts them.
+/// ([`crate::world::KheperaWorld`]) resolves contacts for real and counts them.
 #[derive(Clone, Debug)]
 pub struct KheperaModel {
     config: KheperaConfig,

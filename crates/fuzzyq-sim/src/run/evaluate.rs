@@ -11,10 +11,10 @@
 use fuzzyq_core::{Model, Real};
 use serde::{Deserialize, Serialize};
 
-use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
-use crate::policy::{Actor, Policy, PolicyKind};
-use crate::rollout::Trajectory;
+use crate::model::EnvModel;
+use crate::run::policy::{Actor, Policy, PolicyKind};
+use crate::run::rollout::Trajectory;
 
 /// What one run achieved.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -212,12 +212,12 @@ pub fn lattice(model: &EnvModel, per_dim: usize) -> Result<Vec<Vec<f64>>, SimErr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::TrainConfig;
-    use crate::policy::AnyPolicy;
+    use crate::io::config::TrainConfig;
+    use crate::run::policy::AnyPolicy;
 
     fn dcmotor() -> Policy<f64> {
         let mut c = TrainConfig::from_preset("dcmotor", "toolbox-demo").unwrap();
-        c.solver.precision = crate::config::Precision::F64;
+        c.solver.precision = crate::io::config::Precision::F64;
         let a = crate::train::train(&c, |_| std::ops::ControlFlow::Continue(())).unwrap();
         match AnyPolicy::from_artifact(a).unwrap() {
             AnyPolicy::F64(p) => p,

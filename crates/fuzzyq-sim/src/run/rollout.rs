@@ -3,11 +3,11 @@
 use fuzzyq_core::{Model, Real};
 use serde::{Deserialize, Serialize};
 
-use crate::env::EnvModel;
 use crate::error::{ConfigError, SimError};
-use crate::fql::AdditiveQ;
-use crate::pointmass::PointMass;
-use crate::policy::{AnyPolicy, Policy, PolicyKind};
+use crate::learn::fql::AdditiveQ;
+use crate::model::EnvModel;
+use crate::model::pointmass::PointMass;
+use crate::run::policy::{AnyPolicy, Policy, PolicyKind};
 
 /// An agent has arrived when its position is within this distance of the origin (m).
 pub const ARRIVAL_RADIUS: f64 = 0.1;
@@ -68,7 +68,7 @@ pub struct RolloutMetrics {
 
 /// Checks an initial state against the model's state space.
 pub fn check_x0(model: &PointMass, x0: &[f64]) -> Result<(), SimError> {
-    crate::evaluate::check_state(model, x0)
+    crate::run::evaluate::check_state(model, x0)
 }
 
 /// The point-mass model of a policy, or an error naming the policy's environment.
@@ -216,7 +216,7 @@ pub fn check_additive(model: &PointMass, q: &AdditiveQ) -> Result<(), SimError> 
 }
 
 /// Runs the greedy decentralised policy of an additive Q-function `q` (fuzzy or codebook
-/// features, see [`crate::fql`]) for `steps` steps from `x0` on the point-mass model: agent
+/// features, see [`crate::learn::fql`]) for `steps` steps from `x0` on the point-mass model: agent
 /// `i` takes the argmax of its own term at its own state `(s_x, s_y, v_x, v_y)` (the lowest
 /// action index on ties), as the model's per-agent action of that index. Measured as
 /// [`rollout`] measures a fuzzy Q-iteration policy ([`PolicyKind::Greedy`]; `gamma`, in
@@ -327,8 +327,8 @@ pub(crate) fn measure_with(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fql::{Codebook, FeatureSpace};
-    use crate::pointmass::PointMassConfig;
+    use crate::learn::fql::{Codebook, FeatureSpace};
+    use crate::model::pointmass::PointMassConfig;
 
     fn one_agent() -> PointMass {
         PointMass::new(PointMassConfig {

@@ -100,7 +100,7 @@
 //! environment give bit-identical parameters and learning curves.
 //!
 //! ```
-//! use fuzzyq_sim::fql::{self, Environment, FeatureSpace, FqlConfig, Transition};
+//! use fuzzyq_sim::learn::fql::{self, Environment, FeatureSpace, FqlConfig, Transition};
 //! use rand_pcg::Pcg64Mcg;
 //!
 //! /// One agent on [0, 1]: left, stay or right by 0.25; reward 1 on reaching 1.

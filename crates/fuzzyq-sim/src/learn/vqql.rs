@@ -33,7 +33,7 @@
 //! bit-identical for a seed.
 //!
 //! # Learning ([`train_vqql`])
-//! [`crate::fql::learn`] on [`FeatureSpace::codebook`] features: an observation activates the one cell
+//! [`crate::learn::fql::learn`] on [`FeatureSpace::codebook`] features: an observation activates the one cell
 //! of its nearest centroid with membership 1, so the corrected update
 //! `phi[i][j * M + u_i] += alpha * delta` is exactly tabular Q-learning on the cells (with the
 //! additive, decentralised joint value of the project notes, section 2, as for fuzzy
@@ -52,11 +52,11 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError};
-use crate::fql::{
+use crate::learn::fql::{
     Codebook, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, sq_dist,
 };
-use crate::pointmass::PointMass;
-use crate::pointmass_fql::{PointMassEnv, Starts, train_fql};
+use crate::learn::tasks::pointmass::{PointMassEnv, Starts, train_fql};
+use crate::model::pointmass::PointMass;
 
 /// Lloyd iterations allowed past [`VqqlConfig::lloyd_iterations`] to fill empty cells.
 pub const MAX_REPAIR_ITERATIONS: usize = 100;
@@ -83,7 +83,7 @@ pub struct VqqlConfig {
 impl Default for VqqlConfig {
     /// 2025 cells (the own-state cores of the paper's fuzzy grid, see the
     /// [module docs](self)), 40,000 samples from episodes of 150 steps (the learning episode
-    /// length of [`crate::pointmass_fql::default_fql_config`]), at most 25 Lloyd iterations,
+    /// length of [`crate::learn::tasks::pointmass::default_fql_config`]), at most 25 Lloyd iterations,
     /// tolerance `1e-4`, seed 0.
     fn default() -> Self {
         Self {
@@ -591,7 +591,7 @@ pub fn train_vqql(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pointmass::PointMassConfig;
+    use crate::model::pointmass::PointMassConfig;
 
     fn samples(count: usize, seed: u64) -> Vec<f64> {
         let model = PointMass::paper();
@@ -745,9 +745,13 @@ mod tests {
             cells: 0,
             ..VqqlConfig::default()
         };
-        let text = build_codebook(&model, &crate::pointmass_fql::default_starts(), &small)
-            .unwrap_err()
-            .to_string();
+        let text = build_codebook(
+            &model,
+            &crate::learn::tasks::pointmass::default_starts(),
+            &small,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(text.starts_with("vqql.cells:"), "{text}");
     }
 
@@ -762,7 +766,7 @@ mod tests {
             lloyd_tolerance: 1e-6,
             seed: 9,
         };
-        let starts = crate::pointmass_fql::default_starts();
+        let starts = crate::learn::tasks::pointmass::default_starts();
         let (features, report) = build_codebook(&model, &starts, &config).unwrap();
         let (again, report2) = build_codebook(&model, &starts, &config).unwrap();
         assert_eq!(features, again);
@@ -780,10 +784,10 @@ mod tests {
         );
         assert!(report.agents.iter().all(|a| a.cell_sizes[0] >= 1));
         // The default matches the paper's fuzzy layout parameter for parameter.
-        let fuzzy = crate::pointmass_fql::feature_space(
+        let fuzzy = crate::learn::tasks::pointmass::feature_space(
             &model,
-            &crate::pointmass_fql::PAPER_POSITION_CORES,
-            &crate::pointmass_fql::PAPER_VELOCITY_CORES,
+            &crate::learn::tasks::pointmass::PAPER_POSITION_CORES,
+            &crate::learn::tasks::pointmass::PAPER_VELOCITY_CORES,
         )
         .unwrap();
         assert_eq!(fuzzy.n_cores(0), Some(VqqlConfig::default().cells));

@@ -1,0 +1,5 @@
+//! Learning from samples: model-free fuzzy Q-learning and VQQL.
+
+pub mod fql;
+pub mod tasks;
+pub mod vqql;

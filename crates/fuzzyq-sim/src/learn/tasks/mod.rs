@@ -1,0 +1,4 @@
+//! The tasks as learning environments.
+
+pub mod khepera;
+pub mod pointmass;
