@@ -2,8 +2,10 @@
 //! kind giving one clear line and exit code 2 without touching existing files.
 #![allow(missing_docs)]
 
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use std::time::SystemTime;
 
 fn fuzzyq(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fuzzyq"))
@@ -17,14 +19,61 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// Asserts a failed run: exit code 2 and one `error:` line on stderr containing `needle`.
+/// One bad invocation: the command line (split at whitespace, so no argument holds a space)
+/// and a fragment of the one-line error it must give.
+type BadCase<'a> = (&'a str, &'a str);
+
+/// Runs every case in `dir` and asserts that each one fails cleanly: exit code 2, one
+/// `error:` line on stderr containing the case's fragment, and no file or folder under `dir`
+/// created, removed or changed (bytes and modification time).
 #[track_caller]
-fn assert_fails(o: &Output, needle: &str) {
-    let err = stderr(o);
-    assert_eq!(o.status.code(), Some(2), "stderr: {err}");
-    assert_eq!(err.lines().count(), 1, "one line expected: {err}");
-    assert!(err.starts_with("error: "), "{err}");
-    assert!(err.contains(needle), "{needle:?} not in {err:?}");
+fn assert_all_fail(dir: &Path, cases: &[BadCase<'_>]) {
+    for &(line, needle) in cases {
+        let args: Vec<&str> = line.split_whitespace().collect();
+        let before = snapshot(dir);
+        let o = fuzzyq(&args, dir);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{line}: stderr: {err}");
+        assert_eq!(err.lines().count(), 1, "{line}: one line expected: {err}");
+        assert!(err.starts_with("error: "), "{line}: {err}");
+        assert!(err.contains(needle), "{line}: {needle:?} not in {err:?}");
+        let touched = changed(&before, &snapshot(dir));
+        assert!(touched.is_empty(), "{line}: touched {touched:?}");
+    }
+}
+
+/// Every path under a directory, relative to it, with each file's bytes and modification time
+/// (`None` for folders).
+type Snapshot = BTreeMap<PathBuf, Option<(Vec<u8>, SystemTime)>>;
+
+fn snapshot(dir: &Path) -> Snapshot {
+    let mut all = Snapshot::new();
+    let mut folders = vec![dir.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap() {
+            let path = entry.unwrap().path();
+            let meta = std::fs::symlink_metadata(&path).unwrap();
+            let key = path.strip_prefix(dir).unwrap().to_path_buf();
+            if meta.is_dir() {
+                all.insert(key, None);
+                folders.push(path);
+            } else {
+                let bytes = std::fs::read(&path).unwrap();
+                all.insert(key, Some((bytes, meta.modified().unwrap())));
+            }
+        }
+    }
+    all
+}
+
+/// The paths created, removed or changed between two snapshots.
+fn changed(before: &Snapshot, after: &Snapshot) -> Vec<PathBuf> {
+    let paths: BTreeSet<&PathBuf> = before.keys().chain(after.keys()).collect();
+    paths
+        .into_iter()
+        .filter(|p| before.get(*p) != after.get(*p))
+        .cloned()
+        .collect()
 }
 
 /// The paper's config with one agent: trains in milliseconds.
@@ -169,56 +218,9 @@ fn bad_input_fails_cleanly_without_touching_files() {
     let d = dir.path();
     one_agent_config(d);
     std::fs::write(d.join("keep.fzq"), b"precious").unwrap();
-
-    // Invalid settings, from flags and from the file.
-    assert_fails(
-        &fuzzyq(&["train", "--gamma", "1.5", "--out", "keep.fzq"], d),
-        "solver.gamma: must be in [0, 1), got 1.5",
-    );
     let text = std::fs::read_to_string(d.join("one.toml")).unwrap();
     std::fs::write(d.join("bad.toml"), text.replace("mass = 0.5", "mass = -2")).unwrap();
-    assert_fails(
-        &fuzzyq(&["train", "--config", "bad.toml", "--out", "keep.fzq"], d),
-        "env.mass: must be a positive number, got -2",
-    );
     std::fs::write(d.join("typo.toml"), text.replace("gamma =", "gama =")).unwrap();
-    assert_fails(
-        &fuzzyq(&["train", "--config", "typo.toml", "--out", "keep.fzq"], d),
-        "gama",
-    );
-    assert_fails(
-        &fuzzyq(
-            &["train", "--config", "missing.toml", "--out", "keep.fzq"],
-            d,
-        ),
-        "cannot read config missing.toml",
-    );
-    assert_eq!(std::fs::read(d.join("keep.fzq")).unwrap(), b"precious");
-
-    // An unwritable destination is refused before any training.
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train",
-                "--config",
-                "one.toml",
-                "--out",
-                "no/such/dir/p.fzq",
-            ],
-            d,
-        ),
-        "does not exist",
-    );
-
-    // Policies that are not policies.
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "keep.fzq"], d),
-        "is not a fuzzyq policy file",
-    );
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "nothing.fzq"], d),
-        "cannot read nothing.fzq",
-    );
     let o = fuzzyq(
         &["train", "--config", "one.toml", "--out", "p.fzq", "-q"],
         d,
@@ -226,33 +228,47 @@ fn bad_input_fails_cleanly_without_touching_files() {
     assert!(o.status.success(), "{}", stderr(&o));
     let bytes = std::fs::read(d.join("p.fzq")).unwrap();
     std::fs::write(d.join("cut.fzq"), &bytes[..bytes.len() / 2]).unwrap();
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "cut.fzq"], d),
-        "is truncated",
-    );
 
-    // Bad rollout arguments.
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "p.fzq"], d),
-        "give --x0 with 4 values",
+    assert_all_fail(
+        d,
+        &[
+            // Invalid settings, from flags and from the file.
+            (
+                "train --gamma 1.5 --out keep.fzq",
+                "solver.gamma: must be in [0, 1), got 1.5",
+            ),
+            (
+                "train --config bad.toml --out keep.fzq",
+                "env.mass: must be a positive number, got -2",
+            ),
+            ("train --config typo.toml --out keep.fzq", "gama"),
+            (
+                "train --config missing.toml --out keep.fzq",
+                "cannot read config missing.toml",
+            ),
+            // An unwritable destination is refused before any training.
+            (
+                "train --config one.toml --out no/such/dir/p.fzq",
+                "does not exist",
+            ),
+            // Policies that are not policies.
+            ("rollout --policy keep.fzq", "is not a fuzzyq policy file"),
+            ("rollout --policy nothing.fzq", "cannot read nothing.fzq"),
+            ("rollout --policy cut.fzq", "is truncated"),
+            // Bad rollout arguments.
+            ("rollout --policy p.fzq", "give --x0 with 4 values"),
+            ("rollout --policy p.fzq --x0 1,2,x,4", "--x0: value 3"),
+            (
+                "rollout --policy p.fzq --x0 1,2,30,4",
+                "x0[2] = 30 is outside the state range [-3, 3]",
+            ),
+            (
+                "rollout --policy p.fzq --x0 1,2,0,0 --plot f.jpg",
+                "must end in .png or .svg",
+            ),
+        ],
     );
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "p.fzq", "--x0", "1,2,x,4"], d),
-        "--x0: value 3",
-    );
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "p.fzq", "--x0", "1,2,30,4"], d),
-        "x0[2] = 30 is outside the state range [-3, 3]",
-    );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "rollout", "--policy", "p.fzq", "--x0", "1,2,0,0", "--plot", "f.jpg",
-            ],
-            d,
-        ),
-        "must end in .png or .svg",
-    );
+    assert_eq!(std::fs::read(d.join("keep.fzq")).unwrap(), b"precious");
 
     // Usage errors exit with 2; help with 0.
     let o = fuzzyq(&["train", "--no-such-flag"], d);
@@ -332,65 +348,6 @@ fn khepera_train_rollout_and_starts() {
     let s = json(&d.join("s.json"));
     assert_eq!(s["starts"], 4);
     assert_eq!(s["runs"].as_array().unwrap().len(), 4);
-    // Bad input: one line, exit code 2.
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "k.fzq", "--plant", "model"], d),
-        "rapier plant",
-    );
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "k.fzq", "--x0", "-3,2,1,0"], d),
-        "at rest",
-    );
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "k.fzq", "--radius", "0.1"], d),
-        "--radius",
-    );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "rollout",
-                "--policy",
-                "k.fzq",
-                "--x0",
-                "-3,2,0,0",
-                "--headings",
-                "x",
-            ],
-            d,
-        ),
-        "--headings: value 1",
-    );
-    assert_fails(
-        &fuzzyq(&["rollout", "--policy", "k.fzq", "--x0", "6,0,0,0"], d),
-        "robot",
-    );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train",
-                "--env",
-                "pointmass",
-                "--arena",
-                "arena.toml",
-                "--out",
-                "x.fzq",
-            ],
-            d,
-        ),
-        "--arena",
-    );
-    std::fs::write(d.join("bad.toml"), "x = [1.0, -1.0]\ny = [-1.0, 1.0]\n").unwrap();
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train", "--env", "khepera", "--config", "one.toml", "--arena", "bad.toml",
-                "--out", "x.fzq",
-            ],
-            d,
-        ),
-        "arena",
-    );
-    assert!(!d.join("x.fzq").exists());
     // Model-free fuzzy Q-learning: policy, curve and summary.
     let o = fuzzyq(
         &[
@@ -438,34 +395,40 @@ fn khepera_train_rollout_and_starts() {
         json(&d.join("fs.json"))["runs"].as_array().unwrap().len(),
         2
     );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "rollout",
-                "--policy",
-                "f.toml",
-                "--policy-kind",
-                "interpolated",
-            ],
-            d,
-        ),
-        "greedily",
+
+    // Bad input: one line, exit code 2, nothing written.
+    std::fs::write(d.join("bad.toml"), "x = [1.0, -1.0]\ny = [-1.0, 1.0]\n").unwrap();
+    assert_all_fail(
+        d,
+        &[
+            ("rollout --policy k.fzq --plant model", "rapier plant"),
+            ("rollout --policy k.fzq --x0 -3,2,1,0", "at rest"),
+            ("rollout --policy k.fzq --radius 0.1", "--radius"),
+            (
+                "rollout --policy k.fzq --x0 -3,2,0,0 --headings x",
+                "--headings: value 1",
+            ),
+            ("rollout --policy k.fzq --x0 6,0,0,0", "robot"),
+            (
+                "train --env pointmass --arena arena.toml --out x.fzq",
+                "--arena",
+            ),
+            (
+                "train --env khepera --config one.toml --arena bad.toml --out x.fzq",
+                "arena",
+            ),
+            // A policy learned from samples acts greedily; VQQL learns the point masses only.
+            (
+                "rollout --policy f.toml --policy-kind interpolated",
+                "greedily",
+            ),
+            (
+                "train --env khepera --learner vqql --out y.toml",
+                "pointmass only",
+            ),
+        ],
     );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train",
-                "--env",
-                "khepera",
-                "--learner",
-                "vqql",
-                "--out",
-                "y.toml",
-            ],
-            d,
-        ),
-        "pointmass only",
-    );
+    assert!(!d.join("x.fzq").exists());
     assert!(!d.join("y.toml").exists());
 }
 
@@ -528,40 +491,39 @@ fn compare_writes_the_table_and_figures() {
     assert_eq!(reports[2]["iterations"], 60);
     assert_eq!(j["trajectories"].as_array().unwrap().len(), learners.len());
 
-    // Bad input: exit code 2, one line, nothing written.
-    let fresh = d.join("fresh");
-    for (args, needle) in [
-        (vec!["--learners", "fqi,foo"], "unknown learner \"foo\""),
-        (vec!["--learners", "fqi,fqi"], "fqi is named twice"),
-        (vec!["--env", "khepera"], "point-mass task only"),
-        (vec!["--x0", "1,2,3"], "x0"),
-        (vec!["--steps", "0"], "steps"),
-        (vec!["--start-position", "9"], "start_position"),
-    ] {
-        let mut all = vec!["compare", "--config", "one.toml", "--out", "fresh"];
-        if args[0] == "--x0" {
-            all.push("--x0=1,2,3");
-        } else {
-            all.push("--x0=-4,5,0,0");
-            all.extend(args.iter().copied());
-        }
-        let o = fuzzyq(&all, d);
-        assert_fails(&o, needle);
-        assert!(!fresh.exists(), "{args:?} created the output directory");
-    }
+    // Bad input: exit code 2, one line, nothing written (no output directory either).
     std::fs::write(d.join("file"), "x").unwrap();
-    let o = fuzzyq(
-        &[
-            "compare",
-            "--config",
-            "one.toml",
-            "--x0=-4,5,0,0",
-            "--out",
-            "file",
-        ],
+    assert_all_fail(
         d,
+        &[
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --learners fqi,foo",
+                "unknown learner \"foo\"",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --learners fqi,fqi",
+                "fqi is named twice",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --env khepera",
+                "point-mass task only",
+            ),
+            ("compare --config one.toml --out fresh --x0=1,2,3", "x0"),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --steps 0",
+                "steps",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --start-position 9",
+                "start_position",
+            ),
+            (
+                "compare --config one.toml --x0=-4,5,0,0 --out file",
+                "not a directory",
+            ),
+        ],
     );
-    assert_fails(&o, "not a directory");
+    assert!(!d.join("fresh").exists());
 }
 
 #[test]
@@ -631,46 +593,26 @@ fn point_mass_learners_from_samples_train_and_roll_out() {
         let r = json(&d.join("r.json"));
         assert_eq!(r["steps"], 20);
         assert_eq!(r["policy_kind"], "greedy");
-        assert_fails(
-            &fuzzyq(
-                &[
-                    "rollout",
-                    "--policy",
-                    "p.toml",
-                    "--x0=-4,5,0,0",
-                    "--plant",
-                    "rapier",
-                ],
-                d,
-            ),
-            "fuzzy Q-iteration policies only",
+        assert_all_fail(
+            d,
+            &[(
+                "rollout --policy p.toml --x0=-4,5,0,0 --plant rapier",
+                "fuzzy Q-iteration policies only",
+            )],
         );
     }
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train", "--config", "one.toml", "--cells", "5", "--out", "z.toml",
-            ],
-            d,
-        ),
-        "--cells applies",
-    );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train",
-                "--config",
-                "one.toml",
-                "--learner",
-                "vqql",
-                "--cells",
-                "0",
-                "--out",
-                "z.toml",
-            ],
-            d,
-        ),
-        "vqql.cells",
+    assert_all_fail(
+        d,
+        &[
+            (
+                "train --config one.toml --cells 5 --out z.toml",
+                "--cells applies",
+            ),
+            (
+                "train --config one.toml --learner vqql --cells 0 --out z.toml",
+                "vqql.cells",
+            ),
+        ],
     );
     assert!(!d.join("z.toml").exists());
 }
@@ -757,17 +699,22 @@ fn classic_benchmarks_train_roll_out_and_evaluate() {
         assert!(o.status.success(), "{}", stderr(&o));
         let mc = json(&d.join("mc.json"));
         assert_eq!(mc["runs"].as_array().unwrap().len(), 9);
-        for (args, needle) in [
-            (vec!["--x0=9,0"], "outside the state range"),
-            (vec!["--x0=1"], "needs 2 values"),
-            (vec!["--plant", "rapier"], "--plant does not apply"),
-            (vec!["--starts", "1"], "at least 2 values"),
-            (vec!["--starts", "3", "--x0=0,0"], "--starts evaluates"),
-        ] {
-            let mut all = vec!["rollout", "--policy", "p.fzq"];
-            all.extend(args);
-            assert_fails(&fuzzyq(&all, d), needle);
-        }
+        assert_all_fail(
+            d,
+            &[
+                ("rollout --policy p.fzq --x0=9,0", "outside the state range"),
+                ("rollout --policy p.fzq --x0=1", "needs 2 values"),
+                (
+                    "rollout --policy p.fzq --plant rapier",
+                    "--plant does not apply",
+                ),
+                ("rollout --policy p.fzq --starts 1", "at least 2 values"),
+                (
+                    "rollout --policy p.fzq --starts 3 --x0=0,0",
+                    "--starts evaluates",
+                ),
+            ],
+        );
     }
     // The car ends its run at the top of the hill; the arm has a 4-D state and two torques.
     for (env, x0, cols) in [("carhill", "--x0=-0.5,0", 5), ("arm", "--x0=-1,0,1,0", 8)] {
@@ -797,29 +744,22 @@ fn classic_benchmarks_train_roll_out_and_evaluate() {
             assert_eq!(r["terminal"], true, "{r}");
             assert!(r["return"].as_f64().unwrap() > 0.0, "{r}");
         } else {
-            assert_fails(
-                &fuzzyq(&["rollout", "--policy", "p.fzq", "--maps", "m.png"], d),
-                "2-D",
-            );
+            assert_all_fail(d, &[("rollout --policy p.fzq --maps m.png", "2-D")]);
         }
     }
-    assert_fails(
-        &fuzzyq(&["config", "--env", "dcmotor", "--preset", "huge"], d),
-        "unknown DC motor preset",
-    );
-    assert_fails(
-        &fuzzyq(&["config", "--env", "pointmass", "--preset", "fine"], d),
-        "--preset applies",
-    );
-    assert_fails(
-        &fuzzyq(
-            &[
-                "train", "--env", "dcmotor", "--preset", "fine", "--config", "c.toml", "--out",
-                "x.fzq",
-            ],
-            d,
-        ),
-        "either --config or --preset",
+    assert_all_fail(
+        d,
+        &[
+            (
+                "config --env dcmotor --preset huge",
+                "unknown DC motor preset",
+            ),
+            ("config --env pointmass --preset fine", "--preset applies"),
+            (
+                "train --env dcmotor --preset fine --config c.toml --out x.fzq",
+                "either --config or --preset",
+            ),
+        ],
     );
     assert!(!d.join("x.fzq").exists());
 }
