@@ -180,10 +180,12 @@ pub fn greedy<T: Real>(
     let mut best: Option<(usize, T)> = None;
     for j in 0..n_actions {
         let v = q_value_unchecked(active, phi, n_actions, j);
-        match best {
-            Some((_, b)) if !(v > b) => {}
-            _ if v.is_nan() => {}
-            _ => best = Some((j, v)),
+        let better = match best {
+            Some((_, b)) => v > b,
+            None => !v.is_nan(),
+        };
+        if better {
+            best = Some((j, v));
         }
     }
     Ok(best.unwrap_or((0, T::ZERO)))

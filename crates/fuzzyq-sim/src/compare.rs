@@ -2,7 +2,7 @@
 //! out from the same start and from the same seeded random starts.
 //!
 //! Section 4 of the paper compares its fuzzy learner with CMOMMT (a crisp state-aggregation
-//! learner) from the start [`TABLE1_X0`] and reports final error, time to goal and
+//! learner) from the start [`paper::TABLE1_X0`] and reports final error, time to goal and
 //! iterations. [`compare`] trains each [`Learner`] on the task of one [`TrainConfig`] (same
 //! model, actions, reward, discount and, where a grid applies, the same cores), then measures:
 //!
@@ -19,7 +19,7 @@
 //! | learner | what it is | parameters |
 //! |---|---|---|
 //! | [`Learner::Fqi`] | joint fuzzy Q-iteration (the paper's method, [`crate::train`]) | `N * M` (cores x joint actions); only `V` is stored |
-//! | [`Learner::Crisp`] | grid Q-iteration on the same cores as crisp nearest-core boxes ([`MembershipKind::Crisp`]) | `N * M` |
+//! | [`Learner::Crisp`] | grid Q-iteration on the same cores as crisp nearest-core boxes ([`fuzzyq_core::Membership::Crisp`]) | `N * M` |
 //! | [`Learner::Fql`] | fuzzy Q-learning, additive layout, corrected update ([`crate::learn::fql`]) | `sum_i N_i * M_i` |
 //! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
 //! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
@@ -28,91 +28,52 @@
 
 use std::time::Instant;
 
+use fuzzyq_core::Membership;
+use fuzzyq_core::additive::Update;
+use fuzzyq_core::q::PolicyKind;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError};
-use crate::io::config::{EnvConfig, MembershipKind, TrainConfig};
-use crate::learn::fql::{AdditiveQ, FqlConfig, Update};
-use crate::learn::tasks::pointmass::{self as pointmass_fql, Starts};
-use crate::learn::vqql::{self, VqqlConfig};
-use crate::model::pointmass::PointMass;
-use crate::run::policy::{AnyPolicy, PolicyKind};
-use crate::run::rollout::{self, RolloutMetrics, Trajectory};
+use crate::io::config::{EnvConfig, TrainConfig};
+use crate::io::policy_file::PolicyArtifact;
+use crate::learn::fql::FqlConfig;
+use crate::learn::tasks::pointmass as pointmass_task;
+use crate::learn::vqql::VqqlConfig;
+use crate::model::check_state;
+use crate::model::pointmass::{self, PointMass, Starts};
+use crate::paper;
+use crate::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
+use crate::run::metrics::{PointMassReport, RolloutMetrics, Trajectory, mean_final_error_cm};
+use crate::run::policy::{FqiPolicy, Policy};
+use crate::train::{self, SampleLearning};
 
-/// The initial state of the paper's Table 1 (section 4): both agents at rest.
-pub const TABLE1_X0: [f64; 8] = [-4.0, 5.0, 0.0, 0.0, 5.0, -3.0, 0.0, 0.0];
-
-/// The paper's Table 1: `(metric, CMOMMT, fuzzy)`.
-pub const PAPER_TABLE1: [(&str, f64, f64); 3] = [
-    ("final error (cm)", 18.0, 6.0),
-    ("time to goal (s)", 25.0, 12.0),
-    ("iterations", 34.0, 27.0),
-];
-
-/// A learner of the comparison.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Learner {
-    /// Joint fuzzy Q-iteration on the configured grid (the paper's method).
-    Fqi,
-    /// Grid Q-iteration on the same cores as crisp nearest-core boxes.
-    Crisp,
-    /// Fuzzy Q-learning, additive layout, corrected update.
-    Fql,
-    /// Fuzzy Q-learning, additive layout, the update as printed in the paper.
-    FqlLiteral,
-    /// VQQL: per-agent k-means cells and tabular Q-learning (CMOMMT's learner).
-    Vqql,
+fuzzyq_core::named_option! {
+    /// A learner of the comparison (a column of the table).
+    pub enum Learner: "learner" {
+        /// Joint fuzzy Q-iteration on the configured grid (the paper's method).
+        Fqi = "fqi" => "joint fuzzy Q-iteration (the paper's method)",
+        /// Grid Q-iteration on the same cores as crisp nearest-core boxes.
+        Crisp = "crisp" => "grid Q-iteration, same cores as crisp boxes",
+        /// Fuzzy Q-learning, additive layout, corrected update.
+        Fql = "fql" => "fuzzy Q-learning, additive layout, corrected update",
+        /// Fuzzy Q-learning, additive layout, the update as printed in the paper.
+        FqlLiteral = "fql-literal" => "fuzzy Q-learning, additive layout, update as printed",
+        /// VQQL: per-agent k-means cells and tabular Q-learning (CMOMMT's learner).
+        Vqql = "vqql" => "VQQL (CMOMMT): k-means cells + tabular Q-learning",
+    }
 }
 
 impl Learner {
-    /// Every learner, in table order.
-    pub const ALL: [Self; 5] = [
-        Self::Fqi,
-        Self::Crisp,
-        Self::Fql,
-        Self::FqlLiteral,
-        Self::Vqql,
-    ];
-
-    /// The name used on the command line and in the tables.
-    #[must_use]
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Fqi => "fqi",
-            Self::Crisp => "crisp",
-            Self::Fql => "fql",
-            Self::FqlLiteral => "fql-literal",
-            Self::Vqql => "vqql",
-        }
-    }
-
     /// A one-line description.
     #[must_use]
     pub fn description(self) -> &'static str {
-        match self {
-            Self::Fqi => "joint fuzzy Q-iteration (the paper's method)",
-            Self::Crisp => "grid Q-iteration, same cores as crisp boxes",
-            Self::Fql => "fuzzy Q-learning, additive layout, corrected update",
-            Self::FqlLiteral => "fuzzy Q-learning, additive layout, update as printed",
-            Self::Vqql => "VQQL (CMOMMT): k-means cells + tabular Q-learning",
-        }
+        fuzzyq_core::NamedOption::help(self)
     }
 
-    /// Parses a [`name`](Self::name).
+    /// Parses a [`name`](Self::name); the error names the `learners` field.
     pub fn parse(name: &str) -> Result<Self, ConfigError> {
-        Self::ALL
-            .into_iter()
-            .find(|l| l.name() == name)
-            .ok_or_else(|| {
-                ConfigError::invalid(
-                    "learners",
-                    format!(
-                        "unknown learner {name:?} (expected {})",
-                        Self::ALL.map(Self::name).join(", ")
-                    ),
-                )
-            })
+        name.parse()
+            .map_err(|e| ConfigError::invalid("learners", format!("{name:?}: {e}")))
     }
 
     /// Whether the learner is model-based (iterates over a grid with the model).
@@ -171,14 +132,14 @@ impl CompareConfig {
         };
         Self {
             task,
-            x0: TABLE1_X0.to_vec(),
+            x0: paper::TABLE1_X0.to_vec(),
             steps: 100,
             starts: 100,
             seed: 7,
             start_position: 5.0,
-            learners: Learner::ALL.to_vec(),
-            fql: pointmass_fql::default_fql_config(),
-            fql_starts: pointmass_fql::default_starts(),
+            learners: <Learner as fuzzyq_core::NamedOption>::ALL.to_vec(),
+            fql: pointmass_task::default_fql_config(),
+            fql_starts: pointmass_task::default_starts(),
             vqql,
         }
     }
@@ -187,7 +148,7 @@ impl CompareConfig {
     pub fn validate(&self) -> Result<(), SimError> {
         self.task.validate()?;
         let model = self.model()?;
-        rollout::check_x0(&model, &self.x0)?;
+        check_state(&model, &self.x0)?;
         if self.steps == 0 {
             return Err(ConfigError::invalid("steps", "must be at least 1").into());
         }
@@ -312,12 +273,6 @@ pub enum Event {
     Evaluating(Learner),
 }
 
-/// A trained learner, ready to act.
-enum Trained {
-    Grid(Box<AnyPolicy>),
-    Additive(Box<AdditiveQ>),
-}
-
 /// Trains every configured learner and measures its greedy policy (see the
 /// [module docs](self)). `progress` sees what is running.
 pub fn compare(
@@ -327,50 +282,42 @@ pub fn compare(
     config.validate()?;
     let model = config.model()?;
     let starts =
-        pointmass_fql::random_starts(&model, config.starts, config.seed, config.start_position)?;
-    let gamma = config.task.solver.gamma;
+        pointmass::random_starts(&model, config.starts, config.seed, config.start_position)?;
+    let spec = RolloutSpec {
+        kind: PolicyKind::Greedy,
+        steps: config.steps,
+        plant: PlantChoice::Model,
+        seed: 0,
+    };
     let mut reports = Vec::with_capacity(config.learners.len());
     let mut trajectories = Vec::with_capacity(config.learners.len());
     for &learner in &config.learners {
         progress(Event::Training(learner));
         let t0 = Instant::now();
-        let (trained, mut report) = train_one(config, &model, learner)?;
+        let (policy, mut report) = train_one(config, learner)?;
         report.train_seconds = t0.elapsed().as_secs_f64();
         progress(Event::Trained(
             learner,
             report.iterations,
             report.train_seconds,
         ));
-        let run = |x0: &[f64]| -> Result<(Trajectory, RolloutMetrics), SimError> {
-            match &trained {
-                Trained::Grid(p) => rollout::rollout_any(p, x0, config.steps, PolicyKind::Greedy),
-                Trained::Additive(q) => {
-                    rollout::rollout_additive(&model, q, x0, config.steps, gamma)
-                }
-            }
+        let Outcome::PointMass {
+            trajectory,
+            metrics: from_x0,
+            ..
+        } = evaluate::run(&policy, &config.x0, &spec)?
+        else {
+            unreachable!("a point-mass policy runs on the point masses")
         };
-        let (trajectory, from_x0) = run(&config.x0)?;
         progress(Event::Evaluating(learner));
-        let mut runs = Vec::with_capacity(starts.len());
-        for s in &starts {
-            runs.push(run(s)?.1);
-        }
-        report.final_error_cm = mean_error_cm(&from_x0);
+        let runs = evaluate::point_mass_starts(&policy, &starts, config.steps, PolicyKind::Greedy)?;
+        let over = PointMassReport::from_runs(&runs);
+        report.final_error_cm = mean_final_error_cm(&from_x0);
         report.time_to_goal_s = from_x0.reach_time_s;
         report.from_x0 = from_x0;
-        let reached: Vec<f64> = runs.iter().filter_map(|m| m.reach_time_s).collect();
-        report.success_rate = if runs.is_empty() {
-            0.0
-        } else {
-            reached.len() as f64 / runs.len() as f64
-        };
-        report.mean_time_to_goal_s =
-            (!reached.is_empty()).then(|| reached.iter().sum::<f64>() / reached.len() as f64);
-        report.mean_final_error_cm = if runs.is_empty() {
-            f64::NAN
-        } else {
-            runs.iter().map(mean_error_cm).sum::<f64>() / runs.len() as f64
-        };
+        report.success_rate = over.success_rate;
+        report.mean_time_to_goal_s = over.mean_time_to_goal_s;
+        report.mean_final_error_cm = over.mean_final_error_cm;
         reports.push(report);
         trajectories.push(trajectory);
     }
@@ -384,10 +331,6 @@ pub fn compare(
         reports,
         trajectories,
     })
-}
-
-fn mean_error_cm(m: &RolloutMetrics) -> f64 {
-    100.0 * m.final_error_m.iter().sum::<f64>() / m.final_error_m.len().max(1) as f64
 }
 
 /// A report with the training fields filled in and the measurements still empty.
@@ -423,29 +366,25 @@ fn blank(learner: Learner) -> LearnerReport {
     }
 }
 
-fn train_one(
-    config: &CompareConfig,
-    model: &PointMass,
-    learner: Learner,
-) -> Result<(Trained, LearnerReport), SimError> {
+fn train_one(config: &CompareConfig, learner: Learner) -> Result<(Policy, LearnerReport), SimError> {
     let mut report = blank(learner);
     match learner {
         Learner::Fqi | Learner::Crisp => {
             let mut task = config.task.clone();
             task.grid.membership = if learner == Learner::Crisp {
-                MembershipKind::Crisp
+                Membership::Crisp
             } else {
-                MembershipKind::Triangular
+                Membership::Triangular
             };
-            let artifact = crate::train::train(&task, |_| std::ops::ControlFlow::Continue(()))?;
+            let artifact: PolicyArtifact =
+                train::train(&task, |_| std::ops::ControlFlow::Continue(()))?;
             let n = task.n_cores() as u64;
             report.iterations = artifact.summary.sweeps;
             report.iteration_unit = "sweeps".into();
             report.converged = artifact.summary.converged;
             report.parameters = n * artifact.n_joint_actions() as u64;
             report.stored_values = n;
-            let policy = AnyPolicy::from_artifact(artifact)?;
-            Ok((Trained::Grid(Box::new(policy)), report))
+            Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
         }
         Learner::Fql | Learner::FqlLiteral | Learner::Vqql => {
             let mut fql = config.fql.clone();
@@ -455,28 +394,28 @@ fn train_one(
             } else {
                 Update::Corrected
             };
-            let outcome = if learner == Learner::Vqql {
-                let (outcome, lloyd) =
-                    vqql::train_vqql(model, &config.fql_starts, &config.vqql, &fql, |_| {
-                        std::ops::ControlFlow::Continue(())
-                    })?;
+            let vqql = learner == Learner::Vqql;
+            let learning = SampleLearning {
+                learner: if vqql {
+                    train::Learner::Vqql
+                } else {
+                    train::Learner::Fql
+                },
+                fql,
+                starts: config.fql_starts.clone(),
+                vqql: vqql.then(|| config.vqql.clone()),
+            };
+            let learned = train::learn_from_samples(&config.task, &learning, |_| {
+                std::ops::ControlFlow::Continue(())
+            })?;
+            let outcome = &learned.outcome;
+            if let Some(lloyd) = &learned.lloyd {
                 report.notes.push(format!(
                     "k-means: {} cells per agent, {} Lloyd iterations, distortion {:.4}",
                     config.vqql.cells, lloyd.iterations, lloyd.distortion
                 ));
                 report.stored_values += lloyd.codebook_values as u64;
-                outcome
-            } else {
-                let grid = &config.task.grid;
-                let features = pointmass_fql::feature_space(
-                    model,
-                    &grid.position_cores,
-                    &grid.velocity_cores,
-                )?;
-                pointmass_fql::train_fql(model, &features, &config.fql_starts, &fql, |_| {
-                    std::ops::ControlFlow::Continue(())
-                })?
-            };
+            }
             report.iterations = outcome.curve.len();
             report.iteration_unit = "episodes".into();
             report.converged = outcome.converged_at.is_some();
@@ -493,7 +432,7 @@ fn train_one(
                 "{rewarded} of {} learning episodes met the reward; largest |parameter| {largest:.3e}",
                 outcome.curve.len()
             ));
-            Ok((Trained::Additive(Box::new(outcome.q)), report))
+            Ok((Policy::from_file(learned.file)?, report))
         }
     }
 }
@@ -520,7 +459,7 @@ impl Comparison {
     pub fn to_markdown(&self) -> String {
         let mut rows: Vec<(String, Vec<String>, [String; 2])> = Vec::new();
         let paper = |i: usize| {
-            let (_, c, f) = PAPER_TABLE1[i];
+            let (_, c, f) = paper::TABLE1[i];
             [format!("{c}"), format!("{f}")]
         };
         let none = || [String::from("-"), String::from("-")];

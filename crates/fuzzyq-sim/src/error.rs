@@ -60,7 +60,7 @@ pub enum PolicyFileError {
     },
     /// The file was written by an incompatible format version.
     #[error(
-        "{} has policy format version {found}; this build reads version {supported}",
+        "{} has policy format version {found}; this build reads versions 1 to {supported}",
         path.display()
     )]
     Version {
@@ -68,7 +68,7 @@ pub enum PolicyFileError {
         path: PathBuf,
         /// Its version.
         found: u32,
-        /// The version this build reads.
+        /// The newest version this build reads.
         supported: u32,
     },
     /// The file is shorter than its header says.
@@ -116,4 +116,37 @@ pub enum SimError {
     /// A policy file problem.
     #[error(transparent)]
     PolicyFile(#[from] PolicyFileError),
+}
+
+/// `Ok` if `v` is a positive finite number, else an error naming `field`.
+pub(crate) fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
+    if v > 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            field,
+            format!("must be a positive number, got {v}"),
+        ))
+    }
+}
+
+/// `Ok` if `v` is a finite number `>= 0`, else an error naming `field`.
+pub(crate) fn non_negative(field: &str, v: f64) -> Result<(), ConfigError> {
+    if v >= 0.0 && v.is_finite() {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            field,
+            format!("must be a non-negative number, got {v}"),
+        ))
+    }
+}
+
+/// `Ok` if `ok`, else an error naming `field` with `reason`.
+pub(crate) fn require(ok: bool, field: &str, reason: impl Into<String>) -> Result<(), ConfigError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(field, reason))
+    }
 }

@@ -56,6 +56,7 @@ pub mod error;
 pub mod io;
 pub mod learn;
 pub mod model;
+pub mod paper;
 pub mod run;
 pub mod train;
 pub mod world;

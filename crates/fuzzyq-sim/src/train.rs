@@ -1,49 +1,41 @@
-//! Training: configuration in, [`PolicyArtifact`] out.
+//! Training: a configuration in, a policy file's content out, for every learner.
+//!
+//! - [`train`]: joint fuzzy Q-iteration on the model (the paper's method), either operator;
+//! - [`learn_from_samples`]: fuzzy Q-learning (the additive layout, corrected or printed
+//!   update) on the point masses or the robots, and VQQL on the point masses, with the
+//!   defaults of [`SampleLearning::defaults`].
 
 use std::ops::ControlFlow;
 
 use fuzzyq_core::Real;
-use fuzzyq_core::solver::{self, Delta, Grid, Progress, Solution, SweepRecord};
+use fuzzyq_core::additive::Update;
+use fuzzyq_core::solver::{
+    self, Delta, IterationOperator, Precision, Progress, Solution, SweepRecord,
+};
 
-use crate::error::SimError;
-use crate::io::config::{EnvConfig, IterationOperator, Precision, TrainConfig};
-use crate::io::policy_file::{PolicyArtifact, TrainSummary, Values};
+use crate::error::{ConfigError, SimError};
+use crate::io::config::{EnvConfig, TrainConfig};
+use crate::io::policy_file::{
+    KheperaPolicyFile, PointMassPolicyFile, PolicyArtifact, PolicyFile, TrainSummary, Values,
+};
+use crate::learn::fql::{EpisodeRecord, FqlConfig, FqlOutcome};
+use crate::learn::tasks::{khepera as khepera_task, pointmass as pointmass_task};
+use crate::learn::vqql::{self, LloydReport, VqqlConfig};
 use crate::model::EnvModel;
-use crate::model::classic::arm::Arm;
-use crate::model::classic::carhill::CarHill;
-use crate::model::classic::dcmotor::DcMotor;
-use crate::model::classic::pendulum::Pendulum;
-use crate::model::khepera::KheperaModel;
-use crate::model::pointmass::PointMass;
+use crate::model::pointmass::{PointMass, Starts};
 
-/// Builds the model a configuration describes.
-pub fn build_model(config: &TrainConfig) -> Result<EnvModel, SimError> {
-    match &config.env {
-        EnvConfig::Pointmass(p) => Ok(EnvModel::PointMass(PointMass::new(p.clone())?)),
-        EnvConfig::Khepera(k) => Ok(EnvModel::Khepera(KheperaModel::new(k.clone())?)),
-        EnvConfig::Dcmotor(c) => Ok(EnvModel::DcMotor(
-            DcMotor::new(c.model.clone())?.with_actions(&c.actions)?,
-        )),
-        EnvConfig::Pendulum(c) => Ok(EnvModel::Pendulum(
-            Pendulum::new(c.model.clone())?.with_actions(&c.actions)?,
-        )),
-        EnvConfig::Carhill(c) => Ok(EnvModel::CarHill(
-            CarHill::new(c.model.clone())?.with_actions(&c.actions)?,
-        )),
-        EnvConfig::Arm(c) => Ok(EnvModel::Arm(
-            Arm::new(c.model.clone())?.with_levels(&c.actions)?,
-        )),
+fuzzyq_core::named_option! {
+    /// What learns a policy.
+    #[derive(Default)]
+    pub enum Learner: "learner" {
+        /// Joint fuzzy Q-iteration on the model.
+        #[default]
+        Fqi = "fqi" => "joint fuzzy Q-iteration on the model",
+        /// Model-free fuzzy Q-learning, additive layout.
+        Fql = "fql" => "model-free fuzzy Q-learning (additive layout)",
+        /// VQQL: k-means cells per agent and tabular Q-learning (point masses).
+        Vqql = "vqql" => "VQQL: k-means cells and tabular Q-learning (point masses)",
     }
-}
-
-/// The configuration's grid in precision `T`.
-pub fn build_grid<T: Real>(config: &TrainConfig) -> Result<Grid<T>, SimError> {
-    let cores = config
-        .grid_cores()
-        .into_iter()
-        .map(|c| c.into_iter().map(T::from_f64).collect())
-        .collect();
-    Ok(Grid::new(cores)?.with_membership(config.grid.membership.to_core()))
 }
 
 /// Runs fuzzy Q-iteration as configured; `observer` sees every sweep and may stop the run
@@ -74,8 +66,8 @@ fn solve<T: Real>(
 where
     EnvModel: fuzzyq_core::Model<T>,
 {
-    let model = build_model(config)?;
-    let grid = build_grid::<T>(config)?;
+    let model = config.build_model()?;
+    let grid = config.grid::<T>()?;
     let solver_config = config.solver.solver_config();
     if config.solver.operator == IterationOperator::Values {
         return Ok(solver::solve(&model, &grid, &solver_config, observer)?);
@@ -135,5 +127,162 @@ fn artifact<T>(
         summary: TrainSummary::from_solution(&s),
         values: values(s.v),
         greedy: s.greedy,
+    }
+}
+
+/// How a learner from samples learns: its settings, where its episodes start (point masses)
+/// and VQQL's quantiser.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleLearning {
+    /// Fuzzy Q-learning or VQQL.
+    pub learner: Learner,
+    /// The learning loop's settings (also VQQL's Q-learning).
+    pub fql: FqlConfig,
+    /// Where the point masses' episodes start.
+    pub starts: Starts,
+    /// VQQL's quantiser (VQQL only).
+    pub vqql: Option<VqqlConfig>,
+}
+
+impl SampleLearning {
+    /// The defaults of `learner` on the task of `config`: the environment's learning settings
+    /// (see [`pointmass_task::default_fql_config`], [`khepera_task::default_fql_config`]),
+    /// the configuration's discount, starts over the whole field, and for VQQL as many cells
+    /// per agent as the grid has own-state cores (so that it has as many parameters as the
+    /// additive fuzzy layout).
+    pub fn defaults(config: &TrainConfig, learner: Learner) -> Result<Self, SimError> {
+        let mut fql = match (&config.env, learner) {
+            (_, Learner::Fqi) => {
+                return Err(ConfigError::invalid(
+                    "learner",
+                    "fqi learns on the model (train), not from samples",
+                )
+                .into());
+            }
+            (EnvConfig::Pointmass(_), _) => pointmass_task::default_fql_config(),
+            (EnvConfig::Khepera(_), Learner::Fql) => khepera_task::default_fql_config(),
+            (EnvConfig::Khepera(_), Learner::Vqql) => {
+                return Err(ConfigError::invalid(
+                    "learner",
+                    "vqql is available for the pointmass environment only",
+                )
+                .into());
+            }
+            (other, _) => {
+                return Err(ConfigError::invalid(
+                    "learner",
+                    format!(
+                        "fql and vqql are available for the pointmass and khepera environments, \
+                         not {}",
+                        other.name()
+                    ),
+                )
+                .into());
+            }
+        };
+        fql.gamma = config.solver.gamma;
+        let g = &config.grid;
+        let vqql = (learner == Learner::Vqql).then(|| VqqlConfig {
+            cells: g.position_cores.len().pow(2) * g.velocity_cores.len().pow(2),
+            ..VqqlConfig::default()
+        });
+        Ok(Self {
+            learner,
+            fql,
+            starts: pointmass_task::default_starts(),
+            vqql,
+        })
+    }
+
+    /// The literal (printed) update instead of the corrected one, or back.
+    #[must_use]
+    pub fn with_update(mut self, update: Update) -> Self {
+        self.fql.update = update;
+        self
+    }
+}
+
+/// What a learner from samples produced.
+#[derive(Clone, Debug)]
+pub struct Learned {
+    /// The policy file's content.
+    pub file: PolicyFile,
+    /// The learning run (parameters, curve, convergence).
+    pub outcome: FqlOutcome,
+    /// VQQL's quantiser report.
+    pub lloyd: Option<LloydReport>,
+}
+
+/// Learns the task of `config` from samples as `learning` says (see the [module docs](self));
+/// `progress` sees every episode's record and may stop the run.
+pub fn learn_from_samples(
+    config: &TrainConfig,
+    learning: &SampleLearning,
+    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+) -> Result<Learned, SimError> {
+    config.validate()?;
+    learning.fql.validate()?;
+    if let Some(v) = &learning.vqql {
+        v.validate()?;
+    }
+    match (&config.env, learning.learner) {
+        (EnvConfig::Khepera(k), Learner::Fql) => {
+            let outcome = khepera_task::train_fql(k, &learning.fql, progress)?;
+            let file = KheperaPolicyFile::from_outcome(k, &learning.fql, &outcome);
+            Ok(Learned {
+                file: PolicyFile::Khepera(file),
+                outcome,
+                lloyd: None,
+            })
+        }
+        (EnvConfig::Pointmass(p), learner @ (Learner::Fql | Learner::Vqql)) => {
+            let model = PointMass::new(p.clone())?;
+            learning.starts.validate(&model)?;
+            let (outcome, lloyd) = match (&learning.vqql, learner) {
+                (Some(v), Learner::Vqql) => {
+                    let (o, l) =
+                        vqql::train_vqql(&model, &learning.starts, v, &learning.fql, progress)?;
+                    (o, Some(l))
+                }
+                (_, Learner::Vqql) => {
+                    return Err(ConfigError::invalid("vqql", "VQQL needs its settings").into());
+                }
+                _ => {
+                    let g = &config.grid;
+                    let features =
+                        pointmass_task::feature_space(&model, &g.position_cores, &g.velocity_cores)?;
+                    let o = pointmass_task::train_fql(
+                        &model,
+                        &features,
+                        &learning.starts,
+                        &learning.fql,
+                        progress,
+                    )?;
+                    (o, None)
+                }
+            };
+            let vqql = if learner == Learner::Vqql {
+                learning.vqql.as_ref()
+            } else {
+                None
+            };
+            let file = PointMassPolicyFile::from_outcome(
+                p,
+                &learning.starts,
+                &learning.fql,
+                vqql,
+                &outcome,
+            );
+            Ok(Learned {
+                file: PolicyFile::PointMass(file),
+                outcome,
+                lloyd,
+            })
+        }
+        _ => Err(SampleLearning::defaults(config, learning.learner)
+            .err()
+            .unwrap_or_else(|| {
+                ConfigError::invalid("learner", "not available for this environment").into()
+            })),
     }
 }

@@ -249,6 +249,18 @@ crate::named_option! {
     }
 }
 
+impl Precision {
+    /// `v` rounded to this precision (and back to `f64`).
+    #[inline]
+    #[must_use]
+    pub fn round(self, v: f64) -> f64 {
+        match self {
+            Self::F32 => f64::from(v as f32),
+            Self::F64 => v,
+        }
+    }
+}
+
 /// Settings of a fuzzy Q-iteration run.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverConfig {

@@ -2,17 +2,22 @@
 //! TOML document. `fuzzyq config --env pointmass` prints [`DEFAULT_POINTMASS_TOML`], the
 //! paper's values with a comment on every field.
 
-use fuzzyq_core::Partition;
-use fuzzyq_core::solver::{BackupPath, SolverConfig, SweepMode};
+use fuzzyq_core::solver::{
+    BackupPath, Grid, IterationOperator, Kernel, Precision, SolverConfig, SweepMode,
+};
+use fuzzyq_core::{Membership, Partition, Real};
 use serde::{Deserialize, Serialize};
 
-use crate::error::ConfigError;
-use crate::model::classic::arm::ArmConfig;
-use crate::model::classic::carhill::CarHillConfig;
-use crate::model::classic::dcmotor::DcMotorConfig;
-use crate::model::classic::pendulum::PendulumConfig;
-use crate::model::khepera::KheperaConfig;
-use crate::model::pointmass::PointMassConfig;
+use crate::error::{ConfigError, SimError};
+use crate::model::classic::arm::{Arm, ArmConfig};
+use crate::model::classic::carhill::{CarHill, CarHillConfig};
+use crate::model::classic::dcmotor::{DcMotor, DcMotorConfig};
+use crate::model::classic::pendulum::{Pendulum, PendulumConfig};
+use crate::model::classic::{self, Classic, Dynamics};
+use crate::model::khepera::{self, KheperaConfig, KheperaModel};
+use crate::model::pointmass::{PointMass, PointMassConfig};
+use crate::model::{EnvKind, EnvModel};
+use crate::paper;
 
 /// The default point-mass configuration: the paper's section 3.1.
 pub const DEFAULT_POINTMASS_TOML: &str = r#"# fuzzyq training configuration: the point-mass task of Luviano-Cruz et al. 2018, section 3.1.
@@ -151,37 +156,30 @@ pub struct ClassicEnv<C> {
     pub model: C,
 }
 
-/// The names `--env` accepts.
-pub const ENV_NAMES: [&str; 6] = [
-    "pointmass",
-    "khepera",
-    "dcmotor",
-    "pendulum",
-    "carhill",
-    "arm",
-];
-
 impl EnvConfig {
+    /// The environment.
+    #[must_use]
+    pub fn kind(&self) -> EnvKind {
+        match self {
+            Self::Pointmass(_) => EnvKind::Pointmass,
+            Self::Khepera(_) => EnvKind::Khepera,
+            Self::Dcmotor(_) => EnvKind::Dcmotor,
+            Self::Pendulum(_) => EnvKind::Pendulum,
+            Self::Carhill(_) => EnvKind::Carhill,
+            Self::Arm(_) => EnvKind::Arm,
+        }
+    }
+
     /// The name used on the command line (`--env`).
     #[must_use]
     pub fn name(&self) -> &'static str {
-        match self {
-            Self::Pointmass(_) => "pointmass",
-            Self::Khepera(_) => "khepera",
-            Self::Dcmotor(_) => "dcmotor",
-            Self::Pendulum(_) => "pendulum",
-            Self::Carhill(_) => "carhill",
-            Self::Arm(_) => "arm",
-        }
+        self.kind().name()
     }
 
     /// Whether this is a classic single-agent benchmark (explicit grid, presets).
     #[must_use]
     pub fn is_classic(&self) -> bool {
-        matches!(
-            self,
-            Self::Dcmotor(_) | Self::Pendulum(_) | Self::Carhill(_) | Self::Arm(_)
-        )
+        self.kind().spec().classic
     }
 
     /// Length of the state vector.
@@ -190,9 +188,51 @@ impl EnvConfig {
         match self {
             Self::Pointmass(p) => p.state_dim(),
             Self::Khepera(k) => k.state_dim(),
-            Self::Dcmotor(_) | Self::Pendulum(_) | Self::Carhill(_) => 2,
-            Self::Arm(_) => 4,
+            Self::Dcmotor(_) => DcMotor::STATE_DIM,
+            Self::Pendulum(_) => Pendulum::STATE_DIM,
+            Self::Carhill(_) => CarHill::STATE_DIM,
+            Self::Arm(_) => Arm::STATE_DIM,
         }
+    }
+
+    /// Number of joint actions.
+    #[must_use]
+    pub fn n_joint_actions(&self) -> usize {
+        match self {
+            Self::Pointmass(p) => p.force_levels.len().pow(2 * p.agents as u32),
+            Self::Khepera(k) => khepera::N_ACTIONS.pow(k.agents as u32),
+            Self::Dcmotor(c) => c.actions.len(),
+            Self::Pendulum(c) => c.actions.len(),
+            Self::Carhill(c) => c.actions.len(),
+            Self::Arm(c) => c.actions.len().pow(2),
+        }
+    }
+
+    /// Checks the environment's parameters (building the model).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.build().map(|_| ())
+    }
+
+    /// Builds the model (errors name the field).
+    pub fn build(&self) -> Result<EnvModel, ConfigError> {
+        Ok(match self {
+            Self::Pointmass(p) => EnvModel::PointMass(PointMass::new(p.clone())?),
+            Self::Khepera(k) => EnvModel::Khepera(KheperaModel::new(k.clone())?),
+            Self::Dcmotor(c) => EnvModel::DcMotor(c.build()?),
+            Self::Pendulum(c) => EnvModel::Pendulum(c.build()?),
+            Self::Carhill(c) => EnvModel::CarHill(c.build()?),
+            Self::Arm(c) => EnvModel::Arm(c.build()?),
+        })
+    }
+}
+
+impl<C: Clone> ClassicEnv<C> {
+    /// The benchmark: the dynamics of `[env.model]` with the `actions` (errors name
+    /// `env.*`).
+    pub fn build<S: Dynamics<Config = C>>(&self) -> Result<Classic<S>, ConfigError> {
+        let dynamics = S::new(self.model.clone())?;
+        let table = dynamics.action_table("env.actions", &self.actions)?;
+        Ok(Classic::from_table(dynamics, table))
     }
 }
 
@@ -218,36 +258,12 @@ pub struct GridConfig {
     /// Membership functions on the cores: `"triangular"` (the fuzzy grid, default) or
     /// `"crisp"` (each state belongs to its nearest core alone: crisp grid Q-iteration over
     /// the same cores, the crisp control of the paper's Table 1).
-    #[serde(default, skip_serializing_if = "MembershipKind::is_triangular")]
-    pub membership: MembershipKind,
+    #[serde(default, skip_serializing_if = "is_triangular")]
+    pub membership: Membership,
 }
 
-/// The membership functions of a grid, as written in a config file (`grid.membership`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MembershipKind {
-    /// Triangular fuzzy memberships (fuzzy Q-iteration).
-    #[default]
-    Triangular,
-    /// Crisp nearest-core boxes (crisp grid Q-iteration).
-    Crisp,
-}
-
-impl MembershipKind {
-    /// Whether this is the default, triangular kind.
-    #[must_use]
-    pub fn is_triangular(&self) -> bool {
-        *self == Self::Triangular
-    }
-
-    /// The core's membership kind.
-    #[must_use]
-    pub fn to_core(self) -> fuzzyq_core::Membership {
-        match self {
-            Self::Triangular => fuzzyq_core::Membership::Triangular,
-            Self::Crisp => fuzzyq_core::Membership::Crisp,
-        }
-    }
+fn is_triangular(m: &Membership) -> bool {
+    *m == Membership::Triangular
 }
 
 impl GridConfig {
@@ -262,28 +278,13 @@ impl GridConfig {
             velocity_cores: pick(2),
             heading_divisions: None,
             cores: Some(cores),
-            membership: MembershipKind::Triangular,
+            membership: Membership::Triangular,
         }
     }
 }
 
-/// Which fuzzy Q-iteration operator to run (`solver.operator`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum IterationOperator {
-    /// `theta[d, u] = rho + gamma sum_d' mu_d'(x') V[d']`: only `V` is stored.
-    #[default]
-    Values,
-    /// `theta[d, u] = rho + gamma max_u' sum_d' mu_d'(x') theta[d', u']` (Busoniu, ApproxRL).
-    QValues,
-}
-
-impl IterationOperator {
-    /// Whether this is the default operator.
-    #[must_use]
-    pub fn is_values(&self) -> bool {
-        *self == Self::Values
-    }
+fn is_values(o: &IterationOperator) -> bool {
+    *o == IterationOperator::Values
 }
 
 /// Solver settings as written in a config file.
@@ -297,11 +298,11 @@ pub struct SolverSettings {
     /// Sweep limit, `>= 1`.
     pub max_sweeps: usize,
     /// Sweep order.
-    pub sweep: Sweep,
+    pub sweep: SweepMode,
     /// Goal states are absorbing (zero future value).
     pub absorbing_goal: bool,
     /// Backup implementation.
-    pub backup: Backup,
+    pub backup: BackupPath,
     /// Floating-point precision of the solver.
     pub precision: Precision,
     /// Extrapolate synchronous sweeps with MacQueen's bounds (see the solver docs).
@@ -309,71 +310,14 @@ pub struct SolverSettings {
     pub extrapolate: bool,
     /// Force a kernel instance (`"scalar"`, `"avx2"`, `"avx512"`); all give the same results.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub kernel: Option<KernelChoice>,
+    pub kernel: Option<Kernel>,
     /// The iteration: `"values"` (default) interpolates the per-core maxima and keeps only
     /// `V` (NOTES.md section 2; any grid size); `"q-values"` is Busoniu's fuzzy Q-iteration,
     /// as the ApproxRL toolbox runs it, maximising interpolated Q-values with `theta` stored
     /// (`cores x joint actions` values; synchronous, no extrapolation; see
     /// [`fuzzyq_core::solver::solve_q`]).
-    #[serde(default, skip_serializing_if = "IterationOperator::is_values")]
+    #[serde(default, skip_serializing_if = "is_values")]
     pub operator: IterationOperator,
-}
-
-/// Kernel instance (config spelling of [`fuzzyq_core::solver::Kernel`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum KernelChoice {
-    /// Portable scalar code.
-    Scalar,
-    /// AVX2 with FMA.
-    Avx2,
-    /// AVX-512F.
-    Avx512,
-}
-
-impl From<KernelChoice> for fuzzyq_core::solver::Kernel {
-    fn from(k: KernelChoice) -> Self {
-        match k {
-            KernelChoice::Scalar => Self::Scalar,
-            KernelChoice::Avx2 => Self::Avx2,
-            KernelChoice::Avx512 => Self::Avx512,
-        }
-    }
-}
-
-/// Sweep order (config spelling of [`SweepMode`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Sweep {
-    /// Synchronous (Jacobi).
-    #[default]
-    Sync,
-    /// Asynchronous (Gauss-Seidel).
-    Async,
-}
-
-/// Backup implementation (config spelling of [`BackupPath`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Backup {
-    /// Block path when the model declares blocks.
-    #[default]
-    Auto,
-    /// Block path.
-    Block,
-    /// Generic path.
-    Generic,
-}
-
-/// Solver precision.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Precision {
-    /// Single precision (half the memory, twice the SIMD width).
-    #[default]
-    F32,
-    /// Double precision.
-    F64,
 }
 
 impl Default for SolverSettings {
@@ -383,9 +327,9 @@ impl Default for SolverSettings {
             gamma: c.gamma,
             xi: c.xi,
             max_sweeps: c.max_sweeps,
-            sweep: Sweep::Sync,
+            sweep: c.sweep,
             absorbing_goal: c.absorbing_goal,
-            backup: Backup::Auto,
+            backup: c.path,
             precision: Precision::F32,
             extrapolate: true,
             kernel: None,
@@ -402,23 +346,16 @@ impl SolverSettings {
             gamma: self.gamma,
             xi: self.xi,
             max_sweeps: self.max_sweeps,
-            sweep: match self.sweep {
-                Sweep::Sync => SweepMode::Synchronous,
-                Sweep::Async => SweepMode::Asynchronous,
-            },
+            sweep: self.sweep,
             absorbing_goal: self.absorbing_goal,
-            path: match self.backup {
-                Backup::Auto => BackupPath::Auto,
-                Backup::Block => BackupPath::Block,
-                Backup::Generic => BackupPath::Generic,
-            },
-            kernel: self.kernel.map(Into::into),
+            path: self.backup,
+            kernel: self.kernel,
             extrapolate: self.extrapolate,
         }
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
-        if self.operator == IterationOperator::QValues && self.sweep == Sweep::Async {
+        if self.operator == IterationOperator::QValues && self.sweep == SweepMode::Asynchronous {
             return Err(ConfigError::invalid(
                 "solver.operator",
                 "\"q-values\" runs synchronous sweeps; set sweep = \"sync\"",
@@ -452,11 +389,11 @@ impl Default for TrainConfig {
         Self {
             env: EnvConfig::Pointmass(PointMassConfig::default()),
             grid: GridConfig {
-                position_cores: vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0],
-                velocity_cores: vec![-3.0, -1.0, 0.0, 1.0, 3.0],
+                position_cores: paper::POSITION_CORES.to_vec(),
+                velocity_cores: paper::VELOCITY_CORES.to_vec(),
                 heading_divisions: None,
                 cores: None,
-                membership: Default::default(),
+                membership: Membership::Triangular,
             },
             solver: SolverSettings::default(),
         }
@@ -464,61 +401,38 @@ impl Default for TrainConfig {
 }
 
 impl TrainConfig {
-    /// The default configuration of environment `env` (`"pointmass"` or `"khepera"`).
-    pub fn default_for(env: &str) -> Result<Self, ConfigError> {
-        match env {
-            "pointmass" => Ok(Self::default()),
-            "khepera" => Self::from_toml(DEFAULT_KHEPERA_TOML),
-            "dcmotor" | "pendulum" | "carhill" | "arm" => Self::from_preset(env, DEFAULT_PRESET),
-            other => Err(unknown_env(other)),
+    /// The default configuration of environment `env`: the paper's task for the point masses
+    /// and the robots, the default preset for a classic benchmark.
+    pub fn default_for(env: EnvKind) -> Result<Self, ConfigError> {
+        match (env, env.spec().default_preset) {
+            (EnvKind::Pointmass, _) => Ok(Self::default()),
+            (EnvKind::Khepera, _) => Self::from_toml(DEFAULT_KHEPERA_TOML),
+            (_, Some(preset)) => Self::from_preset(env, preset),
+            (_, None) => Err(env.unknown_preset("")),
         }
     }
 
-    /// A classic benchmark (`dcmotor`, `pendulum`) with the named preset's grid, actions,
-    /// `gamma` and `xi`, the classic model parameters, and the toolbox's iteration
-    /// (synchronous plain sweeps, at most 1000).
-    pub fn from_preset(env: &str, preset: &str) -> Result<Self, ConfigError> {
-        use crate::model::classic::{arm, carhill, dcmotor, pendulum};
+    /// A classic benchmark with the named preset's grid, actions, `gamma` and `xi`, the
+    /// classic model parameters, and the toolbox's iteration (synchronous plain sweeps, at
+    /// most 1000, in `f64`).
+    pub fn from_preset(env: EnvKind, preset: &str) -> Result<Self, ConfigError> {
+        fn with<S: Dynamics>(
+            name: &str,
+            wrap: fn(ClassicEnv<S::Config>) -> EnvConfig,
+        ) -> Result<(classic::Preset, EnvConfig), ConfigError> {
+            let p = classic::preset::<S>(name)?;
+            let env = wrap(ClassicEnv {
+                actions: p.actions.clone(),
+                model: S::Config::default(),
+            });
+            Ok((p, env))
+        }
         let (p, env) = match env {
-            "dcmotor" => {
-                let p = dcmotor::preset(preset)?;
-                let env = EnvConfig::Dcmotor(ClassicEnv {
-                    actions: p.actions.clone(),
-                    model: DcMotorConfig::default(),
-                });
-                (p, env)
-            }
-            "pendulum" => {
-                let p = pendulum::preset(preset)?;
-                let env = EnvConfig::Pendulum(ClassicEnv {
-                    actions: p.actions.clone(),
-                    model: PendulumConfig::default(),
-                });
-                (p, env)
-            }
-            "carhill" => {
-                let p = carhill::preset(preset)?;
-                let env = EnvConfig::Carhill(ClassicEnv {
-                    actions: p.actions.clone(),
-                    model: CarHillConfig::default(),
-                });
-                (p, env)
-            }
-            "arm" => {
-                let p = arm::preset(preset)?;
-                let env = EnvConfig::Arm(ClassicEnv {
-                    actions: p.actions.clone(),
-                    model: ArmConfig::default(),
-                });
-                (p, env)
-            }
-            "pointmass" | "khepera" => {
-                return Err(ConfigError::invalid(
-                    "preset",
-                    format!("applies to the classic benchmarks, not {env}"),
-                ));
-            }
-            other => return Err(unknown_env(other)),
+            EnvKind::Dcmotor => with::<DcMotor>(preset, EnvConfig::Dcmotor)?,
+            EnvKind::Pendulum => with::<Pendulum>(preset, EnvConfig::Pendulum)?,
+            EnvKind::Carhill => with::<CarHill>(preset, EnvConfig::Carhill)?,
+            EnvKind::Arm => with::<Arm>(preset, EnvConfig::Arm)?,
+            EnvKind::Pointmass | EnvKind::Khepera => return Err(env.unknown_preset(preset)),
         };
         let mut grid = GridConfig::explicit(p.cores);
         grid.position_cores.clear();
@@ -538,31 +452,46 @@ impl TrainConfig {
         Ok(c)
     }
 
-    /// The commented default TOML of environment `env`.
-    pub fn default_toml(env: &str) -> Result<&'static str, ConfigError> {
-        match env {
-            "pointmass" => Ok(DEFAULT_POINTMASS_TOML),
-            "khepera" => Ok(DEFAULT_KHEPERA_TOML),
-            "dcmotor" | "pendulum" | "carhill" | "arm" => Err(ConfigError::invalid(
-                "env",
-                format!("{env} has presets: see TrainConfig::from_preset"),
-            )),
-            other => Err(unknown_env(other)),
+    /// The configuration `fuzzyq config` prints: the commented default TOML of the point
+    /// masses or the robots, or a classic benchmark's preset (the default one if `preset` is
+    /// `None`) with a header saying how to use it.
+    pub fn default_toml(env: EnvKind, preset: Option<&str>) -> Result<String, ConfigError> {
+        match (env, env.spec().default_preset) {
+            (EnvKind::Pointmass, _) if preset.is_none() => Ok(DEFAULT_POINTMASS_TOML.into()),
+            (EnvKind::Khepera, _) if preset.is_none() => Ok(DEFAULT_KHEPERA_TOML.into()),
+            (_, Some(default)) => {
+                let name = preset.unwrap_or(default);
+                let c = Self::from_preset(env, name)?;
+                Ok(format!(
+                    "# fuzzyq training configuration: {env}, preset \"{name}\".\n\
+                     # Edit and pass back with `fuzzyq train --env {env} --config FILE.toml`.\n\n{}",
+                    c.to_toml()
+                ))
+            }
+            (_, None) => Err(env.unknown_preset(preset.unwrap_or_default())),
         }
     }
-}
 
-/// The preset of a classic benchmark when none is named: the toolbox's default fine grid.
-pub const DEFAULT_PRESET: &str = "fine";
+    /// Builds the model.
+    pub fn build_model(&self) -> Result<EnvModel, SimError> {
+        Ok(self.env.build()?)
+    }
 
-fn unknown_env(name: &str) -> ConfigError {
-    ConfigError::invalid(
-        "env",
-        format!(
-            "unknown environment {name:?} (expected {})",
-            ENV_NAMES.join(", ")
-        ),
-    )
+    /// The grid in precision `T`.
+    pub fn grid<T: Real>(&self) -> Result<Grid<T>, SimError> {
+        let cores = self
+            .grid_cores()
+            .into_iter()
+            .map(|c| c.into_iter().map(T::from_f64).collect())
+            .collect();
+        Ok(Grid::new(cores)?.with_membership(self.grid.membership))
+    }
+
+    /// Number of joint actions.
+    #[must_use]
+    pub fn n_joint_actions(&self) -> usize {
+        self.env.n_joint_actions()
+    }
 }
 
 /// The default number of heading divisions of the Khepera grid.
@@ -600,9 +529,9 @@ impl TrainConfig {
 
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.env.validate()?;
         match &self.env {
-            EnvConfig::Pointmass(p) => {
-                p.validate()?;
+            EnvConfig::Pointmass(_) => {
                 check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
                 if self.grid.heading_divisions.is_some() {
                     return Err(ConfigError::invalid(
@@ -611,24 +540,7 @@ impl TrainConfig {
                     ));
                 }
             }
-            EnvConfig::Dcmotor(c) => {
-                c.model.validate()?;
-                crate::model::classic::validate_actions("env.actions", &c.actions)?;
-            }
-            EnvConfig::Pendulum(c) => {
-                c.model.validate()?;
-                crate::model::classic::validate_actions("env.actions", &c.actions)?;
-            }
-            EnvConfig::Carhill(c) => {
-                c.model.validate()?;
-                crate::model::classic::validate_actions("env.actions", &c.actions)?;
-            }
-            EnvConfig::Arm(c) => {
-                c.model.validate()?;
-                crate::model::classic::validate_actions("env.actions", &c.actions)?;
-            }
-            EnvConfig::Khepera(k) => {
-                k.validate()?;
+            EnvConfig::Khepera(_) => {
                 if let Some(d) = self.grid.heading_divisions
                     && !(2..=360).contains(&d)
                 {
@@ -638,6 +550,7 @@ impl TrainConfig {
                     ));
                 }
             }
+            _ => {}
         }
         if self.env.is_classic() {
             if self.grid.cores.is_none() {

@@ -1,4 +1,36 @@
-//! Files: training configurations and policy files.
+//! Files: training configurations ([`config`]) and policy files ([`policy_file`]), and the
+//! atomic writing every output of fuzzyq goes through.
 
 pub mod config;
 pub mod policy_file;
+
+use std::io::Write;
+use std::path::Path;
+
+/// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
+/// the destination holds either its old content or all of the new.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut tmp = temp_file_beside(path, ".tmp")?;
+    tmp.write_all(bytes)?;
+    tmp.as_file().sync_all()?;
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// A temporary file in `path`'s directory (so that a rename onto `path` is atomic), named with
+/// `suffix`, readable like a freshly created file (mode 0644 on Unix rather than the 0600 of
+/// temporary files). Dropped without `persist`, it is removed.
+pub fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let mut b = tempfile::Builder::new();
+    b.prefix(".fuzzyq-").suffix(suffix);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        b.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    b.tempfile_in(dir)
+}

@@ -1,32 +1,47 @@
-//! The policy file: everything needed to act, written atomically.
+//! Policy files: one versioned, checksummed container for every learner, written
+//! atomically, and one loader that reads a file once and dispatches on what it holds.
 //!
 //! # Layout (little-endian)
 //! | bytes | content |
 //! |---|---|
 //! | 8 | magic tag `\x89FUZZYQ\n` (the high byte catches 7-bit and text-mode mangling) |
-//! | 4 | format version, `u32` (currently 1) |
+//! | 4 | format version, `u32` (2; version 1 files, fuzzy Q-iteration only, are still read) |
 //! | 8 | payload length in bytes, `u64` |
 //! | 4 | CRC-32 of the payload, `u32` |
-//! | n | payload: a [`PolicyArtifact`] in postcard encoding |
+//! | n | payload in postcard encoding: which learner, then its content |
 //!
-//! The payload holds the training configuration (model parameters, grid, solver settings),
-//! `V` per core, the per-core greedy joint actions and the training summary. A file is written
-//! to a temporary file in the destination's directory, flushed and renamed over the
-//! destination, so a crash or a full disk never leaves a half-written policy. Reading checks
-//! the tag, version, length, checksum and the payload's consistency, and names what is wrong.
+//! The payload of a fuzzy Q-iteration policy ([`PolicyArtifact`]) holds the training
+//! configuration (as its TOML text), `V` per core, the per-core greedy joint actions and the
+//! training summary. A policy learned from samples ([`PointMassPolicyFile`],
+//! [`KheperaPolicyFile`]) travels as the TOML text of its task, learning settings and
+//! parameters (floats round-trip exactly). Files written before version 2 kept learned
+//! policies as plain TOML; [`PolicyFile::from_bytes`] still reads them.
+//!
+//! A file is written to a temporary file in the destination's directory, flushed and renamed
+//! over the destination, so a crash or a full disk never leaves a half-written policy.
+//! Reading checks the tag, version, length, checksum and the content's consistency, and names
+//! what is wrong.
 
-use std::io::Write;
 use std::path::Path;
 
+use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use crate::error::PolicyFileError;
-use crate::io::config::{Precision, TrainConfig};
+use crate::error::{ConfigError, PolicyFileError, SimError};
+use crate::io::config::TrainConfig;
+use crate::io::write_atomically;
+use crate::learn::additive::AdditiveQ;
+use crate::learn::fql::{FqlConfig, FqlOutcome};
+use crate::learn::tasks::khepera as khepera_task;
+use crate::learn::tasks::pointmass as pointmass_task;
+use crate::learn::vqql::VqqlConfig;
+use crate::model::khepera::KheperaConfig;
+use crate::model::pointmass::{PointMass, PointMassConfig, Starts};
 
 /// The magic tag every policy file starts with.
 pub const MAGIC: [u8; 8] = *b"\x89FUZZYQ\n";
-/// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+/// The format version this build writes (it reads versions 1 and 2).
+pub const FORMAT_VERSION: u32 = 2;
 const HEADER_LEN: usize = 8 + 4 + 8 + 4;
 
 /// Per-core values in the solver's precision.
@@ -149,14 +164,26 @@ pub struct PolicyArtifact {
     pub summary: TrainSummary,
 }
 
-/// The encoded form: the configuration travels as its TOML text (postcard cannot encode the
-/// config's internally tagged enums, and TOML keeps it readable and stable across versions).
+/// A fuzzy Q-iteration policy as version 1 and the [`Payload::Fqi`] of version 2 encode it:
+/// the configuration travels as its TOML text (postcard cannot encode the config's internally
+/// tagged enums, and TOML keeps it readable and stable across versions).
 #[derive(Serialize, Deserialize)]
-struct Payload {
+struct FqiPayload {
     config_toml: String,
     values: Values,
     greedy: Vec<u32>,
     summary: TrainSummary,
+}
+
+/// What a version 2 payload holds.
+#[derive(Serialize, Deserialize)]
+enum Payload {
+    /// Fuzzy Q-iteration.
+    Fqi(FqiPayload),
+    /// A point-mass policy learned from samples, as TOML text.
+    PointMass(String),
+    /// A Khepera policy learned from samples, as TOML text.
+    Khepera(String),
 }
 
 impl PolicyArtifact {
@@ -206,43 +233,184 @@ impl PolicyArtifact {
         }
     }
 
-    /// Encodes the artifact with its header.
+}
+
+/// A point-mass policy learned from samples (fuzzy Q-learning or VQQL) with what produced it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointMassPolicyFile {
+    /// The task.
+    pub config: PointMassConfig,
+    /// The episodes' starts.
+    pub starts: Starts,
+    /// The learning settings.
+    pub fql: FqlConfig,
+    /// The quantiser settings of a VQQL policy (its `q` has codebook features); `None` for
+    /// fuzzy Q-learning.
+    #[serde(default)]
+    pub vqql: Option<VqqlConfig>,
+    /// The learned Q-function.
+    pub q: AdditiveQ,
+    /// The first episode that passed the convergence test, if any.
+    #[serde(default)]
+    pub converged_at: Option<usize>,
+    /// Learning episodes run.
+    pub episodes: usize,
+}
+
+impl PointMassPolicyFile {
+    /// The file of a fuzzy Q-learning run (`vqql = None`) or a
+    /// [`train_vqql`](crate::learn::vqql::train_vqql) run (`vqql = Some(..)`).
     #[must_use]
-    pub fn to_bytes(&self) -> Vec<u8> {
-        let payload = postcard::to_stdvec(&Payload {
-            config_toml: self.config.to_toml(),
-            values: self.values.clone(),
-            greedy: self.greedy.clone(),
-            summary: self.summary.clone(),
-        })
-        .expect("an artifact always serialises");
-        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
-        out.extend_from_slice(&MAGIC);
-        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-        out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
-        out.extend_from_slice(&payload);
-        out
+    pub fn from_outcome(
+        config: &PointMassConfig,
+        starts: &Starts,
+        fql: &FqlConfig,
+        vqql: Option<&VqqlConfig>,
+        outcome: &FqlOutcome,
+    ) -> Self {
+        Self {
+            config: config.clone(),
+            starts: starts.clone(),
+            fql: fql.clone(),
+            vqql: vqql.cloned(),
+            q: outcome.q.clone(),
+            converged_at: outcome.converged_at,
+            episodes: outcome.curve.len(),
+        }
     }
 
-    /// Decodes and checks bytes read from `path` (the path only names the file in errors).
-    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
-        let path = path.to_path_buf();
-        let magic_len = MAGIC.len().min(bytes.len());
-        if bytes[..magic_len] != MAGIC[..magic_len] || bytes.is_empty() {
-            return Err(PolicyFileError::NotAPolicy { path });
+    /// Checks the file's parts against each other: valid configurations and starts, a
+    /// Q-function that fits the model, codebook features exactly when `vqql` is set (with
+    /// `vqql.cells` cells per agent).
+    pub fn validate(&self) -> Result<PointMass, SimError> {
+        let model = PointMass::new(self.config.clone())?;
+        self.starts.validate(&model)?;
+        self.fql.validate()?;
+        pointmass_task::check_q(&model, &self.q)?;
+        let features = self.q.features();
+        match &self.vqql {
+            Some(v) => {
+                v.validate()?;
+                if !features.is_codebook() {
+                    return Err(ConfigError::invalid(
+                        "q",
+                        "a VQQL policy (vqql set) needs codebook features",
+                    )
+                    .into());
+                }
+                if let Some(i) =
+                    (0..features.n_agents()).find(|&i| features.n_cores(i) != Some(v.cells))
+                {
+                    return Err(ConfigError::invalid(
+                        "q",
+                        format!(
+                            "agent {i}'s codebook has {:?} cells, vqql.cells = {}",
+                            features.n_cores(i),
+                            v.cells
+                        ),
+                    )
+                    .into());
+                }
+            }
+            None => {
+                if features.is_codebook() {
+                    return Err(ConfigError::invalid(
+                        "q",
+                        "codebook features need the quantiser settings (vqql)",
+                    )
+                    .into());
+                }
+            }
         }
+        Ok(model)
+    }
+}
+
+/// A Khepera policy learned by fuzzy Q-learning with what produced it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KheperaPolicyFile {
+    /// The task.
+    pub config: KheperaConfig,
+    /// The learning settings.
+    pub fql: FqlConfig,
+    /// The learned Q-function.
+    pub q: AdditiveQ,
+    /// The first episode that passed the convergence test, if any.
+    #[serde(default)]
+    pub converged_at: Option<usize>,
+    /// Learning episodes run.
+    pub episodes: usize,
+}
+
+impl KheperaPolicyFile {
+    /// The file of a fuzzy Q-learning run.
+    #[must_use]
+    pub fn from_outcome(config: &KheperaConfig, fql: &FqlConfig, outcome: &FqlOutcome) -> Self {
+        Self {
+            config: config.clone(),
+            fql: fql.clone(),
+            q: outcome.q.clone(),
+            converged_at: outcome.converged_at,
+            episodes: outcome.curve.len(),
+        }
+    }
+
+    /// Checks the file's parts against each other: valid settings and a Q-function learned
+    /// on the feature space and actions of the configuration.
+    pub fn validate(&self) -> Result<(), SimError> {
+        self.fql.validate()?;
+        khepera_task::check_q(&self.q, &self.config)
+    }
+}
+
+/// The content of a policy file of any learner.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PolicyFile {
+    /// Fuzzy Q-iteration (`fuzzyq train`, the default learner).
+    Fqi(PolicyArtifact),
+    /// Fuzzy Q-learning or VQQL on the point masses.
+    PointMass(PointMassPolicyFile),
+    /// Fuzzy Q-learning on the Khepera robots.
+    Khepera(KheperaPolicyFile),
+}
+
+impl PolicyFile {
+    /// Reads and checks a policy file of any kind, reading it once (a pipe or a FIFO works):
+    /// see [`from_bytes`](Self::from_bytes).
+    pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
+        let bytes = std::fs::read(path).map_err(|source| PolicyFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Decodes and checks bytes read from `path` (the path only names the file in errors): a
+    /// container (the magic tag first, then version, length, checksum and content), or a
+    /// policy learned from samples in the plain TOML of files written before version 2.
+    pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
+        let n = MAGIC.len().min(bytes.len());
+        if !bytes.is_empty() && bytes[..n] == MAGIC[..n] {
+            return Self::from_container(bytes, path);
+        }
+        Self::from_legacy_toml(bytes, path)
+    }
+
+    fn from_container(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
+        let path_buf = path.to_path_buf();
         if bytes.len() < HEADER_LEN {
             return Err(PolicyFileError::Truncated {
-                path,
+                path: path_buf,
                 found: bytes.len() as u64,
                 expected: HEADER_LEN as u64,
             });
         }
         let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
-        if version != FORMAT_VERSION {
+        if !(1..=FORMAT_VERSION).contains(&version) {
             return Err(PolicyFileError::Version {
-                path,
+                path: path_buf,
                 found: version,
                 supported: FORMAT_VERSION,
             });
@@ -252,123 +420,129 @@ impl PolicyArtifact {
         let expected = HEADER_LEN as u64 + len;
         if (bytes.len() as u64) < expected {
             return Err(PolicyFileError::Truncated {
-                path,
+                path: path_buf,
                 found: bytes.len() as u64,
                 expected,
             });
         }
         if (bytes.len() as u64) > expected {
-            return Err(PolicyFileError::Malformed {
+            return Err(malformed(
                 path,
-                reason: format!("{} bytes after the payload", bytes.len() as u64 - expected),
-            });
+                format!("{} bytes after the payload", bytes.len() as u64 - expected),
+            ));
         }
         let payload = &bytes[HEADER_LEN..];
         if crc32fast::hash(payload) != crc {
-            return Err(PolicyFileError::Checksum { path });
+            return Err(PolicyFileError::Checksum { path: path_buf });
         }
-        let malformed = |reason: String| PolicyFileError::Malformed {
-            path: path.clone(),
-            reason,
+        let payload = if version == 1 {
+            postcard::from_bytes(payload).map(Payload::Fqi)
+        } else {
+            postcard::from_bytes(payload)
+        }
+        .map_err(|e| malformed(path, e.to_string()))?;
+        let file = match payload {
+            Payload::Fqi(p) => {
+                let config = TrainConfig::from_toml(&p.config_toml)
+                    .map_err(|e| malformed(path, format!("its configuration: {e}")))?;
+                Self::Fqi(PolicyArtifact {
+                    config,
+                    values: p.values,
+                    greedy: p.greedy,
+                    summary: p.summary,
+                })
+            }
+            Payload::PointMass(text) => Self::PointMass(from_toml(&text, path)?),
+            Payload::Khepera(text) => Self::Khepera(from_toml(&text, path)?),
         };
-        let p: Payload = postcard::from_bytes(payload).map_err(|e| malformed(e.to_string()))?;
-        let config = TrainConfig::from_toml(&p.config_toml)
-            .map_err(|e| malformed(format!("its configuration: {e}")))?;
-        let artifact = Self {
-            config,
-            values: p.values,
-            greedy: p.greedy,
-            summary: p.summary,
-        };
-        artifact
-            .check()
-            .map_err(|reason| PolicyFileError::Malformed { path, reason })?;
-        Ok(artifact)
+        file.check().map_err(|reason| malformed(path, reason))?;
+        Ok(file)
     }
 
-    /// Reads and checks a policy file.
-    pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
-        let bytes = std::fs::read(path).map_err(|source| PolicyFileError::Read {
+    /// A learned policy in the plain TOML files written before version 2.
+    fn from_legacy_toml(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
+        let not_a_policy = || PolicyFileError::NotAPolicy {
             path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, path)
+        };
+        let text = std::str::from_utf8(bytes).map_err(|_| not_a_policy())?;
+        let Ok(table) = text.parse::<toml::Table>() else {
+            return Err(not_a_policy());
+        };
+        if !(table.contains_key("q") && table.contains_key("fql")) {
+            return Err(not_a_policy());
+        }
+        let robots = table
+            .get("config")
+            .and_then(toml::Value::as_table)
+            .is_some_and(|c| c.contains_key("radius"));
+        let file = if robots {
+            Self::Khepera(from_toml(text, path)?)
+        } else {
+            Self::PointMass(from_toml(text, path)?)
+        };
+        file.check().map_err(|reason| malformed(path, reason))?;
+        Ok(file)
     }
 
-    /// Writes the policy file atomically (temporary file in the same directory, then rename).
-    pub fn save(&self, path: &Path) -> Result<(), PolicyFileError> {
-        write_atomically(path, &self.to_bytes()).map_err(|source| PolicyFileError::Write {
-            path: path.to_path_buf(),
-            source,
+    /// Checks the content's consistency.
+    pub fn check(&self) -> Result<(), String> {
+        match self {
+            Self::Fqi(a) => a.check(),
+            Self::PointMass(f) => f.validate().map(|_| ()).map_err(|e| e.to_string()),
+            Self::Khepera(f) => f.validate().map_err(|e| e.to_string()),
+        }
+    }
+
+    /// Encodes the file with its header.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
+        let payload = match self {
+            Self::Fqi(a) => Payload::Fqi(FqiPayload {
+                config_toml: a.config.to_toml(),
+                values: a.values.clone(),
+                greedy: a.greedy.clone(),
+                summary: a.summary.clone(),
+            }),
+            Self::PointMass(f) => Payload::PointMass(to_toml(f)?),
+            Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
+        };
+        let payload = postcard::to_stdvec(&payload).expect("a policy always serialises");
+        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
+        out.extend_from_slice(&MAGIC);
+        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+        out.extend_from_slice(&payload);
+        Ok(out)
+    }
+
+    /// Writes the policy file atomically (a temporary file in the same directory, then a
+    /// rename).
+    pub fn save(&self, path: &Path) -> Result<(), SimError> {
+        let bytes = self.to_bytes()?;
+        write_atomically(path, &bytes).map_err(|source| {
+            PolicyFileError::Write {
+                path: path.to_path_buf(),
+                source,
+            }
+            .into()
         })
     }
 }
 
-/// Writes `value` as TOML text into `path` atomically (a policy file learned from samples);
-/// `what` names the file kind in a serialisation error.
-pub(crate) fn save_toml<T: Serialize>(
-    value: &T,
-    path: &Path,
-    what: &str,
-) -> Result<(), PolicyFileError> {
-    let text = toml::to_string(value).map_err(|e| PolicyFileError::Malformed {
-        path: path.to_path_buf(),
-        reason: format!("{what}: {e}"),
-    })?;
-    write_atomically(path, text.as_bytes()).map_err(|source| PolicyFileError::Write {
-        path: path.to_path_buf(),
-        source,
-    })
-}
-
-/// Reads a TOML file written by [`save_toml`] and checks it with `validate`; every error
-/// names the file.
-pub(crate) fn load_toml<T: serde::de::DeserializeOwned>(
-    path: &Path,
-    validate: impl FnOnce(&T) -> Result<(), String>,
-) -> Result<T, PolicyFileError> {
-    let malformed = |reason: String| PolicyFileError::Malformed {
+fn malformed(path: &Path, reason: String) -> PolicyFileError {
+    PolicyFileError::Malformed {
         path: path.to_path_buf(),
         reason,
-    };
-    let bytes = std::fs::read(path).map_err(|source| PolicyFileError::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let text =
-        std::str::from_utf8(&bytes).map_err(|e| malformed(format!("not UTF-8 text: {e}")))?;
-    let value: T =
-        toml::from_str(text).map_err(|e| malformed(e.message().trim_end().to_string()))?;
-    validate(&value).map_err(malformed)?;
-    Ok(value)
-}
-
-/// Writes `bytes` to `path` through a temporary file in the same directory and a rename, so
-/// the destination holds either its old content or all of the new.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let mut tmp = temp_file_beside(path, ".tmp")?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
-}
-
-/// A temporary file in `path`'s directory (so that a rename onto `path` is atomic), named with
-/// `suffix`, readable like a freshly created file (mode 0644 on Unix rather than the 0600 of
-/// temporary files). Dropped without `persist`, it is removed.
-pub fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut b = tempfile::Builder::new();
-    b.prefix(".fuzzyq-").suffix(suffix);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        b.permissions(std::fs::Permissions::from_mode(0o644));
     }
-    b.tempfile_in(dir)
+}
+
+fn from_toml<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T, PolicyFileError> {
+    toml::from_str(text).map_err(|e| malformed(path, e.message().trim_end().to_string()))
+}
+
+fn to_toml<T: Serialize>(value: &T) -> Result<String, SimError> {
+    toml::to_string(value)
+        .map_err(|e| crate::error::ConfigError::Parse(format!("policy file: {e}")).into())
 }
 
 #[cfg(test)]

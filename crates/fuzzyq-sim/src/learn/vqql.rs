@@ -52,11 +52,10 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError};
-use crate::learn::fql::{
-    Codebook, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, sq_dist,
-};
-use crate::learn::tasks::pointmass::{PointMassEnv, Starts, train_fql};
-use crate::model::pointmass::PointMass;
+use crate::learn::codebook::{Codebook, sq_dist};
+use crate::learn::fql::{Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome};
+use crate::learn::tasks::pointmass::{PointMassEnv, train_fql};
+use crate::model::pointmass::{PointMass, Starts};
 
 /// Lloyd iterations allowed past [`VqqlConfig::lloyd_iterations`] to fill empty cells.
 pub const MAX_REPAIR_ITERATIONS: usize = 100;

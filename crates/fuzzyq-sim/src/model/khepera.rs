@@ -33,10 +33,13 @@
 
 use std::f64::consts::PI;
 
-use fuzzyq_core::{ActionSet, Block, Model};
+use fuzzyq_core::solver::Precision;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::ConfigError;
+use crate::error::{ConfigError, SimError, positive, require};
+use crate::model::{ActionTable, BlockSpec, F64Model};
 use crate::model::arena::Arena;
 
 /// Optional sensor and actuator noise (the paper's future work: stochastic dynamics).
@@ -144,26 +147,10 @@ pub const N_ACTIONS: usize = 4;
 /// Names of the four actions, in index order.
 pub const ACTION_NAMES: [&str; N_ACTIONS] = ["forward", "turn_cw", "turn_ccw", "stand"];
 
-fn check(ok: bool, field: &str, reason: impl Into<String>) -> Result<(), ConfigError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(field, reason))
-    }
-}
-
-fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
-    check(
-        v > 0.0 && v.is_finite(),
-        field,
-        format!("must be a positive number, got {v}"),
-    )
-}
-
 impl KheperaConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check(
+        require(
             (1..=MAX_ROBOTS).contains(&self.agents),
             "env.agents",
             format!("must be between 1 and {MAX_ROBOTS}, got {}", self.agents),
@@ -179,7 +166,7 @@ impl KheperaConfig {
             ("env.forward_speed", self.forward_speed),
             ("env.turn_speed", self.turn_speed),
         ] {
-            check(
+            require(
                 v <= self.max_wheel_speed,
                 f,
                 format!(
@@ -188,12 +175,12 @@ impl KheperaConfig {
                 ),
             )?;
         }
-        check(
+        require(
             self.goal_reward.is_finite(),
             "env.goal_reward",
             "must be a finite number",
         )?;
-        check(
+        require(
             self.collision_penalty.is_finite() && self.collision_penalty >= 0.0,
             "env.collision_penalty",
             format!(
@@ -201,25 +188,25 @@ impl KheperaConfig {
                 self.collision_penalty
             ),
         )?;
-        check(
+        require(
             !self.sonar_angles_deg.is_empty()
                 && self.sonar_angles_deg.len() <= 16
                 && self.sonar_angles_deg.iter().all(|a| a.is_finite()),
             "env.sonar_angles_deg",
             "needs 1 to 16 finite angles",
         )?;
-        check(
+        require(
             self.sonar_cone_deg.is_finite() && (0.0..180.0).contains(&self.sonar_cone_deg),
             "env.sonar_cone_deg",
             format!("must be in [0, 180), got {}", self.sonar_cone_deg),
         )?;
-        check(
+        require(
             (1..=32).contains(&self.rays_per_sonar),
             "env.rays_per_sonar",
             format!("must be between 1 and 32, got {}", self.rays_per_sonar),
         )?;
         positive("env.sonar_min_range", self.sonar_min_range)?;
-        check(
+        require(
             self.sonar_max_range.is_finite() && self.sonar_max_range > self.sonar_min_range,
             "env.sonar_max_range",
             format!(
@@ -227,7 +214,7 @@ impl KheperaConfig {
                 self.sonar_min_range, self.sonar_max_range
             ),
         )?;
-        check(
+        require(
             self.sonar_levels[0].is_finite()
                 && self.sonar_levels[0] < self.sonar_levels[1]
                 && self.sonar_levels[1].is_finite(),
@@ -237,7 +224,7 @@ impl KheperaConfig {
                 self.sonar_levels
             ),
         )?;
-        check(
+        require(
             self.distance_edges
                 .iter()
                 .all(|e| e.is_finite() && *e > 0.0)
@@ -252,13 +239,13 @@ impl KheperaConfig {
             ("env.noise.sonar_std", self.noise.sonar_std),
             ("env.noise.wheel_std", self.noise.wheel_std),
         ] {
-            check(
+            require(
                 v.is_finite() && v >= 0.0,
                 f,
                 format!("must be a non-negative number, got {v}"),
             )?;
         }
-        check(
+        require(
             (0.0..=1.0).contains(&self.noise.sonar_dropout),
             "env.noise.sonar_dropout",
             format!("must be a probability, got {}", self.noise.sonar_dropout),
@@ -266,7 +253,7 @@ impl KheperaConfig {
         self.arena.validate()?;
         let lo = self.arena.x[0].max(self.arena.y[0]);
         let hi = self.arena.x[1].min(self.arena.y[1]);
-        check(
+        require(
             hi - lo > 4.0 * self.radius,
             "env.arena",
             "is too small for the robots",
@@ -292,9 +279,9 @@ impl KheperaConfig {
     }
 }
 
-/// Wraps an angle to `(-pi, pi]`.
+/// Wraps a heading to `(-pi, pi]`.
 #[must_use]
-pub fn wrap_angle(a: f64) -> f64 {
+pub fn wrap_heading(a: f64) -> f64 {
     let w = (a + PI).rem_euclid(2.0 * PI) - PI;
     if w <= -PI { w + 2.0 * PI } else { w }
 }
@@ -319,7 +306,7 @@ pub fn drive(pose: [f64; 3], wheels: [f64; 2], base: f64, dt: f64) -> [f64; 3] {
             -r * ((h + dh).cos() - h.cos()),
         )
     };
-    [pose[0] + dx, pose[1] + dy, wrap_angle(h + dh)]
+    [pose[0] + dx, pose[1] + dy, wrap_heading(h + dh)]
 }
 
 /// Linear velocity `(v_x, v_y)` of a robot with heading `h` driven by `wheels`.
@@ -352,7 +339,7 @@ pub fn distance_level(d: f64, edges: &[f64; 8]) -> u8 {
 /// level spans 40 degrees.
 #[must_use]
 pub fn angle_level(rel: f64) -> u8 {
-    let a = wrap_angle(rel);
+    let a = wrap_heading(rel);
     let step = 2.0 * PI / 9.0;
     (((a + PI) / step).floor() as i64).clamp(0, 8) as u8
 }
@@ -362,7 +349,7 @@ pub fn angle_level(rel: f64) -> u8 {
 pub fn goal_polar(pose: [f64; 3], goal: [f64; 2]) -> (f64, f64) {
     let dx = goal[0] - pose[0];
     let dy = goal[1] - pose[1];
-    (dx.hypot(dy), wrap_angle(dy.atan2(dx) - pose[2]))
+    (dx.hypot(dy), wrap_heading(dy.atan2(dx) - pose[2]))
 }
 
 /// Whether two robots of radius `r` at the given positions overlap.
@@ -381,24 +368,24 @@ pub fn robots_overlap(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
 #[derive(Clone, Debug)]
 pub struct KheperaModel {
     config: KheperaConfig,
-    actions_f32: Vec<f32>,
-    actions_f64: Vec<f64>,
-    block_dims: Vec<[usize; 3]>,
-    block_comps: Vec<[usize; 2]>,
+    actions: ActionTable,
+    blocks: Vec<BlockSpec>,
 }
 
 impl KheperaModel {
     /// Builds the model from a validated configuration.
     pub fn new(config: KheperaConfig) -> Result<Self, ConfigError> {
         config.validate()?;
-        let actions_f64: Vec<f64> = (0..N_ACTIONS).flat_map(|a| config.wheels(a)).collect();
-        let actions_f32 = actions_f64.iter().map(|&v| v as f32).collect();
-        let n = config.agents;
+        let actions = (0..N_ACTIONS).flat_map(|a| config.wheels(a)).collect();
+        let blocks = (0..config.agents)
+            .map(|i| BlockSpec {
+                state_dims: vec![3 * i, 3 * i + 1, 3 * i + 2],
+                action_components: vec![2 * i, 2 * i + 1],
+            })
+            .collect();
         Ok(Self {
-            actions_f32,
-            actions_f64,
-            block_dims: (0..n).map(|i| [3 * i, 3 * i + 1, 3 * i + 2]).collect(),
-            block_comps: (0..n).map(|i| [2 * i, 2 * i + 1]).collect(),
+            actions: ActionTable::new(actions, 2),
+            blocks,
             config,
         })
     }
@@ -521,89 +508,154 @@ impl KheperaModel {
     }
 }
 
-/// The first `len` values of `x` in `f64` (at most `3 * MAX_ROBOTS`), without allocating.
-fn widen<T: Copy + Into<f64>>(x: &[T], len: usize) -> Widened {
-    let mut buf = [0.0f64; 3 * MAX_ROBOTS];
-    for (a, &b) in buf.iter_mut().zip(&x[..len]) {
-        *a = b.into();
+/// Poses from the paper's 8-D state (velocities must be zero: robots start at rest) and
+/// headings in degrees.
+pub fn poses_from_paper(
+    config: &KheperaConfig,
+    x0: &[f64],
+    headings_deg: &[f64],
+) -> Result<Vec<[f64; 3]>, SimError> {
+    let n = config.agents;
+    if x0.len() != 4 * n {
+        return Err(ConfigError::invalid(
+            "x0",
+            format!(
+                "needs {} values ([s_x, s_y, v_x, v_y] per robot), got {}",
+                4 * n,
+                x0.len()
+            ),
+        )
+        .into());
     }
-    Widened { buf, len }
-}
-
-/// A fixed-capacity `f64` vector (see [`widen`]).
-struct Widened {
-    buf: [f64; 3 * MAX_ROBOTS],
-    len: usize,
-}
-
-impl std::ops::Deref for Widened {
-    type Target = [f64];
-    fn deref(&self) -> &[f64] {
-        &self.buf[..self.len]
+    if headings_deg.len() != n {
+        return Err(ConfigError::invalid(
+            "headings",
+            format!(
+                "needs {n} values (one per robot), got {}",
+                headings_deg.len()
+            ),
+        )
+        .into());
     }
+    if let Some(v) = x0.iter().find(|v| !v.is_finite()) {
+        return Err(ConfigError::invalid("x0", format!("must be finite, got {v}")).into());
+    }
+    if let Some(h) = headings_deg.iter().find(|v| !v.is_finite()) {
+        return Err(ConfigError::invalid("headings", format!("must be finite, got {h}")).into());
+    }
+    (0..n)
+        .map(|i| {
+            if x0[4 * i + 2] != 0.0 || x0[4 * i + 3] != 0.0 {
+                return Err(ConfigError::invalid(
+                    "x0",
+                    format!("robot {} must start at rest (zero velocity)", i + 1),
+                )
+                .into());
+            }
+            Ok([
+                x0[4 * i],
+                x0[4 * i + 1],
+                wrap_heading(headings_deg[i].to_radians()),
+            ])
+        })
+        .collect()
 }
 
-macro_rules! impl_model {
-    ($t:ty, $actions:ident) => {
-        impl Model<$t> for KheperaModel {
-            fn state_dim(&self) -> usize {
-                self.config.state_dim()
+/// `count` random starts in the arena, drawn from `seed`: positions uniform at least 0.5 m
+/// inside the walls and 0.3 m clear of every obstacle, robots at least 0.5 m apart, headings
+/// uniform.
+pub fn random_starts(
+    config: &KheperaConfig,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<Vec<[f64; 3]>>, SimError> {
+    let a = &config.arena;
+    let margin = 0.5;
+    let (x0, x1) = (a.x[0] + margin, a.x[1] - margin);
+    let (y0, y1) = (a.y[0] + margin, a.y[1] - margin);
+    if x0 >= x1 || y0 >= y1 {
+        return Err(ConfigError::invalid("arena", "too small for random starts").into());
+    }
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let mut out = Vec::with_capacity(count);
+    for _ in 0..count {
+        let mut poses: Vec<[f64; 3]> = Vec::with_capacity(config.agents);
+        let mut tries = 0usize;
+        while poses.len() < config.agents {
+            tries += 1;
+            if tries > 100_000 {
+                return Err(ConfigError::invalid(
+                    "arena",
+                    "no room for random starts clear of the obstacles",
+                )
+                .into());
             }
-
-            fn n_agents(&self) -> usize {
-                self.config.agents
-            }
-
-            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
-                ActionSet::try_new(&self.$actions, 2).expect("finite wheel speeds")
-            }
-
-            fn state_bounds(&self, dim: usize) -> ($t, $t) {
-                let a = &self.config.arena;
-                match dim % 3 {
-                    0 => (a.x[0] as $t, a.x[1] as $t),
-                    1 => (a.y[0] as $t, a.y[1] as $t),
-                    _ => (-PI as $t, PI as $t),
-                }
-            }
-
-            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
-                let n = self.config.agents;
-                let mut out = [0.0f64; 3 * MAX_ROBOTS];
-                self.step_f64(&widen(x, 3 * n), &widen(u, 2 * n), &mut out[..3 * n]);
-                for (a, &b) in next.iter_mut().zip(&out[..3 * n]) {
-                    *a = b as $t;
-                }
-            }
-
-            fn reward(&self, x: &[$t], _u: &[$t]) -> $t {
-                self.reward_f64(&widen(x, 3 * self.config.agents)) as $t
-            }
-
-            fn reward_depends_on_action(&self) -> bool {
-                false
-            }
-
-            fn is_goal(&self, x: &[$t]) -> bool {
-                self.in_region(&widen(x, 3 * self.config.agents))
-            }
-
-            fn n_blocks(&self) -> usize {
-                self.block_dims.len()
-            }
-
-            fn block(&self, b: usize) -> Block<'_> {
-                Block {
-                    state_dims: &self.block_dims[b],
-                    action_components: &self.block_comps[b],
-                }
+            let p = [
+                rng.random_range(x0..x1),
+                rng.random_range(y0..y1),
+                rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
+            ];
+            let clear = !a.disc_collides([p[0], p[1]], config.radius + 0.3)
+                && poses
+                    .iter()
+                    .all(|q| (q[0] - p[0]).hypot(q[1] - p[1]) >= 0.5);
+            if clear {
+                poses.push(p);
             }
         }
-    };
+        out.push(poses);
+    }
+    Ok(out)
 }
 
-impl_model!(f32, actions_f32);
-impl_model!(f64, actions_f64);
+impl F64Model for KheperaModel {
+    fn state_dim(&self) -> usize {
+        self.config.state_dim()
+    }
+
+    fn n_agents(&self) -> usize {
+        self.config.agents
+    }
+
+    fn actions(&self) -> &ActionTable {
+        &self.actions
+    }
+
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        let a = &self.config.arena;
+        match dim % 3 {
+            0 => (a.x[0], a.x[1]),
+            1 => (a.y[0], a.y[1]),
+            _ => (-PI, PI),
+        }
+    }
+
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.step_f64(x, u, next);
+    }
+
+    fn reward(&self, x: &[f64], _u: &[f64], _precision: Precision) -> f64 {
+        self.reward_f64(x)
+    }
+
+    fn reward_depends_on_action(&self) -> bool {
+        false
+    }
+
+    fn is_goal(&self, x: &[f64]) -> bool {
+        self.in_region(x)
+    }
+
+    fn blocks(&self) -> &[BlockSpec] {
+        &self.blocks
+    }
+}
+
+crate::impl_model!(KheperaModel);
 
 #[cfg(test)]
 mod tests {
@@ -639,9 +691,9 @@ mod tests {
 
     #[test]
     fn wrap_and_levels() {
-        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
-        assert_eq!(wrap_angle(-PI), PI);
-        assert_eq!(wrap_angle(PI), PI);
+        assert!((wrap_heading(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
+        assert_eq!(wrap_heading(-PI), PI);
+        assert_eq!(wrap_heading(PI), PI);
         let lv = [0.5, 1.0];
         assert_eq!(sonar_level(0.25, lv), 0);
         assert_eq!(sonar_level(0.4999, lv), 0);

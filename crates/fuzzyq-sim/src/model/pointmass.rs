@@ -25,10 +25,15 @@
 
 use std::sync::Arc;
 
-use fuzzyq_core::{ActionSet, Block, Model};
+use fuzzyq_core::Model;
+use fuzzyq_core::solver::Precision;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::ConfigError;
+use crate::error::{ConfigError, SimError, non_negative, positive};
+use crate::model::{ActionTable, BlockSpec, F64Model, check_state_as};
+use crate::paper;
 
 /// A friction field `eta(s_x, s_y)` in kg/s, as written in a config file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -109,7 +114,7 @@ impl Default for PointMassConfig {
             sample_time: 0.4,
             position_limit: 6.0,
             velocity_limit: 3.0,
-            force_levels: vec![-2.0, -0.2, 0.0, 0.2, 2.0],
+            force_levels: paper::FORCE_LEVELS.to_vec(),
             goal_radius: 0.1,
             goal_reward: 5.0,
             integrator: Integrator::Exact,
@@ -121,28 +126,6 @@ impl Default for PointMassConfig {
 
 /// The largest number of point-mass agents (the joint action count grows as `L^(2n)`).
 pub const MAX_POINT_MASS_AGENTS: usize = 4;
-
-fn positive(field: &'static str, v: f64) -> Result<(), ConfigError> {
-    if v > 0.0 && v.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a positive number, got {v}"),
-        ))
-    }
-}
-
-fn non_negative(field: &'static str, v: f64) -> Result<(), ConfigError> {
-    if v >= 0.0 && v.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a non-negative number, got {v}"),
-        ))
-    }
-}
 
 impl PointMassConfig {
     /// Checks every field's range.
@@ -244,10 +227,8 @@ enum Friction {
 pub struct PointMass {
     config: PointMassConfig,
     friction: Friction,
-    actions_f32: Vec<f32>,
-    actions_f64: Vec<f64>,
-    block_dims: Vec<Vec<usize>>,
-    block_comps: Vec<Vec<usize>>,
+    actions: ActionTable,
+    blocks: Vec<BlockSpec>,
 }
 
 impl std::fmt::Debug for PointMass {
@@ -292,30 +273,31 @@ impl PointMass {
 
     fn build(config: PointMassConfig, friction: Friction) -> Self {
         let levels = &config.force_levels;
-        let mut actions_f64 = Vec::with_capacity(2 * levels.len() * levels.len());
+        let mut actions = Vec::with_capacity(2 * levels.len() * levels.len());
         for &ux in levels {
             for &uy in levels {
-                actions_f64.push(ux);
-                actions_f64.push(uy);
+                actions.push(ux);
+                actions.push(uy);
             }
         }
-        let actions_f32 = actions_f64.iter().map(|&a| a as f32).collect();
-        let (block_dims, block_comps) = match friction {
+        let block = |state_dims: Vec<usize>, action_components: Vec<usize>| BlockSpec {
+            state_dims,
+            action_components,
+        };
+        let blocks = match friction {
             Friction::Constant(_) => (0..config.agents)
                 .flat_map(|i| (0..2).map(move |axis| (i, axis)))
-                .map(|(i, axis)| (vec![4 * i + axis, 4 * i + 2 + axis], vec![2 * i + axis]))
-                .unzip(),
+                .map(|(i, axis)| block(vec![4 * i + axis, 4 * i + 2 + axis], vec![2 * i + axis]))
+                .collect(),
             Friction::Field(_) => (0..config.agents)
-                .map(|i| ((4 * i..4 * i + 4).collect(), vec![2 * i, 2 * i + 1]))
-                .unzip(),
+                .map(|i| block((4 * i..4 * i + 4).collect(), vec![2 * i, 2 * i + 1]))
+                .collect(),
         };
         Self {
             config,
             friction,
-            actions_f32,
-            actions_f64,
-            block_dims,
-            block_comps,
+            actions: ActionTable::new(actions, 2),
+            blocks,
         }
     }
 
@@ -375,6 +357,91 @@ impl PointMass {
     }
 }
 
+/// Where episodes start: a learner's episodes ([`crate::learn::tasks::pointmass::PointMassEnv`]).
+///
+/// Written in TOML as `starts = { fixed = [...] }` or
+/// `starts = { uniform = { position = 6.0, velocity = 0.0 } }`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Starts {
+    /// Always this state (length `4 n`, inside the state bounds).
+    Fixed(Vec<f64>),
+    /// Each agent's position uniform in `[-position, position]^2` and velocity uniform in
+    /// `[-velocity, velocity]^2`, drawn per agent in the order `s_x, s_y, v_x, v_y`.
+    Uniform {
+        /// Half-width of the position square (m), in `[0, position_limit]`.
+        position: f64,
+        /// Half-width of the velocity square (m/s), in `[0, velocity_limit]`.
+        velocity: f64,
+    },
+}
+
+impl Starts {
+    /// Checks the starts against the model's state space; errors name the field
+    /// (`starts.fixed`, `starts.position`, `starts.velocity`).
+    pub fn validate(&self, model: &PointMass) -> Result<(), ConfigError> {
+        let c = model.config();
+        match self {
+            Self::Fixed(x0) => check_state_as("starts.fixed", model, x0),
+            Self::Uniform { position, velocity } => {
+                half_width("starts.position", *position, c.position_limit)?;
+                half_width("starts.velocity", *velocity, c.velocity_limit)
+            }
+        }
+    }
+
+    /// Draws a start into `x` (length `4 n`) from `rng` (nothing is drawn for
+    /// [`Fixed`](Self::Fixed)). The starts must be valid for the model.
+    pub fn draw(&self, rng: &mut Pcg64Mcg, x: &mut [f64]) {
+        match self {
+            Self::Fixed(x0) => x.copy_from_slice(x0),
+            Self::Uniform { position, velocity } => {
+                for agent in x.chunks_mut(4) {
+                    agent[0] = rng.random_range(-position..=*position);
+                    agent[1] = rng.random_range(-position..=*position);
+                    agent[2] = rng.random_range(-velocity..=*velocity);
+                    agent[3] = rng.random_range(-velocity..=*velocity);
+                }
+            }
+        }
+    }
+}
+
+fn half_width(field: &'static str, v: f64, limit: f64) -> Result<(), ConfigError> {
+    if v >= 0.0 && v <= limit {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            field,
+            format!("must be a number in [0, {limit}] (the state bound), got {v}"),
+        ))
+    }
+}
+
+/// `count` starts at rest, each agent's position uniform in `[-position, position]^2`, drawn
+/// from a [`Pcg64Mcg`] seeded with `seed` (agent-major, `s_x` then `s_y`): the same starts for
+/// every learner, whatever its own seed. `position` must lie in `[0, position_limit]`.
+pub fn random_starts(
+    model: &PointMass,
+    count: usize,
+    seed: u64,
+    position: f64,
+) -> Result<Vec<Vec<f64>>, SimError> {
+    half_width("position", position, model.config().position_limit)?;
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let n = model.config().state_dim();
+    Ok((0..count)
+        .map(|_| {
+            let mut x = vec![0.0; n];
+            for agent in x.chunks_mut(4) {
+                agent[0] = rng.random_range(-position..=position);
+                agent[1] = rng.random_range(-position..=position);
+            }
+            x
+        })
+        .collect())
+}
+
 /// Exact zero-order-hold step of one agent `[s_x, s_y, v_x, v_y]`.
 fn exact_step(m: f64, eta: f64, t: f64, s: &[f64], f: [f64; 2]) -> [f64; 4] {
     let mut out = [0.0; 4];
@@ -431,80 +498,58 @@ fn rk4_step(
     y
 }
 
-macro_rules! impl_model {
-    ($t:ty, $actions:ident) => {
-        impl Model<$t> for PointMass {
-            fn state_dim(&self) -> usize {
-                self.config.state_dim()
-            }
+impl F64Model for PointMass {
+    fn state_dim(&self) -> usize {
+        self.config.state_dim()
+    }
 
-            fn n_agents(&self) -> usize {
-                self.config.agents
-            }
+    fn n_agents(&self) -> usize {
+        self.config.agents
+    }
 
-            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
-                ActionSet::try_new(&self.$actions, 2).expect("validated force levels")
-            }
+    fn actions(&self) -> &ActionTable {
+        &self.actions
+    }
 
-            fn state_bounds(&self, dim: usize) -> ($t, $t) {
-                let lim = if dim % 4 < 2 {
-                    self.config.position_limit
-                } else {
-                    self.config.velocity_limit
-                };
-                (-lim as $t, lim as $t)
-            }
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
 
-            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
-                let n = self.config.state_dim();
-                let mut xs = [0.0f64; 4 * MAX_POINT_MASS_AGENTS];
-                let mut us = [0.0f64; 2 * MAX_POINT_MASS_AGENTS];
-                let mut out = [0.0f64; 4 * MAX_POINT_MASS_AGENTS];
-                for (a, &b) in xs.iter_mut().zip(&x[..n]) {
-                    *a = f64::from(b);
-                }
-                for (a, &b) in us.iter_mut().zip(&u[..n / 2]) {
-                    *a = f64::from(b);
-                }
-                self.step_f64(&xs[..n], &us[..n / 2], &mut out[..n]);
-                for (a, &b) in next.iter_mut().zip(&out[..n]) {
-                    *a = b as $t;
-                }
-            }
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        let lim = if dim % 4 < 2 {
+            self.config.position_limit
+        } else {
+            self.config.velocity_limit
+        };
+        (-lim, lim)
+    }
 
-            fn reward(&self, x: &[$t], _u: &[$t]) -> $t {
-                if <Self as Model<$t>>::is_goal(self, x) {
-                    self.config.goal_reward as $t
-                } else {
-                    0.0
-                }
-            }
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        self.step_f64(x, u, next);
+    }
 
-            fn reward_depends_on_action(&self) -> bool {
-                false
-            }
-
-            fn is_goal(&self, x: &[$t]) -> bool {
-                let sq: f64 = x.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
-                sq.sqrt() < self.config.goal_radius
-            }
-
-            fn n_blocks(&self) -> usize {
-                self.block_dims.len()
-            }
-
-            fn block(&self, b: usize) -> Block<'_> {
-                Block {
-                    state_dims: &self.block_dims[b],
-                    action_components: &self.block_comps[b],
-                }
-            }
+    fn reward(&self, x: &[f64], _u: &[f64], _precision: Precision) -> f64 {
+        if self.in_goal_f64(x) {
+            self.config.goal_reward
+        } else {
+            0.0
         }
-    };
+    }
+
+    fn reward_depends_on_action(&self) -> bool {
+        false
+    }
+
+    fn is_goal(&self, x: &[f64]) -> bool {
+        self.in_goal_f64(x)
+    }
+
+    fn blocks(&self) -> &[BlockSpec] {
+        &self.blocks
+    }
 }
 
-impl_model!(f32, actions_f32);
-impl_model!(f64, actions_f64);
+crate::impl_model!(PointMass);
 
 #[cfg(test)]
 mod tests {

@@ -71,24 +71,19 @@
 
 use std::f64::consts::PI;
 use std::ops::ControlFlow;
-use std::path::Path;
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, PolicyFileError, SimError};
-use crate::io::policy_file::{load_toml, save_toml};
+use crate::error::{ConfigError, SimError};
 use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
 use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS, goal_polar};
 #[cfg(doc)]
 use crate::model::khepera::{angle_level, distance_level, sonar_level};
-use crate::run::policy::PolicyKind;
-use crate::run::robots::{
-    KheperaMetrics, KheperaRun, SuccessReport, measure_run, random_starts, run_on_plant,
-};
+use crate::model::khepera::random_starts;
 use crate::world::KheperaWorld;
 #[cfg(doc)]
 use crate::world::StepContacts;
@@ -471,7 +466,7 @@ pub fn train_fql_on(
 }
 
 /// Checks that `q` was learned on the feature space and actions of `config`.
-fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
+pub fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
     let features = feature_space(config)?;
     if q.features() != &features {
         return Err(ConfigError::invalid(
@@ -491,126 +486,6 @@ fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
         .into());
     }
     Ok(())
-}
-
-/// Runs the greedy decentralised policy of `q` (each robot the argmax of its own term at its
-/// own observation) for `steps` control periods from `start` on the plant seeded with `seed`,
-/// and measures the run as [`crate::run::robots::rollout_khepera`] does (see the
-/// [module docs](self)); `gamma` discounts the return and `value_x0` is
-/// [`AdditiveQ::value`] at the start observations.
-pub fn rollout_fql(
-    q: &AdditiveQ,
-    config: &KheperaConfig,
-    start: &[[f64; 3]],
-    steps: usize,
-    seed: u64,
-    gamma: f64,
-) -> Result<(KheperaRun, KheperaMetrics), SimError> {
-    check_q(q, config)?;
-    if !(0.0..=1.0).contains(&gamma) {
-        return Err(
-            ConfigError::invalid("gamma", format!("must be in [0, 1], got {gamma}")).into(),
-        );
-    }
-    let model = KheperaModel::new(config.clone())?;
-    let mut obs = vec![vec![0.0; config.sonar_angles_deg.len() + 2]; config.agents];
-    let (run, collisions) = run_on_plant(&model, start, steps, seed, |poses, sonar, u| {
-        for (i, o) in obs.iter_mut().enumerate() {
-            observation(poses[i], &sonar[i], o);
-            let w = config.wheels(q.greedy(i, o)?);
-            u[2 * i..2 * i + 2].copy_from_slice(&w);
-        }
-        Ok(())
-    })?;
-    for (i, o) in obs.iter_mut().enumerate() {
-        observation(run.poses[0][i], &run.sonar[0][i], o);
-    }
-    let refs: Vec<&[f64]> = obs.iter().map(Vec::as_slice).collect();
-    let value_x0 = q.value(&refs)?;
-    let metrics = measure_run(
-        &model,
-        &run,
-        collisions,
-        gamma,
-        PolicyKind::Greedy,
-        value_x0,
-        seed,
-    );
-    Ok((run, metrics))
-}
-
-/// Rolls the greedy policy of `q` out from the `count` starts of
-/// [`random_starts(config, count, seed)`](random_starts), run `k` on the plant seeded with
-/// `seed + k`: the starts and plants of [`crate::run::robots::success_over_starts`].
-pub fn fql_success_over_starts(
-    q: &AdditiveQ,
-    config: &KheperaConfig,
-    count: usize,
-    seed: u64,
-    steps: usize,
-    gamma: f64,
-) -> Result<(SuccessReport, Vec<KheperaMetrics>), SimError> {
-    let starts = random_starts(config, count, seed)?;
-    let mut all = Vec::with_capacity(count);
-    for (k, s) in starts.iter().enumerate() {
-        let (_, m) = rollout_fql(q, config, s, steps, seed.wrapping_add(k as u64), gamma)?;
-        all.push(m);
-    }
-    Ok((SuccessReport::from_runs(seed, &all), all))
-}
-
-/// A learned Khepera FQL policy with what produced it, saved as TOML text.
-///
-/// (TOML rather than JSON: `serde_json` is not a dependency of this crate; `toml` is, and the
-/// file stays human-readable. Floats round-trip exactly.)
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct FqlPolicyFile {
-    /// The task.
-    pub config: KheperaConfig,
-    /// The learning settings.
-    pub fql: FqlConfig,
-    /// The learned Q-function.
-    pub q: AdditiveQ,
-    /// The first episode that passed the convergence test, if any.
-    #[serde(default)]
-    pub converged_at: Option<usize>,
-    /// Learning episodes run.
-    pub episodes: usize,
-}
-
-impl FqlPolicyFile {
-    /// The file of a [`train_fql`] run.
-    #[must_use]
-    pub fn from_outcome(config: &KheperaConfig, fql: &FqlConfig, outcome: &FqlOutcome) -> Self {
-        Self {
-            config: config.clone(),
-            fql: fql.clone(),
-            q: outcome.q.clone(),
-            converged_at: outcome.converged_at,
-            episodes: outcome.curve.len(),
-        }
-    }
-
-    /// The file as TOML text.
-    pub fn to_toml(&self) -> Result<String, ConfigError> {
-        toml::to_string(self).map_err(|e| ConfigError::Parse(format!("fql policy: {e}")))
-    }
-
-    /// Writes the file atomically (a temporary file in the same directory, then a rename).
-    pub fn save(&self, path: &Path) -> Result<(), PolicyFileError> {
-        save_toml(self, path, "fql policy")
-    }
-
-    /// Reads and checks a file written by [`save`](Self::save): it must parse, its
-    /// configurations must be valid and its Q-function must have the feature space and actions
-    /// of its configuration. Errors name the file.
-    pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
-        load_toml(path, |file: &Self| {
-            file.fql.validate().map_err(|e| e.to_string())?;
-            check_q(&file.q, &file.config).map_err(|e| e.to_string())
-        })
-    }
 }
 
 #[cfg(test)]

@@ -52,7 +52,6 @@
 //! ```
 
 use std::ops::ControlFlow;
-use std::path::Path;
 
 use fuzzyq_core::Model;
 use fuzzyq_core::partition::Partition;
@@ -60,102 +59,11 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, PolicyFileError, SimError};
-use crate::io::policy_file::{load_toml, save_toml};
+use crate::error::{ConfigError, SimError};
 use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
-use crate::learn::vqql::VqqlConfig;
-use crate::model::pointmass::{PointMass, PointMassConfig};
-use crate::run::rollout::check_additive;
-
-/// The paper's position cores per axis (project notes, section 1), in m.
-pub const PAPER_POSITION_CORES: [f64; 9] = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
-
-/// The paper's velocity cores per axis (project notes, section 1), in m/s.
-pub const PAPER_VELOCITY_CORES: [f64; 5] = [-3.0, -1.0, 0.0, 1.0, 3.0];
-
-/// The initial state of Table 1 (section 4): `[-4, 5, 0, 0, 5, -3, 0, 0]`.
-pub const TABLE1_X0: [f64; 8] = [-4.0, 5.0, 0.0, 0.0, 5.0, -3.0, 0.0, 0.0];
-
-/// Where the episodes of a [`PointMassEnv`] start.
-///
-/// Written in TOML as `starts = { fixed = [...] }` or
-/// `starts = { uniform = { position = 6.0, velocity = 0.0 } }`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", deny_unknown_fields)]
-pub enum Starts {
-    /// Always this state (length `4 n`, inside the state bounds).
-    Fixed(Vec<f64>),
-    /// Each agent's position uniform in `[-position, position]^2` and velocity uniform in
-    /// `[-velocity, velocity]^2`, drawn per agent in the order `s_x, s_y, v_x, v_y`.
-    Uniform {
-        /// Half-width of the position square (m), in `[0, position_limit]`.
-        position: f64,
-        /// Half-width of the velocity square (m/s), in `[0, velocity_limit]`.
-        velocity: f64,
-    },
-}
-
-impl Starts {
-    /// Checks the starts against the model's state space; errors name the field
-    /// (`starts.fixed`, `starts.position`, `starts.velocity`).
-    pub fn validate(&self, model: &PointMass) -> Result<(), ConfigError> {
-        let c = model.config();
-        match self {
-            Self::Fixed(x0) => {
-                let n = c.state_dim();
-                if x0.len() != n {
-                    return Err(ConfigError::invalid(
-                        "starts.fixed",
-                        format!("needs {n} values (the state length), got {}", x0.len()),
-                    ));
-                }
-                for (i, &v) in x0.iter().enumerate() {
-                    let (lo, hi) = Model::<f64>::state_bounds(model, i);
-                    if !(v >= lo && v <= hi) {
-                        return Err(ConfigError::invalid(
-                            "starts.fixed",
-                            format!("x0[{i}] = {v} is outside the state range [{lo}, {hi}]"),
-                        ));
-                    }
-                }
-                Ok(())
-            }
-            Self::Uniform { position, velocity } => {
-                half_width("starts.position", *position, c.position_limit)?;
-                half_width("starts.velocity", *velocity, c.velocity_limit)
-            }
-        }
-    }
-
-    /// Draws a start into `x` (length `4 n`) from `rng` (nothing is drawn for
-    /// [`Fixed`](Self::Fixed)). The starts must be valid for the model.
-    fn draw(&self, rng: &mut Pcg64Mcg, x: &mut [f64]) {
-        match self {
-            Self::Fixed(x0) => x.copy_from_slice(x0),
-            Self::Uniform { position, velocity } => {
-                for agent in x.chunks_mut(4) {
-                    agent[0] = rng.random_range(-position..=*position);
-                    agent[1] = rng.random_range(-position..=*position);
-                    agent[2] = rng.random_range(-velocity..=*velocity);
-                    agent[3] = rng.random_range(-velocity..=*velocity);
-                }
-            }
-        }
-    }
-}
-
-fn half_width(field: &'static str, v: f64, limit: f64) -> Result<(), ConfigError> {
-    if v >= 0.0 && v <= limit {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a number in [0, {limit}] (the state bound), got {v}"),
-        ))
-    }
-}
+use crate::model::pointmass::{PointMass, Starts};
 
 /// The default start distribution of the learners: each agent at rest, its position uniform
 /// over the whole field (`Uniform { position: 6.0, velocity: 0.0 }` for the paper's limits).
@@ -182,30 +90,6 @@ pub fn default_starts() -> Starts {
     }
 }
 
-/// `count` starts at rest, each agent's position uniform in `[-position, position]^2`, drawn
-/// from a [`Pcg64Mcg`] seeded with `seed` (agent-major, `s_x` then `s_y`): the same starts for
-/// every learner, whatever its own seed. `position` must lie in `[0, position_limit]`.
-pub fn random_starts(
-    model: &PointMass,
-    count: usize,
-    seed: u64,
-    position: f64,
-) -> Result<Vec<Vec<f64>>, SimError> {
-    half_width("position", position, model.config().position_limit)?;
-    let mut rng = Pcg64Mcg::seed_from_u64(seed);
-    let n = model.config().state_dim();
-    Ok((0..count)
-        .map(|_| {
-            let mut x = vec![0.0; n];
-            for agent in x.chunks_mut(4) {
-                agent[0] = rng.random_range(-position..=position);
-                agent[1] = rng.random_range(-position..=position);
-            }
-            x
-        })
-        .collect())
-}
-
 /// The per-agent feature space of the additive layout: for every agent, the product
 /// partition of its `(s_x, s_y, v_x, v_y)` on `position_cores` (both axes) and
 /// `velocity_cores` (both axes). Errors name the invalid core list.
@@ -227,6 +111,48 @@ pub fn feature_space(
         velocity_cores.to_vec(),
     ];
     FeatureSpace::new(vec![agent; model.config().agents])
+}
+
+/// Checks that `q` is a Q-function for the point-mass model: one term per agent, each
+/// observing its own state `(s_x, s_y, v_x, v_y)` (4 values) with the model's per-agent
+/// actions.
+pub fn check_q(model: &PointMass, q: &AdditiveQ) -> Result<(), SimError> {
+    let agents = model.config().agents;
+    if q.n_agents() != agents {
+        return Err(ConfigError::invalid(
+            "q",
+            format!(
+                "has {} agents, the point-mass model has {agents}",
+                q.n_agents()
+            ),
+        )
+        .into());
+    }
+    for i in 0..agents {
+        let dim = q.features().obs_dim(i).unwrap_or(0);
+        if dim != 4 {
+            return Err(ConfigError::invalid(
+                "q",
+                format!(
+                    "agent {i} observes {dim} values; a point-mass agent observes its own \
+                     (s_x, s_y, v_x, v_y)"
+                ),
+            )
+            .into());
+        }
+        let m = Model::<f64>::action_set(model, i).n_actions();
+        if q.actions()[i] != m {
+            return Err(ConfigError::invalid(
+                "q",
+                format!(
+                    "agent {i} has {} actions, the model has {m} per agent",
+                    q.actions()[i]
+                ),
+            )
+            .into());
+        }
+    }
+    Ok(())
 }
 
 /// The point-mass task as an episodic [`Environment`] (see the [module docs](self)).
@@ -280,7 +206,7 @@ impl PointMassEnv {
 
     /// Places the system at `x0` (checked against the state space).
     pub fn reset_to(&mut self, x0: &[f64]) -> Result<(), SimError> {
-        crate::run::rollout::check_x0(&self.model, x0)?;
+        crate::model::check_state(&self.model, x0)?;
         self.x.copy_from_slice(x0);
         Ok(())
     }
@@ -408,117 +334,6 @@ pub fn train_fql(
     match (result, env.take_error()) {
         (_, Some(e)) => Err(e),
         (r, None) => r,
-    }
-}
-
-/// A learned point-mass policy (fuzzy Q-learning or VQQL) with what produced it, saved as
-/// TOML text (as [`crate::learn::tasks::khepera::FqlPolicyFile`] is).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PointMassPolicyFile {
-    /// The task.
-    pub config: PointMassConfig,
-    /// The episodes' starts.
-    pub starts: Starts,
-    /// The learning settings.
-    pub fql: FqlConfig,
-    /// The quantiser settings of a VQQL policy (its `q` has codebook features); `None` for
-    /// fuzzy Q-learning.
-    #[serde(default)]
-    pub vqql: Option<VqqlConfig>,
-    /// The learned Q-function.
-    pub q: AdditiveQ,
-    /// The first episode that passed the convergence test, if any.
-    #[serde(default)]
-    pub converged_at: Option<usize>,
-    /// Learning episodes run.
-    pub episodes: usize,
-}
-
-impl PointMassPolicyFile {
-    /// The file of a [`train_fql`] run (`vqql = None`) or a
-    /// [`train_vqql`](crate::learn::vqql::train_vqql) run (`vqql = Some(..)`).
-    #[must_use]
-    pub fn from_outcome(
-        config: &PointMassConfig,
-        starts: &Starts,
-        fql: &FqlConfig,
-        vqql: Option<&VqqlConfig>,
-        outcome: &FqlOutcome,
-    ) -> Self {
-        Self {
-            config: config.clone(),
-            starts: starts.clone(),
-            fql: fql.clone(),
-            vqql: vqql.cloned(),
-            q: outcome.q.clone(),
-            converged_at: outcome.converged_at,
-            episodes: outcome.curve.len(),
-        }
-    }
-
-    /// Checks the file's parts against each other: valid configurations and starts, a
-    /// Q-function that fits the model, codebook features exactly when `vqql` is set (with
-    /// `vqql.cells` cells per agent).
-    pub fn validate(&self) -> Result<PointMass, SimError> {
-        let model = PointMass::new(self.config.clone())?;
-        self.starts.validate(&model)?;
-        self.fql.validate()?;
-        check_additive(&model, &self.q)?;
-        let features = self.q.features();
-        match &self.vqql {
-            Some(v) => {
-                v.validate()?;
-                if !features.is_codebook() {
-                    return Err(ConfigError::invalid(
-                        "q",
-                        "a VQQL policy (vqql set) needs codebook features",
-                    )
-                    .into());
-                }
-                if let Some(i) =
-                    (0..features.n_agents()).find(|&i| features.n_cores(i) != Some(v.cells))
-                {
-                    return Err(ConfigError::invalid(
-                        "q",
-                        format!(
-                            "agent {i}'s codebook has {:?} cells, vqql.cells = {}",
-                            features.n_cores(i),
-                            v.cells
-                        ),
-                    )
-                    .into());
-                }
-            }
-            None => {
-                if features.is_codebook() {
-                    return Err(ConfigError::invalid(
-                        "q",
-                        "codebook features need the quantiser settings (vqql)",
-                    )
-                    .into());
-                }
-            }
-        }
-        Ok(model)
-    }
-
-    /// The file as TOML text.
-    pub fn to_toml(&self) -> Result<String, ConfigError> {
-        toml::to_string(self).map_err(|e| ConfigError::Parse(format!("point-mass policy: {e}")))
-    }
-
-    /// Writes the file atomically (a temporary file in the same directory, then a rename).
-    pub fn save(&self, path: &Path) -> Result<(), PolicyFileError> {
-        save_toml(self, path, "point-mass policy")
-    }
-
-    /// Reads and checks a file written by [`save`](Self::save) (see
-    /// [`validate`](Self::validate)). Errors name the file.
-    pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
-        load_toml(path, |file: &Self| {
-            file.validate().map(|_| ()).map_err(|e| e.to_string())
-        })
     }
 }
 

@@ -49,11 +49,13 @@
 
 use std::f64::consts::PI;
 
-use fuzzyq_core::{ActionSet, Block, Model, Real};
+use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::{Integrator, Preset, non_negative, positive, rk4_step_sizes, validate_actions};
-use crate::error::ConfigError;
+use super::octave::{rk4_step_sizes, wrap_angle_floor};
+use super::{Classic, Dynamics, Integrator, Preset, validate_actions};
+use crate::error::{ConfigError, non_negative, positive};
+use crate::model::{ActionTable, EnvKind};
 
 /// The names of the arm's presets.
 pub const PRESETS: [&str; 2] = ["fine", "coarse"];
@@ -176,52 +178,8 @@ fn radians(deg: &[f64]) -> Vec<f64> {
     deg.iter().map(|&d| d * (PI / 180.0)).collect()
 }
 
-/// The named preset `name` (see the [module docs](self) for where each value comes from).
-pub fn preset(name: &str) -> Result<Preset, ConfigError> {
-    let (angles, velocities, xi): (&[f64], &[f64], f64) = match name {
-        "fine" => (
-            &[
-                -180.0, -130.0, -80.0, -30.0, -15.0, -5.0, 0.0, 5.0, 15.0, 30.0, 80.0, 130.0, 180.0,
-            ],
-            &[-360.0, -180.0, -30.0, 0.0, 30.0, 180.0, 360.0],
-            0.01,
-        ),
-        "coarse" => (
-            &[-180.0, -90.0, -30.0, -10.0, 0.0, 10.0, 30.0, 90.0, 180.0],
-            &[-360.0, -90.0, -20.0, 0.0, 20.0, 90.0, 360.0],
-            0.1,
-        ),
-        _ => {
-            return Err(ConfigError::invalid(
-                "preset",
-                format!(
-                    "unknown robot arm preset \"{name}\" (known: {})",
-                    PRESETS.join(", ")
-                ),
-            ));
-        }
-    };
-    let (th, om) = (radians(angles), radians(velocities));
-    Ok(Preset {
-        name: name.to_owned(),
-        cores: vec![th.clone(), om.clone(), th, om],
-        actions: CLASSIC_LEVELS.to_vec(),
-        gamma: 0.98,
-        xi,
-    })
-}
-
-/// Every preset, in the order of [`PRESETS`].
-#[must_use]
-pub fn presets() -> Vec<Preset> {
-    PRESETS
-        .iter()
-        .filter_map(|name| preset(name).ok())
-        .collect()
-}
-
-/// The two-link robot arm (implements [`Model`] for `f32` and `f64`; one agent with two
-/// torque components).
+/// The two-link arm's dynamics (a [`Classic`] benchmark: [`ArmModel`] is the model; one agent
+/// with two torque components).
 #[derive(Clone, Debug)]
 pub struct Arm {
     config: ArmConfig,
@@ -229,59 +187,40 @@ pub struct Arm {
     p: [f64; 3],
     /// RK4 step sizes.
     steps: Vec<f64>,
-    /// Each joint's torques.
-    torques: [Vec<f64>; 2],
-    /// The joint actions `[tau_1, tau_2]`, action-major, `tau_1` slowest.
-    actions_f64: Vec<f64>,
-    actions_f32: Vec<f32>,
 }
 
+/// The two-link arm benchmark: [`Arm`] dynamics with a discrete torque set.
+pub type ArmModel = Classic<Arm>;
+
 impl Arm {
-    /// Builds the model with the classic levels `[-1, 0, 1]` of each joint's maximum torque
-    /// (see [`with_levels`](Self::with_levels), [`with_torques`](Self::with_torques) and
-    /// [`for_preset`](Self::for_preset)).
+    /// Builds the dynamics from validated parameters.
     pub fn new(config: ArmConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let substeps = match config.integrator {
             Integrator::Rk4 { substeps } => substeps,
             Integrator::Zoh => unreachable!("refused by validate"),
         };
-        let arm = Self {
+        Ok(Self {
             p: config.inertia_parameters(),
             steps: rk4_step_sizes(config.sample_time, substeps),
-            torques: [Vec::new(), Vec::new()],
-            actions_f64: Vec::new(),
-            actions_f32: Vec::new(),
             config,
-        };
-        arm.with_levels(&CLASSIC_LEVELS)
+        })
     }
 
-    /// The same model with torque levels `levels` (fractions of each joint's maximum torque,
-    /// in `[-1, 1]`) for both joints.
-    pub fn with_levels(self, levels: &[f64]) -> Result<Self, ConfigError> {
-        validate_actions("actions", levels)?;
-        if let Some(l) = levels.iter().find(|l| l.abs() > 1.0) {
-            return Err(ConfigError::invalid(
-                "actions",
-                format!("torque levels are fractions of the maximum torque in [-1, 1], got {l}"),
-            ));
-        }
-        let [t1, t2] = self.config.max_torque;
-        let tau1: Vec<f64> = levels.iter().map(|&l| l * t1).collect();
-        let tau2: Vec<f64> = levels.iter().map(|&l| l * t2).collect();
-        self.with_torques(&tau1, &tau2)
-    }
-
-    /// The same model with the torque sets `tau1` and `tau2` (N m; each 1 to 4096 finite
-    /// values, at most [`MAX_JOINT_ACTIONS`] pairs; torques beyond the limits are limited when
-    /// applied).
-    pub fn with_torques(mut self, tau1: &[f64], tau2: &[f64]) -> Result<Self, ConfigError> {
-        validate_actions("actions", tau1)?;
-        validate_actions("actions", tau2)?;
+    /// The joint actions `[tau_1, tau_2]` of the torque sets `tau1` and `tau2` (N m; each 1
+    /// to 4096 finite values, at most [`MAX_JOINT_ACTIONS`] pairs; torques beyond the limits
+    /// are limited when applied), action-major, `tau_1` slowest.
+    pub fn torque_table(
+        &self,
+        field: &str,
+        tau1: &[f64],
+        tau2: &[f64],
+    ) -> Result<ActionTable, ConfigError> {
+        validate_actions(field, tau1)?;
+        validate_actions(field, tau2)?;
         if tau1.len() * tau2.len() > MAX_JOINT_ACTIONS {
             return Err(ConfigError::invalid(
-                "actions",
+                field,
                 format!(
                     "{} x {} torques make more than {MAX_JOINT_ACTIONS} joint actions",
                     tau1.len(),
@@ -289,53 +228,17 @@ impl Arm {
                 ),
             ));
         }
-        self.actions_f64 = tau1
+        let pairs = tau1
             .iter()
             .flat_map(|&a| tau2.iter().flat_map(move |&b| [a, b]))
             .collect();
-        self.actions_f32 = self.actions_f64.iter().map(|&u| u as f32).collect();
-        self.torques = [tau1.to_vec(), tau2.to_vec()];
-        Ok(self)
-    }
-
-    /// The model for a preset: `config` with the preset's torque levels.
-    pub fn for_preset(config: ArmConfig, preset: &Preset) -> Result<Self, ConfigError> {
-        preset.validate()?;
-        if preset.cores.len() != 4 {
-            return Err(ConfigError::invalid(
-                "preset.cores",
-                format!(
-                    "the robot arm has 4 state variables, the preset {}",
-                    preset.cores.len()
-                ),
-            ));
-        }
-        Self::new(config)?
-            .with_levels(&preset.actions)
-            .map_err(|e| match e {
-                ConfigError::Invalid { reason, .. } => {
-                    ConfigError::invalid("preset.actions", reason)
-                }
-                other => other,
-            })
+        Ok(ActionTable::new(pairs, 2))
     }
 
     /// The parameters.
     #[must_use]
     pub fn config(&self) -> &ArmConfig {
         &self.config
-    }
-
-    /// The torque set of joint `j` (0 or 1; empty otherwise).
-    #[must_use]
-    pub fn torques(&self, j: usize) -> &[f64] {
-        self.torques.get(j).map_or(&[], Vec::as_slice)
-    }
-
-    /// The joint actions `[tau_1, tau_2]`, action-major, `tau_1` slowest.
-    #[must_use]
-    pub fn actions(&self) -> &[f64] {
-        &self.actions_f64
     }
 
     /// The torques `tau` limited to `|tau_j| <= max_torque[j]`.
@@ -387,7 +290,7 @@ impl Arm {
         let c = &self.config;
         for (i, j) in [(0, 0), (2, 1)] {
             y[i] = if c.wrap {
-                wrap_angle(y[i])
+                wrap_angle_floor(y[i])
             } else {
                 y[i].clamp(-PI, PI)
             };
@@ -417,96 +320,94 @@ impl Arm {
     }
 }
 
-/// `mod(a + pi, 2 pi) - pi` with MATLAB's `mod` (`a - floor(a / m) m`): an angle in
-/// `[-pi, pi)` (up to rounding at the ends). NaN stays NaN.
-#[must_use]
-pub fn wrap_angle(a: f64) -> f64 {
-    let m = 2.0 * PI;
-    let s = a + PI;
-    (s - (s / m).floor() * m) - PI
-}
+impl Dynamics for Arm {
+    const ENV: EnvKind = EnvKind::Arm;
+    const STATE_DIM: usize = 4;
+    const ACTION_DIM: usize = 2;
+    type Config = ArmConfig;
 
-/// The one dynamics block: the whole state and both torques. Declaring it lets the solver
-/// tabulate the transitions once instead of stepping the model on every sweep.
-const BLOCK_DIMS: [usize; 4] = [0, 1, 2, 3];
-const BLOCK_COMPS: [usize; 2] = [0, 1];
+    fn new(config: ArmConfig) -> Result<Self, ConfigError> {
+        Arm::new(config)
+    }
 
-impl Arm {
-    /// `(x, tau)` in `f64` from slices of precision `T` (`None` for wrong lengths).
-    fn inputs<T: Real>(x: &[T], u: &[T]) -> Option<([f64; 4], [f64; 2])> {
-        let (&[a, b, c, d], &[t1, t2]) = (x, u) else {
-            return None;
+    fn config(&self) -> &ArmConfig {
+        &self.config
+    }
+
+    /// See the [module docs](self) for where each value comes from.
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        let (angles, velocities, xi): (&[f64], &[f64], f64) = match name {
+            "fine" => (
+                &[
+                    -180.0, -130.0, -80.0, -30.0, -15.0, -5.0, 0.0, 5.0, 15.0, 30.0, 80.0, 130.0, 180.0,
+                ],
+                &[-360.0, -180.0, -30.0, 0.0, 30.0, 180.0, 360.0],
+                0.01,
+            ),
+            "coarse" => (
+                &[-180.0, -90.0, -30.0, -10.0, 0.0, 10.0, 30.0, 90.0, 180.0],
+                &[-360.0, -90.0, -20.0, 0.0, 20.0, 90.0, 360.0],
+                0.1,
+            ),
+            _ => return Err(Self::ENV.unknown_preset(name)),
         };
-        Some((
-            [a.to_f64(), b.to_f64(), c.to_f64(), d.to_f64()],
-            [t1.to_f64(), t2.to_f64()],
-        ))
+        let (th, om) = (radians(angles), radians(velocities));
+        Ok(Preset {
+            name: name.to_owned(),
+            cores: vec![th.clone(), om.clone(), th, om],
+            actions: CLASSIC_LEVELS.to_vec(),
+            gamma: 0.98,
+            xi,
+        })
+    }
+
+
+    /// The classic levels `[-1, 0, 1]` of each joint's maximum torque.
+    fn default_actions() -> Vec<f64> {
+        CLASSIC_LEVELS.to_vec()
+    }
+
+    /// The listed actions are torque **levels**, fractions of each joint's maximum torque in
+    /// `[-1, 1]`, combined per joint (`tau_1` slowest).
+    fn action_table(&self, field: &str, levels: &[f64]) -> Result<ActionTable, ConfigError> {
+        validate_actions(field, levels)?;
+        if let Some(l) = levels.iter().find(|l| l.abs() > 1.0) {
+            return Err(ConfigError::invalid(
+                field,
+                format!("torque levels are fractions of the maximum torque in [-1, 1], got {l}"),
+            ));
+        }
+        let [t1, t2] = self.config.max_torque;
+        let tau1: Vec<f64> = levels.iter().map(|&l| l * t1).collect();
+        let tau2: Vec<f64> = levels.iter().map(|&l| l * t2).collect();
+        self.torque_table(field, &tau1, &tau2)
+    }
+
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        let lim = match dim {
+            1 => self.config.max_velocity[0],
+            3 => self.config.max_velocity[1],
+            _ => PI,
+        };
+        (-lim, lim)
+    }
+
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_f64([x[0], x[1], x[2], x[3]], [u[0], u[1]]));
+    }
+
+    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
+        self.reward_f64([x[0], x[1], x[2], x[3]], [u[0], u[1]])
+    }
+
+    fn reward_depends_on_action(&self) -> bool {
+        self.config.r != [0.0, 0.0]
     }
 }
-
-macro_rules! impl_model {
-    ($t:ty, $actions:ident) => {
-        impl Model<$t> for Arm {
-            fn state_dim(&self) -> usize {
-                4
-            }
-
-            fn n_agents(&self) -> usize {
-                1
-            }
-
-            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
-                ActionSet::try_new(&self.$actions, 2).expect("validated torques")
-            }
-
-            fn state_bounds(&self, dim: usize) -> ($t, $t) {
-                let lim = match dim {
-                    1 => self.config.max_velocity[0],
-                    3 => self.config.max_velocity[1],
-                    _ => PI,
-                };
-                (-lim as $t, lim as $t)
-            }
-
-            /// The successor (NaN for inputs of the wrong length).
-            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
-                match Self::inputs(x, u) {
-                    Some((x, tau)) => {
-                        for (n, y) in next.iter_mut().zip(self.step_f64(x, tau)) {
-                            *n = y as $t;
-                        }
-                    }
-                    None => next.fill(<$t>::NAN),
-                }
-            }
-
-            fn reward(&self, x: &[$t], u: &[$t]) -> $t {
-                match Self::inputs(x, u) {
-                    Some((x, tau)) => self.reward_f64(x, tau) as $t,
-                    None => <$t>::NAN,
-                }
-            }
-
-            fn reward_depends_on_action(&self) -> bool {
-                self.config.r != [0.0, 0.0]
-            }
-
-            fn n_blocks(&self) -> usize {
-                1
-            }
-
-            fn block(&self, _b: usize) -> Block<'_> {
-                Block {
-                    state_dims: &BLOCK_DIMS,
-                    action_components: &BLOCK_COMPS,
-                }
-            }
-        }
-    };
-}
-
-impl_model!(f32, actions_f32);
-impl_model!(f64, actions_f64);
 
 #[cfg(test)]
 mod tests {

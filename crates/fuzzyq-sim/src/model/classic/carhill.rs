@@ -40,11 +40,13 @@
 //!   grid's does; square equidistant grids of 16 to 25 cores per variable all do, 13 or
 //!   fewer do not.
 
-use fuzzyq_core::{ActionSet, Block, Model, Real};
+use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::{Integrator, Preset, colon, positive, rk4, symequidgrid, validate_actions};
-use crate::error::ConfigError;
+use super::octave::{colon, rk4, symequidgrid};
+use super::{Classic, Dynamics, Integrator, Preset};
+use crate::error::{ConfigError, positive};
+use crate::model::EnvKind;
 
 /// The names of the car's presets.
 pub const PRESETS: [&str; 2] = ["fine", "coarse"];
@@ -109,42 +111,6 @@ impl CarHillConfig {
     }
 }
 
-/// The named preset `name` (see the [module docs](self) for where each value comes from).
-pub fn preset(name: &str) -> Result<Preset, ConfigError> {
-    match name {
-        "fine" => Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![colon(-1.0, 0.05, 1.0)?, colon(-3.0, 0.2, 3.0)?],
-            actions: CLASSIC_ACTIONS.to_vec(),
-            gamma: 0.95,
-            xi: 0.01,
-        }),
-        "coarse" => Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![symequidgrid(1.0, 17)?, symequidgrid(3.0, 17)?],
-            actions: CLASSIC_ACTIONS.to_vec(),
-            gamma: 0.95,
-            xi: 0.01,
-        }),
-        _ => Err(ConfigError::invalid(
-            "preset",
-            format!(
-                "unknown car-on-the-hill preset \"{name}\" (known: {})",
-                PRESETS.join(", ")
-            ),
-        )),
-    }
-}
-
-/// Every preset, in the order of [`PRESETS`].
-#[must_use]
-pub fn presets() -> Vec<Preset> {
-    PRESETS
-        .iter()
-        .filter_map(|name| preset(name).ok())
-        .collect()
-}
-
 /// The hill's height `H(p)`.
 #[must_use]
 pub fn hill(p: f64) -> f64 {
@@ -167,19 +133,19 @@ pub fn hill_derivatives(p: f64) -> (f64, f64) {
     }
 }
 
-/// The car on the hill (implements [`Model`] for `f32` and `f64`; one agent, one force).
+/// The car on the hill's dynamics (a [`Classic`] benchmark: [`CarHillModel`] is the model).
 #[derive(Clone, Debug)]
 pub struct CarHill {
     config: CarHillConfig,
     /// RK4 step sizes.
     steps: Vec<f64>,
-    actions_f64: Vec<f64>,
-    actions_f32: Vec<f32>,
 }
 
+/// The car on the hill benchmark: [`CarHill`] dynamics with a discrete force set.
+pub type CarHillModel = Classic<CarHill>;
+
 impl CarHill {
-    /// Builds the model with the classic actions `{-4, 4}` (see
-    /// [`with_actions`](Self::with_actions) and [`for_preset`](Self::for_preset)).
+    /// Builds the dynamics from validated parameters.
     pub fn new(config: CarHillConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let substeps = match config.integrator {
@@ -188,46 +154,14 @@ impl CarHill {
         };
         Ok(Self {
             steps: vec![config.sample_time / substeps as f64; substeps],
-            actions_f64: CLASSIC_ACTIONS.to_vec(),
-            actions_f32: CLASSIC_ACTIONS.iter().map(|&u| u as f32).collect(),
             config,
         })
-    }
-
-    /// The same model with the discrete action set `actions` (forces; 1 to 4096 finite
-    /// values).
-    pub fn with_actions(mut self, actions: &[f64]) -> Result<Self, ConfigError> {
-        validate_actions("actions", actions)?;
-        self.actions_f64 = actions.to_vec();
-        self.actions_f32 = actions.iter().map(|&u| u as f32).collect();
-        Ok(self)
-    }
-
-    /// The model for a preset: `config` with the preset's actions.
-    pub fn for_preset(config: CarHillConfig, preset: &Preset) -> Result<Self, ConfigError> {
-        preset.validate()?;
-        if preset.cores.len() != 2 {
-            return Err(ConfigError::invalid(
-                "preset.cores",
-                format!(
-                    "the car on the hill has 2 state variables, the preset {}",
-                    preset.cores.len()
-                ),
-            ));
-        }
-        Self::new(config)?.with_actions(&preset.actions)
     }
 
     /// The parameters.
     #[must_use]
     pub fn config(&self) -> &CarHillConfig {
         &self.config
-    }
-
-    /// The discrete actions.
-    #[must_use]
-    pub fn actions(&self) -> &[f64] {
-        &self.actions_f64
     }
 
     /// The time derivative `[p_dot, p_ddot]` at `x` under force `u`.
@@ -293,101 +227,84 @@ impl CarHill {
     }
 }
 
-/// The one dynamics block: both state variables and the force. Declaring it lets the solver
-/// tabulate the transitions once instead of stepping the model on every sweep.
-const BLOCK_DIMS: [usize; 2] = [0, 1];
-const BLOCK_COMPS: [usize; 1] = [0];
+impl Dynamics for CarHill {
+    const ENV: EnvKind = EnvKind::Carhill;
+    const STATE_DIM: usize = 2;
+    const ACTION_DIM: usize = 1;
+    type Config = CarHillConfig;
 
-impl CarHill {
-    /// The successor in precision `T`, as `[f64; 2]` (`None` for a state or action of the
-    /// wrong length).
-    fn successor_rounded<T: Real>(&self, x: &[T], u: &[T]) -> Option<[f64; 2]> {
-        let (&[p, v], &[f]) = (x, u) else {
-            return None;
+    fn new(config: CarHillConfig) -> Result<Self, ConfigError> {
+        CarHill::new(config)
+    }
+
+    fn config(&self) -> &CarHillConfig {
+        &self.config
+    }
+
+    /// See the [module docs](self) for where each value comes from.
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        match name {
+            "fine" => Ok(Preset {
+                name: name.to_owned(),
+                cores: vec![colon(-1.0, 0.05, 1.0)?, colon(-3.0, 0.2, 3.0)?],
+                actions: CLASSIC_ACTIONS.to_vec(),
+                gamma: 0.95,
+                xi: 0.01,
+            }),
+            "coarse" => Ok(Preset {
+                name: name.to_owned(),
+                cores: vec![symequidgrid(1.0, 17)?, symequidgrid(3.0, 17)?],
+                actions: CLASSIC_ACTIONS.to_vec(),
+                gamma: 0.95,
+                xi: 0.01,
+            }),
+            _ => Err(Self::ENV.unknown_preset(name)),
+        }
+    }
+
+    /// The classic forces `{-4, 4}`.
+    fn default_actions() -> Vec<f64> {
+        CLASSIC_ACTIONS.to_vec()
+    }
+
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        let lim = if dim == 0 {
+            self.config.position_limit
+        } else {
+            self.config.velocity_limit
         };
-        let y = self.step_f64([p.to_f64(), v.to_f64()], f.to_f64());
-        Some(y.map(|c| T::from_f64(c).to_f64()))
+        (-lim, lim)
+    }
+
+    /// The unclipped successor.
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_f64([x[0], x[1]], u[0]));
+    }
+
+    /// `+1`, `-1` or 0 by the successor rounded to the solver's precision, so that the reward
+    /// and [`is_terminal`](Dynamics::is_terminal) see the successor the solver sees (see the
+    /// [module docs](self)).
+    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64 {
+        let y = self.step_f64([x[0], x[1]], u[0]);
+        self.transition_reward(y.map(|c| precision.round(c)))
+    }
+
+    fn is_goal(&self, x: &[f64]) -> bool {
+        self.is_success_f64([x[0], x[1]])
+    }
+
+    fn is_terminal(&self, x: &[f64]) -> bool {
+        self.is_terminal_f64([x[0], x[1]])
+    }
+
+    fn has_terminal_states(&self) -> bool {
+        true
     }
 }
-
-macro_rules! impl_model {
-    ($t:ty, $actions:ident) => {
-        impl Model<$t> for CarHill {
-            fn state_dim(&self) -> usize {
-                2
-            }
-
-            fn n_agents(&self) -> usize {
-                1
-            }
-
-            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
-                ActionSet::try_new(&self.$actions, 1).expect("validated actions")
-            }
-
-            fn state_bounds(&self, dim: usize) -> ($t, $t) {
-                let lim = if dim == 0 {
-                    self.config.position_limit
-                } else {
-                    self.config.velocity_limit
-                };
-                (-lim as $t, lim as $t)
-            }
-
-            /// The unclipped successor (NaN for inputs of the wrong length).
-            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
-                match self.successor_rounded(x, u) {
-                    Some(y) => {
-                        for (n, y) in next.iter_mut().zip(y) {
-                            *n = y as $t;
-                        }
-                    }
-                    None => next.fill(<$t>::NAN),
-                }
-            }
-
-            /// `+1`, `-1` or 0 by the successor (see the [module docs](self)).
-            fn reward(&self, x: &[$t], u: &[$t]) -> $t {
-                match self.successor_rounded(x, u) {
-                    Some(y) => self.transition_reward(y) as $t,
-                    None => <$t>::NAN,
-                }
-            }
-
-            fn is_goal(&self, x: &[$t]) -> bool {
-                match x {
-                    &[p, v] => self.is_success_f64([f64::from(p), f64::from(v)]),
-                    _ => false,
-                }
-            }
-
-            fn is_terminal(&self, x: &[$t]) -> bool {
-                match x {
-                    &[p, v] => self.is_terminal_f64([f64::from(p), f64::from(v)]),
-                    _ => true,
-                }
-            }
-
-            fn has_terminal_states(&self) -> bool {
-                true
-            }
-
-            fn n_blocks(&self) -> usize {
-                1
-            }
-
-            fn block(&self, _b: usize) -> Block<'_> {
-                Block {
-                    state_dims: &BLOCK_DIMS,
-                    action_components: &BLOCK_COMPS,
-                }
-            }
-        }
-    };
-}
-
-impl_model!(f32, actions_f32);
-impl_model!(f64, actions_f64);
 
 #[cfg(test)]
 mod tests {

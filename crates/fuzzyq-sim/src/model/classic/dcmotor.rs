@@ -30,14 +30,13 @@
 
 use std::f64::consts::PI;
 
-use fuzzyq_core::{ActionSet, Block, Model};
+use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    Integrator, Preset, colon, non_negative, positive, rk4, rk4_step_sizes, sat, symequidgrid,
-    validate_actions,
-};
-use crate::error::ConfigError;
+use super::octave::{colon, rk4, rk4_step_sizes, sat, symequidgrid};
+use super::{Classic, Dynamics, Integrator, Preset};
+use crate::error::{ConfigError, non_negative, positive};
+use crate::model::EnvKind;
 
 /// The names of the DC motor's presets.
 pub const PRESETS: [&str; 2] = ["toolbox-demo", "fine"];
@@ -126,37 +125,7 @@ impl DcMotorConfig {
     }
 }
 
-/// The named preset `name` (see the [module docs](self) for where each value comes from).
-pub fn preset(name: &str) -> Result<Preset, ConfigError> {
-    match name {
-        "toolbox-demo" => Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![symequidgrid(PI, 21)?, symequidgrid(16.0 * PI, 21)?],
-            actions: symequidgrid(10.0, 5)?,
-            gamma: 0.98,
-            xi: 0.01,
-        }),
-        "fine" => Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![
-                colon(-PI, 5.0 * PI / 180.0, PI)?,
-                colon(-16.0 * PI, PI / 6.0, 16.0 * PI)?,
-            ],
-            actions: vec![-10.0, -5.0, -1.0, -0.1, 0.0, 0.1, 1.0, 5.0, 10.0],
-            gamma: 0.95,
-            xi: 0.01,
-        }),
-        _ => Err(ConfigError::invalid(
-            "preset",
-            format!(
-                "unknown DC motor preset \"{name}\" (known: {})",
-                PRESETS.join(", ")
-            ),
-        )),
-    }
-}
-
-/// The DC motor model (implements [`Model`] for `f32` and `f64`).
+/// The DC motor's dynamics (a [`Classic`] benchmark: [`DcMotorModel`] is the model).
 #[derive(Clone, Debug)]
 pub struct DcMotor {
     config: DcMotorConfig,
@@ -167,9 +136,10 @@ pub struct DcMotor {
     cont: (f64, f64),
     /// RK4 step sizes (empty for the zero-order hold).
     steps: Vec<f64>,
-    actions_f64: Vec<f64>,
-    actions_f32: Vec<f32>,
 }
+
+/// The DC motor benchmark: [`DcMotor`] dynamics with a discrete voltage set.
+pub type DcMotorModel = Classic<DcMotor>;
 
 /// `phi1(z) = (1 - e^-z) / z` (1 at 0).
 fn phi1(z: f64) -> f64 {
@@ -194,9 +164,7 @@ fn phi2(z: f64) -> f64 {
 }
 
 impl DcMotor {
-    /// Builds the model with the `"toolbox-demo"` actions (5 equidistant voltages on
-    /// `[-10, 10]`); see [`with_actions`](Self::with_actions) and
-    /// [`for_preset`](Self::for_preset).
+    /// Builds the dynamics from validated parameters.
     pub fn new(config: DcMotorConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let (a, c) = config.continuous();
@@ -207,40 +175,13 @@ impl DcMotor {
             Integrator::Zoh => Vec::new(),
             Integrator::Rk4 { substeps } => rk4_step_sizes(ts, substeps),
         };
-        let actions = symequidgrid(10.0, 5)?;
         Ok(Self {
             a: [[1.0, ts * p1], [0.0, (-z).exp()]],
             b: [c * ts * ts * phi2(z), c * ts * p1],
             cont: (a, c),
             steps,
-            actions_f32: actions.iter().map(|&u| u as f32).collect(),
-            actions_f64: actions,
             config,
         })
-    }
-
-    /// The same model with the discrete action set `actions` (voltages; 1 to 4096 finite
-    /// values).
-    pub fn with_actions(mut self, actions: &[f64]) -> Result<Self, ConfigError> {
-        validate_actions("actions", actions)?;
-        self.actions_f64 = actions.to_vec();
-        self.actions_f32 = actions.iter().map(|&u| u as f32).collect();
-        Ok(self)
-    }
-
-    /// The model for a preset: `config` with the preset's actions.
-    pub fn for_preset(config: DcMotorConfig, preset: &Preset) -> Result<Self, ConfigError> {
-        preset.validate()?;
-        if preset.cores.len() != 2 {
-            return Err(ConfigError::invalid(
-                "preset.cores",
-                format!(
-                    "the DC motor has 2 state variables, the preset {}",
-                    preset.cores.len()
-                ),
-            ));
-        }
-        Self::new(config)?.with_actions(&preset.actions)
     }
 
     /// The parameters.
@@ -254,12 +195,6 @@ impl DcMotor {
     #[must_use]
     pub fn zoh_matrices(&self) -> ([[f64; 2]; 2], [f64; 2]) {
         (self.a, self.b)
-    }
-
-    /// The discrete actions.
-    #[must_use]
-    pub fn actions(&self) -> &[f64] {
-        &self.actions_f64
     }
 
     /// The successor of `x` under voltage `u`, saturated to the state bounds.
@@ -290,66 +225,70 @@ impl DcMotor {
     }
 }
 
-/// The one dynamics block: both state variables and the voltage. Declaring it lets the
-/// solver tabulate the transitions once (the toolbox's precomputed activation matrix)
-/// instead of stepping the model on every sweep.
-const BLOCK_DIMS: [usize; 2] = [0, 1];
-const BLOCK_COMPS: [usize; 1] = [0];
+impl Dynamics for DcMotor {
+    const ENV: EnvKind = EnvKind::Dcmotor;
+    const STATE_DIM: usize = 2;
+    const ACTION_DIM: usize = 1;
+    type Config = DcMotorConfig;
 
-macro_rules! impl_model {
-    ($t:ty, $actions:ident) => {
-        impl Model<$t> for DcMotor {
-            fn state_dim(&self) -> usize {
-                2
-            }
+    fn new(config: DcMotorConfig) -> Result<Self, ConfigError> {
+        DcMotor::new(config)
+    }
 
-            fn n_agents(&self) -> usize {
-                1
-            }
+    fn config(&self) -> &DcMotorConfig {
+        &self.config
+    }
 
-            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
-                ActionSet::try_new(&self.$actions, 1).expect("validated actions")
-            }
-
-            fn state_bounds(&self, dim: usize) -> ($t, $t) {
-                let lim = if dim == 0 {
-                    self.config.max_angle
-                } else {
-                    self.config.max_velocity
-                };
-                (-lim as $t, lim as $t)
-            }
-
-            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
-                let y = self.step_f64([f64::from(x[0]), f64::from(x[1])], f64::from(u[0]));
-                next[0] = y[0] as $t;
-                next[1] = y[1] as $t;
-            }
-
-            fn reward(&self, x: &[$t], u: &[$t]) -> $t {
-                self.reward_f64([f64::from(x[0]), f64::from(x[1])], f64::from(u[0])) as $t
-            }
-
-            fn reward_depends_on_action(&self) -> bool {
-                true
-            }
-
-            fn n_blocks(&self) -> usize {
-                1
-            }
-
-            fn block(&self, _b: usize) -> Block<'_> {
-                Block {
-                    state_dims: &BLOCK_DIMS,
-                    action_components: &BLOCK_COMPS,
-                }
-            }
+    /// See the [module docs](self) for where each value comes from.
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        match name {
+            "toolbox-demo" => Ok(Preset {
+                name: name.to_owned(),
+                cores: vec![symequidgrid(PI, 21)?, symequidgrid(16.0 * PI, 21)?],
+                actions: symequidgrid(10.0, 5)?,
+                gamma: 0.98,
+                xi: 0.01,
+            }),
+            "fine" => Ok(Preset {
+                name: name.to_owned(),
+                cores: vec![
+                    colon(-PI, 5.0 * PI / 180.0, PI)?,
+                    colon(-16.0 * PI, PI / 6.0, 16.0 * PI)?,
+                ],
+                actions: vec![-10.0, -5.0, -1.0, -0.1, 0.0, 0.1, 1.0, 5.0, 10.0],
+                gamma: 0.95,
+                xi: 0.01,
+            }),
+            _ => Err(Self::ENV.unknown_preset(name)),
         }
-    };
-}
+    }
 
-impl_model!(f32, actions_f32);
-impl_model!(f64, actions_f64);
+    /// The `"toolbox-demo"` actions: 5 equidistant voltages on `[-10, 10]`.
+    fn default_actions() -> Vec<f64> {
+        symequidgrid(10.0, 5).expect("a valid grid")
+    }
+
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        let lim = if dim == 0 {
+            self.config.max_angle
+        } else {
+            self.config.max_velocity
+        };
+        (-lim, lim)
+    }
+
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_f64([x[0], x[1]], u[0]));
+    }
+
+    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
+        self.reward_f64([x[0], x[1]], u[0])
+    }
+}
 
 #[cfg(test)]
 mod tests {

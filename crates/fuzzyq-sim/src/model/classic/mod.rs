@@ -29,16 +29,21 @@
 pub mod arm;
 pub mod carhill;
 pub mod dcmotor;
+pub mod octave;
 pub mod pendulum;
 
 pub use dcmotor::{DcMotor, DcMotorConfig};
 pub use pendulum::{Pendulum, PendulumConfig};
 
 use fuzzyq_core::Real;
-use fuzzyq_core::solver::{Grid, SolverConfig};
+use fuzzyq_core::solver::{Grid, Precision, SolverConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError};
+use crate::model::{ActionTable, BlockSpec, EnvKind, F64Model};
+
+/// The preset of a classic benchmark when none is named: the toolbox's default fine grid.
+pub const DEFAULT_PRESET: &str = "fine";
 
 /// The most RK4 substeps per sample time a configuration may ask for.
 pub const MAX_RK4_SUBSTEPS: usize = 10_000;
@@ -181,337 +186,213 @@ pub(crate) fn validate_actions(field: &str, actions: &[f64]) -> Result<(), Confi
     Ok(())
 }
 
-/// Checks that `v` is a positive finite number.
-pub(crate) fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
-    if v > 0.0 && v.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a positive number, got {v}"),
-        ))
+/// The dynamics of a classic benchmark, computed in `f64`: what distinguishes the four.
+/// [`Classic`] adds what they share (the discrete actions, presets, the one dynamics block and
+/// the [`Model`](fuzzyq_core::Model) implementation).
+pub trait Dynamics: Clone + std::fmt::Debug + Send + Sync + Sized {
+    /// The environment (its name and presets in the registry).
+    const ENV: EnvKind;
+    /// Length of the state vector.
+    const STATE_DIM: usize;
+    /// Components of an action vector.
+    const ACTION_DIM: usize;
+    /// The physical parameters (`[env.model]` in a config file).
+    type Config: Clone + Default;
+
+    /// Builds the dynamics from validated parameters.
+    fn new(config: Self::Config) -> Result<Self, ConfigError>;
+    /// The parameters.
+    fn config(&self) -> &Self::Config;
+    /// The named preset (an error listing the presets for an unknown name).
+    fn preset(name: &str) -> Result<Preset, ConfigError>;
+    /// The action list of a preset or config (`actions = [...]`) when none is given.
+    fn default_actions() -> Vec<f64>;
+    /// The action vectors of a listed action set (one component each by default; the arm
+    /// combines torque levels per joint). Errors name `field`.
+    fn action_table(&self, field: &str, listed: &[f64]) -> Result<ActionTable, ConfigError> {
+        validate_actions(field, listed)?;
+        Ok(ActionTable::new(listed.to_vec(), 1))
+    }
+    /// The sample time (s).
+    fn sample_time(&self) -> f64;
+    /// The range of state variable `dim`.
+    fn state_bounds(&self, dim: usize) -> (f64, f64);
+    /// The successor of `x` (length [`STATE_DIM`](Self::STATE_DIM)) under `u` (length
+    /// [`ACTION_DIM`](Self::ACTION_DIM)).
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]);
+    /// The reward of `u` at `x` (see [`F64Model::reward`] for `precision`).
+    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64;
+    /// See [`F64Model::reward_depends_on_action`].
+    fn reward_depends_on_action(&self) -> bool {
+        true
+    }
+    /// See [`F64Model::is_goal`].
+    fn is_goal(&self, x: &[f64]) -> bool {
+        let _ = x;
+        false
+    }
+    /// See [`F64Model::is_terminal`].
+    fn is_terminal(&self, x: &[f64]) -> bool {
+        let _ = x;
+        false
+    }
+    /// See [`F64Model::has_terminal_states`].
+    fn has_terminal_states(&self) -> bool {
+        false
     }
 }
 
-/// Checks that `v` is a non-negative finite number.
-pub(crate) fn non_negative(field: &str, v: f64) -> Result<(), ConfigError> {
-    if v >= 0.0 && v.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a non-negative number, got {v}"),
-        ))
-    }
+/// The named preset `name` of benchmark `S`, or an error listing its presets.
+pub fn preset<S: Dynamics>(name: &str) -> Result<Preset, ConfigError> {
+    S::preset(name)
 }
 
-/// Octave's colon range `base : increment : limit`, element for element as Octave 7 computes
-/// it: the number of elements with Octave's tolerant floor (Hagerty's FL5, tolerance
-/// `3 eps`), element `i` as `base + i * increment` and the last element clipped to `limit`
-/// when it overshoots (so `-pi : 5*pi/180 : pi` ends exactly at `pi`).
-///
-/// An empty range (`increment` of the wrong sign) is an empty vector. Non-finite arguments and
-/// ranges of more than 2^24 elements are refused.
-pub fn colon(base: f64, increment: f64, limit: f64) -> Result<Vec<f64>, ConfigError> {
-    if !(base.is_finite() && increment.is_finite() && limit.is_finite()) {
-        return Err(ConfigError::invalid(
-            "range",
-            format!("{base} : {increment} : {limit} has a non-finite bound or increment"),
-        ));
-    }
-    if increment == 0.0 || (limit < base && increment > 0.0) || (limit > base && increment < 0.0) {
-        return Ok(Vec::new());
-    }
-    if (limit <= base && base + increment < limit) || (limit >= base && base + increment > limit) {
-        return Ok(vec![base]);
-    }
-    let n = colon_numel(base, limit, increment);
-    if n > 1 << 24 {
-        return Err(ConfigError::invalid(
-            "range",
-            format!("{base} : {increment} : {limit} has {n} elements (at most 2^24)"),
-        ));
-    }
-    if n <= 1 {
-        return Ok(if n == 1 { vec![base] } else { Vec::new() });
-    }
-    let mut last = base + (n - 1) as f64 * increment;
-    if (increment > 0.0 && last >= limit) || (increment < 0.0 && last <= limit) {
-        last = limit;
-    }
-    if base.round() == base && increment.round() == increment {
-        last = last.round();
-    }
-    let mut out = Vec::with_capacity(n);
-    out.push(base);
-    out.extend((1..n - 1).map(|i| base + i as f64 * increment));
-    out.push(last);
-    Ok(out)
-}
-
-/// Octave's `xnumel_internal`: the element count of a non-empty finite range.
-fn colon_numel(base: f64, limit: f64, inc: f64) -> usize {
-    let ct = 3.0 * f64::EPSILON;
-    let tmp = tolerant_floor((limit - base + inc) / inc, ct);
-    let mut n = if tmp > 0.0 { tmp as i64 } else { 0 };
-    let teq = |u: f64, v: f64| (u - v).abs() < u.abs().max(v.abs()) * ct;
-    if !teq(base + (n - 1) as f64 * inc, limit) {
-        if teq(base + (n - 2) as f64 * inc, limit) {
-            n -= 1;
-        } else if teq(base + n as f64 * inc, limit) {
-            n += 1;
-        }
-    }
-    n.max(0) as usize
-}
-
-/// Hagerty's FL5 tolerant floor, as in Octave's `xtfloor`.
-fn tolerant_floor(x: f64, ct: f64) -> f64 {
-    let q = if x < 0.0 { 1.0 - ct } else { 1.0 };
-    let rmax = q / (2.0 - ct);
-    let mut t1 = 1.0 + x.floor();
-    t1 = (ct / q) * t1.abs();
-    t1 = t1.min(rmax);
-    t1 = t1.max(ct);
-    t1 = (x + t1).floor();
-    if x <= 0.0 || (t1 - x) < rmax {
-        t1
-    } else {
-        t1 - 1.0
-    }
-}
-
-/// The toolbox's `symequidgrid(n, b)`: `n` equidistant points on `[-b, b]`, computed as
-/// Octave's range `-b : 2*b/(n-1) : b` (so the doubles are Octave's: point `i` is
-/// `-b + i * (2b/(n-1))`, which is not exactly symmetric about 0, and the last is `b`).
-pub fn symequidgrid(b: f64, n: usize) -> Result<Vec<f64>, ConfigError> {
-    if !(b > 0.0 && b.is_finite() && (2..=1 << 24).contains(&n)) {
-        return Err(ConfigError::invalid(
-            "symequidgrid",
-            format!("needs a positive finite bound and 2 to 2^24 points, got b = {b}, n = {n}"),
-        ));
-    }
-    let grid = colon(-b, 2.0 * b / (n - 1) as f64, b)?;
-    if grid.len() != n {
-        return Err(ConfigError::invalid(
-            "symequidgrid",
-            format!("Octave's range gives {} points instead of {n}", grid.len()),
-        ));
-    }
-    Ok(grid)
-}
-
-/// Octave's `linspace(x1, x2, n)` (built symmetrically from both ends, as Octave 7 does).
-fn linspace(x1: f64, x2: f64, n: usize) -> Vec<f64> {
-    match n {
-        0 => return Vec::new(),
-        1 => return vec![x2],
-        _ => {}
-    }
-    let mut out = vec![0.0; n];
-    out[0] = x1;
-    out[n - 1] = x2;
-    let delta = (x2 - x1) / (n - 1) as f64;
-    for i in 1..n / 2 {
-        out[i] = x1 + i as f64 * delta;
-        out[n - 1 - i] = x2 - i as f64 * delta;
-    }
-    if !n.is_multiple_of(2) {
-        out[n / 2] = if x1 == -x2 { 0.0 } else { (x1 + x2) / 2.0 };
-    }
-    out
-}
-
-/// The toolbox's `symloggrid(n, b, sp, ep)`: `n` (odd) points on `[-b, b]`, logarithmically
-/// denser near 0: `ls = (logspace(sp, ep, (n+1)/2) - 10^sp) / (10^ep - 10^sp)` and the sorted
-/// union of `-b ls` and `b ls`. Computed with Octave's `linspace` and `10^x` through the
-/// platform's `pow`; the values agree with Octave's to the last bit where the two `pow`s do.
-pub fn symloggrid(n: usize, b: f64, sp: f64, ep: f64) -> Result<Vec<f64>, ConfigError> {
-    if n.is_multiple_of(2) || !(3..=1 << 20).contains(&n) {
-        return Err(ConfigError::invalid(
-            "symloggrid",
-            format!("needs an odd number of points between 3 and 2^20, got {n}"),
-        ));
-    }
-    if !(b > 0.0 && b.is_finite() && sp.is_finite() && ep.is_finite() && sp < ep) {
-        return Err(ConfigError::invalid(
-            "symloggrid",
-            format!("needs b > 0 and finite powers sp < ep, got b = {b}, sp = {sp}, ep = {ep}"),
-        ));
-    }
-    let (lo, hi) = (10f64.powf(sp), 10f64.powf(ep));
-    let ls: Vec<f64> = linspace(sp, ep, n.div_ceil(2))
-        .into_iter()
-        .map(|e| (10f64.powf(e) - lo) / (hi - lo))
-        .collect();
-    let mut grid: Vec<f64> = ls
+/// Every preset of benchmark `S`, in registry order.
+#[must_use]
+pub fn presets<S: Dynamics>() -> Vec<Preset> {
+    S::ENV
+        .spec()
+        .presets
         .iter()
-        .map(|&l| -b * l)
-        .chain(ls.iter().map(|&l| b * l))
-        .collect();
-    grid.sort_by(f64::total_cmp);
-    // sortx: drop an element when the next one is not larger (the duplicate zero).
-    let mut out: Vec<f64> = grid
-        .windows(2)
-        .filter(|w| w[1] > w[0])
-        .map(|w| w[0])
-        .collect();
-    out.push(grid[grid.len() - 1]);
-    for v in &mut out {
-        if *v == 0.0 {
-            *v = 0.0; // +0, whichever zero sorted last
+        .filter_map(|name| preset::<S>(name).ok())
+        .collect()
+}
+
+/// A classic benchmark: its [`Dynamics`] with a discrete action set. One agent; one dynamics
+/// block (the whole state and action), which lets the solver tabulate the transitions once
+/// (the toolbox's precomputed activation matrix) instead of stepping the model every sweep.
+/// Dereferences to the dynamics (`config()`, `step_f64`, ...).
+#[derive(Clone, Debug)]
+pub struct Classic<S> {
+    dynamics: S,
+    actions: ActionTable,
+    blocks: [BlockSpec; 1],
+}
+
+impl<S: Dynamics> Classic<S> {
+    /// The benchmark with the action list `actions` (see [`Dynamics::action_table`]).
+    pub fn new(dynamics: S, actions: &[f64]) -> Result<Self, ConfigError> {
+        let table = dynamics.action_table("actions", actions)?;
+        Ok(Self::from_table(dynamics, table))
+    }
+
+    /// The benchmark with an action table built by [`Dynamics::action_table`].
+    #[must_use]
+    pub fn from_table(dynamics: S, actions: ActionTable) -> Self {
+        Self {
+            blocks: [BlockSpec {
+                state_dims: (0..S::STATE_DIM).collect(),
+                action_components: (0..actions.dim()).collect(),
+            }],
+            dynamics,
+            actions,
         }
     }
-    if out.len() != n || out.windows(2).any(|w| w[0] >= w[1]) {
-        return Err(ConfigError::invalid(
-            "symloggrid",
-            format!("the grid has {} distinct points instead of {n}", out.len()),
-        ));
-    }
-    Ok(out)
-}
 
-/// The toolbox's (column-major) flat index of the core with row-major (fuzzyq) flat index
-/// `index` on a grid with `dims[e]` cores per state variable. `None` if out of range.
-#[must_use]
-pub fn toolbox_core_index(dims: &[usize], index: usize) -> Option<usize> {
-    let n: usize = dims.iter().product();
-    if index >= n {
-        return None;
+    /// The benchmark with parameters `config` and its default actions.
+    pub fn from_config(config: S::Config) -> Result<Self, ConfigError> {
+        Self::new(S::new(config)?, &S::default_actions())
     }
-    let (mut rest, mut out, mut stride) = (index, 0, 1);
-    // Row-major digits come out last variable first; column-major strides grow from the first.
-    let mut digits = vec![0usize; dims.len()];
-    for (d, &len) in digits.iter_mut().zip(dims).rev() {
-        *d = rest % len;
-        rest /= len;
-    }
-    for (&d, &len) in digits.iter().zip(dims) {
-        out += d * stride;
-        stride *= len;
-    }
-    Some(out)
-}
 
-/// The row-major (fuzzyq) flat index of the core with the toolbox's (column-major) flat index
-/// `index`. `None` if out of range.
-#[must_use]
-pub fn core_index_from_toolbox(dims: &[usize], index: usize) -> Option<usize> {
-    let n: usize = dims.iter().product();
-    if index >= n {
-        return None;
+    /// The benchmark for a preset: `config` with the preset's actions (errors name
+    /// `preset.*`).
+    pub fn for_preset(config: S::Config, preset: &Preset) -> Result<Self, ConfigError> {
+        preset.validate()?;
+        if preset.cores.len() != S::STATE_DIM {
+            return Err(ConfigError::invalid(
+                "preset.cores",
+                format!(
+                    "the {} has {} state variables, the preset {}",
+                    S::ENV.name(),
+                    S::STATE_DIM,
+                    preset.cores.len()
+                ),
+            ));
+        }
+        let dynamics = S::new(config)?;
+        let table = dynamics.action_table("preset.actions", &preset.actions)?;
+        Ok(Self::from_table(dynamics, table))
     }
-    let (mut rest, mut out) = (index, 0);
-    let mut digits = vec![0usize; dims.len()];
-    for (d, &len) in digits.iter_mut().zip(dims) {
-        *d = rest % len;
-        rest /= len;
-    }
-    for (&d, &len) in digits.iter().zip(dims) {
-        out = out * len + d;
-    }
-    Some(out)
-}
 
-/// The step sizes of `substeps` fixed steps over `[0, ts]`: the differences of Octave's range
-/// `0 : ts/substeps : ts` (uniform `ts/substeps` if that range has an unexpected length).
-pub(crate) fn rk4_step_sizes(ts: f64, substeps: usize) -> Vec<f64> {
-    let substeps = substeps.max(1);
-    match colon(0.0, ts / substeps as f64, ts) {
-        Ok(t) if t.len() == substeps + 1 => t.windows(2).map(|w| w[1] - w[0]).collect(),
-        _ => vec![ts / substeps as f64; substeps],
+    /// The same benchmark with the action list `actions`.
+    pub fn with_actions(self, actions: &[f64]) -> Result<Self, ConfigError> {
+        Self::new(self.dynamics, actions)
+    }
+
+    /// The dynamics.
+    #[must_use]
+    pub fn dynamics(&self) -> &S {
+        &self.dynamics
+    }
+
+    /// The discrete action vectors, action-major.
+    #[must_use]
+    pub fn actions(&self) -> &[f64] {
+        self.actions.values()
     }
 }
 
-/// Classical RK4 over the step sizes `h` for a 2-state ODE `y' = f(y)` (the action is held
-/// inside `f`), written like MATLAB's `ode4`:
-/// `y + (h/6) (k1 + 2 k2 + 2 k3 + k4)` with `k2 = f(y + 0.5 h k1)`, ...
-pub(crate) fn rk4(f: impl Fn([f64; 2]) -> [f64; 2], y0: [f64; 2], h: &[f64]) -> [f64; 2] {
-    let mut y = y0;
-    for &hi in h {
-        let add = |c: f64, k: [f64; 2]| [y[0] + c * k[0], y[1] + c * k[1]];
-        let k1 = f(y);
-        let k2 = f(add(0.5 * hi, k1));
-        let k3 = f(add(0.5 * hi, k2));
-        let k4 = f(add(hi, k3));
-        let c = hi / 6.0;
-        for j in 0..2 {
-            y[j] += c * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+impl<S> std::ops::Deref for Classic<S> {
+    type Target = S;
+    fn deref(&self) -> &S {
+        &self.dynamics
+    }
+}
+
+impl<S: Dynamics> F64Model for Classic<S> {
+    fn state_dim(&self) -> usize {
+        S::STATE_DIM
+    }
+    fn n_agents(&self) -> usize {
+        1
+    }
+    fn actions(&self) -> &ActionTable {
+        &self.actions
+    }
+    fn sample_time(&self) -> f64 {
+        self.dynamics.sample_time()
+    }
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        self.dynamics.state_bounds(dim)
+    }
+    /// The successor (NaN for inputs of the wrong length).
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        if x.len() == S::STATE_DIM && u.len() == S::ACTION_DIM && next.len() == S::STATE_DIM {
+            self.dynamics.step(x, u, next);
+        } else {
+            next.fill(f64::NAN);
         }
     }
-    y
-}
-
-/// MATLAB/Octave's `sat(x, lo, hi)`: `x` limited to `[lo, hi]` (NaN stays NaN).
-#[inline]
-pub(crate) fn sat(x: f64, lo: f64, hi: f64) -> f64 {
-    if x < lo {
-        lo
-    } else if x > hi {
-        hi
-    } else {
-        x
+    /// The reward (NaN for inputs of the wrong length).
+    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64 {
+        if x.len() == S::STATE_DIM && u.len() == S::ACTION_DIM {
+            self.dynamics.reward(x, u, precision)
+        } else {
+            f64::NAN
+        }
+    }
+    fn reward_depends_on_action(&self) -> bool {
+        self.dynamics.reward_depends_on_action()
+    }
+    fn is_goal(&self, x: &[f64]) -> bool {
+        x.len() == S::STATE_DIM && self.dynamics.is_goal(x)
+    }
+    fn is_terminal(&self, x: &[f64]) -> bool {
+        x.len() != S::STATE_DIM || self.dynamics.is_terminal(x)
+    }
+    fn has_terminal_states(&self) -> bool {
+        self.dynamics.has_terminal_states()
+    }
+    fn blocks(&self) -> &[BlockSpec] {
+        &self.blocks
     }
 }
+
+crate::impl_model!(Classic<S> where S: Dynamics);
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn colon_matches_octave_ranges() {
-        assert_eq!(
-            colon(-10.0, 5.0, 10.0).unwrap(),
-            [-10.0, -5.0, 0.0, 5.0, 10.0]
-        );
-        assert_eq!(colon(-3.0, 1.5, 3.0).unwrap(), [-3.0, -1.5, 0.0, 1.5, 3.0]);
-        // Octave's classic example: 1.8:0.05:1.9 has 3 elements.
-        assert_eq!(colon(1.8, 0.05, 1.9).unwrap().len(), 3);
-        assert!(colon(1.0, 1.0, 0.0).unwrap().is_empty());
-        assert_eq!(colon(0.0, 2.0, 1.0).unwrap(), [0.0]);
-        let pi = std::f64::consts::PI;
-        let fine = colon(-pi, 5.0 * pi / 180.0, pi).unwrap();
-        assert_eq!(fine.len(), 73);
-        assert_eq!((fine[0], fine[72]), (-pi, pi));
-        assert_eq!(colon(-16.0 * pi, pi / 6.0, 16.0 * pi).unwrap().len(), 193);
-        assert_eq!(colon(-15.0 * pi, pi / 3.0, 15.0 * pi).unwrap().len(), 91);
-        assert!(colon(0.0, f64::NAN, 1.0).is_err());
-    }
-
-    #[test]
-    fn symequidgrid_is_octaves_range() {
-        let pi = std::f64::consts::PI;
-        let g = symequidgrid(15.0 * pi, 21).unwrap();
-        // Not symmetric: element 11 is -b + 11 inc, not -(element 9).
-        assert_eq!(g[9], -4.712_388_980_384_688);
-        assert_eq!(g[11], 4.712_388_980_384_695);
-        assert_eq!(g[10], 0.0);
-        assert!(symequidgrid(1.0, 1).is_err());
-        assert!(symequidgrid(-1.0, 3).is_err());
-    }
-
-    #[test]
-    fn symloggrid_gives_the_pendulum_actions() {
-        let u = symloggrid(15, 3.0, -1.0, 1.0).unwrap();
-        assert_eq!(u.len(), 15);
-        assert_eq!((u[0], u[7], u[14]), (-3.0, 0.0, 3.0));
-        for i in 0..15 {
-            assert_eq!(u[i], -u[14 - i]);
-        }
-        assert!(symloggrid(4, 3.0, -1.0, 1.0).is_err());
-    }
-
-    #[test]
-    fn core_index_conversions_invert() {
-        let dims = [3, 4, 2];
-        for i in 0..24 {
-            let t = toolbox_core_index(&dims, i).unwrap();
-            assert_eq!(core_index_from_toolbox(&dims, t), Some(i));
-        }
-        // Row-major (i0, i1, i2) = (1, 2, 1): 1*8 + 2*2 + 1 = 13; column-major 1 + 3*2 + 12*1.
-        assert_eq!(toolbox_core_index(&dims, 13), Some(19));
-        assert_eq!(toolbox_core_index(&dims, 24), None);
-    }
 
     #[test]
     fn integrator_serde_is_lowercase() {

@@ -26,14 +26,15 @@
 
 use std::f64::consts::PI;
 
-use fuzzyq_core::{ActionSet, Block, Model};
+use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    Integrator, Preset, colon, non_negative, positive, rk4, rk4_step_sizes, sat, symequidgrid,
-    symloggrid, validate_actions,
+use super::octave::{
+    colon, rk4, rk4_step_sizes, sat, symequidgrid, symloggrid, wrap_angle_octave,
 };
-use crate::error::ConfigError;
+use super::{Classic, Dynamics, Integrator, Preset};
+use crate::error::{ConfigError, non_negative, positive};
+use crate::model::EnvKind;
 
 /// The names of the pendulum's presets.
 pub const PRESETS: [&str; 2] = ["toolbox-demo", "fine"];
@@ -153,83 +154,20 @@ impl PendulumConfig {
     }
 }
 
-/// The named preset `name` (see the [module docs](self) for where each value comes from).
-pub fn preset(name: &str) -> Result<Preset, ConfigError> {
-    match name {
-        "toolbox-demo" => Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![symequidgrid(PI, 41)?, symequidgrid(15.0 * PI, 21)?],
-            actions: symequidgrid(3.0, 5)?,
-            gamma: 0.98,
-            xi: 0.01,
-        }),
-        "fine" => Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![
-                colon(-PI, 5.0 * PI / 180.0, PI)?,
-                colon(-15.0 * PI, PI / 3.0, 15.0 * PI)?,
-            ],
-            actions: symloggrid(15, 3.0, -1.0, 1.0)?,
-            gamma: 0.98,
-            xi: 0.01,
-        }),
-        _ => Err(ConfigError::invalid(
-            "preset",
-            format!(
-                "unknown pendulum preset \"{name}\" (known: {})",
-                PRESETS.join(", ")
-            ),
-        )),
-    }
-}
-
-/// MATLAB's `mod(alpha + pi, 2*pi) - pi` with Octave's `mod` (`x - floor(x/y) y`, 0 when
-/// `x/y` is within a relative `eps` of an integer, the sign of `y`): the angle wrapped into
-/// `[-pi, pi)` (rounding can give `pi` itself for angles a hair below `-pi`).
-#[must_use]
-pub fn wrap_angle(alpha: f64) -> f64 {
-    octave_mod(alpha + PI, 2.0 * PI) - PI
-}
-
-/// Octave's `mod(x, y)` for doubles (`lo-mappers.h`).
-fn octave_mod(x: f64, y: f64) -> f64 {
-    let mut r = if y == 0.0 {
-        x
-    } else {
-        let q = x / y;
-        let nq = nint(q);
-        if nint(y) != y && ((q - nq) / nq).abs() < f64::EPSILON {
-            0.0
-        } else {
-            x - y * q.floor()
-        }
-    };
-    if x != y && y != 0.0 {
-        r = r.copysign(y);
-    }
-    r
-}
-
-/// Octave's `x_nint`: `floor(x + 0.5)` for finite `x`.
-fn nint(x: f64) -> f64 {
-    if x.is_finite() { (x + 0.5).floor() } else { x }
-}
-
-/// The swing-up model (implements [`Model`] for `f32` and `f64`).
+/// The swing-up's dynamics (a [`Classic`] benchmark: [`PendulumModel`] is the model).
 #[derive(Clone, Debug)]
 pub struct Pendulum {
     config: PendulumConfig,
     coef: PendulumCoefficients,
     /// RK4 step sizes.
     steps: Vec<f64>,
-    actions_f64: Vec<f64>,
-    actions_f32: Vec<f32>,
 }
 
+/// The swing-up benchmark: [`Pendulum`] dynamics with a discrete voltage set.
+pub type PendulumModel = Classic<Pendulum>;
+
 impl Pendulum {
-    /// Builds the model with the `"toolbox-demo"` actions (5 equidistant voltages on
-    /// `[-3, 3]`); see [`with_actions`](Self::with_actions) and
-    /// [`for_preset`](Self::for_preset).
+    /// Builds the dynamics from validated parameters.
     pub fn new(config: PendulumConfig) -> Result<Self, ConfigError> {
         config.validate()?;
         let Integrator::Rk4 { substeps } = config.integrator else {
@@ -238,39 +176,11 @@ impl Pendulum {
                 "the pendulum needs rk4",
             ));
         };
-        let steps = rk4_step_sizes(config.sample_time, substeps);
-        let actions = symequidgrid(3.0, 5)?;
         Ok(Self {
             coef: config.coefficients(),
-            steps,
-            actions_f32: actions.iter().map(|&u| u as f32).collect(),
-            actions_f64: actions,
+            steps: rk4_step_sizes(config.sample_time, substeps),
             config,
         })
-    }
-
-    /// The same model with the discrete action set `actions` (voltages, 1 to 4096 finite
-    /// values; values beyond the voltage bound act as the bound).
-    pub fn with_actions(mut self, actions: &[f64]) -> Result<Self, ConfigError> {
-        validate_actions("actions", actions)?;
-        self.actions_f64 = actions.to_vec();
-        self.actions_f32 = actions.iter().map(|&u| u as f32).collect();
-        Ok(self)
-    }
-
-    /// The model for a preset: `config` with the preset's actions.
-    pub fn for_preset(config: PendulumConfig, preset: &Preset) -> Result<Self, ConfigError> {
-        preset.validate()?;
-        if preset.cores.len() != 2 {
-            return Err(ConfigError::invalid(
-                "preset.cores",
-                format!(
-                    "the pendulum has 2 state variables, the preset {}",
-                    preset.cores.len()
-                ),
-            ));
-        }
-        Self::new(config)?.with_actions(&preset.actions)
     }
 
     /// The parameters.
@@ -283,12 +193,6 @@ impl Pendulum {
     #[must_use]
     pub fn coefficients(&self) -> PendulumCoefficients {
         self.coef
-    }
-
-    /// The discrete actions.
-    #[must_use]
-    pub fn actions(&self) -> &[f64] {
-        &self.actions_f64
     }
 
     /// The state derivative at `x` under the (already limited) voltage `u`.
@@ -308,7 +212,7 @@ impl Pendulum {
         let u = self.limit(u);
         let y = rk4(|y| self.derivative(y, u), x, &self.steps);
         let v = self.config.max_velocity;
-        [wrap_angle(y[0]), sat(y[1], -v, v)]
+        [wrap_angle_octave(y[0]), sat(y[1], -v, v)]
     }
 
     /// The reward at the current state `x` under voltage `u` (limited): `-x' Q x - R u^2`.
@@ -324,64 +228,71 @@ impl Pendulum {
     }
 }
 
-/// The one dynamics block: both state variables and the voltage (see the DC motor's).
-const BLOCK_DIMS: [usize; 2] = [0, 1];
-const BLOCK_COMPS: [usize; 1] = [0];
+impl Dynamics for Pendulum {
+    const ENV: EnvKind = EnvKind::Pendulum;
+    const STATE_DIM: usize = 2;
+    const ACTION_DIM: usize = 1;
+    type Config = PendulumConfig;
 
-macro_rules! impl_model {
-    ($t:ty, $actions:ident) => {
-        impl Model<$t> for Pendulum {
-            fn state_dim(&self) -> usize {
-                2
-            }
+    fn new(config: PendulumConfig) -> Result<Self, ConfigError> {
+        Pendulum::new(config)
+    }
 
-            fn n_agents(&self) -> usize {
-                1
-            }
+    fn config(&self) -> &PendulumConfig {
+        &self.config
+    }
 
-            fn action_set(&self, _agent: usize) -> ActionSet<'_, $t> {
-                ActionSet::try_new(&self.$actions, 1).expect("validated actions")
-            }
-
-            fn state_bounds(&self, dim: usize) -> ($t, $t) {
-                let lim = if dim == 0 {
-                    PI
-                } else {
-                    self.config.max_velocity
-                };
-                (-lim as $t, lim as $t)
-            }
-
-            fn step(&self, x: &[$t], u: &[$t], next: &mut [$t]) {
-                let y = self.step_f64([f64::from(x[0]), f64::from(x[1])], f64::from(u[0]));
-                next[0] = y[0] as $t;
-                next[1] = y[1] as $t;
-            }
-
-            fn reward(&self, x: &[$t], u: &[$t]) -> $t {
-                self.reward_f64([f64::from(x[0]), f64::from(x[1])], f64::from(u[0])) as $t
-            }
-
-            fn reward_depends_on_action(&self) -> bool {
-                true
-            }
-
-            fn n_blocks(&self) -> usize {
-                1
-            }
-
-            fn block(&self, _b: usize) -> Block<'_> {
-                Block {
-                    state_dims: &BLOCK_DIMS,
-                    action_components: &BLOCK_COMPS,
-                }
-            }
+    /// See the [module docs](self) for where each value comes from.
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        match name {
+            "toolbox-demo" => Ok(Preset {
+                name: name.to_owned(),
+                cores: vec![symequidgrid(PI, 41)?, symequidgrid(15.0 * PI, 21)?],
+                actions: symequidgrid(3.0, 5)?,
+                gamma: 0.98,
+                xi: 0.01,
+            }),
+            "fine" => Ok(Preset {
+                name: name.to_owned(),
+                cores: vec![
+                    colon(-PI, 5.0 * PI / 180.0, PI)?,
+                    colon(-15.0 * PI, PI / 3.0, 15.0 * PI)?,
+                ],
+                actions: symloggrid(15, 3.0, -1.0, 1.0)?,
+                gamma: 0.98,
+                xi: 0.01,
+            }),
+            _ => Err(Self::ENV.unknown_preset(name)),
         }
-    };
-}
+    }
 
-impl_model!(f32, actions_f32);
-impl_model!(f64, actions_f64);
+    /// The `"toolbox-demo"` actions: 5 equidistant voltages on `[-3, 3]` (values beyond the
+    /// voltage bound act as the bound).
+    fn default_actions() -> Vec<f64> {
+        symequidgrid(3.0, 5).expect("a valid grid")
+    }
+
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        let lim = if dim == 0 {
+            PI
+        } else {
+            self.config.max_velocity
+        };
+        (-lim, lim)
+    }
+
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_f64([x[0], x[1]], u[0]));
+    }
+
+    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
+        self.reward_f64([x[0], x[1]], u[0])
+    }
+}
 
 #[cfg(test)]
 mod tests {
