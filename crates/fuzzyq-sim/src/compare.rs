@@ -366,7 +366,10 @@ fn blank(learner: Learner) -> LearnerReport {
     }
 }
 
-fn train_one(config: &CompareConfig, learner: Learner) -> Result<(Policy, LearnerReport), SimError> {
+fn train_one(
+    config: &CompareConfig,
+    learner: Learner,
+) -> Result<(Policy, LearnerReport), SimError> {
     let mut report = blank(learner);
     match learner {
         Learner::Fqi | Learner::Crisp => {

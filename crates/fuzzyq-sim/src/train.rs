@@ -249,8 +249,11 @@ pub fn learn_from_samples(
                 }
                 _ => {
                     let g = &config.grid;
-                    let features =
-                        pointmass_task::feature_space(&model, &g.position_cores, &g.velocity_cores)?;
+                    let features = pointmass_task::feature_space(
+                        &model,
+                        &g.position_cores,
+                        &g.velocity_cores,
+                    )?;
                     let o = pointmass_task::train_fql(
                         &model,
                         &features,

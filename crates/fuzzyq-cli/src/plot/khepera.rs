@@ -4,11 +4,11 @@
 use std::path::Path;
 
 use anyhow::bail;
+use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::model::arena::Arena;
 use fuzzyq_sim::model::khepera::ACTION_NAMES;
-use fuzzyq_sim::run::policy::PolicyKind;
-use fuzzyq_sim::run::robots::KheperaRun;
-use fuzzyq_sim::run::rollout::Trajectory;
+use fuzzyq_sim::run::metrics::KheperaRun;
+use fuzzyq_sim::run::metrics::Trajectory;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};

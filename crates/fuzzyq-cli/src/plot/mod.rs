@@ -108,7 +108,7 @@ fn write_figure(
     register_font();
     // Render next to the destination (the bitmap encoder picks the format from the
     // extension), then rename over it.
-    let tmp = fuzzyq_sim::io::policy_file::temp_file_beside(path, &format!(".{ext}"))
+    let tmp = fuzzyq_sim::io::temp_file_beside(path, &format!(".{ext}"))
         .with_context(|| format!("cannot write plot {}", path.display()))?;
     {
         if ext == "svg" {

@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use anyhow::anyhow;
-use fuzzyq_sim::run::policy::PolicyKind;
-use fuzzyq_sim::run::rollout::Trajectory;
+use fuzzyq_core::q::PolicyKind;
+use fuzzyq_sim::run::metrics::Trajectory;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use anyhow::bail;
-use fuzzyq_sim::run::rollout::Trajectory;
+use fuzzyq_sim::run::metrics::Trajectory;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 

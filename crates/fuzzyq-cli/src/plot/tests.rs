@@ -2,11 +2,11 @@
 
 use std::path::Path;
 
+use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::learn::fql::EpisodeRecord;
 use fuzzyq_sim::model::arena::{Arena, Obstacle};
-use fuzzyq_sim::run::policy::PolicyKind;
-use fuzzyq_sim::run::robots::KheperaRun;
-use fuzzyq_sim::run::rollout::Trajectory;
+use fuzzyq_sim::run::metrics::KheperaRun;
+use fuzzyq_sim::run::metrics::Trajectory;
 
 use super::{khepera_figure, learning_curve_figure, success_figure};
 
@@ -24,7 +24,7 @@ fn khepera_run(steps: usize) -> KheperaRun {
                     let r = (x0.hypot(y0)) * (1.0 - 0.97 * s);
                     let a = y0.atan2(x0) + (1.0 + i as f64) * 2.5 * s;
                     let (x, y) = (r * a.cos(), r * a.sin());
-                    let heading = fuzzyq_sim::model::khepera::wrap_angle(a + 2.0 + 3.0 * s);
+                    let heading = fuzzyq_sim::model::khepera::wrap_heading(a + 2.0 + 3.0 * s);
                     [x, y, heading]
                 })
                 .collect()

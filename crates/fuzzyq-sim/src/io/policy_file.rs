@@ -232,7 +232,6 @@ impl PolicyArtifact {
             crate::io::config::EnvConfig::Arm(c) => c.actions.len().pow(2),
         }
     }
-
 }
 
 /// A point-mass policy learned from samples (fuzzy Q-learning or VQQL) with what produced it.
@@ -536,7 +535,10 @@ fn malformed(path: &Path, reason: String) -> PolicyFileError {
     }
 }
 
-fn from_toml<T: serde::de::DeserializeOwned>(text: &str, path: &Path) -> Result<T, PolicyFileError> {
+fn from_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    path: &Path,
+) -> Result<T, PolicyFileError> {
     toml::from_str(text).map_err(|e| malformed(path, e.message().trim_end().to_string()))
 }
 

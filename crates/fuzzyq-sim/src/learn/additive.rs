@@ -377,7 +377,6 @@ impl AdditiveQ {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -500,6 +499,4 @@ mod tests {
         let bad_shape = "features = [[[0.0, 1.0]]]\nactions = [3]\nphi = [[0.0]]";
         assert!(toml::from_str::<AdditiveQ>(bad_shape).is_err());
     }
-
-
 }

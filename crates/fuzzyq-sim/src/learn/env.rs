@@ -38,4 +38,3 @@ pub struct Transition {
     /// The episode ended in an absorbing state: no bootstrap from the next state.
     pub terminal: bool,
 }
-

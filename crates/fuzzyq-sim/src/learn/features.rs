@@ -295,4 +295,3 @@ impl Lookup for Codebook {
         ActiveCores::single(self.nearest_unchecked(obs).0)
     }
 }
-

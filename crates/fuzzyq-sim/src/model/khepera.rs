@@ -39,8 +39,8 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, positive, require};
-use crate::model::{ActionTable, BlockSpec, F64Model};
 use crate::model::arena::Arena;
+use crate::model::{ActionTable, BlockSpec, F64Model};
 
 /// Optional sensor and actuator noise (the paper's future work: stochastic dynamics).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]

@@ -15,8 +15,8 @@ use crate::error::{ConfigError, SimError};
 use crate::model::khepera::random_starts;
 use crate::model::{EnvModel, F64Model};
 use crate::run::metrics::{
-    KheperaMetrics, KheperaRun, MonteCarlo, RolloutMetrics, RunSummary, SuccessReport,
-    Trajectory, measure_khepera, measure_point_masses,
+    KheperaMetrics, KheperaRun, MonteCarlo, RolloutMetrics, RunSummary, SuccessReport, Trajectory,
+    measure_khepera, measure_point_masses,
 };
 use crate::run::plant::{KheperaPlant, ModelPlant, RapierPointMasses};
 use crate::run::policy::Policy;
@@ -227,7 +227,13 @@ pub fn monte_carlo(
     for x0 in starts {
         let mut plant = ModelPlant::new(model);
         let r = rollout(&mut *controller, &mut plant, x0, steps)?;
-        runs.push(RunSummary::of(&r.trajectory, x0, r.terminal, gamma, r.value_x0));
+        runs.push(RunSummary::of(
+            &r.trajectory,
+            x0,
+            r.terminal,
+            gamma,
+            r.value_x0,
+        ));
     }
     Ok(MonteCarlo::from_runs(runs, kind, steps, gamma))
 }

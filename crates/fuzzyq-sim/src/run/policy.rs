@@ -250,7 +250,11 @@ macro_rules! engine {
             }
             fn value(&self, x: &[f64]) -> Result<f64, EvalError> {
                 let p = self.borrow_owner();
-                Ok(p.grid.view().active(&to_t::<$t>(x))?.interpolate(&p.v).to_f64())
+                Ok(p.grid
+                    .view()
+                    .active(&to_t::<$t>(x))?
+                    .interpolate(&p.v)
+                    .to_f64())
             }
             fn joint_vector(&self, u: usize, out: &mut [f64]) -> Result<(), EvalError> {
                 joint_vector(self.borrow_owner(), u, out)
@@ -482,7 +486,9 @@ impl FqiController<'_> {
 
 impl Controller for FqiController<'_> {
     fn act(&mut self, obs: &Observation<'_>, u: &mut [f64]) -> Result<(), SimError> {
-        self.policy.act(self.kind, obs.state, &mut self.q, u).map(|_| ())
+        self.policy
+            .act(self.kind, obs.state, &mut self.q, u)
+            .map(|_| ())
     }
 
     fn value_at_start(&self, start: &[f64], _first: &Observation<'_>) -> Result<f64, SimError> {

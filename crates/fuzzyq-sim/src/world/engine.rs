@@ -1,8 +1,8 @@
 //! The rapier world both plants share: the arena's colliders, one disc per body, imposed
 //! motion per substep and the touch state of every disc (see the [module docs](super)).
 
-use rapier2d::math::{Rotation, Vector};
 use fuzzyq_core::EvalError;
+use rapier2d::math::{Rotation, Vector};
 use rapier2d::prelude::{
     ColliderBuilder, ColliderHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
 };
@@ -39,7 +39,6 @@ pub(super) const VEL_TOL: f64 = 1e-5;
 
 /// A displacement error below this (m) is `f32` rounding.
 pub(super) const POS_TOL: f64 = 2e-5;
-
 
 /// The motion imposed on one disc over a substep.
 #[derive(Clone, Copy, Debug, Default)]
@@ -319,4 +318,3 @@ pub(super) fn check_slice(what: &'static str, expected: usize, v: &[f64]) -> Res
     }
     Ok(())
 }
-

@@ -80,10 +80,10 @@ use crate::error::{ConfigError, SimError};
 use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
+use crate::model::khepera::random_starts;
 use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS, goal_polar};
 #[cfg(doc)]
 use crate::model::khepera::{angle_level, distance_level, sonar_level};
-use crate::model::khepera::random_starts;
 use crate::world::KheperaWorld;
 #[cfg(doc)]
 use crate::world::StepContacts;

@@ -339,7 +339,8 @@ impl Dynamics for Arm {
         let (angles, velocities, xi): (&[f64], &[f64], f64) = match name {
             "fine" => (
                 &[
-                    -180.0, -130.0, -80.0, -30.0, -15.0, -5.0, 0.0, 5.0, 15.0, 30.0, 80.0, 130.0, 180.0,
+                    -180.0, -130.0, -80.0, -30.0, -15.0, -5.0, 0.0, 5.0, 15.0, 30.0, 80.0, 130.0,
+                    180.0,
                 ],
                 &[-360.0, -180.0, -30.0, 0.0, 30.0, 180.0, 360.0],
                 0.01,
@@ -360,7 +361,6 @@ impl Dynamics for Arm {
             xi,
         })
     }
-
 
     /// The classic levels `[-1, 0, 1]` of each joint's maximum torque.
     fn default_actions() -> Vec<f64> {

@@ -29,9 +29,7 @@ use std::f64::consts::PI;
 use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::octave::{
-    colon, rk4, rk4_step_sizes, sat, symequidgrid, symloggrid, wrap_angle_octave,
-};
+use super::octave::{colon, rk4, rk4_step_sizes, sat, symequidgrid, symloggrid, wrap_angle_octave};
 use super::{Classic, Dynamics, Integrator, Preset};
 use crate::error::{ConfigError, non_negative, positive};
 use crate::model::EnvKind;

@@ -5,17 +5,20 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
+use fuzzyq_core::NamedOption;
 use fuzzyq_sim::compare::{self, CompareConfig, Comparison, Event, Learner};
+use fuzzyq_sim::model::EnvKind;
+use fuzzyq_sim::model::pointmass::Starts;
 
-use crate::rollout::parse_list;
-use crate::train::load_config;
-use crate::{Env, check_writable, plot, write_file, write_json};
+use crate::cmd::train::load_config;
+use crate::output::{self, check_writable, parse_list, print_stdout, write_file, write_json};
+use crate::plot;
 
 #[derive(Args, Debug)]
 pub(crate) struct CompareArgs {
     /// The environment (the comparison runs on the point-mass task).
-    #[arg(long, value_enum, default_value_t = Env::Pointmass)]
-    env: Env,
+    #[arg(long, value_parser = output::env(), default_value = "pointmass")]
+    env: EnvKind,
     /// A TOML configuration (see `fuzzyq config`): the task, the grid of the grid-based
     /// learners and the solver settings (gamma is every learner's discount).
     #[arg(long, value_name = "FILE.toml")]
@@ -36,10 +39,9 @@ pub(crate) struct CompareArgs {
     /// Random starts put each agent uniformly within this distance of the goal per axis (m).
     #[arg(long, value_name = "M", default_value_t = 5.0)]
     start_position: f64,
-    /// The learners, comma-separated, in table order: fqi, crisp, fql, fql-literal, vqql
-    /// [default: all].
-    #[arg(long, value_name = "L,...", value_delimiter = ',')]
-    learners: Option<Vec<String>>,
+    /// The learners, comma-separated, in table order [default: all].
+    #[arg(long, value_name = "L,...", value_delimiter = ',', value_parser = output::named::<Learner>())]
+    learners: Option<Vec<Learner>>,
     /// Episodes of the learners from samples (fql, fql-literal, vqql) [default: 3000].
     #[arg(long, value_name = "N")]
     episodes: Option<usize>,
@@ -61,7 +63,7 @@ pub(crate) struct CompareArgs {
 }
 
 fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
-    if args.env != Env::Pointmass {
+    if args.env != EnvKind::Pointmass {
         anyhow::bail!(
             "--env {}: the comparison runs on the point-mass task only",
             args.env.name()
@@ -77,18 +79,14 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
     if let Some(x0) = &args.x0 {
         c.x0 = parse_list(x0, "--x0")?;
     }
-    if let Some(names) = &args.learners {
-        c.learners = names
-            .iter()
-            .map(|n| Learner::parse(n.trim()))
-            .collect::<Result<_, _>>()
-            .context("--learners")?;
+    if let Some(learners) = &args.learners {
+        c.learners.clone_from(learners);
     }
     if let Some(e) = args.episodes {
         c.fql.episodes = e;
     }
     if let Some(m) = args.learn_position {
-        c.fql_starts = fuzzyq_sim::learn::tasks::pointmass::Starts::Uniform {
+        c.fql_starts = Starts::Uniform {
             position: m,
             velocity: 0.0,
         };
@@ -152,7 +150,7 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
     })?;
     write(&args.out, &comparison)?;
     let table = comparison.to_markdown();
-    crate::print_stdout(&table)?;
+    print_stdout(&table)?;
     if !quiet {
         eprintln!(
             "compared {} learners in {:.1} s; wrote {}",

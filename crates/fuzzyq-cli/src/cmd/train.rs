@@ -1,0 +1,542 @@
+//! `fuzzyq train`.
+
+use std::io::IsTerminal;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::Args;
+use fuzzyq_core::additive::Update;
+use fuzzyq_core::solver::{
+    BackupPath, IterationOperator, Kernel, Precision, Progress, SolveError, SweepMode,
+};
+use fuzzyq_sim::io::config::EnvConfig;
+use fuzzyq_sim::io::policy_file::PolicyFile;
+use fuzzyq_sim::learn::fql::EpisodeRecord;
+use fuzzyq_sim::model::EnvKind;
+use fuzzyq_sim::train::{self, Learner, SampleLearning};
+use fuzzyq_sim::{SimError, TrainConfig};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+
+use crate::Failure;
+use crate::output::{self, check_outputs, check_writable, refuse, write_json};
+use crate::plot;
+
+#[derive(Args, Debug)]
+pub(crate) struct TrainArgs {
+    /// The environment.
+    #[arg(long, value_parser = output::env(), default_value = "pointmass")]
+    env: EnvKind,
+    /// A TOML configuration (see `fuzzyq config`); flags below override its values.
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
+    /// A classic benchmark's named grid, actions, gamma and xi (`toolbox-demo`: the toolbox
+    /// demo's coarse grid; `fine`: the toolbox's default fine grid) [default: fine].
+    #[arg(long, value_name = "NAME")]
+    preset: Option<String>,
+    /// Discount factor in [0, 1).
+    #[arg(long, value_name = "G")]
+    gamma: Option<f64>,
+    /// Stop when the sweep's change ||theta_{k+1} - theta_k||_inf is at most X.
+    #[arg(long, value_name = "X")]
+    xi: Option<f64>,
+    /// Sweep limit.
+    #[arg(long, value_name = "K")]
+    max_sweeps: Option<usize>,
+    /// The iteration.
+    #[arg(long, value_parser = output::named::<IterationOperator>())]
+    operator: Option<IterationOperator>,
+    /// Asynchronous (Gauss-Seidel) sweeps instead of synchronous ones.
+    #[arg(long = "async")]
+    asynchronous: bool,
+    /// Goal states collect their reward and have zero future value.
+    #[arg(long)]
+    absorbing_goal: bool,
+    /// Extrapolate synchronous sweeps with MacQueen's bounds (fewer sweeps, same stopping
+    /// rule and error bound).
+    #[arg(long, overrides_with = "no_extrapolate")]
+    extrapolate: bool,
+    /// Plain sweeps from theta_0 = 0, as in the paper.
+    #[arg(long)]
+    no_extrapolate: bool,
+    /// Backup implementation.
+    #[arg(long, value_parser = output::named::<BackupPath>())]
+    backup: Option<BackupPath>,
+    /// Solver precision.
+    #[arg(long, value_parser = output::named::<Precision>())]
+    precision: Option<Precision>,
+    /// Kernel instance of the block backup (default: the fastest this CPU runs; all give
+    /// identical results).
+    #[arg(long, value_parser = output::named::<Kernel>())]
+    kernel: Option<Kernel>,
+    /// Worker threads (default: one per core; results do not depend on it).
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
+    /// The arena of the khepera environment (TOML with walls and obstacles); replaces the
+    /// config's `[env.arena]`.
+    #[arg(long, value_name = "FILE.toml")]
+    arena: Option<PathBuf>,
+    /// The learner: joint fuzzy Q-iteration on the model, or a learner from samples (fql:
+    /// on the point masses' own states or the robots' sonars; vqql: point masses).
+    #[arg(long, value_parser = output::named::<Learner>(), default_value = "fqi")]
+    learner: Learner,
+    /// fql, vqql: number of episodes [default: 3000 for the point masses, 2000 for the
+    /// robots].
+    #[arg(long, value_name = "N")]
+    episodes: Option<usize>,
+    /// fql, vqql: the update as printed in the paper (eqs 24-26) instead of the corrected one.
+    #[arg(long)]
+    literal: bool,
+    /// vqql: cells per agent [default: the own-state cores of the grid].
+    #[arg(long, value_name = "K")]
+    cells: Option<usize>,
+    /// fql, vqql: seed of exploration and starts.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// fql, vqql: write the learning curve (one row per episode) as CSV.
+    #[arg(long, value_name = "FILE.csv")]
+    curve: Option<PathBuf>,
+    /// fql, vqql: draw the learning curve (PNG or SVG).
+    #[arg(long, value_name = "FILE.png|FILE.svg")]
+    plot: Option<PathBuf>,
+    /// Where to write the policy file.
+    #[arg(long, value_name = "POLICY")]
+    out: PathBuf,
+    /// Also write a JSON summary of the run.
+    #[arg(long, value_name = "SUMMARY.json")]
+    json: Option<PathBuf>,
+    /// No progress output.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+/// The `--json` summary of fuzzy Q-iteration.
+#[derive(Serialize)]
+struct Summary<'a> {
+    env: &'a str,
+    policy: String,
+    sweeps: usize,
+    converged: bool,
+    delta_inf: f64,
+    xi: f64,
+    gamma: f64,
+    error_bound: f64,
+    sweep_bound: usize,
+    seconds: f64,
+    seconds_per_sweep: f64,
+    cores: usize,
+    joint_actions: usize,
+    q_values: f64,
+    backup: &'a str,
+    kernel: &'a str,
+    multiply_adds_per_sweep: Option<f64>,
+    sweep_seconds: f64,
+    gflops_fma: Option<f64>,
+    precision: Precision,
+    sweep: SweepMode,
+    absorbing_goal: bool,
+    threads: usize,
+    peak_memory_mb: Option<f64>,
+    deltas: &'a [(f64, f64)],
+    extrapolated: &'a [usize],
+}
+
+/// The `--json` summary of a learner from samples.
+#[derive(Serialize)]
+struct SampleSummary {
+    env: &'static str,
+    learner: &'static str,
+    update: Update,
+    policy: String,
+    episodes: usize,
+    steps_total: usize,
+    rewarded_episodes: usize,
+    converged_at: Option<usize>,
+    final_eval_success_rate: Option<f64>,
+    seconds: f64,
+    seed: u64,
+}
+
+/// The configuration file `path` (or the defaults of `env`, or its named preset), which must
+/// describe `env`.
+pub(crate) fn load_config(
+    path: Option<&Path>,
+    env: EnvKind,
+    preset: Option<&str>,
+) -> anyhow::Result<TrainConfig> {
+    let config = match (path, preset) {
+        (Some(_), Some(_)) => anyhow::bail!("give either --config or --preset, not both"),
+        (Some(path), None) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read config {}", path.display()))?;
+            TrainConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))?
+        }
+        (None, Some(p)) => TrainConfig::from_preset(env, p)?,
+        (None, None) => TrainConfig::default_for(env)?,
+    };
+    if config.env.kind() != env {
+        anyhow::bail!(
+            "the config describes env \"{}\" but --env is {}",
+            config.env.name(),
+            env.name()
+        );
+    }
+    Ok(config)
+}
+
+/// The configuration with every flag applied, validated.
+fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
+    let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
+    if let Some(path) = &args.arena {
+        match &mut config.env {
+            EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::model::arena::Arena::from_file(path)?,
+            _ => anyhow::bail!("--arena applies to --env khepera only"),
+        }
+    }
+    let s = &mut config.solver;
+    s.gamma = args.gamma.unwrap_or(s.gamma);
+    s.xi = args.xi.unwrap_or(s.xi);
+    s.max_sweeps = args.max_sweeps.unwrap_or(s.max_sweeps);
+    s.operator = args.operator.unwrap_or(s.operator);
+    s.backup = args.backup.unwrap_or(s.backup);
+    s.precision = args.precision.unwrap_or(s.precision);
+    s.kernel = args.kernel.or(s.kernel);
+    if args.asynchronous {
+        s.sweep = SweepMode::Asynchronous;
+    }
+    if args.absorbing_goal {
+        s.absorbing_goal = true;
+    }
+    if args.extrapolate {
+        s.extrapolate = true;
+    }
+    if args.no_extrapolate {
+        s.extrapolate = false;
+    }
+    config.validate()?;
+    Ok(config)
+}
+
+/// Peak resident memory of this process (Linux `VmHWM`), in MB.
+fn peak_memory_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+fn fmt_delta(p: &Progress) -> String {
+    let d = p.record.delta;
+    if p.record.extrapolated {
+        return "extrapolated".into();
+    }
+    match d.value() {
+        Some(v) => format!("delta {v:.4}"),
+        None => format!("delta in [{:.4}, {:.4}]", d.lower, d.upper),
+    }
+}
+
+/// A progress bar on a terminal (hidden otherwise or with `--quiet`).
+fn progress_bar(quiet: bool, len: u64, template: &str) -> ProgressBar {
+    if quiet || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let b = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
+    b.set_style(ProgressStyle::with_template(template).expect("valid template"));
+    b
+}
+
+fn stop_if(stop: &AtomicBool) -> ControlFlow<()> {
+    if stop.load(Ordering::SeqCst) {
+        ControlFlow::Break(())
+    } else {
+        ControlFlow::Continue(())
+    }
+}
+
+pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let config = build_config(&args)?;
+    if args.learner != Learner::Fqi {
+        return run_from_samples(&args, &config);
+    }
+    for (set, flag) in [
+        (args.episodes.is_some(), "--episodes"),
+        (args.literal, "--literal"),
+        (args.cells.is_some(), "--cells"),
+        (args.curve.is_some(), "--curve"),
+        (args.plot.is_some(), "--plot"),
+    ] {
+        refuse(set, flag, "applies to --learner fql or vqql only")?;
+    }
+    check_writable(&args.out, "policy")?;
+    check_outputs(&[(&args.json, "summary")])?;
+    if let Some(n) = args.threads {
+        if n == 0 {
+            anyhow::bail!("--threads must be at least 1");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot start the thread pool")?;
+    }
+    let threads = rayon::current_num_threads();
+    let stop = output::interrupt_flag();
+
+    let n_cores = config.n_cores();
+    let env = config.env.name();
+    let joint = config.n_joint_actions();
+    let synchronous = config.solver.sweep == SweepMode::Synchronous;
+    if !args.quiet {
+        eprintln!(
+            "fuzzyq train: {env}, {n_cores} cores x {joint} joint actions ({:.3e} Q-values), \
+             gamma {}, xi {}, {} sweeps{}, {threads} threads",
+            n_cores as f64 * joint as f64,
+            config.solver.gamma,
+            config.solver.xi,
+            if synchronous {
+                "synchronous"
+            } else {
+                "asynchronous"
+            },
+            if config.solver.extrapolate && synchronous {
+                " with extrapolation"
+            } else {
+                ""
+            },
+        );
+    }
+    let bar = progress_bar(
+        args.quiet,
+        0,
+        "{spinner} sweep {pos}/{len} (a-priori bound) {msg} [{elapsed_precise}]",
+    );
+    bar.set_message("preparing");
+    bar.enable_steady_tick(Duration::from_millis(200));
+    let plain = !args.quiet && !std::io::stderr().is_terminal();
+    let result = train::train(&config, |p| {
+        bar.set_length(p.bound as u64);
+        bar.set_position(p.record.sweep as u64);
+        bar.set_message(fmt_delta(p));
+        if plain && (p.record.sweep == 1 || p.record.sweep % 10 == 0) {
+            eprintln!(
+                "sweep {}/{} (a-priori bound): {}, {:.1} s",
+                p.record.sweep,
+                p.bound,
+                fmt_delta(p),
+                p.record.seconds
+            );
+        }
+        stop_if(&stop)
+    });
+    bar.finish_and_clear();
+    let artifact = match result {
+        Ok(a) => a,
+        Err(SimError::Solve(SolveError::Interrupted { sweeps })) => {
+            return Err(Failure::Interrupted(format!(
+                "interrupted after {sweeps} sweeps; no policy was written"
+            ))
+            .into());
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let file = PolicyFile::Fqi(artifact);
+    file.save(&args.out).context("cannot save the policy")?;
+    let PolicyFile::Fqi(artifact) = file else {
+        unreachable!("just built")
+    };
+    let s = &artifact.summary;
+    if !args.quiet {
+        eprintln!(
+            "{} after {} sweeps in {:.1} s (final delta {:.4}, xi {}); policy written to {}",
+            if s.converged {
+                "converged"
+            } else {
+                "sweep limit reached"
+            },
+            s.sweeps,
+            s.seconds,
+            s.final_delta,
+            config.solver.xi,
+            args.out.display()
+        );
+    }
+    if let Some(path) = &args.json {
+        let gamma = config.solver.gamma;
+        let summary = Summary {
+            env,
+            policy: args.out.display().to_string(),
+            sweeps: s.sweeps,
+            converged: s.converged,
+            delta_inf: s.final_delta,
+            xi: config.solver.xi,
+            gamma,
+            error_bound: gamma / (1.0 - gamma) * s.final_delta,
+            sweep_bound: s.sweep_bound,
+            seconds: s.seconds,
+            seconds_per_sweep: s.seconds / s.sweeps.max(1) as f64,
+            cores: n_cores,
+            joint_actions: joint,
+            q_values: n_cores as f64 * joint as f64,
+            backup: &s.backup,
+            kernel: &s.kernel,
+            multiply_adds_per_sweep: s.multiply_adds_per_sweep,
+            sweep_seconds: s.sweep_seconds,
+            // Billions of multiply-adds per second over the sweeps.
+            gflops_fma: s
+                .multiply_adds_per_sweep
+                .map(|m| m * s.sweeps as f64 / s.sweep_seconds.max(1e-9) / 1e9),
+            precision: config.solver.precision,
+            sweep: config.solver.sweep,
+            absorbing_goal: config.solver.absorbing_goal,
+            threads,
+            peak_memory_mb: peak_memory_mb(),
+            deltas: &s.deltas,
+            extrapolated: &s.extrapolated,
+        };
+        write_json(path, &summary)?;
+    }
+    Ok(())
+}
+
+/// `fuzzyq train --learner fql|vqql`: learning from samples with the additive layout.
+fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
+    let mut learning = SampleLearning::defaults(config, args.learner)?;
+    refuse(
+        args.cells.is_some() && args.learner != Learner::Vqql,
+        "--cells",
+        "applies to --learner vqql only",
+    )?;
+    check_writable(&args.out, "policy")?;
+    check_outputs(&[
+        (&args.curve, "curve"),
+        (&args.plot, "plot"),
+        (&args.json, "summary"),
+    ])?;
+    if let Some(p) = &args.plot {
+        plot::check_extension(p)?;
+    }
+    learning.fql.seed = args.seed;
+    if let Some(n) = args.episodes {
+        learning.fql.episodes = n;
+    }
+    if args.literal {
+        learning.fql.update = Update::Literal;
+    }
+    if let Some(v) = &mut learning.vqql {
+        v.cells = args.cells.unwrap_or(v.cells);
+        v.seed = args.seed;
+        v.validate()?;
+    }
+    learning.fql.validate()?;
+    let fql = learning.fql.clone();
+    let stop = output::interrupt_flag();
+    let bar = progress_bar(
+        args.quiet,
+        fql.episodes as u64,
+        "{spinner} episode {pos}/{len} {msg} [{elapsed_precise}]",
+    );
+    let env = config.env.name();
+    let what = match args.learner {
+        Learner::Vqql => "VQQL (k-means cells, tabular Q-learning)",
+        _ => "model-free fuzzy Q-learning",
+    };
+    if !args.quiet {
+        eprintln!(
+            "fuzzyq train: {env}, {what} ({:?} update, additive layout), {} episodes of at most \
+             {} steps, seed {}",
+            fql.update, fql.episodes, fql.max_steps, fql.seed
+        );
+        if let Some(v) = &learning.vqql {
+            eprintln!(
+                "building the codebooks: k-means with {} cells per agent on {} explored states",
+                v.cells, v.samples
+            );
+        }
+    }
+    let plain = !args.quiet && !std::io::stderr().is_terminal();
+    let started = std::time::Instant::now();
+    let progress = |r: &EpisodeRecord| {
+        bar.set_position(r.episode as u64 + 1);
+        if let Some(s) = r.eval_success_rate {
+            bar.set_message(format!("greedy success {:.0}%", 100.0 * s));
+            if plain {
+                eprintln!(
+                    "episode {}: greedy evaluation success {:.0}%",
+                    r.episode + 1,
+                    100.0 * s
+                );
+            }
+        }
+        stop_if(&stop)
+    };
+    let learned = train::learn_from_samples(config, &learning, progress)?;
+    bar.finish_and_clear();
+    let outcome = &learned.outcome;
+    if stop.load(Ordering::SeqCst) {
+        return Err(Failure::Interrupted(format!(
+            "interrupted after {} episodes; no policy was written",
+            outcome.curve.len()
+        ))
+        .into());
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    learned.file.save(&args.out)?;
+    if let Some(p) = &args.curve {
+        let mut text = Vec::new();
+        fuzzyq_sim::learn::fql::write_curve_csv(&outcome.curve, &mut text)?;
+        output::write_file(p, &text, "curve")?;
+    }
+    if let Some(p) = &args.plot {
+        let title = match &config.env {
+            EnvConfig::Pointmass(pm) => format!(
+                "{} on {} point masses (seed {})",
+                if args.learner == Learner::Vqql {
+                    "VQQL"
+                } else {
+                    "Fuzzy Q-learning"
+                },
+                pm.agents,
+                fql.seed
+            ),
+            _ => format!("Fuzzy Q-learning on two Khepera robots (seed {})", fql.seed),
+        };
+        plot::learning_curve_figure(p, &outcome.curve, &title)?;
+    }
+    let last_eval = outcome.curve.iter().rev().find_map(|r| r.eval_success_rate);
+    let rewarded = outcome.curve.iter().filter(|r| r.ret > 0.0).count();
+    if let Some(j) = &args.json {
+        write_json(
+            j,
+            &SampleSummary {
+                env,
+                learner: args.learner.name(),
+                update: fql.update,
+                policy: args.out.display().to_string(),
+                episodes: outcome.curve.len(),
+                steps_total: outcome.steps_total,
+                rewarded_episodes: rewarded,
+                converged_at: outcome.converged_at,
+                final_eval_success_rate: last_eval,
+                seconds,
+                seed: fql.seed,
+            },
+        )?;
+    }
+    if !args.quiet {
+        eprintln!(
+            "learned in {seconds:.1} s: {} episodes, {} steps ({rewarded} met the reward), \
+             converged {}, last greedy evaluation success {}; wrote {}",
+            outcome.curve.len(),
+            outcome.steps_total,
+            outcome
+                .converged_at
+                .map_or_else(|| "no".to_string(), |e| format!("at episode {e}")),
+            last_eval.map_or_else(|| "n/a".to_string(), |s| format!("{:.0}%", 100.0 * s)),
+            args.out.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,153 @@
+//! What every subcommand shares: flag parsing helpers and atomic output files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+use fuzzyq_core::NamedOption;
+use fuzzyq_sim::model::EnvKind;
+
+/// A clap value parser for a named option of the library: its values, each with its help
+/// line, come from the option's one declaration ([`NamedOption::ALL`]).
+pub(crate) fn named<E: NamedOption + Send + Sync + Clone>() -> impl TypedValueParser<Value = E> {
+    PossibleValuesParser::new(
+        E::ALL
+            .iter()
+            .map(|v| PossibleValue::new(v.name()).help(v.help())),
+    )
+    .map(|s| E::from_name(&s).expect("clap checked the value"))
+}
+
+/// The `--env` parser: the registry's environments, with their presets in the help.
+pub(crate) fn env() -> impl TypedValueParser<Value = EnvKind> {
+    PossibleValuesParser::new(
+        EnvKind::ALL
+            .iter()
+            .map(|v| PossibleValue::new(v.name()).help(v.help_line())),
+    )
+    .map(|s| EnvKind::from_name(&s).expect("clap checked the value"))
+}
+
+/// Parses `-4,-6,-2,2` (also with spaces or surrounding brackets) given to `flag`.
+pub(crate) fn parse_list(text: &str, flag: &str) -> anyhow::Result<Vec<f64>> {
+    let t = text.trim().trim_start_matches('[').trim_end_matches(']');
+    t.split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|s| !s.is_empty())
+        .enumerate()
+        .map(|(i, s)| {
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .with_context(|| format!("{flag}: value {} ({s:?}) is not a finite number", i + 1))
+        })
+        .collect()
+}
+
+/// Fails naming `flag` if it was given (`set`) where it does not apply (`why`).
+pub(crate) fn refuse(set: bool, flag: &str, why: &str) -> anyhow::Result<()> {
+    if set {
+        anyhow::bail!("{flag} {why}");
+    }
+    Ok(())
+}
+
+/// Writes `text` to stdout.
+pub(crate) fn print_stdout(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())?;
+    out.flush()?;
+    Ok(())
+}
+
+/// Whether an error is a broken pipe on stdout (a normal end: `fuzzyq ... | head`).
+pub(crate) fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// Collapses a message to one line.
+pub(crate) fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// Checks, before any long work, that `path` can be created: its directory exists and
+/// accepts a new file. Nothing is left behind.
+pub(crate) fn check_writable(path: &Path, what: &str) -> anyhow::Result<()> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if path.is_dir() {
+        anyhow::bail!("{what} {} is a directory", path.display());
+    }
+    if !dir.is_dir() {
+        anyhow::bail!(
+            "{what} {}: directory {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    probe(&dir).with_context(|| format!("{what} {}: cannot write there", path.display()))
+}
+
+fn probe(dir: &Path) -> std::io::Result<()> {
+    let probe = dir.join(format!(".fuzzyq-probe-{}", std::process::id()));
+    std::fs::File::create(&probe)?;
+    std::fs::remove_file(&probe)
+}
+
+/// Checks every output path that is given (`(path, what)` pairs).
+pub(crate) fn check_outputs(outputs: &[(&Option<PathBuf>, &str)]) -> anyhow::Result<()> {
+    for (path, what) in outputs {
+        if let Some(p) = path {
+            check_writable(p, what)?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes a file atomically, naming it in the error.
+pub(crate) fn write_file(path: &Path, bytes: &[u8], what: &str) -> anyhow::Result<()> {
+    fuzzyq_sim::io::write_atomically(path, bytes)
+        .with_context(|| format!("cannot write {what} {}", path.display()))
+}
+
+/// Serialises `value` as pretty JSON into `path`, atomically.
+pub(crate) fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
+    let mut text = serde_json::to_string_pretty(value)?;
+    text.push('\n');
+    write_file(path, text.as_bytes(), "JSON")
+}
+
+/// Sets a flag on Ctrl-C; a second Ctrl-C while the first is being honoured ends the process.
+pub(crate) fn interrupt_flag() -> std::sync::Arc<std::sync::atomic::AtomicBool> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let _ = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    });
+    stop
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_x0_forms() {
+        assert_eq!(
+            parse_list("-4,-6,2", "--x0").unwrap(),
+            vec![-4.0, -6.0, 2.0]
+        );
+        assert_eq!(parse_list("[1, 2.5]", "--x0").unwrap(), vec![1.0, 2.5]);
+        let e = parse_list("1,x", "--headings").unwrap_err().to_string();
+        assert!(e.starts_with("--headings: value 2"), "{e}");
+        assert!(parse_list("1,nan", "--x0").is_err());
+    }
+}
