@@ -6,53 +6,41 @@
 use std::hint::black_box;
 use std::ops::ControlFlow;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use fuzzyq_core::solver::{solve, solve_q};
-use fuzzyq_sim::model::classic::{
-    DcMotor, DcMotorConfig, Pendulum, PendulumConfig, dcmotor, pendulum,
-};
+use fuzzyq_sim::model::classic::{Classic, DcMotor, Dynamics, Pendulum, preset};
+
+/// Both operators on benchmark `S`'s fine preset.
+fn both_operators<S: Dynamics>(
+    g: &mut BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    name: &str,
+) {
+    let p = preset::<S>("fine").unwrap();
+    let m = Classic::<S>::for_preset(S::Config::default(), &p).unwrap();
+    g.bench_function(format!("{name}_values"), |b| {
+        b.iter(|| {
+            let grid = p.grid::<f64>().unwrap();
+            black_box(solve(&m, &grid, &p.solver_config(), |_| ControlFlow::Continue(())).unwrap())
+        })
+    });
+    g.bench_function(format!("{name}_q_values"), |b| {
+        b.iter(|| {
+            let grid = p.grid::<f64>().unwrap();
+            black_box(
+                solve_q(&m, &grid, &p.solver_config(), |_, _| {
+                    ControlFlow::Continue(())
+                })
+                .unwrap(),
+            )
+        })
+    });
+}
 
 fn fine_presets(c: &mut Criterion) {
     let mut g = c.benchmark_group("classic_end_to_end");
     g.sample_size(10);
-    let p = dcmotor::preset("fine").unwrap();
-    let m = DcMotor::for_preset(DcMotorConfig::default(), &p).unwrap();
-    g.bench_function("dcmotor_fine_73x193x9_values", |b| {
-        b.iter(|| {
-            let grid = p.grid::<f64>().unwrap();
-            black_box(solve(&m, &grid, &p.solver_config(), |_| ControlFlow::Continue(())).unwrap())
-        })
-    });
-    g.bench_function("dcmotor_fine_73x193x9_q_values", |b| {
-        b.iter(|| {
-            let grid = p.grid::<f64>().unwrap();
-            black_box(
-                solve_q(&m, &grid, &p.solver_config(), |_, _| {
-                    ControlFlow::Continue(())
-                })
-                .unwrap(),
-            )
-        })
-    });
-    let p = pendulum::preset("fine").unwrap();
-    let m = Pendulum::for_preset(PendulumConfig::default(), &p).unwrap();
-    g.bench_function("pendulum_fine_73x91x15_values", |b| {
-        b.iter(|| {
-            let grid = p.grid::<f64>().unwrap();
-            black_box(solve(&m, &grid, &p.solver_config(), |_| ControlFlow::Continue(())).unwrap())
-        })
-    });
-    g.bench_function("pendulum_fine_73x91x15_q_values", |b| {
-        b.iter(|| {
-            let grid = p.grid::<f64>().unwrap();
-            black_box(
-                solve_q(&m, &grid, &p.solver_config(), |_, _| {
-                    ControlFlow::Continue(())
-                })
-                .unwrap(),
-            )
-        })
-    });
+    both_operators::<DcMotor>(&mut g, "dcmotor_fine_73x193x9");
+    both_operators::<Pendulum>(&mut g, "pendulum_fine_73x91x15");
     g.finish();
 }
 

@@ -19,7 +19,7 @@ pub fn model() -> PointMass {
 /// The paper's grid (4,100,625 cores).
 #[must_use]
 pub fn paper_grid<T: Real>() -> Grid<T> {
-    fuzzyq_sim::train::build_grid(&TrainConfig::default()).expect("paper grid")
+    TrainConfig::default().grid().expect("paper grid")
 }
 
 /// A reduced two-agent grid: 5 position and 3 velocity cores (50,625 cores).
@@ -28,7 +28,7 @@ pub fn reduced_grid<T: Real>() -> Grid<T> {
     let mut c = TrainConfig::default();
     c.grid.position_cores = vec![-6.0, -0.5, 0.0, 0.5, 6.0];
     c.grid.velocity_cores = vec![-3.0, 0.0, 3.0];
-    fuzzyq_sim::train::build_grid(&c).expect("reduced grid")
+    c.grid().expect("reduced grid")
 }
 
 /// `n` deterministic pseudo-random values in `[0, scale)`.

@@ -55,13 +55,12 @@ fn sweeps(c: &mut Criterion) {
             b.iter(|| black_box(block.apply(black_box(&v)).unwrap()))
         });
     }
-    let small = fuzzyq_sim::train::build_grid::<f32>(&{
+    let small = {
         let mut c = fuzzyq_sim::TrainConfig::default();
         c.grid.position_cores = vec![-6.0, 0.0, 6.0];
         c.grid.velocity_cores = vec![-3.0, 0.0];
-        c
-    })
-    .unwrap();
+        c.grid::<f32>().unwrap()
+    };
     let vs = values::<f32>(small.n_cores(), 100.0);
     let generic = Operator::new(&m, small.view(), BACKUP, BackupPath::Generic).unwrap();
     let block_small = Operator::new(&m, small.view(), BACKUP, BackupPath::Block).unwrap();

@@ -169,3 +169,68 @@ pub fn max_and_argmax<T: Real>(theta: &[T], m: usize) -> (Vec<T>, Vec<u32>) {
         })
         .unzip()
 }
+
+/// A fuzzy Q-iteration policy of a training result.
+pub fn fqi_policy(a: fuzzyq_sim::PolicyArtifact) -> fuzzyq_sim::run::policy::Policy {
+    fuzzyq_sim::run::policy::Policy::Fqi(
+        fuzzyq_sim::run::policy::FqiPolicy::from_artifact(a).expect("a valid policy"),
+    )
+}
+
+/// One point-mass run of `policy` on the model.
+pub fn point_mass_run(
+    policy: &fuzzyq_sim::run::policy::Policy,
+    x0: &[f64],
+    steps: usize,
+    kind: fuzzyq_core::q::PolicyKind,
+) -> Result<
+    (
+        fuzzyq_sim::run::metrics::Trajectory,
+        fuzzyq_sim::run::metrics::RolloutMetrics,
+    ),
+    fuzzyq_sim::SimError,
+> {
+    use fuzzyq_sim::run::evaluate::{Outcome, PlantChoice, RolloutSpec, run};
+    let spec = RolloutSpec {
+        kind,
+        steps,
+        plant: PlantChoice::Model,
+        seed: 0,
+    };
+    match run(policy, x0, &spec)? {
+        Outcome::PointMass {
+            trajectory,
+            metrics,
+            ..
+        } => Ok((trajectory, metrics)),
+        other => panic!("not a point-mass run: {other:?}"),
+    }
+}
+
+/// One run of a robot `policy` from poses `start` on the plant seeded with `seed`.
+pub fn khepera_run(
+    policy: &fuzzyq_sim::run::policy::Policy,
+    start: &[[f64; 3]],
+    steps: usize,
+    kind: fuzzyq_core::q::PolicyKind,
+    seed: u64,
+) -> Result<
+    (
+        fuzzyq_sim::run::metrics::KheperaRun,
+        fuzzyq_sim::run::metrics::KheperaMetrics,
+    ),
+    fuzzyq_sim::SimError,
+> {
+    use fuzzyq_sim::run::evaluate::{Outcome, PlantChoice, RolloutSpec, run};
+    let flat: Vec<f64> = start.iter().flatten().copied().collect();
+    let spec = RolloutSpec {
+        kind,
+        steps,
+        plant: PlantChoice::Model,
+        seed,
+    };
+    match run(policy, &flat, &spec)? {
+        Outcome::Khepera { run, metrics } => Ok((run, metrics)),
+        other => panic!("not a robot run: {other:?}"),
+    }
+}

@@ -46,9 +46,12 @@ use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{BackupPath, Grid, Operator, SolveError, solve, solve_q};
 use fuzzyq_core::{ActionSet, Backup, JointActions, Model, ProductPartition, q};
+use fuzzyq_sim::model::EnvKind;
+use fuzzyq_sim::model::classic::dcmotor::DcMotorModel;
+use fuzzyq_sim::model::classic::octave::{core_index_from_toolbox, toolbox_core_index};
+use fuzzyq_sim::model::classic::pendulum::PendulumModel;
 use fuzzyq_sim::model::classic::{
-    DcMotor, DcMotorConfig, Pendulum, PendulumConfig, Preset, core_index_from_toolbox, dcmotor,
-    pendulum, toolbox_core_index,
+    DcMotor, DcMotorConfig, Pendulum, PendulumConfig, Preset, preset,
 };
 
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/data/approxrl");
@@ -89,18 +92,18 @@ const IP: Case = Case {
     solver_sweeps: 359,
 };
 
-fn dc() -> (DcMotor, Preset) {
-    let preset = dcmotor::preset("toolbox-demo").unwrap();
+fn dc() -> (DcMotorModel, Preset) {
+    let preset = preset::<DcMotor>("toolbox-demo").unwrap();
     (
-        DcMotor::for_preset(DcMotorConfig::default(), &preset).unwrap(),
+        DcMotorModel::for_preset(DcMotorConfig::default(), &preset).unwrap(),
         preset,
     )
 }
 
-fn ip() -> (Pendulum, Preset) {
-    let preset = pendulum::preset("toolbox-demo").unwrap();
+fn ip() -> (PendulumModel, Preset) {
+    let preset = preset::<Pendulum>("toolbox-demo").unwrap();
     (
-        Pendulum::for_preset(PendulumConfig::default(), &preset).unwrap(),
+        PendulumModel::for_preset(PendulumConfig::default(), &preset).unwrap(),
         preset,
     )
 }
@@ -475,8 +478,9 @@ fn check_solve_q<M: Model<f64>>(case: &Case, model: &M, preset: &Preset) {
 /// iteration count and final delta, and the per-core greedy actions of `solve_q`.
 #[test]
 fn q_values_operator_trains_the_toolbox_iteration() {
-    use fuzzyq_sim::io::config::{IterationOperator, TrainConfig};
-    for (env, case) in [("dcmotor", &DC), ("pendulum", &IP)] {
+    use fuzzyq_core::solver::{IterationOperator, SweepMode};
+    use fuzzyq_sim::io::config::TrainConfig;
+    for (env, case) in [(EnvKind::Dcmotor, &DC), (EnvKind::Pendulum, &IP)] {
         let mut c = TrainConfig::from_preset(env, "toolbox-demo").unwrap();
         c.solver.operator = IterationOperator::QValues;
         let again = TrainConfig::from_toml(&c.to_toml()).unwrap();
@@ -488,7 +492,7 @@ fn q_values_operator_trains_the_toolbox_iteration() {
         assert!((a.summary.final_delta - last).abs() <= 1e-9 * last, "{env}");
         assert_eq!(a.summary.kernel, "q-values");
         let mut bad = c.clone();
-        bad.solver.sweep = fuzzyq_sim::io::config::Sweep::Async;
+        bad.solver.sweep = SweepMode::Asynchronous;
         assert!(
             bad.validate()
                 .unwrap_err()
@@ -748,19 +752,19 @@ fn solver_differs_from_the_toolbox_only_by_its_operator() {
 
 #[test]
 fn presets_and_models_refuse_bad_input() {
-    assert!(dcmotor::preset("nope").is_err());
+    assert!(preset::<DcMotor>("nope").is_err());
     let mut p = dc().1;
     p.gamma = 1.0;
     assert!(matches!(
         p.grid::<f64>(),
         Err(fuzzyq_sim::SimError::Config(_))
     ));
-    let p = pendulum::preset("fine").unwrap();
+    let p = preset::<Pendulum>("fine").unwrap();
     let three = Preset {
         cores: vec![p.cores[0].clone(); 3],
         ..p
     };
-    assert!(Pendulum::for_preset(PendulumConfig::default(), &three).is_err());
+    assert!(PendulumModel::for_preset(PendulumConfig::default(), &three).is_err());
     // A grid that does not match the model's state is a typed solver error.
     let g = three.grid::<f64>().unwrap();
     let (pend, _) = ip();

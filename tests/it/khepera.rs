@@ -2,14 +2,20 @@
 
 use std::ops::ControlFlow;
 
+use fuzzyq_core::q::PolicyKind;
+use fuzzyq_core::solver::{BackupPath, Precision};
 use fuzzyq_sim::PolicyArtifact;
-use fuzzyq_sim::io::config::{Backup, EnvConfig, TrainConfig};
+use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
+use fuzzyq_sim::io::policy_file::PolicyFile;
+use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::model::arena::{Arena, Obstacle};
-use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
-use fuzzyq_sim::run::robots::{random_starts, rollout_khepera_any, success_over_starts};
+use fuzzyq_sim::model::khepera::random_starts;
+use fuzzyq_sim::run::evaluate::khepera_starts;
+use fuzzyq_sim::run::policy::Policy;
+use fuzzyq_tests::{fqi_policy, khepera_run, point_mass_run};
 
 fn khepera(agents: usize, position_cores: Vec<f64>, headings: usize) -> TrainConfig {
-    let mut c = TrainConfig::default_for("khepera").expect("default");
+    let mut c = TrainConfig::default_for(EnvKind::Khepera).expect("default");
     if let EnvConfig::Khepera(k) = &mut c.env {
         k.agents = agents;
     }
@@ -27,7 +33,7 @@ fn train(c: &TrainConfig) -> PolicyArtifact {
 fn one_robot_trains_saves_and_arrives_on_the_plant() {
     let c = khepera(
         1,
-        TrainConfig::default_for("khepera")
+        TrainConfig::default_for(EnvKind::Khepera)
             .unwrap()
             .grid
             .position_cores,
@@ -37,10 +43,10 @@ fn one_robot_trains_saves_and_arrives_on_the_plant() {
     assert!(a.summary.converged);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("k.fzq");
-    a.save(&path).unwrap();
-    let policy = AnyPolicy::from_artifact(PolicyArtifact::load(&path).unwrap()).unwrap();
+    PolicyFile::Fqi(a).save(&path).unwrap();
+    let policy = Policy::load(&path).unwrap();
     for start in [[-3.0, 2.0, 0.0], [4.0, -4.5, 2.5], [0.5, 5.0, -1.0]] {
-        let (run, m) = rollout_khepera_any(&policy, &[start], 300, PolicyKind::Greedy, 1).unwrap();
+        let (run, m) = khepera_run(&policy, &[start], 300, PolicyKind::Greedy, 1).unwrap();
         assert_eq!(run.poses.len(), 301);
         assert!(m.success, "from {start:?}: {m:?}");
         assert_eq!(m.collisions.total, 0);
@@ -52,9 +58,9 @@ fn one_robot_trains_saves_and_arrives_on_the_plant() {
 fn two_robot_smoke_run_is_deterministic() {
     let c = khepera(2, vec![-6.0, -2.0, -0.5, -0.1, 0.0, 0.1, 0.5, 2.0, 6.0], 8);
     let a = train(&c);
-    let policy = AnyPolicy::from_artifact(a).unwrap();
-    let (r1, _) = success_over_starts(&policy, 3, 5, 40, PolicyKind::Greedy).unwrap();
-    let (r2, m2) = success_over_starts(&policy, 3, 5, 40, PolicyKind::Greedy).unwrap();
+    let policy = fqi_policy(a);
+    let (r1, _) = khepera_starts(&policy, 3, 5, 40, PolicyKind::Greedy).unwrap();
+    let (r2, m2) = khepera_starts(&policy, 3, 5, 40, PolicyKind::Greedy).unwrap();
     assert_eq!(r1, r2);
     assert_eq!(m2.len(), 3);
     let starts = random_starts(
@@ -67,12 +73,18 @@ fn two_robot_smoke_run_is_deterministic() {
     )
     .unwrap();
     assert_eq!(starts.len(), 3);
-    // A point-mass rollout refuses a khepera policy with a clear error.
-    let Err(e) = fuzzyq_sim::run::rollout::rollout_any(&policy, &[0.0; 8], 5, PolicyKind::Greedy)
-    else {
+    // Point-mass starts refuse a khepera policy with a clear error.
+    let Err(e) = fuzzyq_sim::run::evaluate::point_mass_starts(
+        &policy,
+        &[vec![0.0; 8]],
+        5,
+        PolicyKind::Greedy,
+    ) else {
         panic!("a khepera policy must be refused")
     };
     assert!(e.to_string().contains("khepera"), "{e}");
+    // A robot's start of the wrong length is refused.
+    assert!(point_mass_run(&policy, &[0.0; 8], 5, PolicyKind::Greedy).is_err());
 }
 
 #[test]
@@ -90,10 +102,10 @@ fn block_and_generic_backups_agree_with_an_obstacle() {
     }
     c.solver.extrapolate = false;
     c.solver.max_sweeps = 30;
-    c.solver.precision = fuzzyq_sim::io::config::Precision::F64;
-    c.solver.backup = Backup::Block;
+    c.solver.precision = Precision::F64;
+    c.solver.backup = BackupPath::Block;
     let b = train(&c);
-    c.solver.backup = Backup::Generic;
+    c.solver.backup = BackupPath::Generic;
     let g = train(&c);
     let (
         fuzzyq_sim::io::policy_file::Values::F64(vb),

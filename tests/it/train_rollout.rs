@@ -2,11 +2,15 @@
 
 use std::ops::ControlFlow;
 
-use fuzzyq_sim::io::config::{EnvConfig, GridConfig, Precision, TrainConfig};
+use fuzzyq_core::q::PolicyKind;
+use fuzzyq_core::solver::Precision;
+use fuzzyq_sim::io::config::{EnvConfig, GridConfig, TrainConfig};
+use fuzzyq_sim::io::policy_file::PolicyFile;
 use fuzzyq_sim::model::pointmass::{Integrator, PointMass, PointMassConfig};
-use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
-use fuzzyq_sim::run::rollout::{PAPER_X0, rollout_any};
+use fuzzyq_sim::paper::X0 as PAPER_X0;
+use fuzzyq_sim::run::policy::Policy;
 use fuzzyq_sim::{PolicyArtifact, SimError};
+use fuzzyq_tests::{fqi_policy, point_mass_run};
 use proptest::prelude::*;
 
 /// The paper's task on a reduced grid (two agents, 3 x 3 x 3 x 3 cores each).
@@ -38,13 +42,13 @@ fn small_train_save_load_rollout() {
 
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("policy.fzq");
-    artifact.save(&path).unwrap();
-    let loaded = PolicyArtifact::load(&path).unwrap();
-    assert_eq!(loaded, artifact);
+    let file = PolicyFile::Fqi(artifact);
+    file.save(&path).unwrap();
+    assert_eq!(PolicyFile::load(&path).unwrap(), file);
 
-    let policy = AnyPolicy::from_artifact(loaded).unwrap();
+    let policy = Policy::load(&path).unwrap();
     for kind in [PolicyKind::Greedy, PolicyKind::Interpolated] {
-        let (t, m) = rollout_any(&policy, &PAPER_X0, 75, kind).unwrap();
+        let (t, m) = point_mass_run(&policy, &PAPER_X0, 75, kind).unwrap();
         assert_eq!(t.states.len(), 76);
         assert_eq!(t.actions.len(), 75);
         // The coarse grid still brings both agents from 7.2 m and 5.8 m to within 0.5 m.
@@ -72,8 +76,8 @@ fn precision_f64_trains_the_same_policy() {
     c.solver.precision = Precision::F64;
     let b = train(&c);
     assert_eq!(a.summary.sweeps, b.summary.sweeps);
-    let policy = AnyPolicy::from_artifact(b).unwrap();
-    let (_, m) = rollout_any(&policy, &PAPER_X0, 75, PolicyKind::Greedy).unwrap();
+    let policy = fqi_policy(b);
+    let (_, m) = point_mass_run(&policy, &PAPER_X0, 75, PolicyKind::Greedy).unwrap();
     assert!(m.final_error_m.iter().all(|&e| e < 0.5), "{m:?}");
 }
 
@@ -81,9 +85,9 @@ fn precision_f64_trains_the_same_policy() {
 fn rollout_rejects_bad_initial_states() {
     let mut c = reduced();
     c.solver.max_sweeps = 2;
-    let policy = AnyPolicy::from_artifact(train(&c)).unwrap();
+    let policy = fqi_policy(train(&c));
     let err = |x0: &[f64]| {
-        rollout_any(&policy, x0, 5, PolicyKind::Greedy)
+        point_mass_run(&policy, x0, 5, PolicyKind::Greedy)
             .unwrap_err()
             .to_string()
     };

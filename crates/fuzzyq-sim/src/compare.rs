@@ -587,7 +587,7 @@ mod tests {
             velocity_cores: vec![-3.0, 0.0, 3.0],
             heading_divisions: None,
             cores: None,
-            membership: MembershipKind::Triangular,
+            membership: Membership::Triangular,
         };
         let mut c = CompareConfig::new(task);
         c.x0 = vec![-4.0, 3.0, 0.0, 0.0];
@@ -617,8 +617,14 @@ mod tests {
         let a = strip(compare(&c, |e| events.push(e)).unwrap());
         let b = strip(compare(&c, |_| {}).unwrap());
         assert_eq!(a, b);
-        assert_eq!(a.reports.len(), Learner::ALL.len());
-        assert_eq!(events.len(), 3 * Learner::ALL.len());
+        assert_eq!(
+            a.reports.len(),
+            <Learner as fuzzyq_core::NamedOption>::ALL.len()
+        );
+        assert_eq!(
+            events.len(),
+            3 * <Learner as fuzzyq_core::NamedOption>::ALL.len()
+        );
         assert_eq!(events[0], Event::Training(Learner::Fqi));
         // The model-based learners represent cores x actions; the crisp one is a different
         // learner on the same cores.
@@ -632,8 +638,14 @@ mod tests {
         // The table has one column per learner and the paper's two.
         let md = a.to_markdown();
         let header = md.lines().next().unwrap();
-        assert_eq!(header.matches('|').count(), Learner::ALL.len() + 4);
-        assert_eq!(a.to_csv().lines().count(), 1 + Learner::ALL.len());
+        assert_eq!(
+            header.matches('|').count(),
+            <Learner as fuzzyq_core::NamedOption>::ALL.len() + 4
+        );
+        assert_eq!(
+            a.to_csv().lines().count(),
+            1 + <Learner as fuzzyq_core::NamedOption>::ALL.len()
+        );
     }
 
     #[test]
@@ -658,7 +670,7 @@ mod tests {
         c.steps = 0;
         check(c, "steps");
         let mut c = tiny();
-        c.task = TrainConfig::default_for("khepera").unwrap();
+        c.task = TrainConfig::default_for(crate::model::EnvKind::Khepera).unwrap();
         check(c, "point-mass task");
         assert!(
             Learner::parse("cmommt")
@@ -666,8 +678,8 @@ mod tests {
                 .to_string()
                 .contains("fql-literal")
         );
-        for l in Learner::ALL {
-            assert_eq!(Learner::parse(l.name()).unwrap(), l);
+        for l in <Learner as fuzzyq_core::NamedOption>::ALL {
+            assert_eq!(Learner::parse(l.name()).unwrap(), *l);
         }
     }
 }

@@ -1,50 +1,52 @@
 //! # fuzzyq-sim
 //!
-//! Models and environments for fuzzyq, and the glue from a configuration to a trained policy
-//! and back to actions:
+//! The environments of fuzzyq and everything between a configuration and a measured run:
+//! models, rapier worlds, learners from samples, configuration and policy files, policies,
+//! rollouts and the paper's Table 1. Built on the no_std numeric core, `fuzzyq-core`.
 //!
-//! - [`classic`]: the classic single-agent benchmarks of Busoniu et al. 2010 (ApproxRL): the DC
-//!   motor and the inverted pendulum swing-up, with the toolbox's grids as presets;
-//! - [`pointmass`]: the paper's point-mass task (section 3.1) for `n` agents, with the exact
-//!   zero-order-hold step or RK4 for a position-dependent friction, declaring its independent
-//!   dynamics blocks to the solver;
-//! - [`config`]: the TOML training configuration (environment, grid, solver);
-//! - [`train`]: configuration in, [`PolicyArtifact`] out;
-//! - [`artifact`]: the policy file (tagged, versioned, checksummed, written atomically);
-//! - [`policy`] and [`rollout`]: greedy and interpolated policies, simulated runs and their
-//!   metrics.
-//! - [`fql`]: model-free fuzzy Q-learning (section 2.5) on any episodic [`fql::Environment`].
-//! - [`evaluate`]: rollouts and Monte-Carlo evaluation of a policy on any environment.
-//! - [`compare`]: the paper's Table 1 rerun: fuzzy and crisp learners side by side.
-//! - [`khepera_fql`]: model-free fuzzy Q-learning of the Khepera task on the rapier plant.
-//! - [`pointmass_fql`]: the point-mass task as a model-free environment, its fuzzy features,
-//!   learning defaults and policy file.
-//! - [`vqql`]: the crisp baseline of Table 1 (a k-means vector quantiser of each agent's state
-//!   plus tabular Q-learning).
-//! - [`physics`]: rapier2d plants (colliding point masses, Khepera robots with sonars) that
-//!   move exactly as the models do in open space.
+//! ## Layers
+//! Each folder has one job, and a module only names lower layers (checked in CI by
+//! `scripts/check-layers.py`; `docs/design.md` explains the design):
 //!
+//! | layer | module | job |
+//! |---|---|---|
+//! | 0 | [`error`], [`paper`] | typed errors; the numbers taken from the paper |
+//! | 1 | [`model`] | the environment registry ([`model::EnvKind`]) and the models: point masses, Khepera robots, classic benchmarks |
+//! | 2 | [`world`] | rapier2d worlds: colliding point masses, robots with ray-cast sonars |
+//! | 3 | [`learn`] | learning from samples: fuzzy Q-learning, VQQL, the tasks as environments |
+//! | 4 | [`io`] | TOML configurations and the policy files of every learner |
+//! | 5 | [`run`] | policies, plants, the one rollout loop, metrics, evaluations |
+//! | 6 | [`train`] | a configuration in, a policy out, for every learner |
+//! | 7 | [`compare`] | the paper's Table 1: every learner trained and measured alike |
+//!
+//! ## A first example
 //! ```
-//! use fuzzyq_sim::io::config::{GridConfig, TrainConfig};
-//! use fuzzyq_sim::run::policy::{AnyPolicy, PolicyKind};
+//! use fuzzyq_core::q::PolicyKind;
+//! use fuzzyq_sim::io::config::{EnvConfig, GridConfig, TrainConfig};
+//! use fuzzyq_sim::run::evaluate::{self, Outcome, RolloutSpec};
+//! use fuzzyq_sim::run::policy::{FqiPolicy, Policy};
 //!
 //! // The paper's task with one agent on a coarse grid.
 //! let mut config = TrainConfig::default();
-//! if let fuzzyq_sim::io::config::EnvConfig::Pointmass(p) = &mut config.env {
+//! if let EnvConfig::Pointmass(p) = &mut config.env {
 //!     p.agents = 1;
 //! }
-//! config.grid = GridConfig {
-//!     position_cores: vec![-6.0, -1.0, 0.0, 1.0, 6.0],
-//!     velocity_cores: vec![-3.0, 0.0, 3.0],
-//!     heading_divisions: None,
-//!     cores: None,
-//!     membership: Default::default(),
-//! };
+//! let (pos, vel) = (vec![-6.0, -1.0, 0.0, 1.0, 6.0], vec![-3.0, 0.0, 3.0]);
+//! config.grid = GridConfig::explicit(vec![pos.clone(), pos, vel.clone(), vel]);
 //! let artifact = fuzzyq_sim::train::train(&config, |_| std::ops::ControlFlow::Continue(()))?;
 //! assert!(artifact.summary.converged);
-//! let policy = AnyPolicy::from_artifact(artifact)?;
-//! let (trajectory, metrics) =
-//!     fuzzyq_sim::run::rollout::rollout_any(&policy, &[-4.0, 3.0, 0.0, 0.0], 40, PolicyKind::Greedy)?;
+//! let policy = Policy::Fqi(FqiPolicy::from_artifact(artifact)?);
+//! let spec = RolloutSpec {
+//!     kind: PolicyKind::Greedy,
+//!     steps: 40,
+//!     plant: evaluate::PlantChoice::Model,
+//!     seed: 0,
+//! };
+//! let Outcome::PointMass { trajectory, metrics, .. } =
+//!     evaluate::run(&policy, &[-4.0, 3.0, 0.0, 0.0], &spec)?
+//! else {
+//!     unreachable!("a point-mass policy")
+//! };
 //! assert_eq!(trajectory.states.len(), 41);
 //! assert!(metrics.final_error_m[0] < 4.0);
 //! # Ok::<(), fuzzyq_sim::SimError>(())

@@ -5,7 +5,6 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
-use fuzzyq_core::NamedOption;
 use fuzzyq_sim::compare::{self, CompareConfig, Comparison, Event, Learner};
 use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::model::pointmass::Starts;

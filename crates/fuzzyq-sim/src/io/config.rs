@@ -312,7 +312,7 @@ pub struct SolverSettings {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<Kernel>,
     /// The iteration: `"values"` (default) interpolates the per-core maxima and keeps only
-    /// `V` (NOTES.md section 2; any grid size); `"q-values"` is Busoniu's fuzzy Q-iteration,
+    /// `V` (`docs/design.md`, section 2; any grid size); `"q-values"` is Busoniu's fuzzy Q-iteration,
     /// as the ApproxRL toolbox runs it, maximising interpolated Q-values with `theta` stored
     /// (`cores x joint actions` values; synchronous, no extrapolation; see
     /// [`fuzzyq_core::solver::solve_q`]).
@@ -671,7 +671,7 @@ mod tests {
 
     #[test]
     fn default_khepera_toml_round_trips() {
-        let c = TrainConfig::default_for("khepera").unwrap();
+        let c = TrainConfig::default_for(EnvKind::Khepera).unwrap();
         let EnvConfig::Khepera(k) = &c.env else {
             panic!("not khepera")
         };
@@ -681,7 +681,7 @@ mod tests {
         assert_eq!(cores[2].first(), Some(&-std::f64::consts::PI));
         assert_eq!(cores[2].last(), Some(&std::f64::consts::PI));
         assert_eq!(TrainConfig::from_toml(&c.to_toml()).unwrap(), c);
-        assert!(TrainConfig::default_for("boat").is_err());
+        assert!(EnvKind::parse("boat").is_err());
     }
 
     #[test]

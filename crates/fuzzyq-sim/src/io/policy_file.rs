@@ -549,8 +549,11 @@ fn to_toml<T: Serialize>(value: &T) -> Result<String, SimError> {
 
 #[cfg(test)]
 mod tests {
+    use std::ops::ControlFlow;
+
     use super::*;
     use crate::io::config::{GridConfig, TrainConfig};
+    use crate::learn::tasks::{khepera as kt, pointmass as pt};
 
     fn tiny() -> PolicyArtifact {
         let config = TrainConfig {
@@ -585,53 +588,227 @@ mod tests {
         }
     }
 
+    fn decode(bytes: &[u8]) -> Result<PolicyFile, PolicyFileError> {
+        PolicyFile::from_bytes(bytes, Path::new("p.fzq"))
+    }
+
     #[test]
     fn round_trips_and_refuses_damage() {
-        let a = tiny();
-        let bytes = a.to_bytes();
-        let p = Path::new("p.fzq");
-        assert_eq!(PolicyArtifact::from_bytes(&bytes, p).unwrap(), a);
+        let a = PolicyFile::Fqi(tiny());
+        let bytes = a.to_bytes().unwrap();
+        assert_eq!(decode(&bytes).unwrap(), a);
 
-        let e = PolicyArtifact::from_bytes(&bytes[..bytes.len() - 10], p).unwrap_err();
+        let e = decode(&bytes[..bytes.len() - 10]).unwrap_err();
         assert!(matches!(e, PolicyFileError::Truncated { .. }), "{e}");
-        let e = PolicyArtifact::from_bytes(&bytes[..5], p).unwrap_err();
+        let e = decode(&bytes[..5]).unwrap_err();
         assert!(matches!(e, PolicyFileError::Truncated { .. }), "{e}");
-        let e = PolicyArtifact::from_bytes(b"[env]\nkind = 1\n", p).unwrap_err();
+        let e = decode(b"[env]\nkind = 1\n").unwrap_err();
         assert!(matches!(e, PolicyFileError::NotAPolicy { .. }), "{e}");
-        let e = PolicyArtifact::from_bytes(b"", p).unwrap_err();
+        let e = decode(b"").unwrap_err();
+        assert!(matches!(e, PolicyFileError::NotAPolicy { .. }), "{e}");
+        let e = decode(&[0xff, 0xfe, 0x00]).unwrap_err();
         assert!(matches!(e, PolicyFileError::NotAPolicy { .. }), "{e}");
 
         let mut flipped = bytes.clone();
         let last = flipped.len() - 1;
         flipped[last] ^= 1;
-        let e = PolicyArtifact::from_bytes(&flipped, p).unwrap_err();
+        let e = decode(&flipped).unwrap_err();
         assert!(matches!(e, PolicyFileError::Checksum { .. }), "{e}");
 
-        let mut v2 = bytes.clone();
-        v2[8] = 2;
-        let e = PolicyArtifact::from_bytes(&v2, p).unwrap_err();
+        let mut v3 = bytes.clone();
+        v3[8] = 3;
+        let e = decode(&v3).unwrap_err();
         assert!(
-            matches!(e, PolicyFileError::Version { found: 2, .. }),
+            matches!(e, PolicyFileError::Version { found: 3, .. }),
             "{e}"
         );
+        assert!(e.to_string().contains("versions 1 to 2"), "{e}");
 
-        let mut bad = a.clone();
+        let mut bad = tiny();
         bad.greedy[0] = 625;
-        let e = PolicyArtifact::from_bytes(&bad.to_bytes(), p).unwrap_err();
+        let e = decode(&PolicyFile::Fqi(bad).to_bytes().unwrap()).unwrap_err();
         assert!(e.to_string().contains("out of range"), "{e}");
     }
 
+    /// Files of format version 1 (fuzzy Q-iteration only, no payload kind) still load.
     #[test]
-    fn save_is_atomic_and_loads() {
+    fn version_1_files_still_load() {
+        let a = tiny();
+        let payload = postcard::to_stdvec(&FqiPayload {
+            config_toml: a.config.to_toml(),
+            values: a.values.clone(),
+            greedy: a.greedy.clone(),
+            summary: a.summary.clone(),
+        })
+        .unwrap();
+        let mut v1 = Vec::new();
+        v1.extend_from_slice(&MAGIC);
+        v1.extend_from_slice(&1u32.to_le_bytes());
+        v1.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        v1.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+        v1.extend_from_slice(&payload);
+        assert_eq!(decode(&v1).unwrap(), PolicyFile::Fqi(a));
+        // Version 2 is the same payload behind its kind.
+        let v2 = PolicyFile::Fqi(tiny()).to_bytes().unwrap();
+        assert_eq!(&v2[..8], &MAGIC);
+        assert_eq!(v2[8], 2);
+        assert_eq!(v2[24], 0, "the payload kind of fuzzy Q-iteration");
+        assert_eq!(&v2[25..], &payload[..]);
+    }
+
+    #[test]
+    fn save_is_atomic_and_loads_through_a_pipe() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("policy.fzq");
-        let a = tiny();
+        let a = PolicyFile::Fqi(tiny());
         a.save(&path).unwrap();
-        assert_eq!(PolicyArtifact::load(&path).unwrap(), a);
+        assert_eq!(PolicyFile::load(&path).unwrap(), a);
         // Only the destination remains: no temporary files.
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
         let missing = dir.path().join("no/such/dir/p.fzq");
         assert!(a.save(&missing).is_err());
         assert!(!missing.exists());
+        let e = PolicyFile::load(&dir.path().join("missing.fzq")).unwrap_err();
+        assert!(e.to_string().contains("cannot read"), "{e}");
+        // The loader reads a file once: a FIFO (a policy fed through a pipe) works.
+        #[cfg(unix)]
+        {
+            let fifo = dir.path().join("fifo");
+            let status = std::process::Command::new("mkfifo").arg(&fifo).status();
+            if status.is_ok_and(|s| s.success()) {
+                let bytes = a.to_bytes().unwrap();
+                let writer = {
+                    let fifo = fifo.clone();
+                    std::thread::spawn(move || std::fs::write(fifo, bytes).unwrap())
+                };
+                assert_eq!(PolicyFile::load(&fifo).unwrap(), a);
+                writer.join().unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn point_mass_policy_files_round_trip_and_are_checked() {
+        let go = |_: &_| ControlFlow::Continue(());
+        let point_mass = |path: &Path| -> Result<PointMassPolicyFile, PolicyFileError> {
+            match PolicyFile::load(path)? {
+                PolicyFile::PointMass(f) => Ok(f),
+                other => panic!("not a point-mass file: {other:?}"),
+            }
+        };
+        let model = pt::tests::tiny_model();
+        let starts = pt::tests::tiny_starts();
+        let fql = FqlConfig {
+            episodes: 30,
+            ..pt::tests::tiny_fql()
+        };
+        let features = pt::feature_space(&model, &[-6.0, 0.0, 6.0], &[-3.0, 0.0, 3.0]).unwrap();
+        let out = pt::train_fql(&model, &features, &starts, &fql, go).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("pm.toml");
+        let file = PointMassPolicyFile::from_outcome(model.config(), &starts, &fql, None, &out);
+        PolicyFile::PointMass(file.clone()).save(&path).unwrap();
+        let back = point_mass(&path).unwrap();
+        assert_eq!(back, file);
+        assert_eq!(back.episodes, 30);
+
+        let vq = VqqlConfig {
+            cells: 20,
+            samples: 500,
+            explore_steps: 20,
+            ..VqqlConfig::default()
+        };
+        let (vout, _) = crate::learn::vqql::train_vqql(&model, &starts, &vq, &fql, go).unwrap();
+        let vfile =
+            PointMassPolicyFile::from_outcome(model.config(), &starts, &fql, Some(&vq), &vout);
+        let vpath = dir.path().join("vq.toml");
+        PolicyFile::PointMass(vfile.clone()).save(&vpath).unwrap();
+        let vback = point_mass(&vpath).unwrap();
+        assert_eq!(vback, vfile);
+        assert!(vback.q.features().is_codebook());
+        let (t1, _) =
+            pt::tests::rollout_additive(&model, &vback.q, &pt::tests::TINY_X0, 10, 0.95).unwrap();
+        let (t2, _) =
+            pt::tests::rollout_additive(&model, &vfile.q, &pt::tests::TINY_X0, 10, 0.95).unwrap();
+        assert_eq!(t1, t2);
+
+        // Inconsistent files name the problem and the file.
+        let load_err = |f: &PointMassPolicyFile| {
+            std::fs::write(&path, toml::to_string(f).unwrap()).unwrap();
+            point_mass(&path).unwrap_err().to_string()
+        };
+        let mut bad = file.clone();
+        bad.vqql = Some(vq.clone());
+        assert!(load_err(&bad).contains("needs codebook features"));
+        let mut bad = vfile.clone();
+        bad.vqql = None;
+        assert!(load_err(&bad).contains("quantiser settings"));
+        let mut bad = vfile.clone();
+        bad.vqql = Some(VqqlConfig { cells: 21, ..vq });
+        assert!(load_err(&bad).contains("vqql.cells = 21"));
+        let mut bad = file.clone();
+        bad.config.agents = 2;
+        assert!(load_err(&bad).contains("has 1 agents"));
+        let mut bad = file.clone();
+        bad.config.force_levels = vec![-1.0, 1.0];
+        assert!(load_err(&bad).contains("actions"));
+        let mut bad = file.clone();
+        bad.starts = Starts::Fixed(vec![0.0; 3]);
+        assert!(load_err(&bad).contains("starts.fixed"));
+        let mut bad = file.clone();
+        bad.fql.gamma = 2.0;
+        assert!(load_err(&bad).contains("fql.gamma"));
+        std::fs::write(&path, "not = [toml").unwrap();
+        let e = point_mass(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("pm.toml") && e.contains("not a fuzzyq policy"),
+            "{e}"
+        );
+        let e = point_mass(&dir.path().join("missing.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot read"), "{e}");
+    }
+
+    #[test]
+    fn khepera_policy_files_round_trip_and_are_checked() {
+        let config = crate::model::khepera::KheperaConfig::default();
+        let fql = FqlConfig {
+            episodes: 2,
+            max_steps: 5,
+            eval_every: 0,
+            ..kt::default_fql_config()
+        };
+        let out = kt::train_fql(&config, &fql, |_| ControlFlow::Continue(())).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fql.fzq");
+        let file = KheperaPolicyFile::from_outcome(&config, &fql, &out);
+        PolicyFile::Khepera(file.clone()).save(&path).unwrap();
+        assert_eq!(
+            PolicyFile::load(&path).unwrap(),
+            PolicyFile::Khepera(file.clone())
+        );
+        // The plain TOML of files written before version 2 still loads, and is checked.
+        let toml_path = dir.path().join("fql.toml");
+        std::fs::write(&toml_path, toml::to_string(&file).unwrap()).unwrap();
+        assert_eq!(
+            PolicyFile::load(&toml_path).unwrap(),
+            PolicyFile::Khepera(file.clone())
+        );
+        let mut other = file.clone();
+        other.config.sonar_levels = [0.4, 1.0];
+        std::fs::write(&toml_path, toml::to_string(&other).unwrap()).unwrap();
+        let err = PolicyFile::load(&toml_path).unwrap_err().to_string();
+        assert!(
+            err.contains("fql.toml") && err.contains("feature space"),
+            "{err}"
+        );
+        let err = PolicyFile::from_bytes(
+            &PolicyFile::Khepera(other).to_bytes().unwrap(),
+            Path::new("x.fzq"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("feature space"), "{err}");
     }
 }

@@ -27,7 +27,7 @@ pub struct Sample<'a> {
     pub terminal: bool,
 }
 
-/// The additive fuzzy Q-function of the project notes (section 2):
+/// The additive fuzzy Q-function (`docs/design.md`, section 2):
 /// `Q(x, u) = sum_i sum_d mu_d(obs_i) phi[i][d * M_i + u_i]`.
 ///
 /// Serialised with its feature space, action counts and parameters; deserialising validates
@@ -378,11 +378,11 @@ impl AdditiveQ {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// Two agents: agent 0 on cores [0, 1, 2] with 2 actions, agent 1 on cores [0, 1] with 3.
-    fn hand_q() -> AdditiveQ {
+    pub(crate) fn hand_q() -> AdditiveQ {
         let features =
             FeatureSpace::new(vec![vec![vec![0.0, 1.0, 2.0]], vec![vec![0.0, 1.0]]]).unwrap();
         AdditiveQ::from_params(
@@ -396,7 +396,7 @@ mod tests {
         .unwrap()
     }
 
-    fn close(a: f64, b: f64) -> bool {
+    pub(crate) fn close(a: f64, b: f64) -> bool {
         (a - b).abs() <= 1e-12
     }
 

@@ -6,7 +6,7 @@
 //! an [`Environment`]: episodes that start with [`reset`](Environment::reset), observations per
 //! agent and one discrete action per agent per step.
 //!
-//! # Parameter layout (project notes, section 2, `additive`)
+//! # Parameter layout (`additive`; `docs/design.md`, section 2)
 //! Agent `i` observes a vector `obs_i(x)` of `E_i` continuous values, fuzzified by its own
 //! product of triangular partitions with `N_i` cores (a [`FeatureSpace`]), and has `M_i`
 //! discrete actions. Its parameters `phi[i]` are one flat table of `N_i * M_i` values, row-major
@@ -24,7 +24,7 @@
 //! contraction guarantee (unlike the `joint` layout of fuzzy Q-iteration); it is trained by the
 //! sample updates below, starting from `phi = 0` (eq 23).
 //!
-//! # The corrected update ([`Update::Corrected`], the default; notes, section 3)
+//! # The corrected update ([`Update::Corrected`], the default; `docs/design.md`, section 3)
 //! Semi-gradient Q-learning with the memberships as features. After the transition
 //! `(x_k, u_k) -> (r_{k+1}, x_{k+1})`:
 //!
@@ -877,6 +877,8 @@ pub fn write_curve_csv(curve: &[EpisodeRecord], mut w: impl Write) -> std::io::R
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::learn::additive::tests::{close, hand_q};
+    use crate::learn::codebook::Codebook;
 
     const STEP: f64 = 0.1;
     const GOAL: f64 = 0.95;

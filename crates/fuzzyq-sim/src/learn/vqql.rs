@@ -36,7 +36,7 @@
 //! [`crate::learn::fql::learn`] on [`FeatureSpace::codebook`] features: an observation activates the one cell
 //! of its nearest centroid with membership 1, so the corrected update
 //! `phi[i][j * M + u_i] += alpha * delta` is exactly tabular Q-learning on the cells (with the
-//! additive, decentralised joint value of the project notes, section 2, as for fuzzy
+//! additive, decentralised joint value of `docs/design.md`, section 2, as for fuzzy
 //! Q-learning). The literal update is available too, as for fuzzy features.
 //!
 //! # Parameter count
@@ -785,8 +785,8 @@ mod tests {
         // The default matches the paper's fuzzy layout parameter for parameter.
         let fuzzy = crate::learn::tasks::pointmass::feature_space(
             &model,
-            &crate::learn::tasks::pointmass::PAPER_POSITION_CORES,
-            &crate::learn::tasks::pointmass::PAPER_VELOCITY_CORES,
+            &crate::paper::POSITION_CORES,
+            &crate::paper::VELOCITY_CORES,
         )
         .unwrap();
         assert_eq!(fuzzy.n_cores(0), Some(VqqlConfig::default().cells));

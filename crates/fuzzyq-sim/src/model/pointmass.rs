@@ -25,7 +25,6 @@
 
 use std::sync::Arc;
 
-use fuzzyq_core::Model;
 use fuzzyq_core::solver::Precision;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -553,6 +552,8 @@ crate::impl_model!(PointMass);
 
 #[cfg(test)]
 mod tests {
+    use fuzzyq_core::Model;
+
     use super::*;
 
     #[test]

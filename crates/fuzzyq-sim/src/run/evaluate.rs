@@ -275,3 +275,352 @@ pub fn lattice(model: &EnvModel, per_dim: usize) -> Result<Vec<Vec<f64>>, SimErr
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use fuzzyq_core::q::PolicyKind;
+
+    use super::*;
+    use crate::error::SimError;
+    use crate::io::config::{EnvConfig, GridConfig, TrainConfig};
+    use crate::learn::additive::AdditiveQ;
+    use crate::learn::codebook::Codebook;
+    use crate::learn::features::FeatureSpace;
+    use crate::learn::tasks::khepera::feature_space;
+    use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS, random_starts};
+    use crate::model::pointmass::{PointMass, PointMassConfig};
+    use crate::run::metrics::RolloutMetrics;
+    use crate::run::policy::{AdditivePolicy, FqiPolicy};
+
+    fn one_agent() -> PointMass {
+        PointMass::new(PointMassConfig {
+            agents: 1,
+            ..PointMassConfig::default()
+        })
+        .unwrap()
+    }
+
+    fn spec(steps: usize) -> RolloutSpec {
+        RolloutSpec {
+            kind: PolicyKind::Greedy,
+            steps,
+            plant: PlantChoice::Model,
+            seed: 0,
+        }
+    }
+
+    /// The greedy rollout of an additive `q` on the point masses of `model`.
+    fn rollout_additive(
+        model: &PointMass,
+        q: &AdditiveQ,
+        x0: &[f64],
+        steps: usize,
+        gamma: f64,
+    ) -> Result<(Trajectory, RolloutMetrics), SimError> {
+        let policy = Policy::Additive(AdditivePolicy::point_masses(
+            model.clone(),
+            q.clone(),
+            gamma,
+        )?);
+        match run(&policy, x0, &spec(steps))? {
+            Outcome::PointMass {
+                trajectory,
+                metrics,
+                ..
+            } => Ok((trajectory, metrics)),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// Cores `[-6, 0, 6]` for positions and `[-3, 0, 3]` for velocities (81 cores): action 0
+    /// `(-2, -2)` is worth 1 at the cores with `s_x = 6`, action 24 `(2, 2)` is worth 0.8 at
+    /// the cores with `s_x = 0`, everything else 0.
+    fn hand_q() -> AdditiveQ {
+        let p = vec![-6.0, 0.0, 6.0];
+        let v = vec![-3.0, 0.0, 3.0];
+        let features = FeatureSpace::new(vec![vec![p.clone(), p, v.clone(), v]]).unwrap();
+        let mut phi = vec![0.0; 81 * 25];
+        for d in 0..81 {
+            // Row-major: s_x is the slowest index (stride 27).
+            match d / 27 {
+                2 => phi[d * 25] = 1.0,
+                1 => phi[d * 25 + 24] = 0.8,
+                _ => {}
+            }
+        }
+        AdditiveQ::from_params(features, vec![25], vec![phi]).unwrap()
+    }
+
+    #[test]
+    fn rollout_additive_takes_the_hand_computed_greedy_actions() {
+        let model = one_agent();
+        let q = hand_q();
+        // s_x = 3: memberships 1/2 at s_x = 0 and 6, so Q = (0.5, ..., 0.4): action 0.
+        let (t, m) = rollout_additive(&model, &q, &[3.0, 1.0, 0.5, 0.0], 3, 0.9).unwrap();
+        assert_eq!(t.actions[0], [-2.0, -2.0]);
+        assert!((m.value_x0 - 0.5).abs() < 1e-12);
+        let mut next = [0.0; 4];
+        model.step_f64(&[3.0, 1.0, 0.5, 0.0], &[-2.0, -2.0], &mut next);
+        assert_eq!(t.states[1], next);
+        assert_eq!(
+            (t.states.len(), t.actions.len(), t.rewards.len()),
+            (4, 3, 3)
+        );
+        assert_eq!(m.policy_kind, PolicyKind::Greedy);
+        assert_eq!(m.steps, 3);
+        // s_x = 1: memberships 5/6 at s_x = 0, 1/6 at 6: Q(0) = 1/6 < Q(24) = 2/3: action 24.
+        let (t, m) = rollout_additive(&model, &q, &[1.0, 0.0, 0.0, 0.0], 1, 0.9).unwrap();
+        assert_eq!(t.actions[0], [2.0, 2.0]);
+        assert!((m.value_x0 - 0.8 * 5.0 / 6.0).abs() < 1e-12);
+        // s_x = -6: only cores with s_x = -6 are active, every value is 0 and the lowest index
+        // wins: action 0.
+        let (t, _) = rollout_additive(&model, &q, &[-6.0, 0.0, 0.0, 0.0], 1, 0.9).unwrap();
+        assert_eq!(t.actions[0], [-2.0, -2.0]);
+    }
+
+    #[test]
+    fn rollout_additive_runs_codebook_policies_and_checks_its_inputs() {
+        let model = one_agent();
+        let book = Codebook::new(
+            vec![vec![2.0, 0.0, 0.0, 0.0], vec![-2.0, 0.0, 0.0, 0.0]],
+            vec![1.0; 4],
+        )
+        .unwrap();
+        let features = FeatureSpace::codebook(vec![book]).unwrap();
+        let mut phi = vec![0.0; 2 * 25];
+        phi[7] = 1.0; // cell 0: (-0.2, 0)
+        phi[25 + 22] = 2.0; // cell 1: (2, 0) = (levels[4], levels[2])
+        let q = AdditiveQ::from_params(features, vec![25], vec![phi]).unwrap();
+        let (t, m) = rollout_additive(&model, &q, &[0.5, 0.0, 0.0, 0.0], 1, 0.9).unwrap();
+        assert_eq!(t.actions[0], [-0.2, 0.0]);
+        assert_eq!(m.value_x0, 1.0);
+        let (t, m) = rollout_additive(&model, &q, &[-0.5, 0.0, 0.0, 0.0], 1, 0.9).unwrap();
+        assert_eq!(t.actions[0], [2.0, 0.0]);
+        assert_eq!(m.value_x0, 2.0);
+
+        // Mismatches are errors.
+        let err = |r: Result<(Trajectory, RolloutMetrics), SimError>| {
+            r.expect_err("expected an error").to_string()
+        };
+        let two = PointMass::paper();
+        assert!(err(rollout_additive(&two, &q, &[0.0; 8], 1, 0.9)).contains("has 1 agents"));
+        let nine = PointMass::new(PointMassConfig {
+            agents: 1,
+            force_levels: vec![-1.0, 0.0, 1.0],
+            ..PointMassConfig::default()
+        })
+        .unwrap();
+        assert!(err(rollout_additive(&nine, &q, &[0.0; 4], 1, 0.9)).contains("25 actions"));
+        let wide = FeatureSpace::new(vec![vec![vec![0.0, 1.0]; 3]]).unwrap();
+        let q3 = AdditiveQ::new(wide, vec![25]).unwrap();
+        assert!(err(rollout_additive(&model, &q3, &[0.0; 4], 1, 0.9)).contains("observes 3"));
+        assert!(err(rollout_additive(&model, &q, &[0.0; 3], 1, 0.9)).starts_with("x0:"));
+        assert!(
+            err(rollout_additive(
+                &model,
+                &q,
+                &[f64::NAN, 0.0, 0.0, 0.0],
+                1,
+                0.9
+            ))
+            .starts_with("x0:")
+        );
+        assert!(err(rollout_additive(&model, &q, &[0.0; 4], 1, f64::NAN)).starts_with("gamma:"));
+        let (t, _) = rollout_additive(&model, &q, &[0.0; 4], 0, 0.9).unwrap();
+        assert_eq!(t.states.len(), 1);
+    }
+
+    fn fqi(config: &TrainConfig) -> Policy {
+        let a = crate::train::train(config, |_| std::ops::ControlFlow::Continue(())).unwrap();
+        Policy::Fqi(FqiPolicy::from_artifact(a).unwrap())
+    }
+
+    fn dcmotor() -> Policy {
+        let mut c =
+            TrainConfig::from_preset(crate::model::EnvKind::Dcmotor, "toolbox-demo").unwrap();
+        c.solver.precision = fuzzyq_core::solver::Precision::F64;
+        fqi(&c)
+    }
+
+    fn classic(
+        policy: &Policy,
+        x0: &[f64],
+        steps: usize,
+        kind: PolicyKind,
+    ) -> (Trajectory, RunSummary) {
+        let spec = RolloutSpec {
+            kind,
+            ..spec(steps)
+        };
+        match run(policy, x0, &spec).unwrap() {
+            Outcome::Classic {
+                trajectory,
+                summary,
+            } => (trajectory, summary),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn returns_are_discounted_sums_and_the_motor_is_brought_to_rest() {
+        let p = dcmotor();
+        let (t, s) = classic(&p, &[-1.0, 0.0], 400, PolicyKind::Interpolated);
+        assert_eq!(t.states.len(), 401);
+        let g: f64 = 0.98;
+        let manual: f64 = t
+            .rewards
+            .iter()
+            .enumerate()
+            .map(|(k, r)| g.powi(k as i32) * r)
+            .sum();
+        assert!((manual - s.discounted_return).abs() <= 1e-9 * manual.abs());
+        assert!(s.final_state[0].abs() < 0.05, "{:?}", s.final_state);
+        assert!(s.discounted_return < 0.0 && s.value_x0 < 0.0);
+        assert!(run(&p, &[0.0], &spec(10)).is_err());
+        assert!(run(&p, &[4.0, 0.0], &spec(10)).is_err());
+    }
+
+    #[test]
+    fn monte_carlo_averages_over_a_lattice() {
+        let p = dcmotor();
+        let starts = lattice(p.model().unwrap(), 3).unwrap();
+        assert_eq!(starts.len(), 9);
+        assert_eq!(
+            starts[0],
+            vec![-std::f64::consts::PI, -16.0 * std::f64::consts::PI]
+        );
+        assert_eq!(starts[1][0], starts[0][0]);
+        let mc = monte_carlo(&p, &starts, 100, PolicyKind::Greedy).unwrap();
+        assert_eq!(mc.runs.len(), 9);
+        let mean = mc.runs.iter().map(|r| r.discounted_return).sum::<f64>() / 9.0;
+        assert!((mean - mc.mean_return).abs() < 1e-9);
+        assert!(mc.min_return <= mc.mean_return && mc.mean_return <= mc.max_return);
+        // Each run equals the single run from its start.
+        let (_, one) = classic(&p, &starts[4], 100, PolicyKind::Greedy);
+        assert_eq!(mc.runs[4], one);
+        assert!(lattice(p.model().unwrap(), 1).is_err());
+        assert!(monte_carlo(&p, &[], 10, PolicyKind::Greedy).is_err());
+    }
+
+    #[test]
+    fn the_rapier_plant_equals_the_model_without_contacts() {
+        let mut config = TrainConfig::default();
+        if let EnvConfig::Pointmass(p) = &mut config.env {
+            p.agents = 1;
+        }
+        let (pos, vel) = (vec![-6.0, -1.0, 0.0, 1.0, 6.0], vec![-3.0, 0.0, 3.0]);
+        config.grid = GridConfig::explicit(vec![pos.clone(), pos, vel.clone(), vel]);
+        for precision in [
+            fuzzyq_core::solver::Precision::F32,
+            fuzzyq_core::solver::Precision::F64,
+        ] {
+            config.solver.precision = precision;
+            let p = fqi(&config);
+            let x0 = [-4.0, 3.0, 0.0, 0.0];
+            let Outcome::PointMass {
+                trajectory: a,
+                metrics: ma,
+                collisions: none,
+            } = run(&p, &x0, &spec(40)).unwrap()
+            else {
+                panic!("point masses")
+            };
+            assert!(none.is_none());
+            let rapier = RolloutSpec {
+                plant: PlantChoice::Rapier(PointMassPlantConfig::default()),
+                ..spec(40)
+            };
+            let Outcome::PointMass {
+                trajectory: b,
+                metrics: mb,
+                collisions: Some(col),
+            } = run(&p, &x0, &rapier).unwrap()
+            else {
+                panic!("point masses on the rapier plant")
+            };
+            assert_eq!(col.total, 0);
+            assert_eq!(a.actions, b.actions);
+            for (x, y) in a.states.iter().zip(&b.states) {
+                for (p, q) in x.iter().zip(y) {
+                    assert!((p - q).abs() < 1e-9, "{x:?} vs {y:?}");
+                }
+            }
+            assert_eq!(ma.reach_step, mb.reach_step);
+            assert!((ma.discounted_return - mb.discounted_return).abs() < 1e-12);
+            // Many starts: each run equals the single run from its start.
+            let starts = vec![x0.to_vec(), vec![3.0, -2.0, 0.0, 0.0]];
+            let all = point_mass_starts(&p, &starts, 40, PolicyKind::Greedy).unwrap();
+            assert_eq!(all[0], ma);
+        }
+    }
+
+    /// The robots' greedy policy of a learned `q` on their plant.
+    fn robots(q: &AdditiveQ, config: &KheperaConfig, gamma: f64) -> Result<Policy, SimError> {
+        let model = KheperaModel::new(config.clone())?;
+        Ok(Policy::Additive(AdditivePolicy::robots(
+            model,
+            q.clone(),
+            gamma,
+        )?))
+    }
+
+    fn robot_run(
+        policy: &Policy,
+        start: &[[f64; 3]],
+        steps: usize,
+        seed: u64,
+    ) -> (KheperaRun, KheperaMetrics) {
+        let flat: Vec<f64> = start.iter().flatten().copied().collect();
+        let spec = RolloutSpec {
+            seed,
+            ..spec(steps)
+        };
+        match run(policy, &flat, &spec).unwrap() {
+            Outcome::Khepera { run, metrics } => (run, metrics),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn rollout_returns_every_pose_and_matches_success_over_starts() {
+        let config = KheperaConfig::default();
+        let features = feature_space(&config).unwrap();
+        let q = AdditiveQ::new(features, vec![N_ACTIONS; 2]).unwrap();
+        let start = [[-4.0, 5.0, 0.0], [5.0, 3.0, 0.0]];
+        let policy = robots(&q, &config, 0.96).unwrap();
+        let (run, m) = robot_run(&policy, &start, 30, 0);
+        assert_eq!(run.poses.len(), 31);
+        assert_eq!(run.trajectory.states.len(), 31);
+        assert_eq!(run.trajectory.actions.len(), 30);
+        assert_eq!(run.sonar.len(), 31);
+        assert_eq!(run.action_indices.len(), 30);
+        // phi = 0: every robot takes action 0 (forward) on the tie.
+        assert!(run.action_indices.iter().flatten().all(|&a| a == 0));
+        assert_eq!(run.poses[0], start.to_vec());
+        let d = config.forward_speed * config.sample_time * 30.0;
+        assert!(
+            (run.poses[30][0][0] - (-4.0 + d)).abs() < 1e-6,
+            "{:?}",
+            run.poses[30]
+        );
+        assert_eq!(m.rollout.steps, 30);
+        assert_eq!(m.rollout.value_x0, 0.0);
+        assert!(!m.success);
+
+        let (report, all) = khepera_starts(&policy, 3, 7, 20, PolicyKind::Greedy).unwrap();
+        assert_eq!(report.starts, 3);
+        assert_eq!(all.len(), 3);
+        let starts = random_starts(&config, 3, 7).unwrap();
+        let (_, m1) = robot_run(&policy, &starts[1], 20, 8);
+        assert_eq!(all[1], m1);
+
+        // A Q-function of another configuration is refused.
+        let other = KheperaConfig {
+            distance_edges: [0.3, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0],
+            ..KheperaConfig::default()
+        };
+        assert!(robots(&q, &other, 0.96).is_err());
+        // A learned policy acts greedily only.
+        assert!(policy.controller(PolicyKind::Interpolated).is_err());
+    }
+}

@@ -24,7 +24,10 @@ use crate::io::policy_file::{
     KheperaPolicyFile, PointMassPolicyFile, PolicyArtifact, PolicyFile, Values,
 };
 use crate::learn::additive::AdditiveQ;
-use crate::learn::tasks::khepera::observation;
+use crate::learn::tasks::khepera::{self as khepera_task, observation};
+use crate::learn::tasks::pointmass as pointmass_task;
+use crate::model::khepera::KheperaModel;
+use crate::model::pointmass::PointMass;
 use crate::model::{ActionTable, EnvKind, EnvModel, F64Model, Wide};
 use crate::run::plant::Observation;
 use crate::run::rollout::Controller;
@@ -515,26 +518,43 @@ pub struct AdditivePolicy {
 }
 
 impl AdditivePolicy {
-    /// The policy of a point-mass policy file (fuzzy Q-learning or VQQL).
-    pub fn point_masses(file: PointMassPolicyFile) -> Result<Self, SimError> {
-        let model = file.validate()?;
+    /// A Q-function learned on the point masses of `model` (each agent observing its own
+    /// `(s_x, s_y, v_x, v_y)`), with the learning discount `gamma` (for the returns).
+    pub fn point_masses(model: PointMass, q: AdditiveQ, gamma: f64) -> Result<Self, SimError> {
+        pointmass_task::check_q(&model, &q)?;
+        Self::with(EnvModel::PointMass(model), q, gamma, Observe::OwnState)
+    }
+
+    /// A Q-function learned on the robots of `model` (each observing its sonars and the goal).
+    pub fn robots(model: KheperaModel, q: AdditiveQ, gamma: f64) -> Result<Self, SimError> {
+        khepera_task::check_q(&q, model.config())?;
+        Self::with(EnvModel::Khepera(model), q, gamma, Observe::Sensors)
+    }
+
+    fn with(model: EnvModel, q: AdditiveQ, gamma: f64, observe: Observe) -> Result<Self, SimError> {
+        if !(0.0..=1.0).contains(&gamma) {
+            return Err(
+                ConfigError::invalid("gamma", format!("must be in [0, 1], got {gamma}")).into(),
+            );
+        }
         Ok(Self {
-            model: EnvModel::PointMass(model),
-            gamma: file.fql.gamma,
-            q: file.q,
-            observe: Observe::OwnState,
+            model,
+            q,
+            gamma,
+            observe,
         })
     }
 
+    /// The policy of a point-mass policy file (fuzzy Q-learning or VQQL).
+    pub fn from_point_mass_file(file: PointMassPolicyFile) -> Result<Self, SimError> {
+        let model = file.validate()?;
+        Self::point_masses(model, file.q, file.fql.gamma)
+    }
+
     /// The policy of a Khepera fuzzy Q-learning policy file.
-    pub fn robots(file: KheperaPolicyFile) -> Result<Self, SimError> {
-        let model = crate::model::khepera::KheperaModel::new(file.config)?;
-        Ok(Self {
-            model: EnvModel::Khepera(model),
-            gamma: file.fql.gamma,
-            q: file.q,
-            observe: Observe::Sensors,
-        })
+    pub fn from_khepera_file(file: KheperaPolicyFile) -> Result<Self, SimError> {
+        let model = KheperaModel::new(file.config)?;
+        Self::robots(model, file.q, file.fql.gamma)
     }
 
     /// The learned Q-function.
@@ -645,8 +665,8 @@ impl Policy {
     pub fn from_file(file: PolicyFile) -> Result<Self, SimError> {
         Ok(match file {
             PolicyFile::Fqi(a) => Self::Fqi(FqiPolicy::from_artifact(a)?),
-            PolicyFile::PointMass(f) => Self::Additive(AdditivePolicy::point_masses(f)?),
-            PolicyFile::Khepera(f) => Self::Additive(AdditivePolicy::robots(f)?),
+            PolicyFile::PointMass(f) => Self::Additive(AdditivePolicy::from_point_mass_file(f)?),
+            PolicyFile::Khepera(f) => Self::Additive(AdditivePolicy::from_khepera_file(f)?),
         })
     }
 

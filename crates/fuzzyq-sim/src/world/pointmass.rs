@@ -287,10 +287,10 @@ impl PointMassPlant {
 /// collisions.
 #[cfg(test)]
 mod tests {
-    use std::f64::consts::PI;
 
     use super::*;
-    use crate::run::rollout::PAPER_X0;
+    use crate::paper::X0 as PAPER_X0;
+    use crate::world::ContactKind;
 
     fn paper_plant() -> (PointMass, PointMassPlant) {
         let model = PointMass::paper();

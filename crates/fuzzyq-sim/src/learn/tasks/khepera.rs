@@ -5,7 +5,7 @@
 //! Fuzzy Q-iteration ([`crate::train`]) learns the Khepera task on the joint pose with the
 //! kinematic model. Here each robot learns from what it senses instead, as the paper's robots
 //! do: no model, the plant's contacts and (optionally noisy) sonars, and the additive,
-//! decentralised layout of [`crate::learn::fql`] (project notes, section 2).
+//! decentralised layout of [`crate::learn::fql`] (`docs/design.md`, section 2).
 //!
 //! # Observations ([`observation`], [`observation_cores`])
 //! Robot `i` observes `E = S + 2` continuous values: its `S` sonar readings (5 by default, in
@@ -49,23 +49,22 @@
 //! - Optional [`Shaping`] (off by default and off in [`train_fql`]): a potential-based term
 //!   for diagnosis, never part of the paper's reward.
 //!
-//! # Rollouts
-//! [`rollout_fql`] runs the greedy decentralised policy (each robot the argmax of its own term,
-//! lowest index on ties) on the plant and reports it exactly as
-//! [`crate::run::robots::rollout_khepera`] reports a fuzzy Q-iteration policy: the paper's 8-D state
+//! # Acting
+//! A learned Q-function acts through `run::policy::AdditivePolicy` (each robot the argmax of
+//! its own term at its own observation, lowest index on ties) on the robot plant, and is
+//! measured exactly as a fuzzy Q-iteration policy is (`run::evaluate`): the paper's 8-D state
 //! with the measured velocities, rewards `rho(x_k)` of the state before each action, the same
 //! metrics and success rule (final 8-D state in the region, no collision during the run).
 //! Unlike a learning episode, a rollout does not stop at the region.
 //!
 //! ```no_run
+//! use fuzzyq_sim::learn::tasks::khepera::{default_fql_config, train_fql};
 //! use fuzzyq_sim::model::khepera::KheperaConfig;
-//! use fuzzyq_sim::learn::tasks::khepera::{default_fql_config, fql_success_over_starts, train_fql};
 //!
 //! let config = KheperaConfig::default();
 //! let fql = default_fql_config();
 //! let outcome = train_fql(&config, &fql, |_| std::ops::ControlFlow::Continue(()))?;
-//! let (report, _) = fql_success_over_starts(&outcome.q, &config, 100, 7, 500, fql.gamma)?;
-//! println!("success {}", report.success_rate);
+//! println!("{} episodes", outcome.curve.len());
 //! # Ok::<(), fuzzyq_sim::SimError>(())
 //! ```
 
@@ -750,74 +749,5 @@ mod tests {
         assert!(shaped.q.params().iter().flatten().all(|v| v.is_finite()));
         assert!(shaped.q.params().iter().flatten().any(|v| *v != 0.0));
         assert!(shaped.curve.iter().all(|r| r.max_abs_td > 0.0));
-
-        // The policy file round-trips and rejects a mismatched configuration.
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("fql.toml");
-        let file = FqlPolicyFile::from_outcome(&config, &fql, &out);
-        file.save(&path).unwrap();
-        let back = FqlPolicyFile::load(&path).unwrap();
-        assert_eq!(back, file);
-        let mut other = file.clone();
-        other.config.sonar_levels = [0.4, 1.0];
-        std::fs::write(&path, other.to_toml().unwrap()).unwrap();
-        let err = FqlPolicyFile::load(&path).unwrap_err().to_string();
-        assert!(
-            err.contains("fql.toml") && err.contains("feature space"),
-            "{err}"
-        );
-        std::fs::write(&path, "not = [toml").unwrap();
-        let err = FqlPolicyFile::load(&path).unwrap_err().to_string();
-        assert!(
-            err.contains("fql.toml") && err.contains("malformed"),
-            "{err}"
-        );
-        let err = FqlPolicyFile::load(&dir.path().join("missing.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(
-            err.contains("cannot read") && err.contains("missing.toml"),
-            "{err}"
-        );
-    }
-
-    #[test]
-    fn rollout_returns_every_pose_and_matches_success_over_starts() {
-        let config = KheperaConfig::default();
-        let features = feature_space(&config).unwrap();
-        let q = AdditiveQ::new(features, vec![N_ACTIONS; 2]).unwrap();
-        let start = [[-4.0, 5.0, 0.0], [5.0, 3.0, 0.0]];
-        let (run, m) = rollout_fql(&q, &config, &start, 30, 0, 0.96).unwrap();
-        assert_eq!(run.poses.len(), 31);
-        assert_eq!(run.trajectory.states.len(), 31);
-        assert_eq!(run.trajectory.actions.len(), 30);
-        assert_eq!(run.sonar.len(), 31);
-        assert_eq!(run.action_indices.len(), 30);
-        // phi = 0: every robot takes action 0 (forward) on the tie.
-        assert!(run.action_indices.iter().flatten().all(|&a| a == 0));
-        assert_eq!(run.poses[0], start.to_vec());
-        let d = config.forward_speed * config.sample_time * 30.0;
-        assert!(
-            (run.poses[30][0][0] - (-4.0 + d)).abs() < 1e-6,
-            "{:?}",
-            run.poses[30]
-        );
-        assert_eq!(m.rollout.steps, 30);
-        assert_eq!(m.rollout.value_x0, 0.0);
-        assert!(!m.success);
-
-        let (report, all) = fql_success_over_starts(&q, &config, 3, 7, 20, 0.96).unwrap();
-        assert_eq!(report.starts, 3);
-        assert_eq!(all.len(), 3);
-        let starts = random_starts(&config, 3, 7).unwrap();
-        let (_, m1) = rollout_fql(&q, &config, &starts[1], 20, 8, 0.96).unwrap();
-        assert_eq!(all[1], m1);
-
-        // A Q-function of another configuration is refused.
-        let other = KheperaConfig {
-            distance_edges: [0.3, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0],
-            ..KheperaConfig::default()
-        };
-        assert!(rollout_fql(&q, &other, &start, 5, 0, 0.96).is_err());
     }
 }

@@ -20,34 +20,28 @@
 //!   `[-p, p]^2` and velocity uniform in `[-v, v]^2`, drawn from the learner's generator.
 //!
 //! # Features ([`feature_space`])
-//! The additive layout of the project notes (section 2): per agent, the product partition of
-//! its own `(s_x, s_y, v_x, v_y)` on the given position and velocity cores. With the paper's
-//! cores ([`PAPER_POSITION_CORES`], [`PAPER_VELOCITY_CORES`]) that is `9 * 9 * 5 * 5 = 2025`
-//! cores and, with 25 actions, the paper's "50625 pairs per agent".
+//! The additive layout (`docs/design.md`, "Two parameter layouts"): per agent, the product
+//! partition of its own `(s_x, s_y, v_x, v_y)` on the given position and velocity cores. With
+//! the paper's cores ([`crate::paper::POSITION_CORES`], [`crate::paper::VELOCITY_CORES`]) that
+//! is `9 * 9 * 5 * 5 = 2025` cores and, with 25 actions, the paper's "50625 pairs per agent".
 //!
 //! The crisp baseline of Table 1 (VQQL) runs on the same environment with codebook features
-//! ([`crate::learn::vqql`]); every learned Q-function rolls out with
-//! [`rollout_additive`](crate::run::rollout::rollout_additive) and is saved as a
-//! [`PointMassPolicyFile`].
+//! ([`crate::learn::vqql`]). [`crate::train::learn_from_samples`] trains either on a
+//! configuration; every learned Q-function acts through
+//! `run::policy::AdditivePolicy` and is saved as an `io::policy_file::PointMassPolicyFile`.
 //!
 //! ```no_run
 //! use fuzzyq_sim::PointMass;
-//! use fuzzyq_sim::learn::tasks::pointmass::{self, Starts, TABLE1_X0};
+//! use fuzzyq_sim::learn::tasks::pointmass as task;
+//! use fuzzyq_sim::paper;
 //!
 //! let model = PointMass::paper();
-//! let features = pointmass_fql::feature_space(
-//!     &model,
-//!     &pointmass_fql::PAPER_POSITION_CORES,
-//!     &pointmass_fql::PAPER_VELOCITY_CORES,
-//! )?;
-//! let starts = Starts::Uniform { position: 6.0, velocity: 0.0 };
-//! let fql = pointmass_fql::default_fql_config();
-//! let outcome = pointmass_fql::train_fql(&model, &features, &starts, &fql, |_| {
+//! let features = task::feature_space(&model, &paper::POSITION_CORES, &paper::VELOCITY_CORES)?;
+//! let fql = task::default_fql_config();
+//! let outcome = task::train_fql(&model, &features, &task::default_starts(), &fql, |_| {
 //!     std::ops::ControlFlow::Continue(())
 //! })?;
-//! let (_, metrics) =
-//!     fuzzyq_sim::run::rollout::rollout_additive(&model, &outcome.q, &TABLE1_X0, 100, fql.gamma)?;
-//! println!("final errors {:?}", metrics.final_error_m);
+//! println!("{} episodes", outcome.curve.len());
 //! # Ok::<(), fuzzyq_sim::SimError>(())
 //! ```
 
@@ -55,9 +49,7 @@ use std::ops::ControlFlow;
 
 use fuzzyq_core::Model;
 use fuzzyq_core::partition::Partition;
-use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
-use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError};
 use crate::learn::fql::{
@@ -338,10 +330,46 @@ pub fn train_fql(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
+    use rand::SeedableRng;
+    use serde::{Deserialize, Serialize};
+
     use super::*;
     use crate::learn::vqql::{self, VqqlConfig};
-    use crate::run::rollout::rollout_additive;
+    use crate::model::pointmass::{PointMassConfig, random_starts};
+    use crate::paper::{POSITION_CORES, TABLE1_X0, VELOCITY_CORES};
+    use crate::run::evaluate::{self, Outcome, RolloutSpec};
+    use crate::run::metrics::{RolloutMetrics, Trajectory};
+    use crate::run::policy::{AdditivePolicy, Policy};
+
+    /// The greedy rollout of `q` on the model (the one rollout path).
+    pub(crate) fn rollout_additive(
+        model: &PointMass,
+        q: &AdditiveQ,
+        x0: &[f64],
+        steps: usize,
+        gamma: f64,
+    ) -> Result<(Trajectory, RolloutMetrics), SimError> {
+        let policy = Policy::Additive(AdditivePolicy::point_masses(
+            model.clone(),
+            q.clone(),
+            gamma,
+        )?);
+        let spec = RolloutSpec {
+            kind: fuzzyq_core::q::PolicyKind::Greedy,
+            steps,
+            plant: evaluate::PlantChoice::Model,
+            seed: 0,
+        };
+        match evaluate::run(&policy, x0, &spec)? {
+            Outcome::PointMass {
+                trajectory,
+                metrics,
+                ..
+            } => Ok((trajectory, metrics)),
+            _ => unreachable!("a point-mass policy"),
+        }
+    }
 
     fn continue_all(_: &EpisodeRecord) -> ControlFlow<()> {
         ControlFlow::Continue(())
@@ -349,7 +377,7 @@ mod tests {
 
     /// One agent, forces `{-2, 0, 2}` per axis (9 actions), a goal ball of radius 1 in its
     /// 4-D state.
-    fn tiny_model() -> PointMass {
+    pub(crate) fn tiny_model() -> PointMass {
         PointMass::new(PointMassConfig {
             agents: 1,
             force_levels: vec![-2.0, 0.0, 2.0],
@@ -359,14 +387,14 @@ mod tests {
         .unwrap()
     }
 
-    fn tiny_starts() -> Starts {
+    pub(crate) fn tiny_starts() -> Starts {
         Starts::Uniform {
             position: 3.0,
             velocity: 0.0,
         }
     }
 
-    fn tiny_fql() -> FqlConfig {
+    pub(crate) fn tiny_fql() -> FqlConfig {
         FqlConfig {
             gamma: 0.95,
             episodes: 1500,
@@ -382,7 +410,7 @@ mod tests {
         }
     }
 
-    const TINY_X0: [f64; 4] = [-3.0, 2.0, 0.0, 0.0];
+    pub(crate) const TINY_X0: [f64; 4] = [-3.0, 2.0, 0.0, 0.0];
 
     /// Rolls the greedy policy out from [`TINY_X0`]: it must reach the goal ball and stay.
     fn assert_solves(model: &PointMass, q: &AdditiveQ) {
@@ -555,94 +583,23 @@ mod tests {
         assert!(random_starts(&model, 0, 0, 1.0).unwrap().is_empty());
 
         // The paper's layout: 2025 own-state cores and 50,625 parameters per agent.
-        let f = feature_space(&model, &PAPER_POSITION_CORES, &PAPER_VELOCITY_CORES).unwrap();
+        let f = feature_space(&model, &POSITION_CORES, &VELOCITY_CORES).unwrap();
         assert_eq!(
             (f.n_agents(), f.n_cores(0), f.obs_dim(1)),
             (2, Some(2025), Some(4))
         );
         assert_eq!(f.n_params(&[25]).ok(), None);
         assert_eq!(f.n_params(&[25, 25]).unwrap(), 2 * 50_625);
-        assert_eq!(f.cores()[1][1], PAPER_POSITION_CORES);
-        assert_eq!(f.cores()[1][3], PAPER_VELOCITY_CORES);
-        let e = feature_space(&model, &[0.0, 0.0], &PAPER_VELOCITY_CORES).unwrap_err();
+        assert_eq!(f.cores()[1][1], POSITION_CORES);
+        assert_eq!(f.cores()[1][3], VELOCITY_CORES);
+        let e = feature_space(&model, &[0.0, 0.0], &VELOCITY_CORES).unwrap_err();
         assert!(e.to_string().starts_with("position_cores:"), "{e}");
-        let e = feature_space(&model, &PAPER_POSITION_CORES, &[f64::NAN, 1.0]).unwrap_err();
+        let e = feature_space(&model, &POSITION_CORES, &[f64::NAN, 1.0]).unwrap_err();
         assert!(e.to_string().starts_with("velocity_cores:"), "{e}");
         // Features that do not fit the model are refused by the learner.
         let one = feature_space(&tiny_model(), &[-6.0, 6.0], &[-3.0, 3.0]).unwrap();
         let e = train_fql(&model, &one, &default_starts(), &tiny_fql(), continue_all).unwrap_err();
         assert!(e.to_string().starts_with("features:"), "{e}");
-    }
-
-    #[test]
-    fn policy_files_round_trip_and_are_checked() {
-        let model = tiny_model();
-        let starts = tiny_starts();
-        let fql = FqlConfig {
-            episodes: 30,
-            ..tiny_fql()
-        };
-        let features = feature_space(&model, &[-6.0, 0.0, 6.0], &[-3.0, 0.0, 3.0]).unwrap();
-        let out = train_fql(&model, &features, &starts, &fql, continue_all).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("pm.toml");
-        let file = PointMassPolicyFile::from_outcome(model.config(), &starts, &fql, None, &out);
-        file.save(&path).unwrap();
-        let back = PointMassPolicyFile::load(&path).unwrap();
-        assert_eq!(back, file);
-        assert_eq!(back.episodes, 30);
-
-        let vq = VqqlConfig {
-            cells: 20,
-            samples: 500,
-            explore_steps: 20,
-            ..VqqlConfig::default()
-        };
-        let (vout, _) = vqql::train_vqql(&model, &starts, &vq, &fql, continue_all).unwrap();
-        let vfile =
-            PointMassPolicyFile::from_outcome(model.config(), &starts, &fql, Some(&vq), &vout);
-        let vpath = dir.path().join("vq.toml");
-        vfile.save(&vpath).unwrap();
-        let vback = PointMassPolicyFile::load(&vpath).unwrap();
-        assert_eq!(vback, vfile);
-        assert!(vback.q.features().is_codebook());
-        let (t1, _) = rollout_additive(&model, &vback.q, &TINY_X0, 10, 0.95).unwrap();
-        let (t2, _) = rollout_additive(&model, &vfile.q, &TINY_X0, 10, 0.95).unwrap();
-        assert_eq!(t1, t2);
-
-        // Inconsistent files name the problem and the file.
-        let load_err = |f: &PointMassPolicyFile| {
-            std::fs::write(&path, f.to_toml().unwrap()).unwrap();
-            PointMassPolicyFile::load(&path).unwrap_err().to_string()
-        };
-        let mut bad = file.clone();
-        bad.vqql = Some(vq.clone());
-        assert!(load_err(&bad).contains("needs codebook features"));
-        let mut bad = vfile.clone();
-        bad.vqql = None;
-        assert!(load_err(&bad).contains("quantiser settings"));
-        let mut bad = vfile.clone();
-        bad.vqql = Some(VqqlConfig { cells: 21, ..vq });
-        assert!(load_err(&bad).contains("vqql.cells = 21"));
-        let mut bad = file.clone();
-        bad.config.agents = 2;
-        assert!(load_err(&bad).contains("has 1 agents"));
-        let mut bad = file.clone();
-        bad.config.force_levels = vec![-1.0, 1.0];
-        assert!(load_err(&bad).contains("actions"));
-        let mut bad = file.clone();
-        bad.starts = Starts::Fixed(vec![0.0; 3]);
-        assert!(load_err(&bad).contains("starts.fixed"));
-        let mut bad = file.clone();
-        bad.fql.gamma = 2.0;
-        assert!(load_err(&bad).contains("fql.gamma"));
-        std::fs::write(&path, "not = [toml").unwrap();
-        let e = PointMassPolicyFile::load(&path).unwrap_err().to_string();
-        assert!(e.contains("pm.toml") && e.contains("malformed"), "{e}");
-        let e = PointMassPolicyFile::load(&dir.path().join("missing.toml"))
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("cannot read"), "{e}");
     }
 
     /// The measurement behind the docs of [`default_starts`] (not a check: it prints). Run with
@@ -653,7 +610,7 @@ mod tests {
         let model = PointMass::paper();
         let starts = default_starts();
         let fql = default_fql_config();
-        let features = feature_space(&model, &PAPER_POSITION_CORES, &PAPER_VELOCITY_CORES).unwrap();
+        let features = feature_space(&model, &POSITION_CORES, &VELOCITY_CORES).unwrap();
         let evaluation = random_starts(&model, 100, 7, 5.0).unwrap();
         let report = |name: &str, q: &AdditiveQ, out: &FqlOutcome, seconds: f64| {
             let (t, m) = rollout_additive(&model, q, &TABLE1_X0, 100, fql.gamma).unwrap();

@@ -417,9 +417,18 @@ mod tests {
     use fuzzyq_core::{Backup, q};
 
     use super::*;
+    use fuzzyq_core::Model;
 
-    fn arm() -> Arm {
-        Arm::new(ArmConfig::default()).unwrap()
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        super::super::preset::<Arm>(name)
+    }
+
+    fn presets() -> Vec<Preset> {
+        super::super::presets::<Arm>()
+    }
+
+    fn arm() -> ArmModel {
+        ArmModel::from_config(ArmConfig::default()).unwrap()
     }
 
     #[test]
@@ -464,7 +473,7 @@ mod tests {
     #[test]
     fn step_matches_a_fine_integration() {
         let m = arm();
-        let fine = Arm::new(ArmConfig {
+        let fine = ArmModel::from_config(ArmConfig {
             integrator: Integrator::Rk4 { substeps: 2000 },
             ..ArmConfig::default()
         })
@@ -481,7 +490,7 @@ mod tests {
 
     #[test]
     fn energy_is_conserved_without_damping_and_torque() {
-        let m = Arm::new(ArmConfig {
+        let m = ArmModel::from_config(ArmConfig {
             damping: [0.0, 0.0],
             max_velocity: [100.0, 100.0],
             ..ArmConfig::default()
@@ -529,12 +538,12 @@ mod tests {
         let y = m.step_f64([PI - 0.01, 2.0 * PI, 0.0, 0.0], [0.0, 0.0]);
         assert!(y[0] < -2.5 && y[0] >= -PI, "{y:?}");
         for a in [-7.0, -PI, -1.0, 0.0, 3.0, PI, 10.0] {
-            let w = wrap_angle(a);
+            let w = super::super::octave::wrap_angle_floor(a);
             assert!((-PI..PI + 1e-12).contains(&w), "{a} -> {w}");
             assert!(((a - w) / (2.0 * PI) - ((a - w) / (2.0 * PI)).round()).abs() < 1e-12);
         }
-        assert_eq!(wrap_angle(PI), -PI);
-        assert!(wrap_angle(f64::NAN).is_nan());
+        assert_eq!(super::super::octave::wrap_angle_floor(PI), -PI);
+        assert!(super::super::octave::wrap_angle_floor(f64::NAN).is_nan());
         // Velocities saturate at 2 pi.
         let y = m.step_f64([0.0, 2.0 * PI, 0.0, -2.0 * PI], [1.5, -1.0]);
         assert!(y[1] <= 2.0 * PI && y[3] >= -2.0 * PI);
@@ -543,7 +552,7 @@ mod tests {
         let x = [0.1, 0.2, 0.3, 0.4];
         assert_eq!(m.step_f64(x, [10.0, -10.0]), m.step_f64(x, [1.5, -1.0]));
         // Without wrapping the angle saturates at pi.
-        let s = Arm::new(ArmConfig {
+        let s = ArmModel::from_config(ArmConfig {
             wrap: false,
             ..ArmConfig::default()
         })
@@ -563,7 +572,7 @@ mod tests {
             -(1.0 + 0.2 + 1.0 + 0.2)
         );
         assert!(!Model::<f64>::reward_depends_on_action(&m));
-        let r = Arm::new(ArmConfig {
+        let r = ArmModel::from_config(ArmConfig {
             r: [1.0, 2.0],
             ..ArmConfig::default()
         })
@@ -594,15 +603,10 @@ mod tests {
         assert_eq!(set.action(1), [-1.5, 0.0]);
         assert_eq!(set.action(5), [0.0, 1.0]);
         assert_eq!(set.action(8), [1.5, 1.0]);
-        assert_eq!(
-            (m.torques(0), m.torques(1)),
-            (&[-1.5, 0.0, 1.5][..], &[-1.0, 0.0, 1.0][..])
-        );
-        assert!(m.torques(2).is_empty());
-        let m = m.with_torques(&[-1.0, 1.0], &[0.5]).unwrap();
-        assert_eq!(m.actions(), [-1.0, 0.5, 1.0, 0.5]);
-        assert!(arm().with_levels(&[2.0]).is_err());
-        assert!(arm().with_torques(&[0.0; 100], &[0.0; 100]).is_err());
+        let t = m.torque_table("actions", &[-1.0, 1.0], &[0.5]).unwrap();
+        assert_eq!(t.values(), [-1.0, 0.5, 1.0, 0.5]);
+        assert!(arm().with_actions(&[2.0]).is_err());
+        assert!(m.torque_table("actions", &[0.0; 100], &[0.0; 100]).is_err());
     }
 
     #[test]
@@ -617,9 +621,9 @@ mod tests {
         assert_eq!(preset("coarse").unwrap().n_cores(), 9 * 7 * 9 * 7);
         assert_eq!(presets().len(), 2);
         assert!(preset("vertical").is_err());
-        let m = Arm::for_preset(ArmConfig::default(), &fine).unwrap();
+        let m = ArmModel::for_preset(ArmConfig::default(), &fine).unwrap();
         assert_eq!(Model::<f64>::action_set(&m, 0).n_actions(), 9);
-        let e = Arm::for_preset(
+        let e = ArmModel::for_preset(
             ArmConfig::default(),
             &Preset {
                 actions: vec![-2.0, 2.0],
@@ -628,7 +632,7 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("preset.actions"), "{e}");
-        let e = Arm::for_preset(
+        let e = ArmModel::for_preset(
             ArmConfig::default(),
             &Preset {
                 cores: fine.cores[..2].to_vec(),
@@ -644,7 +648,7 @@ mod tests {
         let bad = |f: fn(&mut ArmConfig)| {
             let mut c = ArmConfig::default();
             f(&mut c);
-            Arm::new(c).unwrap_err().to_string()
+            ArmModel::from_config(c).unwrap_err().to_string()
         };
         assert!(bad(|c| c.link_lengths[1] = 0.0).contains("env.link_lengths"));
         assert!(bad(|c| c.masses[0] = f64::NAN).contains("env.masses"));
@@ -676,7 +680,7 @@ mod tests {
     #[test]
     fn coarse_fuzzy_q_iteration_moves_the_arm_to_its_goal() {
         let p = preset("coarse").unwrap();
-        let m = Arm::for_preset(ArmConfig::default(), &p).unwrap();
+        let m = ArmModel::for_preset(ArmConfig::default(), &p).unwrap();
         let grid = p.grid::<f64>().unwrap();
         let s = solve(&m, &grid, &p.solver_config(), |_| ControlFlow::Continue(())).unwrap();
         assert!(s.converged(), "{} sweeps", s.sweeps.len());

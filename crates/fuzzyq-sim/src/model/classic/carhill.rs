@@ -314,9 +314,18 @@ mod tests {
     use fuzzyq_core::{Backup, q};
 
     use super::*;
+    use fuzzyq_core::Model;
 
-    fn car() -> CarHill {
-        CarHill::new(CarHillConfig::default()).unwrap()
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        super::super::preset::<CarHill>(name)
+    }
+
+    fn presets() -> Vec<Preset> {
+        super::super::presets::<CarHill>()
+    }
+
+    fn car() -> CarHillModel {
+        CarHillModel::from_config(CarHillConfig::default()).unwrap()
     }
 
     /// The toolbox's `hillcar_trans`, transcribed independently.
@@ -368,7 +377,7 @@ mod tests {
     #[test]
     fn step_matches_a_fine_integration() {
         let m = car();
-        let fine = CarHill::new(CarHillConfig {
+        let fine = CarHillModel::from_config(CarHillConfig {
             integrator: Integrator::Rk4 { substeps: 1000 },
             ..CarHillConfig::default()
         })
@@ -467,13 +476,13 @@ mod tests {
         assert_eq!(coarse.n_cores(), 17 * 17);
         assert_eq!(presets().len(), PRESETS.len());
         assert!(preset("book").unwrap_err().to_string().contains("preset"));
-        let m = CarHill::for_preset(CarHillConfig::default(), &fine).unwrap();
+        let m = CarHillModel::for_preset(CarHillConfig::default(), &fine).unwrap();
         assert_eq!(Model::<f32>::action_set(&m, 0).n_actions(), 2);
         let bad = Preset {
             cores: vec![vec![0.0, 1.0]],
             ..fine
         };
-        assert!(CarHill::for_preset(CarHillConfig::default(), &bad).is_err());
+        assert!(CarHillModel::for_preset(CarHillConfig::default(), &bad).is_err());
     }
 
     #[test]
@@ -481,7 +490,7 @@ mod tests {
         let bad = |f: fn(&mut CarHillConfig)| {
             let mut c = CarHillConfig::default();
             f(&mut c);
-            CarHill::new(c).unwrap_err().to_string()
+            CarHillModel::from_config(c).unwrap_err().to_string()
         };
         assert!(bad(|c| c.mass = 0.0).contains("env.mass"));
         assert!(bad(|c| c.gravity = f64::NAN).contains("env.gravity"));
@@ -500,7 +509,7 @@ mod tests {
     /// Greedy rollout from `x` with the model-based Q-values of `v`; the number of steps to
     /// the goal, if reached within `steps`.
     fn steps_to_goal(
-        m: &CarHill,
+        m: &CarHillModel,
         grid: &Grid<f64>,
         v: &[f64],
         x: [f64; 2],
@@ -530,7 +539,7 @@ mod tests {
     #[test]
     fn coarse_fuzzy_q_iteration_reaches_the_top() {
         let p = preset("coarse").unwrap();
-        let m = CarHill::for_preset(CarHillConfig::default(), &p).unwrap();
+        let m = CarHillModel::for_preset(CarHillConfig::default(), &p).unwrap();
         let grid = p.grid::<f64>().unwrap();
         let s = solve(&m, &grid, &p.solver_config(), |_| ControlFlow::Continue(())).unwrap();
         assert!(s.converged(), "{} sweeps", s.sweeps.len());

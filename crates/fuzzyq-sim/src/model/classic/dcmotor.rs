@@ -293,11 +293,16 @@ impl Dynamics for DcMotor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fuzzyq_core::Model;
+
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        super::super::preset::<DcMotor>(name)
+    }
 
     #[test]
     fn zoh_matches_fine_rk4() {
-        let zoh = DcMotor::new(DcMotorConfig::default()).unwrap();
-        let rk = DcMotor::new(DcMotorConfig {
+        let zoh = DcMotorModel::from_config(DcMotorConfig::default()).unwrap();
+        let rk = DcMotorModel::from_config(DcMotorConfig {
             integrator: Integrator::Rk4 { substeps: 50 },
             ..DcMotorConfig::default()
         })
@@ -327,7 +332,7 @@ mod tests {
 
     #[test]
     fn saturates_and_rewards_at_the_current_state() {
-        let m = DcMotor::new(DcMotorConfig::default()).unwrap();
+        let m = DcMotorModel::from_config(DcMotorConfig::default()).unwrap();
         let y = m.step_f64([PI, 16.0 * PI], 10.0);
         assert_eq!(y, [PI, 16.0 * PI]);
         assert_eq!(m.reward_f64([1.0, 2.0], 3.0), -(5.0 + 0.04) - 0.09);
@@ -343,7 +348,7 @@ mod tests {
         assert_eq!(fine.actions.len(), 9);
         assert_eq!(fine.gamma, 0.95);
         assert!(preset("coarse").is_err());
-        let m = DcMotor::for_preset(DcMotorConfig::default(), &fine).unwrap();
+        let m = DcMotorModel::for_preset(DcMotorConfig::default(), &fine).unwrap();
         assert_eq!(Model::<f64>::action_set(&m, 0).n_actions(), 9);
     }
 
@@ -352,14 +357,14 @@ mod tests {
         let bad = |f: fn(&mut DcMotorConfig)| {
             let mut c = DcMotorConfig::default();
             f(&mut c);
-            DcMotor::new(c).unwrap_err().to_string()
+            DcMotorModel::from_config(c).unwrap_err().to_string()
         };
         assert!(bad(|c| c.inertia = 0.0).contains("env.inertia"));
         assert!(bad(|c| c.resistance = f64::NAN).contains("env.resistance"));
         assert!(bad(|c| c.q = [-1.0, 0.0]).contains("env.q"));
         assert!(bad(|c| c.integrator = Integrator::Rk4 { substeps: 0 }).contains("env.integrator"));
         assert!(bad(|c| c.inertia = 1e-320).contains("env.inertia"));
-        let m = DcMotor::new(DcMotorConfig::default()).unwrap();
+        let m = DcMotorModel::from_config(DcMotorConfig::default()).unwrap();
         assert!(m.with_actions(&[]).is_err());
         let toml_text = "inertia = 1e-4\nintegrator = { rk4 = { substeps = 2 } }";
         let c: DcMotorConfig = toml::from_str(toml_text).unwrap();

@@ -356,4 +356,15 @@ mod tests {
         assert_eq!(toolbox_core_index(&dims, 13), Some(19));
         assert_eq!(toolbox_core_index(&dims, 24), None);
     }
+
+    #[test]
+    fn octave_wrapping_matches_octaves_mod() {
+        assert_eq!(wrap_angle_octave(PI), -PI);
+        assert_eq!(wrap_angle_octave(-PI), -PI);
+        assert_eq!(wrap_angle_octave(0.5), 0.5);
+        assert!((wrap_angle_octave(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-15);
+        assert!((wrap_angle_octave(-3.2) - (2.0 * PI - 3.2)).abs() < 1e-15);
+        let w = wrap_angle_octave(-PI - 1e-17);
+        assert!((-PI..=PI).contains(&w));
+    }
 }

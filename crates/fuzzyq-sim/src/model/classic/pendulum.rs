@@ -296,15 +296,8 @@ impl Dynamics for Pendulum {
 mod tests {
     use super::*;
 
-    #[test]
-    fn wraps_like_octave() {
-        assert_eq!(wrap_angle(PI), -PI);
-        assert_eq!(wrap_angle(-PI), -PI);
-        assert_eq!(wrap_angle(0.5), 0.5);
-        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-15);
-        assert!((wrap_angle(-3.2) - (2.0 * PI - 3.2)).abs() < 1e-15);
-        let w = wrap_angle(-PI - 1e-17);
-        assert!((-PI..=PI).contains(&w));
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        super::super::preset::<Pendulum>(name)
     }
 
     #[test]
@@ -317,7 +310,7 @@ mod tests {
 
     #[test]
     fn limits_the_voltage_and_saturates_the_velocity() {
-        let m = Pendulum::new(PendulumConfig::default()).unwrap();
+        let m = PendulumModel::from_config(PendulumConfig::default()).unwrap();
         assert_eq!(m.step_f64([0.1, 2.0], 30.0), m.step_f64([0.1, 2.0], 3.0));
         assert_eq!(m.reward_f64([0.0, 0.0], -7.0), -9.0);
         let y = m.step_f64([0.0, 15.0 * PI], 3.0);
@@ -343,7 +336,7 @@ mod tests {
         let bad = |f: fn(&mut PendulumConfig)| {
             let mut c = PendulumConfig::default();
             f(&mut c);
-            Pendulum::new(c).unwrap_err().to_string()
+            PendulumModel::from_config(c).unwrap_err().to_string()
         };
         assert!(bad(|c| c.integrator = Integrator::Zoh).contains("env.integrator"));
         assert!(bad(|c| c.mass = -1.0).contains("env.mass"));
