@@ -1,4 +1,6 @@
-//! A controller's view of fuzzyq-core: static tables, no std, no heap.
+//! A controller's view of fuzzyq-core: static tables, no std, no heap: deciding (memberships,
+//! Q evaluation, the greedy and interpolated policies) and learning on board (the additive
+//! layout's sample update).
 #![no_std]
 
 use core::panic::PanicInfo;
@@ -60,4 +62,37 @@ pub extern "C" fn fuzzyq_decide(s: f32, v: f32, force: &mut f32) -> u32 {
     }
     *force = h[0] + mu[0];
     u as u32
+}
+
+/// One corrected sample update of the additive layout on the caller's table `phi` (one agent
+/// on the (s, v) grid: 45 cores x 5 actions; no heap): returns the TD error, or NaN if the
+/// update was refused or the input invalid.
+#[unsafe(no_mangle)]
+pub extern "C" fn fuzzyq_learn(
+    phi: &mut [f32; 225],
+    s: f32,
+    v: f32,
+    action: u32,
+    reward: f32,
+    s1: f32,
+    v1: f32,
+) -> f32 {
+    use fuzzyq_core::additive::{self, Agent, Update};
+    let Ok(grid) = ProductPartition::try_new(&[&POSITION[..], &VELOCITY[..]]) else {
+        return f32::NAN;
+    };
+    let (Ok(cur), Ok(next)) = (grid.active(&[s, v]), grid.active(&[s1, v1])) else {
+        return f32::NAN;
+    };
+    let mut agents = [Agent {
+        phi,
+        n_actions: 5,
+        cur,
+        next,
+        action: action as usize,
+    }];
+    match additive::update(Update::Corrected, &mut agents, reward, false, 0.96, 0.1) {
+        Ok(Some(delta)) => delta,
+        _ => f32::NAN,
+    }
 }

@@ -59,11 +59,17 @@ impl std::error::Error for Failure {}
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
-        Err(e) => {
-            // Help and version go to stdout with code 0; usage errors exit with 2.
-            let code = if e.use_stderr() { 2 } else { 0 };
+        // Help and version go to stdout with code 0.
+        Err(e) if !e.use_stderr() => {
             let _ = e.print();
-            return ExitCode::from(code);
+            return ExitCode::SUCCESS;
+        }
+        // Usage errors are one line (with the possible values where clap lists them), code 2.
+        Err(e) => {
+            let text = e.render().to_string();
+            let first = text.split("\n\n").next().unwrap_or_default();
+            eprintln!("{}", output::one_line(first));
+            return ExitCode::from(2);
         }
     };
     let result = match cli.command {

@@ -60,6 +60,8 @@ pub mod learn;
 pub mod model;
 pub mod paper;
 pub mod run;
+#[cfg(test)]
+mod test_support;
 pub mod train;
 pub mod world;
 

@@ -696,11 +696,11 @@ mod tests {
                 other => panic!("not a point-mass file: {other:?}"),
             }
         };
-        let model = pt::tests::tiny_model();
-        let starts = pt::tests::tiny_starts();
+        let model = crate::test_support::tiny_model();
+        let starts = crate::test_support::tiny_starts();
         let fql = FqlConfig {
             episodes: 30,
-            ..pt::tests::tiny_fql()
+            ..crate::test_support::tiny_fql()
         };
         let features = pt::feature_space(&model, &[-6.0, 0.0, 6.0], &[-3.0, 0.0, 3.0]).unwrap();
         let out = pt::train_fql(&model, &features, &starts, &fql, go).unwrap();
@@ -727,9 +727,9 @@ mod tests {
         assert_eq!(vback, vfile);
         assert!(vback.q.features().is_codebook());
         let (t1, _) =
-            pt::tests::rollout_additive(&model, &vback.q, &pt::tests::TINY_X0, 10, 0.95).unwrap();
+            crate::test_support::rollout_additive(&model, &vback.q, &crate::test_support::TINY_X0, 10, 0.95).unwrap();
         let (t2, _) =
-            pt::tests::rollout_additive(&model, &vfile.q, &pt::tests::TINY_X0, 10, 0.95).unwrap();
+            crate::test_support::rollout_additive(&model, &vfile.q, &crate::test_support::TINY_X0, 10, 0.95).unwrap();
         assert_eq!(t1, t2);
 
         // Inconsistent files name the problem and the file.

@@ -378,11 +378,11 @@ impl AdditiveQ {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
 
     /// Two agents: agent 0 on cores [0, 1, 2] with 2 actions, agent 1 on cores [0, 1] with 3.
-    pub(crate) fn hand_q() -> AdditiveQ {
+    fn hand_q() -> AdditiveQ {
         let features =
             FeatureSpace::new(vec![vec![vec![0.0, 1.0, 2.0]], vec![vec![0.0, 1.0]]]).unwrap();
         AdditiveQ::from_params(
@@ -396,7 +396,7 @@ pub(crate) mod tests {
         .unwrap()
     }
 
-    pub(crate) fn close(a: f64, b: f64) -> bool {
+    fn close(a: f64, b: f64) -> bool {
         (a - b).abs() <= 1e-12
     }
 
@@ -498,5 +498,30 @@ pub(crate) mod tests {
         assert!(toml::from_str::<AdditiveQ>(bad_cores).is_err());
         let bad_shape = "features = [[[0.0, 1.0]]]\nactions = [3]\nphi = [[0.0]]";
         assert!(toml::from_str::<AdditiveQ>(bad_shape).is_err());
+    }
+
+    #[test]
+    fn bad_shapes_are_errors() {
+    // Bad shapes through the Q-function API.
+    let q = hand_q();
+    let mut out = [0.0; 2];
+    assert!(q.q_agent(0, &[0.5, 1.0], &mut out).is_err());
+    assert!(q.q_agent(0, &[f64::NAN], &mut out).is_err());
+    assert!(q.q_agent(2, &[0.5], &mut out).is_err());
+    assert!(q.q_agent(0, &[0.5], &mut [0.0; 3]).is_err());
+    q.q_agent(0, &[0.5], &mut out).unwrap();
+    assert_eq!(out, [2.0, 3.0]);
+    assert!(q.q(&[&[0.5], &[0.5]], &[2, 0]).is_err());
+    assert!(
+        AdditiveQ::from_params(q.features().clone(), vec![2, 3], vec![vec![0.0; 6]]).is_err()
+    );
+    assert!(
+        AdditiveQ::from_params(
+            q.features().clone(),
+            vec![2, 3],
+            vec![vec![0.0; 6], vec![f64::NAN; 6]]
+        )
+        .is_err()
+    );
     }
 }

@@ -291,6 +291,7 @@ mod tests {
     use crate::model::pointmass::{PointMass, PointMassConfig};
     use crate::run::metrics::RolloutMetrics;
     use crate::run::policy::{AdditivePolicy, FqiPolicy};
+    use crate::test_support::rollout_additive;
 
     fn one_agent() -> PointMass {
         PointMass::new(PointMassConfig {
@@ -306,29 +307,6 @@ mod tests {
             steps,
             plant: PlantChoice::Model,
             seed: 0,
-        }
-    }
-
-    /// The greedy rollout of an additive `q` on the point masses of `model`.
-    fn rollout_additive(
-        model: &PointMass,
-        q: &AdditiveQ,
-        x0: &[f64],
-        steps: usize,
-        gamma: f64,
-    ) -> Result<(Trajectory, RolloutMetrics), SimError> {
-        let policy = Policy::Additive(AdditivePolicy::point_masses(
-            model.clone(),
-            q.clone(),
-            gamma,
-        )?);
-        match run(&policy, x0, &spec(steps))? {
-            Outcome::PointMass {
-                trajectory,
-                metrics,
-                ..
-            } => Ok((trajectory, metrics)),
-            other => panic!("{other:?}"),
         }
     }
 

@@ -330,87 +330,19 @@ pub fn train_fql(
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use rand::SeedableRng;
     use serde::{Deserialize, Serialize};
 
     use super::*;
     use crate::learn::vqql::{self, VqqlConfig};
-    use crate::model::pointmass::{PointMassConfig, random_starts};
+    use crate::model::pointmass::random_starts;
     use crate::paper::{POSITION_CORES, TABLE1_X0, VELOCITY_CORES};
-    use crate::run::evaluate::{self, Outcome, RolloutSpec};
-    use crate::run::metrics::{RolloutMetrics, Trajectory};
-    use crate::run::policy::{AdditivePolicy, Policy};
-
-    /// The greedy rollout of `q` on the model (the one rollout path).
-    pub(crate) fn rollout_additive(
-        model: &PointMass,
-        q: &AdditiveQ,
-        x0: &[f64],
-        steps: usize,
-        gamma: f64,
-    ) -> Result<(Trajectory, RolloutMetrics), SimError> {
-        let policy = Policy::Additive(AdditivePolicy::point_masses(
-            model.clone(),
-            q.clone(),
-            gamma,
-        )?);
-        let spec = RolloutSpec {
-            kind: fuzzyq_core::q::PolicyKind::Greedy,
-            steps,
-            plant: evaluate::PlantChoice::Model,
-            seed: 0,
-        };
-        match evaluate::run(&policy, x0, &spec)? {
-            Outcome::PointMass {
-                trajectory,
-                metrics,
-                ..
-            } => Ok((trajectory, metrics)),
-            _ => unreachable!("a point-mass policy"),
-        }
-    }
+    use crate::test_support::{TINY_X0, rollout_additive, tiny_fql, tiny_model, tiny_starts};
 
     fn continue_all(_: &EpisodeRecord) -> ControlFlow<()> {
         ControlFlow::Continue(())
     }
-
-    /// One agent, forces `{-2, 0, 2}` per axis (9 actions), a goal ball of radius 1 in its
-    /// 4-D state.
-    pub(crate) fn tiny_model() -> PointMass {
-        PointMass::new(PointMassConfig {
-            agents: 1,
-            force_levels: vec![-2.0, 0.0, 2.0],
-            goal_radius: 1.0,
-            ..PointMassConfig::default()
-        })
-        .unwrap()
-    }
-
-    pub(crate) fn tiny_starts() -> Starts {
-        Starts::Uniform {
-            position: 3.0,
-            velocity: 0.0,
-        }
-    }
-
-    pub(crate) fn tiny_fql() -> FqlConfig {
-        FqlConfig {
-            gamma: 0.95,
-            episodes: 1500,
-            max_steps: 40,
-            alpha: 0.2,
-            epsilon: 1.0,
-            epsilon_min: 0.05,
-            epsilon_decay_episodes: 1000,
-            seed: 3,
-            eval_every: 100,
-            eval_episodes: 20,
-            ..default_fql_config()
-        }
-    }
-
-    pub(crate) const TINY_X0: [f64; 4] = [-3.0, 2.0, 0.0, 0.0];
 
     /// Rolls the greedy policy out from [`TINY_X0`]: it must reach the goal ball and stay.
     fn assert_solves(model: &PointMass, q: &AdditiveQ) {

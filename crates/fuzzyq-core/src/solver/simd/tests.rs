@@ -1,0 +1,139 @@
+//! Tests of the parent module.
+
+use super::*;
+use crate::backup::{SparseRows, contract};
+use proptest::prelude::*;
+
+/// Random rows: `n_rows` rows of 0 to 5 entries (non-negative weights, some zero rows).
+fn rows_strategy(n_rows: usize, n_cols: usize) -> impl Strategy<Value = RowsBuf<f32>> {
+    prop::collection::vec(
+        prop::collection::vec((0..n_cols as u32, 0.0f32..1.0), 0..6),
+        n_rows,
+    )
+    .prop_map(move |rows| {
+        let mut ptr = vec![0u32];
+        let (mut col, mut weight) = (Vec::new(), Vec::new());
+        for r in rows {
+            for (k, w) in r {
+                col.push(k);
+                weight.push(w);
+            }
+            ptr.push(col.len() as u32);
+        }
+        RowsBuf::new(ptr, col, weight, n_cols).expect("valid rows")
+    })
+}
+
+fn values(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed | 1;
+    (0..n)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            ((s >> 40) as f32 / (1u64 << 24) as f32) * 200.0 - 100.0
+        })
+        .collect()
+}
+
+/// A shape: block cores, actions, successor cores, r_len, p_len (covering masked tails,
+/// single lanes and rows longer than a register block).
+fn shape() -> impl Strategy<Value = (usize, usize, usize, usize, usize)> {
+    (
+        1usize..4,
+        1usize..7,
+        1usize..9,
+        1usize..5,
+        prop_oneof![1usize..40, 120usize..300],
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn every_instance_matches_the_scalar_one_bit_for_bit(
+        ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
+            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
+        }),
+        seed in any::<u64>(),
+    ) {
+        let input = values(n_k * r_len * p_len, seed);
+        let scalar = select::<f32>(Some(super::super::Kernel::Scalar)).unwrap();
+        for k in f32::available() {
+            for c in 0..n_c {
+                let mut a = vec![0.0f32; r_len * na * p_len];
+                let mut b = vec![0.0f32; r_len * na * p_len];
+                (k.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut a);
+                (scalar.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut b);
+                prop_assert_eq!(&a, &b, "stage, {} kernels", k.name);
+
+                // The unfused reference agrees to rounding.
+                let sr = SparseRows { ptr: &rows.ptr, col: &rows.col, weight: &rows.weight };
+                let mut r = vec![0.0f32; r_len * na * p_len];
+                contract(sr, c * na, na, n_k, r_len, p_len, &input, &mut r).unwrap();
+                for (x, y) in a.iter().zip(&r) {
+                    prop_assert!((x - y).abs() <= 1e-4 * (1.0 + y.abs()));
+                }
+            }
+            // The last stage over rows of length p_len (r_len = 1).
+            let last_in = &input[..n_k * p_len];
+            let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+            for abs in [false, true] {
+                let mut m = vec![0.0f32; n_c];
+                let mut ms = vec![0.0f32; n_c];
+                (k.last)(rows.view(), 0, na, p_len, abs, last_in, &mut m, &mut bounds);
+                (scalar.last)(rows.view(), 0, na, p_len, abs, last_in, &mut ms, &mut bounds);
+                prop_assert_eq!(&m, &ms, "last, {} kernels", k.name);
+                // Pruned maxima equal the maxima of the full stage output.
+                for c in 0..n_c {
+                    let mut full = vec![0.0f32; na * p_len];
+                    (k.stage)(rows.view(), c * na, na, 1, p_len, last_in, &mut full);
+                    let want = full
+                        .iter()
+                        .map(|&x| if abs { x.abs() } else { x })
+                        .fold(f32::NEG_INFINITY, f32::max);
+                    prop_assert_eq!(m[c], want, "pruned maximum, core {}", c);
+                    if !abs {
+                        let mut arg = vec![0u32; 1];
+                        (k.argmax)(rows.view(), c, na, p_len, last_in, &m[c..c + 1], &mut arg);
+                        let first = full.iter().position(|&x| x == want).unwrap();
+                        prop_assert_eq!(arg[0] as usize, first, "argmax, core {}", c);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn rows_are_validated() {
+    assert!(RowsBuf::new(vec![0, 1], vec![3], vec![0.5f32], 3).is_none());
+    assert!(RowsBuf::new(vec![0, 1], vec![2], vec![-0.5f32], 3).is_none());
+    assert!(RowsBuf::new(vec![0, 2], vec![2], vec![0.5f32], 3).is_none());
+    assert!(RowsBuf::new(vec![0, 1], vec![2], vec![0.5f32], 3).is_some());
+}
+
+#[test]
+fn f64_instances_match_too() {
+    let rows = RowsBuf::new(
+        vec![0, 2, 3, 7],
+        vec![0, 2, 1, 0, 1, 2, 2],
+        vec![0.25, 0.75, 1.0, 0.1, 0.2, 0.3, 0.4],
+        3,
+    )
+    .unwrap();
+    for p_len in [1, 5, 13, 130] {
+        let input: Vec<f64> = values(3 * 2 * p_len, 9)
+            .into_iter()
+            .map(f64::from)
+            .collect();
+        let scalar = select::<f64>(Some(super::super::Kernel::Scalar)).unwrap();
+        for k in f64::available() {
+            let (mut a, mut b) = (vec![0.0; 2 * 3 * p_len], vec![0.0; 2 * 3 * p_len]);
+            (k.stage)(rows.view(), 0, 3, 2, p_len, &input, &mut a);
+            (scalar.stage)(rows.view(), 0, 3, 2, p_len, &input, &mut b);
+            assert_eq!(a, b, "{} p_len {p_len}", k.name);
+        }
+    }
+}
