@@ -328,7 +328,7 @@ def test_classic_model_errors() -> None:
         (lambda: fuzzyq.CarHill(integrator="zoh"), fuzzyq.ConfigError, "rk4"),
         (lambda: fuzzyq.Arm(actions=[2.0]), fuzzyq.ConfigError, "torque levels"),
         (lambda: fuzzyq.DcMotor(actions=[]), fuzzyq.ConfigError, "actions"),
-        (lambda: fuzzyq.ClassicModel(), TypeError, ""),
+        (lambda: fuzzyq.ClassicModel(), TypeError, "ClassicModel"),
     ]:
         with pytest.raises(err, match=match):
             make()
