@@ -6,6 +6,7 @@ from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import disjoint_base
 
 __all__ = [
     "FuzzyqError",
@@ -19,6 +20,11 @@ __all__ = [
     "Grid",
     "PointMass",
     "CallableModel",
+    "ClassicModel",
+    "DcMotor",
+    "Pendulum",
+    "CarHill",
+    "Arm",
     "Solution",
     "Policy",
     "solve",
@@ -144,6 +150,136 @@ class CallableModel:
     def n_joint_actions(self) -> int: ...
     def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
 
+@disjoint_base
+class ClassicModel:
+    """A classic benchmark (Busoniu et al. 2010): the base of DcMotor, Pendulum, CarHill, Arm."""
+
+    @property
+    def env(self) -> str: ...
+    @property
+    def preset(self) -> str: ...
+    @property
+    def gamma(self) -> float: ...
+    @property
+    def xi(self) -> float: ...
+    def grid(self) -> Grid: ...
+    @property
+    def params(self) -> dict[str, Any]: ...
+    @property
+    def state_dim(self) -> int: ...
+    @property
+    def n_agents(self) -> int: ...
+    @property
+    def action_dim(self) -> int: ...
+    @property
+    def n_actions(self) -> int: ...
+    @property
+    def n_joint_actions(self) -> int: ...
+    @property
+    def action_levels(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def actions(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def sample_time(self) -> float: ...
+    @property
+    def state_bounds(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def default_start(self) -> npt.NDArray[np.float64]: ...
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
+    def step(
+        self, x: npt.ArrayLike, u: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], float | npt.NDArray[np.float64]]: ...
+    def reward(self, x: npt.ArrayLike, u: npt.ArrayLike) -> float: ...
+    def is_terminal(self, x: npt.ArrayLike) -> bool: ...
+
+# An integrator: "zoh", "rk4" (the default substeps) or {"rk4": {"substeps": n}}.
+_Integrator = str | dict[str, dict[str, int]]
+
+@final
+class DcMotor(ClassicModel):
+    """The DC motor: state [angle, angular velocity], voltage actions."""
+
+    def __new__(
+        cls,
+        preset: str = "fine",
+        *,
+        actions: npt.ArrayLike | None = None,
+        inertia: float = ...,
+        damping: float = ...,
+        torque_constant: float = ...,
+        resistance: float = ...,
+        sample_time: float = ...,
+        max_angle: float = ...,
+        max_velocity: float = ...,
+        q: Sequence[float] = ...,
+        r: float = ...,
+        integrator: _Integrator = ...,
+    ) -> DcMotor: ...
+
+@final
+class Pendulum(ClassicModel):
+    """The inverted pendulum swing-up: state [angle (0 = up), angular velocity]."""
+
+    def __new__(
+        cls,
+        preset: str = "fine",
+        *,
+        actions: npt.ArrayLike | None = None,
+        disc_inertia: float = ...,
+        mass: float = ...,
+        length: float = ...,
+        gravity: float = ...,
+        damping: float = ...,
+        torque_constant: float = ...,
+        resistance: float = ...,
+        sample_time: float = ...,
+        max_velocity: float = ...,
+        max_voltage: float = ...,
+        q: Sequence[float] = ...,
+        r: float = ...,
+        integrator: _Integrator = ...,
+    ) -> Pendulum: ...
+
+@final
+class CarHill(ClassicModel):
+    """The car on the hill: state [position, velocity], force actions."""
+
+    def __new__(
+        cls,
+        preset: str = "fine",
+        *,
+        actions: npt.ArrayLike | None = None,
+        mass: float = ...,
+        gravity: float = ...,
+        sample_time: float = ...,
+        position_limit: float = ...,
+        velocity_limit: float = ...,
+        integrator: _Integrator = ...,
+    ) -> CarHill: ...
+
+@final
+class Arm(ClassicModel):
+    """The two-link robot arm: state [angle 1, velocity 1, angle 2, velocity 2], torques."""
+
+    def __new__(
+        cls,
+        preset: str = "fine",
+        *,
+        actions: npt.ArrayLike | None = None,
+        link_lengths: Sequence[float] = ...,
+        masses: Sequence[float] = ...,
+        inertias: Sequence[float] = ...,
+        centres_of_mass: Sequence[float] = ...,
+        damping: Sequence[float] = ...,
+        max_velocity: Sequence[float] = ...,
+        max_torque: Sequence[float] = ...,
+        q: Sequence[float] = ...,
+        r: Sequence[float] = ...,
+        sample_time: float = ...,
+        wrap: bool = ...,
+        integrator: _Integrator = ...,
+    ) -> Arm: ...
+
 @final
 class Solution:
     """The result of `solve` or `load`."""
@@ -154,6 +290,8 @@ class Solution:
     def greedy(self) -> npt.NDArray[np.uint32]: ...
     @property
     def grid(self) -> Grid: ...
+    @property
+    def env(self) -> str | None: ...
     @property
     def sweeps(self) -> int: ...
     @property
@@ -179,10 +317,17 @@ class Solution:
 
 @final
 class Policy:
-    """A greedy (eq 7) or interpolated (eq 22) policy."""
+    """A policy of any learner: fuzzy Q-iteration (greedy, eq 7, or interpolated, eq 22) or
+    learned from samples (fuzzy Q-learning, VQQL: greedy, decentralised)."""
 
     @property
     def kind(self) -> str: ...
+    @property
+    def learner(self) -> str: ...
+    @property
+    def env(self) -> str | None: ...
+    @property
+    def gamma(self) -> float: ...
     @property
     def state_dim(self) -> int: ...
     @property
@@ -196,22 +341,37 @@ class Policy:
     def act_index(self, x: npt.ArrayLike) -> int: ...
     def agent_actions(self, x: npt.ArrayLike) -> list[int]: ...
     def q_values(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+    def value(self, x: npt.ArrayLike) -> float: ...
+    def rollout(
+        self,
+        x0: npt.ArrayLike | None = None,
+        steps: int | None = None,
+        *,
+        seed: int = 0,
+        headings: npt.ArrayLike | None = None,
+        plant: str = "model",
+        radius: float | None = None,
+    ) -> dict[str, Any]: ...
 
 def solve(
-    model: PointMass | CallableModel,
+    model: PointMass | ClassicModel | CallableModel,
     grid: Grid,
     *,
-    gamma: float = 0.96,
-    xi: float = 0.05,
+    gamma: float | None = None,
+    xi: float | None = None,
     max_sweeps: int = 1000,
     sweep: str = "sync",
-    extrapolate: bool = True,
+    extrapolate: bool | None = None,
     absorbing_goal: bool = False,
-    precision: str = "f32",
+    precision: str | None = None,
     backup: str = "auto",
     kernel: str | None = None,
+    operator: str = "values",
     threads: int | None = None,
     callback: Callable[[dict[str, Any]], object] | None = None,
 ) -> Solution: ...
-def load(path: str | PathLike[str]) -> Solution: ...
+def load(path: str | PathLike[str]) -> Solution | Policy:
+    """Reads a policy file of any kind: a Solution (fuzzy Q-iteration) or a Policy (learned
+    from samples: fuzzy Q-learning, VQQL)."""
+
 def available_kernels() -> list[str]: ...

@@ -174,6 +174,43 @@ def test_rollout_reaches_the_goal(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid
         assert np.hypot(x[0], x[1]) < 0.08, kind
 
 
+def test_policy_rollout_steps_the_model(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+    model, _, s = one_agent
+    policy = s.policy("greedy")
+    assert (policy.env, policy.learner, policy.gamma, policy.kind) == ("pointmass", "fqi", 0.96, "greedy")
+    assert s.env == "pointmass"
+    run = policy.rollout([-4, -6, -2, 2], 30)
+    assert set(run) == {"states", "actions", "rewards", "times", "metrics"}
+    x = np.array([-4.0, -6.0, -2.0, 2.0])
+    for k in range(30):
+        np.testing.assert_array_equal(run["states"][k], x)
+        u = policy.act(x)
+        np.testing.assert_array_equal(run["actions"][k], u)
+        assert run["rewards"][k] == model.reward(x)
+        x = model.step(x, u)
+    np.testing.assert_array_equal(run["states"][30], x)
+    m = run["metrics"]
+    assert (m["steps"], m["policy_kind"], m["x0"], m["dt"]) == (30, "greedy", [-4, -6, -2, 2], 0.4)
+    assert m["value_x0"] == pytest.approx(policy.value([-4, -6, -2, 2]))
+    assert m["value_x0"] == pytest.approx(s.value([-4, -6, -2, 2]))
+    # Default length: the environment's (75 sample times for the point masses).
+    assert policy.rollout([-4, -6, -2, 2])["actions"].shape == (75, 2)
+    rapier = policy.rollout([-4, -6, -2, 2], 10, plant="rapier")
+    assert rapier["metrics"]["plant"] == "rapier"
+    for kwargs, match in [
+        ({"plant": "ground"}, "plant"),
+        ({"headings": [0.0]}, "headings"),
+        ({"radius": 0.1}, "radius"),
+        ({"steps": 0}, "steps"),
+        ({"x0": None}, "1 agent;"),
+        ({"x0": [1.0, 2.0, 3.0]}, "x0"),
+        ({"x0": [9.0, 0.0, 0.0, 0.0]}, "outside the state range"),
+    ]:
+        args = {"x0": [-4, -6, -2, 2], **kwargs}
+        with pytest.raises(fuzzyq.ConfigError, match=match):
+            policy.rollout(**args)  # type: ignore[arg-type]
+
+
 def test_solver_settings_and_errors(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
     model, grid, s = one_agent
     for kwargs, err, match in [
@@ -234,6 +271,107 @@ def test_ctrl_c_interrupts_a_long_solve_promptly() -> None:
     assert time.monotonic() - start < 5.0
 
 
+# --- the classic benchmarks ----------------------------------------------------------------------
+
+
+CLASSIC = [
+    (fuzzyq.DcMotor, "dcmotor", 2, 1),
+    (fuzzyq.Pendulum, "pendulum", 2, 1),
+    (fuzzyq.CarHill, "carhill", 2, 1),
+    (fuzzyq.Arm, "arm", 4, 2),
+]
+
+
+@pytest.mark.parametrize(("cls", "env", "e", "a"), CLASSIC, ids=[c[1] for c in CLASSIC])
+def test_classic_models(cls: type[fuzzyq.ClassicModel], env: str, e: int, a: int) -> None:
+    m = cls()
+    assert isinstance(m, fuzzyq.ClassicModel)
+    assert (m.env, m.preset, m.state_dim, m.action_dim, m.n_agents) == (env, "fine", e, a, 1)
+    assert m.actions.shape == (m.n_actions, a) and m.n_joint_actions == m.n_actions
+    assert m.grid().n_dims == e and 0 < m.gamma < 1 and m.xi > 0
+    assert m.state_bounds.shape == (e, 2)
+    x, u = m.default_start, m.joint_action(m.n_actions - 1)
+    np.testing.assert_array_equal(u, m.actions[-1])
+    nxt, r = m.step(x, u)
+    assert nxt.shape == (e,) and isinstance(r, float) and r == m.reward(x, u)
+    batch, rewards = m.step(np.stack([x, x, nxt]), np.stack([u, u, u]))
+    assert batch.shape == (3, e) and rewards.shape == (3,)
+    np.testing.assert_array_equal(batch[1], nxt)
+    assert rewards[1] == r
+    assert set(m.params) >= {"sample_time", "integrator"} and m.sample_time == m.params["sample_time"]
+
+
+def test_classic_model_parameters() -> None:
+    # Keyword arguments are the configuration's fields; the reward is -x'Qx - R u^2.
+    motor = fuzzyq.DcMotor("toolbox-demo", q=[1.0, 0.0], r=0.5)
+    assert motor.reward([0.5, 3.0], [2.0]) == -(0.25 + 0.5 * 4)
+    assert motor.params["q"] == [1.0, 0.0] and motor.preset == "toolbox-demo"
+    assert motor.n_actions == 5 and motor.grid().shape == (21, 21)
+    np.testing.assert_array_equal(fuzzyq.DcMotor(actions=[-1, 1]).action_levels, [-1.0, 1.0])
+    # The arm combines its torque levels (fractions of each joint's maximum) per joint.
+    arm = fuzzyq.Arm(actions=[-1, 0, 1], max_torque=np.array([2.0, 1.0]))
+    assert arm.actions.shape == (9, 2)
+    np.testing.assert_array_equal(arm.actions[0], [-2.0, -1.0])
+    car = fuzzyq.CarHill("coarse", integrator={"rk4": {"substeps": 3}})
+    assert car.params["integrator"] == {"rk4": {"substeps": 3}}
+    assert fuzzyq.CarHill(integrator="rk4").params["integrator"] == {"rk4": {"substeps": 10}}
+    assert car.is_terminal([1.5, 0.0]) and not car.is_terminal([0.0, 0.0])
+
+
+def test_classic_model_errors() -> None:
+    for make, err, match in [
+        (lambda: fuzzyq.DcMotor(inertiaa=1.0), fuzzyq.ConfigError, "unknown field `inertiaa`"),
+        (lambda: fuzzyq.DcMotor(inertia=-1.0), fuzzyq.ConfigError, "env.inertia"),
+        (lambda: fuzzyq.DcMotor(q=[1.0]), fuzzyq.ConfigError, "dcmotor.q"),
+        (lambda: fuzzyq.DcMotor(inertia=np.nan), fuzzyq.InputError, "dcmotor.inertia"),
+        (lambda: fuzzyq.Pendulum("nope"), fuzzyq.ConfigError, "unknown pendulum preset"),
+        (lambda: fuzzyq.CarHill(integrator="zoh"), fuzzyq.ConfigError, "rk4"),
+        (lambda: fuzzyq.Arm(actions=[2.0]), fuzzyq.ConfigError, "torque levels"),
+        (lambda: fuzzyq.DcMotor(actions=[]), fuzzyq.ConfigError, "actions"),
+        (lambda: fuzzyq.ClassicModel(), TypeError, "ClassicModel"),
+    ]:
+        with pytest.raises(err, match=match):
+            make()
+    motor = fuzzyq.DcMotor("toolbox-demo")
+    with pytest.raises(fuzzyq.InputError, match=r"expected shape \(2,\) or \(n, 2\)"):
+        motor.step([0.0, 0.0, 0.0], [1.0])
+    with pytest.raises(fuzzyq.InputError, match="same batch size"):
+        motor.step(np.zeros((2, 2)), [1.0])
+    with pytest.raises(fuzzyq.ConfigError, match="grid.cores"):
+        fuzzyq.solve(motor, fuzzyq.Grid([[0, 1]] * 3))
+    with pytest.raises(fuzzyq.ConfigError, match="operator"):
+        fuzzyq.solve(motor, motor.grid(), operator="bellman")
+
+
+def test_solve_and_roll_out_a_classic_model() -> None:
+    car = fuzzyq.CarHill("coarse")
+    s = fuzzyq.solve(car, car.grid())
+    # The preset's settings: plain sweeps in float64 with its gamma and xi.
+    assert (s.env, s.gamma, s.xi, s.V.dtype) == ("carhill", car.gamma, car.xi, np.float64)
+    assert s.converged and s.deltas.shape[0] == s.sweeps
+    other = fuzzyq.solve(car, car.grid(), gamma=0.9, precision="float32", extrapolate=True)
+    assert other.gamma == 0.9 and other.V.dtype == np.float32
+    for kind in ("greedy", "interpolated"):
+        policy = s.policy(kind)
+        assert (policy.env, policy.learner, policy.state_dim, policy.action_dim) == ("carhill", "fqi", 2, 1)
+        run = policy.rollout(steps=100)
+        k = len(run["actions"])
+        assert run["states"].shape == (k + 1, 2) and run["rewards"].shape == (k,)
+        np.testing.assert_allclose(run["times"], car.sample_time * np.arange(k + 1))
+        np.testing.assert_array_equal(run["states"][0], car.default_start)
+        # The run is the model stepped under the policy's actions, to its terminal state.
+        for i in range(k):
+            np.testing.assert_array_equal(run["actions"][i], policy.act(run["states"][i]))
+            nxt, r = car.step(run["states"][i], run["actions"][i])
+            np.testing.assert_array_equal(run["states"][i + 1], nxt)
+            assert run["rewards"][i] == r
+        m = run["metrics"]
+        assert m["steps"] == k and m["terminal"] == (k < 100) and m["x0"] == [-0.5, 0.0]
+        assert m["value_x0"] == pytest.approx(policy.value(car.default_start))
+    q = fuzzyq.solve(car, car.grid(), operator="q-values")
+    assert q.kernel == "q-values" and q.converged
+
+
 # --- models written in Python ------------------------------------------------------------------
 
 
@@ -280,6 +418,11 @@ def test_a_ten_line_custom_system() -> None:
     policy = solution.policy("greedy")
     assert solution.converged
     assert policy.act([0.8, 0.0])[0] == -1.0 and policy.act([-0.8, 0.0])[0] == 1.0
+    assert solution.env is None and policy.env is None
+    with pytest.raises(fuzzyq.ConfigError, match="no plant"):
+        policy.rollout([0.5, 0.0])
+    with pytest.raises(fuzzyq.ConfigError, match="q-values"):
+        fuzzyq.solve(model, grid, operator="q-values")
 
 
 def test_callable_model_errors() -> None:
@@ -329,6 +472,7 @@ def test_save_load_round_trip(tmp_path: Path, one_agent: tuple[fuzzyq.PointMass,
     path = tmp_path / "one.fzq"
     s.save(path)
     back = fuzzyq.load(path)
+    assert isinstance(back, fuzzyq.Solution)  # fuzzy Q-iteration; learned policies load as Policy
     np.testing.assert_array_equal(back.V, s.V)
     np.testing.assert_array_equal(back.greedy, s.greedy)
     assert back.sweeps == s.sweeps and back.grid.shape == s.grid.shape
@@ -371,7 +515,9 @@ def test_python_and_cli_policies_act_alike(tmp_path: Path) -> None:
         [exe, "rollout", "--policy", tmp_path / "cli.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "cli.csv", "--json", tmp_path / "m.json", "-q"],
         check=True,
     )
-    loaded = fuzzyq.load(tmp_path / "cli.fzq").policy("greedy")
+    cli_solution = fuzzyq.load(tmp_path / "cli.fzq")
+    assert isinstance(cli_solution, fuzzyq.Solution)
+    loaded = cli_solution.policy("greedy")
     rows = np.loadtxt(tmp_path / "cli.csv", delimiter=",", skiprows=1, max_rows=30)
     for row in rows:
         np.testing.assert_array_equal(loaded.act(row[1:5]), row[5:7])

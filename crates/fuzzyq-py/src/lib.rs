@@ -1,14 +1,17 @@
 //! Python bindings of fuzzyq: the `fuzzyq._fuzzyq` extension module.
 //!
-//! A thin layer: arguments are converted and checked here (shapes and dtypes named in the
-//! errors), the work runs in the Rust crates with the GIL released, and results come back as
-//! numpy arrays that own the solver's buffers (no copies). The Python package `fuzzyq`
-//! (`python/fuzzyq`) re-exports this module and adds the Gymnasium/PettingZoo environments.
+//! A thin layer over the sim crate: arguments are converted and checked here (shapes and
+//! dtypes named in the errors), models, policies, policy files and rollouts are the sim
+//! crate's (the same code as the `fuzzyq` command line), the work runs with the GIL released,
+//! and results come back as numpy arrays. The Python package `fuzzyq` (`python/fuzzyq`)
+//! re-exports this module and adds the Gymnasium/PettingZoo environments.
 
+mod classic;
 mod convert;
-mod engine;
 mod errors;
+mod json;
 mod model;
+mod policy;
 mod solve;
 
 use pyo3::prelude::*;
@@ -21,8 +24,13 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::Grid>()?;
     m.add_class::<model::PointMass>()?;
     m.add_class::<model::CallableModel>()?;
+    m.add_class::<classic::ClassicModel>()?;
+    m.add_class::<classic::DcMotor>()?;
+    m.add_class::<classic::Pendulum>()?;
+    m.add_class::<classic::CarHill>()?;
+    m.add_class::<classic::Arm>()?;
     m.add_class::<solve::Solution>()?;
-    m.add_class::<solve::Policy>()?;
+    m.add_class::<policy::Policy>()?;
     m.add_function(wrap_pyfunction!(solve::solve, m)?)?;
     m.add_function(wrap_pyfunction!(solve::load, m)?)?;
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;

@@ -42,8 +42,26 @@ impl Grid {
             .iter()
             .map(|c| c.iter().map(|&v| T::from_f64(v)).collect())
             .collect();
-        fuzzyq_core::solver::Grid::new(cores).expect("a valid f64 grid is valid in f32")
+        fuzzyq_core::solver::Grid::new(cores)
+            .expect("a valid f64 grid is valid in f32")
+            .with_membership(self.inner.membership())
     }
+}
+
+/// Checks that a batch of states and one of actions have the same size.
+pub(crate) fn same_batch(py: Python<'_>, bx: Option<usize>, bu: Option<usize>) -> PyResult<()> {
+    if bx == bu {
+        return Ok(());
+    }
+    Err(error(
+        py,
+        Kind::Input,
+        format!(
+            "x and u: expected the same batch size, got {} and {}",
+            bx.map_or("none".into(), |b| b.to_string()),
+            bu.map_or("none".into(), |b| b.to_string())
+        ),
+    ))
 }
 
 #[pymethods]
@@ -392,17 +410,7 @@ impl PointMass {
         let (e, a) = (self.state_dim(), self.action_dim());
         let (xs, bx) = one_or_batch(x, "x", e)?;
         let (us, bu) = one_or_batch(u, "u", a)?;
-        if bx != bu {
-            return Err(error(
-                py,
-                Kind::Input,
-                format!(
-                    "x and u: expected the same batch size, got {} and {}",
-                    bx.map_or("none".into(), |b| b.to_string()),
-                    bu.map_or("none".into(), |b| b.to_string())
-                ),
-            ));
-        }
+        same_batch(py, bx, bu)?;
         let n = bx.unwrap_or(1);
         let mut out = vec![0.0; n * e];
         for i in 0..n {

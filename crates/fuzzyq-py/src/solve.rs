@@ -1,106 +1,90 @@
-//! `solve`, `load`, `Solution` and `Policy`.
+//! `solve`, `load` and `Solution`: fuzzy Q-iteration through the sim crate (the command
+//! line's training path for built-in models, the solver on a table for Python callables), and
+//! every policy file the command line writes.
 
 use std::ops::ControlFlow;
 use std::path::PathBuf;
+use std::str::FromStr;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use fuzzyq_core::solver::{self, Kernel, Progress, SolveError, TabulatedModel};
-use fuzzyq_core::{Backup, Real};
-use fuzzyq_sim::PolicyArtifact;
-use fuzzyq_sim::io::config::{
-    Backup as BackupSetting, EnvConfig, GridConfig, KernelChoice, Precision, SolverSettings, Sweep,
-    TrainConfig,
+use fuzzyq_core::options::UnknownName;
+use fuzzyq_core::q::PolicyKind;
+use fuzzyq_core::solver::{
+    self, BackupPath, IterationOperator, Kernel, Precision, Progress, SolveError, SweepMode,
+    TabulatedModel,
 };
-use fuzzyq_sim::io::policy_file::{TrainSummary, Values};
+use fuzzyq_core::{NamedOption, Real};
+use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
+use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary, Values};
+use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{finite_vector, one_or_batch};
-use crate::engine::{Engine, Owned, PointMass32, PointMass64, Table32, Table64};
-use crate::errors::{Kind, error, eval_error, policy_file_error, sim_error, solve_error};
+use crate::classic::ClassicModel;
+use crate::convert::finite_vector;
+use crate::errors::{Kind, config_error, error, policy_file_error, sim_error, solve_error};
 use crate::model::{CallableModel, Grid, PointMass};
+use crate::policy::Policy;
 
-/// Where a solution came from: what a policy needs besides `V`.
-enum Source {
-    /// A built-in point-mass model; the configuration can be saved.
-    PointMass {
-        model: Arc<fuzzyq_sim::PointMass>,
-        config: Box<TrainConfig>,
-    },
-    /// A tabulated model (from a Python callable), in the solver's precision.
-    Table32(Arc<TabulatedModel<f32>>),
-    Table64(Arc<TabulatedModel<f64>>),
-}
-
-/// The result of [`solve`] or [`load`]: `V`, the greedy actions, the run's record, and
-/// policies.
-#[pyclass(module = "fuzzyq", frozen)]
-pub struct Solution {
-    v: Py<PyAny>,
-    greedy: Py<PyArray1<u32>>,
-    grid: Py<Grid>,
-    summary: TrainSummary,
-    gamma: f64,
-    xi: f64,
-    absorbing_goal: bool,
-    precision: Precision,
-    source: Source,
-    engine: OnceLock<Arc<dyn Engine>>,
-}
-
-#[allow(clippy::too_many_arguments)] // the solver's settings, as given to `solve`
-fn parse_settings(
+/// The option named `got`, or a `ConfigError` naming `field` and the accepted names.
+pub(crate) fn parse_option<T: FromStr<Err = UnknownName>>(
     py: Python<'_>,
-    gamma: f64,
-    xi: f64,
+    field: &str,
+    got: &str,
+) -> PyResult<T> {
+    got.parse()
+        .map_err(|e: UnknownName| error(py, Kind::Config, format!("{field}: {e}, got {got:?}")))
+}
+
+/// The solver settings as given to `solve` (`None`: the model's default).
+struct Settings<'a> {
+    gamma: Option<f64>,
+    xi: Option<f64>,
     max_sweeps: usize,
-    sweep: &str,
-    extrapolate: bool,
+    sweep: &'a str,
+    extrapolate: Option<bool>,
     absorbing_goal: bool,
-    precision: &str,
-    backup: &str,
-    kernel: Option<&str>,
-) -> PyResult<SolverSettings> {
-    let bad = |what: &str, allowed: &str, got: &str| {
-        error(
-            py,
-            Kind::Config,
-            format!("{what}: expected one of {allowed}, got {got:?}"),
-        )
-    };
-    Ok(SolverSettings {
-        gamma,
-        xi,
-        max_sweeps,
-        sweep: match sweep {
-            "sync" => Sweep::Sync,
-            "async" => Sweep::Async,
-            other => return Err(bad("sweep", "\"sync\", \"async\"", other)),
-        },
-        absorbing_goal,
-        backup: match backup {
-            "auto" => BackupSetting::Auto,
-            "block" => BackupSetting::Block,
-            "generic" => BackupSetting::Generic,
-            other => return Err(bad("backup", "\"auto\", \"block\", \"generic\"", other)),
-        },
-        precision: match precision {
-            "f32" | "float32" => Precision::F32,
-            "f64" | "float64" => Precision::F64,
-            other => return Err(bad("precision", "\"f32\", \"f64\"", other)),
-        },
-        extrapolate,
-        kernel: match kernel {
-            None => None,
-            Some("scalar") => Some(KernelChoice::Scalar),
-            Some("avx2") => Some(KernelChoice::Avx2),
-            Some("avx512") => Some(KernelChoice::Avx512),
-            Some(other) => return Err(bad("kernel", "\"scalar\", \"avx2\", \"avx512\"", other)),
-        },
-        operator: fuzzyq_sim::io::config::IterationOperator::Values,
-    })
+    precision: Option<&'a str>,
+    backup: &'a str,
+    kernel: Option<&'a str>,
+    operator: &'a str,
+}
+
+impl Settings<'_> {
+    /// The settings with the model's defaults filled in: the preset's `gamma` and `xi`, plain
+    /// sweeps in float64 for a classic benchmark (as `fuzzyq train --preset` runs it), the
+    /// paper's settings otherwise.
+    fn resolve(&self, py: Python<'_>, classic: Option<(f64, f64)>) -> PyResult<SolverSettings> {
+        let defaults = SolverSettings::default();
+        let precision = match self.precision {
+            None if classic.is_some() => Precision::F64,
+            None => defaults.precision,
+            Some("float32") => Precision::F32,
+            Some("float64") => Precision::F64,
+            Some(p) => parse_option(py, "precision", p)?,
+        };
+        Ok(SolverSettings {
+            gamma: self
+                .gamma
+                .unwrap_or(classic.map_or(defaults.gamma, |c| c.0)),
+            xi: self.xi.unwrap_or(classic.map_or(defaults.xi, |c| c.1)),
+            max_sweeps: self.max_sweeps,
+            sweep: parse_option::<SweepMode>(py, "sweep", self.sweep)?,
+            absorbing_goal: self.absorbing_goal,
+            backup: parse_option::<BackupPath>(py, "backup", self.backup)?,
+            precision,
+            extrapolate: self
+                .extrapolate
+                .unwrap_or(classic.is_none() && defaults.extrapolate),
+            kernel: self
+                .kernel
+                .map(|k| parse_option::<Kernel>(py, "kernel", k))
+                .transpose()?,
+            operator: parse_option::<IterationOperator>(py, "operator", self.operator)?,
+        })
+    }
 }
 
 /// Runs `f` on `threads` threads (a dedicated pool) or on the global pool.
@@ -150,24 +134,30 @@ fn observer<'a>(
 
 /// Solves a model on a grid by fuzzy Q-iteration (the paper's eq 20), with the GIL released.
 ///
-/// `model` is a `PointMass` or a `CallableModel`. `callback(info)` is called after every sweep
-/// with a dict (`sweep`, `delta_lower`, `delta_upper`, `extrapolated`, `seconds`, `bound`,
-/// `xi`); an exception it raises stops the solve and propagates. Ctrl-C raises
-/// `KeyboardInterrupt` at the end of the current sweep.
+/// `model` is a built-in model (`PointMass`, `DcMotor`, `Pendulum`, `CarHill`, `Arm`), solved
+/// through the same code as `fuzzyq train`, or a `CallableModel`, tabulated on the grid first.
+/// Settings left at `None` take the model's defaults: for a classic benchmark its preset's
+/// `gamma` and `xi`, plain sweeps (`extrapolate=False`) in `"f64"`, as `fuzzyq train --preset`
+/// runs it; otherwise `gamma=0.96`, `xi=0.05`, `extrapolate=True`, `"f32"`.
+/// `operator="q-values"` runs Busoniu's fuzzy Q-iteration (theta stored; built-in models).
+/// `callback(info)` is called after every sweep with a dict (`sweep`, `delta_lower`,
+/// `delta_upper`, `extrapolated`, `seconds`, `bound`, `xi`); an exception it raises stops the
+/// solve and propagates. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
 #[pyfunction]
 #[pyo3(signature = (
     model,
     grid,
     *,
-    gamma = 0.96,
-    xi = 0.05,
+    gamma = None,
+    xi = None,
     max_sweeps = 1000,
     sweep = "sync",
-    extrapolate = true,
+    extrapolate = None,
     absorbing_goal = false,
-    precision = "f32",
+    precision = None,
     backup = "auto",
     kernel = None,
+    operator = "values",
     threads = None,
     callback = None,
 ))]
@@ -176,20 +166,20 @@ pub(crate) fn solve(
     py: Python<'_>,
     model: &Bound<'_, PyAny>,
     grid: &Bound<'_, Grid>,
-    gamma: f64,
-    xi: f64,
+    gamma: Option<f64>,
+    xi: Option<f64>,
     max_sweeps: usize,
     sweep: &str,
-    extrapolate: bool,
+    extrapolate: Option<bool>,
     absorbing_goal: bool,
-    precision: &str,
+    precision: Option<&str>,
     backup: &str,
     kernel: Option<&str>,
+    operator: &str,
     threads: Option<usize>,
     callback: Option<Py<PyAny>>,
 ) -> PyResult<Solution> {
-    let settings = parse_settings(
-        py,
+    let given = Settings {
         gamma,
         xi,
         max_sweeps,
@@ -199,7 +189,8 @@ pub(crate) fn solve(
         precision,
         backup,
         kernel,
-    )?;
+        operator,
+    };
     if threads == Some(0) {
         return Err(error(py, Kind::Config, "threads: must be at least 1"));
     }
@@ -208,6 +199,7 @@ pub(crate) fn solve(
     {
         return Err(error(py, Kind::InputType, "callback: expected a callable"));
     }
+    let g = grid.get();
     let failure = Mutex::new(None);
     let finish = |py: Python<'_>, e: SolveError| -> PyErr {
         match failure.lock().expect("not poisoned").take() {
@@ -215,18 +207,32 @@ pub(crate) fn solve(
             None => solve_error(py, &e),
         }
     };
-    let g = grid.get();
 
-    if let Ok(pm) = model.cast::<PointMass>() {
-        let pm = pm.get();
+    // A built-in model: the configuration `fuzzyq train` would read, trained the same way.
+    let builtin = if let Ok(pm) = model.cast::<PointMass>() {
+        let settings = given.resolve(py, None)?;
+        Some((
+            EnvConfig::Pointmass(pm.get().model.config().clone()),
+            GridConfig {
+                membership: g.inner.membership(),
+                ..GridConfig::explicit(g.inner.cores().to_vec())
+            },
+            settings,
+        ))
+    } else if let Ok(c) = model.cast::<ClassicModel>() {
+        let c = c.get();
+        let settings = given.resolve(py, Some(c.preset_gamma_xi()))?;
+        Some((c.env.clone(), ClassicModel::grid_config(g), settings))
+    } else {
+        None
+    };
+    if let Some((env, grid_config, settings)) = builtin {
         let config = TrainConfig {
-            env: EnvConfig::Pointmass(pm.model.config().clone()),
-            grid: GridConfig::explicit(g.inner.cores().to_vec()),
+            env,
+            grid: grid_config,
             solver: settings,
         };
-        config
-            .validate()
-            .map_err(|e| crate::errors::config_error(py, &e))?;
+        config.validate().map_err(|e| config_error(py, &e))?;
         let cb = callback.as_ref();
         let result = py
             .detach(|| {
@@ -240,21 +246,26 @@ pub(crate) fn solve(
             Err(fuzzyq_sim::SimError::Solve(e)) => return Err(finish(py, e)),
             Err(e) => return Err(sim_error(py, &e)),
         };
-        return Solution::from_artifact(
-            py,
-            artifact,
-            Some(pm.model.clone()),
-            Some(grid.clone().unbind()),
-        );
+        return Solution::from_artifact(py, artifact, Some(grid.clone().unbind()));
     }
 
     let Ok(cm) = model.cast::<CallableModel>() else {
         return Err(error(
             py,
             Kind::InputType,
-            "model: expected a fuzzyq.PointMass or a fuzzyq.CallableModel",
+            "model: expected a fuzzyq.PointMass, a classic benchmark (fuzzyq.DcMotor, \
+             fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm) or a fuzzyq.CallableModel",
         ));
     };
+    let settings = given.resolve(py, None)?;
+    if settings.operator != IterationOperator::Values {
+        return Err(error(
+            py,
+            Kind::Config,
+            "operator: \"q-values\" solves the built-in models; a CallableModel is solved with \
+             \"values\"",
+        ));
+    }
     let cm = cm.get();
     let (next, rewards) = cm.tabulate(py, &g.inner)?;
     let config = settings.solver_config();
@@ -295,24 +306,64 @@ pub(crate) fn solve(
     }
 }
 
-/// Reads a policy file written by `fuzzyq train` or `Solution.save`.
+/// Reads a policy file written by `fuzzyq train` (any environment, any learner) or by
+/// `Solution.save`.
+///
+/// Returns a `Solution` for a fuzzy Q-iteration policy (`V`, `greedy`, `grid`, the run's
+/// record, `.policy(kind)`), and a `Policy` for a policy learned from samples (fuzzy
+/// Q-learning, VQQL: greedy and decentralised, each agent acting on its own observation).
 #[pyfunction]
-pub(crate) fn load(py: Python<'_>, path: PathBuf) -> PyResult<Solution> {
-    let artifact = py
-        .detach(|| PolicyArtifact::load(&path))
+pub(crate) fn load(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
+    let file = py
+        .detach(|| PolicyFile::load(&path))
         .map_err(|e| policy_file_error(py, &e))?;
-    Solution::from_artifact(py, artifact, None, None)
+    match file {
+        PolicyFile::Fqi(a) => Ok(Py::new(py, Solution::from_artifact(py, a, None)?)?.into_any()),
+        learned => {
+            let policy = py
+                .detach(|| SimPolicy::from_file(learned))
+                .map_err(|e| sim_error(py, &e))?;
+            let policy = Policy::new(Arc::new(policy), PolicyKind::Greedy);
+            Ok(Py::new(py, policy)?.into_any())
+        }
+    }
 }
 
 /// The kernel instances this CPU runs, fastest first (`"avx512"`, `"avx2"`, `"scalar"`).
 #[pyfunction]
 pub(crate) fn available_kernels() -> Vec<&'static str> {
-    <Kernel as fuzzyq_core::NamedOption>::ALL
+    <Kernel as NamedOption>::ALL
         .iter()
         .copied()
         .filter(|k| k.is_available())
         .map(Kernel::name)
         .collect()
+}
+
+/// What a solution's policy needs besides `V` and the greedy actions.
+enum Source {
+    /// A built-in model: the training configuration (model, grid, settings); can be saved.
+    Env(Box<TrainConfig>),
+    /// A tabulated model (from a Python callable), in the solver's precision.
+    Table32(Arc<TabulatedModel<f32>>),
+    Table64(Arc<TabulatedModel<f64>>),
+}
+
+/// The result of [`solve`] or [`load`]: `V`, the greedy actions, the run's record, and
+/// policies.
+#[pyclass(module = "fuzzyq", frozen)]
+pub struct Solution {
+    v: Py<PyAny>,
+    greedy: Py<PyArray1<u32>>,
+    grid: Py<Grid>,
+    summary: TrainSummary,
+    gamma: f64,
+    xi: f64,
+    absorbing_goal: bool,
+    precision: Precision,
+    source: Source,
+    /// The sim crate's policy, built (and prepared) on first use.
+    policy: OnceLock<Arc<SimPolicy>>,
 }
 
 impl Solution {
@@ -335,39 +386,15 @@ impl Solution {
             absorbing_goal: settings.absorbing_goal,
             precision: settings.precision,
             source,
-            engine: OnceLock::new(),
+            policy: OnceLock::new(),
         })
     }
 
-    fn from_artifact(
-        py: Python<'_>,
-        a: PolicyArtifact,
-        model: Option<Arc<fuzzyq_sim::PointMass>>,
-        grid: Option<Py<Grid>>,
-    ) -> PyResult<Self> {
-        let model = match model {
-            Some(m) => m,
-            None => {
-                match fuzzyq_sim::train::build_model(&a.config).map_err(|e| sim_error(py, &e))? {
-                    fuzzyq_sim::model::EnvModel::PointMass(m) => Arc::new(m),
-                    other => {
-                        let e = fuzzyq_sim::SimError::from(fuzzyq_sim::ConfigError::invalid(
-                            "env",
-                            format!(
-                                "{} policies are not available from Python yet; use the fuzzyq CLI",
-                                other.name()
-                            ),
-                        ));
-                        return Err(sim_error(py, &e));
-                    }
-                }
-            }
-        };
+    fn from_artifact(py: Python<'_>, a: PolicyArtifact, grid: Option<Py<Grid>>) -> PyResult<Self> {
         let grid = match grid {
             Some(g) => g,
             None => {
-                let inner = fuzzyq_sim::train::build_grid::<f64>(&a.config)
-                    .map_err(|e| sim_error(py, &e))?;
+                let inner = a.config.grid::<f64>().map_err(|e| sim_error(py, &e))?;
                 Py::new(py, Grid::from_inner(inner))?
             }
         };
@@ -383,64 +410,67 @@ impl Solution {
             grid,
             a.summary,
             &settings,
-            Source::PointMass {
-                model,
-                config: Box::new(a.config),
-            },
+            Source::Env(Box::new(a.config)),
         )
     }
 
-    /// The decision engine, built on first use from a copy of `V`.
-    fn engine(&self, py: Python<'_>) -> PyResult<Arc<dyn Engine>> {
-        if let Some(e) = self.engine.get() {
-            return Ok(e.clone());
+    /// A copy of `V` in the solver's precision.
+    fn values(&self, py: Python<'_>) -> PyResult<Values> {
+        let v = self.v.bind(py);
+        Ok(match self.precision {
+            Precision::F32 => {
+                Values::F32(v.cast::<PyArray1<f32>>()?.readonly().as_slice()?.to_vec())
+            }
+            Precision::F64 => {
+                Values::F64(v.cast::<PyArray1<f64>>()?.readonly().as_slice()?.to_vec())
+            }
+        })
+    }
+
+    /// The sim crate's policy of this solution, built and prepared (with the GIL released) on
+    /// first use from a copy of `V`.
+    pub(crate) fn sim_policy(&self, py: Python<'_>) -> PyResult<Arc<SimPolicy>> {
+        if let Some(p) = self.policy.get() {
+            return Ok(p.clone());
         }
         let greedy: Vec<u32> = self.greedy.bind(py).readonly().as_slice()?.to_vec();
-        let grid = self.grid.get();
-        let v = self.v.bind(py);
-        macro_rules! owned {
-            ($t:ty, $model:expr) => {{
-                let v: Vec<$t> = v.cast::<PyArray1<$t>>()?.readonly().as_slice()?.to_vec();
-                Owned {
-                    model: $model,
-                    grid: grid.to_precision::<$t>(),
-                    v,
-                    greedy,
-                }
-            }};
-        }
-        let backup32 = Backup {
-            gamma: self.gamma as f32,
-            absorbing_goal: self.absorbing_goal,
-        };
-        let backup64 = Backup {
-            gamma: self.gamma,
-            absorbing_goal: self.absorbing_goal,
-        };
-        let built: Result<Arc<dyn Engine>, SolveError> = match (&self.source, self.precision) {
-            (Source::PointMass { model, .. }, Precision::F32) => {
-                let o = owned!(f32, model.clone());
+        let values = self.values(py)?;
+        let (gamma, absorbing) = (self.gamma, self.absorbing_goal);
+        let prepared = |p: FqiPolicy| p.prepare().map(|()| p);
+        let built = match (&self.source, values) {
+            (Source::Env(config), values) => {
+                let config = (**config).clone();
+                py.detach(|| FqiPolicy::new(config, values, greedy).and_then(prepared))
+            }
+            (Source::Table32(t), Values::F32(v)) => {
+                let grid = self.grid.get().to_precision::<f32>();
                 py.detach(|| {
-                    PointMass32::build(o, backup32).map(|e| Arc::new(e) as Arc<dyn Engine>)
+                    FqiPolicy::tabulated(t.clone(), grid, v, greedy, gamma, absorbing)
+                        .and_then(prepared)
                 })
             }
-            (Source::PointMass { model, .. }, Precision::F64) => {
-                let o = owned!(f64, model.clone());
+            (Source::Table64(t), Values::F64(v)) => {
+                let grid = self.grid.get().to_precision::<f64>();
                 py.detach(|| {
-                    PointMass64::build(o, backup64).map(|e| Arc::new(e) as Arc<dyn Engine>)
+                    FqiPolicy::tabulated(t.clone(), grid, v, greedy, gamma, absorbing)
+                        .and_then(prepared)
                 })
             }
-            (Source::Table32(t), _) => {
-                let o = owned!(f32, t.clone());
-                py.detach(|| Table32::build(o, backup32).map(|e| Arc::new(e) as Arc<dyn Engine>))
-            }
-            (Source::Table64(t), _) => {
-                let o = owned!(f64, t.clone());
-                py.detach(|| Table64::build(o, backup64).map(|e| Arc::new(e) as Arc<dyn Engine>))
-            }
+            _ => unreachable!("a tabulated model is solved in the precision of its table"),
         };
-        let engine = built.map_err(|e| solve_error(py, &e))?;
-        Ok(self.engine.get_or_init(|| engine).clone())
+        let policy = built.map_err(|e| sim_error(py, &e))?;
+        Ok(self
+            .policy
+            .get_or_init(|| Arc::new(SimPolicy::Fqi(policy)))
+            .clone())
+    }
+}
+
+/// The fuzzy Q-iteration policy inside a sim policy built by [`Solution::sim_policy`].
+fn fqi(p: &SimPolicy) -> &FqiPolicy {
+    match p {
+        SimPolicy::Fqi(f) => f,
+        SimPolicy::Additive(_) => unreachable!("a solution's policy is fuzzy Q-iteration"),
     }
 }
 
@@ -462,6 +492,16 @@ impl Solution {
     #[getter]
     fn grid(&self, py: Python<'_>) -> Py<Grid> {
         self.grid.clone_ref(py)
+    }
+
+    /// The environment's name (`"pointmass"`, `"khepera"`, `"dcmotor"`, ...), or `None` for
+    /// a `CallableModel`.
+    #[getter]
+    fn env(&self) -> Option<&'static str> {
+        match &self.source {
+            Source::Env(c) => Some(c.env.name()),
+            _ => None,
+        }
     }
 
     /// Sweeps performed.
@@ -509,7 +549,8 @@ impl Solution {
         self.summary.seconds
     }
 
-    /// The kernel instance used (`"avx512"`, `"avx2"`, `"scalar"` or `"generic"`).
+    /// The kernel instance used (`"avx512"`, `"avx2"`, `"scalar"`, `"generic"` or
+    /// `"q-values"`).
     #[getter]
     fn kernel(&self) -> &str {
         &self.summary.kernel
@@ -530,8 +571,9 @@ impl Solution {
     /// `theta[d, u]` for every core and joint action, shape `(n_cores, n_joint_actions)`.
     /// Only for problems with at most 5e7 Q-values (the paper's has 2.56e9).
     fn theta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let engine = self.engine(py)?;
-        let (n, m) = (engine.n_cores(), engine.n_joint());
+        let policy = self.sim_policy(py)?;
+        let p = fqi(&policy);
+        let (n, m) = (p.n_cores(), p.n_joint_actions());
         if n.saturating_mul(m) > 50_000_000 {
             return Err(error(
                 py,
@@ -541,9 +583,7 @@ impl Solution {
                 ),
             ));
         }
-        let t = py
-            .detach(|| engine.theta())
-            .map_err(|e| solve_error(py, &e))?;
+        let t = py.detach(|| p.theta()).map_err(|e| sim_error(py, &e))?;
         Ok(PyArray2::from_owned_array(
             py,
             Array2::from_shape_vec((n, m), t).expect("n x m"),
@@ -552,66 +592,48 @@ impl Solution {
 
     /// `V` interpolated at state `x`.
     fn value(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let engine = self.engine(py)?;
-        let x = finite_vector(x, "x", Some(engine.state_dim()))?;
-        engine.value(&x).map_err(|e| eval_error(py, &e))
+        let policy = self.sim_policy(py)?;
+        let p = fqi(&policy);
+        let x = finite_vector(x, "x", Some(p.state_dim()))?;
+        p.value(&x).map_err(|e| sim_error(py, &e))
     }
 
     /// A policy: `"greedy"` (eq 7, the maximiser of `Q(x, .)`) or `"interpolated"` (eq 22).
     #[pyo3(signature = (kind = "greedy"))]
     fn policy(&self, py: Python<'_>, kind: &str) -> PyResult<Policy> {
-        let greedy = match kind {
-            "greedy" => true,
-            "interpolated" => false,
-            other => {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!("kind: expected \"greedy\" or \"interpolated\", got {other:?}"),
-                ));
-            }
-        };
-        Ok(Policy {
-            engine: self.engine(py)?,
-            greedy,
-        })
+        let kind = parse_option::<PolicyKind>(py, "kind", kind)?;
+        Ok(Policy::new(self.sim_policy(py)?, kind))
     }
 
     /// Writes the policy file (the format `fuzzyq rollout` reads), atomically. Only solutions
     /// of built-in models can be saved.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let Source::PointMass { config, .. } = &self.source else {
+        let Source::Env(config) = &self.source else {
             return Err(error(
                 py,
                 Kind::Config,
-                "save: only solutions of built-in models (PointMass) can be written to a policy file",
+                "save: only solutions of built-in models (PointMass, DcMotor, Pendulum, CarHill, \
+                 Arm) can be written to a policy file",
             ));
-        };
-        let v = self.v.bind(py);
-        let values = match self.precision {
-            Precision::F32 => {
-                Values::F32(v.cast::<PyArray1<f32>>()?.readonly().as_slice()?.to_vec())
-            }
-            Precision::F64 => {
-                Values::F64(v.cast::<PyArray1<f64>>()?.readonly().as_slice()?.to_vec())
-            }
         };
         let artifact = PolicyArtifact {
             config: (**config).clone(),
-            values,
+            values: self.values(py)?,
             greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
             summary: self.summary.clone(),
         };
         artifact
             .check()
             .map_err(|e| error(py, Kind::Input, format!("save: {e}")))?;
-        py.detach(|| artifact.save(&path))
-            .map_err(|e| policy_file_error(py, &e))
+        py.detach(|| PolicyFile::Fqi(artifact).save(&path))
+            .map_err(|e| sim_error(py, &e))
     }
 
     fn __repr__(&self) -> String {
         format!(
-            "Solution(sweeps={}, converged={}, final_delta={:.4}, seconds={:.2}, kernel={:?})",
+            "Solution(env={}, sweeps={}, converged={}, final_delta={:.4}, seconds={:.2}, kernel={:?})",
+            self.env()
+                .map_or_else(|| "None".into(), |e| format!("{e:?}")),
             self.summary.sweeps,
             if self.summary.converged {
                 "True"
@@ -621,153 +643,6 @@ impl Solution {
             self.summary.final_delta,
             self.summary.seconds,
             self.summary.kernel
-        )
-    }
-}
-
-/// A policy derived from a solution.
-#[pyclass(module = "fuzzyq", frozen)]
-pub struct Policy {
-    engine: Arc<dyn Engine>,
-    greedy: bool,
-}
-
-impl Policy {
-    fn require_greedy(&self, py: Python<'_>, what: &str) -> PyResult<()> {
-        if self.greedy {
-            Ok(())
-        } else {
-            Err(error(
-                py,
-                Kind::Config,
-                format!("{what}: only the greedy policy has discrete actions"),
-            ))
-        }
-    }
-
-    fn greedy_index(&self, py: Python<'_>, x: &[f64]) -> PyResult<usize> {
-        let mut q = vec![0.0; self.engine.n_joint()];
-        self.engine
-            .q_values(x, &mut q)
-            .map_err(|e| solve_error(py, &e))?;
-        Ok(fuzzyq_core::q::argmax(&q).unwrap_or(0))
-    }
-
-    fn act_into(&self, py: Python<'_>, x: &[f64], out: &mut [f64]) -> PyResult<()> {
-        if self.greedy {
-            let u = self.greedy_index(py, x)?;
-            self.engine.joint_vector(u, out);
-            Ok(())
-        } else {
-            self.engine
-                .interpolated(x, out)
-                .map_err(|e| eval_error(py, &e))
-        }
-    }
-}
-
-#[pymethods]
-impl Policy {
-    /// `"greedy"` or `"interpolated"`.
-    #[getter]
-    fn kind(&self) -> &'static str {
-        if self.greedy {
-            "greedy"
-        } else {
-            "interpolated"
-        }
-    }
-
-    /// Length of the state vector.
-    #[getter]
-    fn state_dim(&self) -> usize {
-        self.engine.state_dim()
-    }
-
-    /// Length of the joint action vector.
-    #[getter]
-    fn action_dim(&self) -> usize {
-        self.engine.action_dim()
-    }
-
-    /// Number of joint actions.
-    #[getter]
-    fn n_joint_actions(&self) -> usize {
-        self.engine.n_joint()
-    }
-
-    /// Number of agents.
-    #[getter]
-    fn n_agents(&self) -> usize {
-        self.engine.n_agents()
-    }
-
-    /// The joint action vector at state `x` (the greedy action's, or the interpolated one).
-    fn act<'py>(
-        &self,
-        py: Python<'py>,
-        x: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let x = finite_vector(x, "x", Some(self.engine.state_dim()))?;
-        let mut u = vec![0.0; self.engine.action_dim()];
-        self.act_into(py, &x, &mut u)?;
-        Ok(PyArray1::from_vec(py, u))
-    }
-
-    /// The joint action vectors at a batch of states, shape `(n, state_dim)` -> `(n, action_dim)`.
-    fn act_batch<'py>(
-        &self,
-        py: Python<'py>,
-        states: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let (e, a) = (self.engine.state_dim(), self.engine.action_dim());
-        let (xs, b) = one_or_batch(states, "states", e)?;
-        let n = b.unwrap_or(1);
-        let mut out = vec![0.0; n * a];
-        for i in 0..n {
-            self.act_into(py, &xs[i * e..(i + 1) * e], &mut out[i * a..(i + 1) * a])?;
-        }
-        Ok(PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((n, a), out).expect("n x a"),
-        ))
-    }
-
-    /// The greedy joint action index at `x` (lowest index on ties).
-    fn act_index(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<usize> {
-        self.require_greedy(py, "act_index")?;
-        let x = finite_vector(x, "x", Some(self.engine.state_dim()))?;
-        self.greedy_index(py, &x)
-    }
-
-    /// The greedy action of each agent at `x` (indices into each agent's action set).
-    fn agent_actions(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
-        self.require_greedy(py, "agent_actions")?;
-        let x = finite_vector(x, "x", Some(self.engine.state_dim()))?;
-        let u = self.greedy_index(py, &x)?;
-        Ok(self.engine.agent_indices(u))
-    }
-
-    /// `Q(x, .)`, one value per joint action.
-    fn q_values<'py>(
-        &self,
-        py: Python<'py>,
-        x: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let x = finite_vector(x, "x", Some(self.engine.state_dim()))?;
-        let mut q = vec![0.0; self.engine.n_joint()];
-        self.engine
-            .q_values(&x, &mut q)
-            .map_err(|e| solve_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, q))
-    }
-
-    fn __repr__(&self) -> String {
-        format!(
-            "Policy(kind={:?}, state_dim={}, action_dim={})",
-            self.kind(),
-            self.engine.state_dim(),
-            self.engine.action_dim()
         )
     }
 }
