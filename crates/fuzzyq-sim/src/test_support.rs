@@ -77,4 +77,3 @@ pub fn tiny_fql() -> FqlConfig {
 
 /// A start of [`tiny_model`] 3.6 m from the goal.
 pub const TINY_X0: [f64; 4] = [-3.0, 2.0, 0.0, 0.0];
-

@@ -203,7 +203,7 @@ crate::named_option! {
 
 crate::named_option! {
     /// An instruction set for the block path's kernels (see [`Operator::with_kernel`]). Every
-    /// instance computes bit-identical results; they differ only in speed. [`ALL`](Self::ALL)
+    /// instance computes bit-identical results; they differ only in speed. [`NamedOption::ALL`](crate::NamedOption::ALL)
     /// lists them fastest first.
     pub enum Kernel: "kernel" {
         /// x86-64 AVX-512F.

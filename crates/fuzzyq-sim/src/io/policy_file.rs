@@ -178,8 +178,8 @@ struct FqiPayload {
 /// What a version 2 payload holds.
 #[derive(Serialize, Deserialize)]
 enum Payload {
-    /// Fuzzy Q-iteration.
-    Fqi(FqiPayload),
+    /// Fuzzy Q-iteration (boxed to keep the enum small; serde encodes a box as its content).
+    Fqi(Box<FqiPayload>),
     /// A point-mass policy learned from samples, as TOML text.
     PointMass(String),
     /// A Khepera policy learned from samples, as TOML text.
@@ -435,7 +435,7 @@ impl PolicyFile {
             return Err(PolicyFileError::Checksum { path: path_buf });
         }
         let payload = if version == 1 {
-            postcard::from_bytes(payload).map(Payload::Fqi)
+            postcard::from_bytes(payload).map(|p| Payload::Fqi(Box::new(p)))
         } else {
             postcard::from_bytes(payload)
         }
@@ -495,12 +495,12 @@ impl PolicyFile {
     /// Encodes the file with its header.
     pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
         let payload = match self {
-            Self::Fqi(a) => Payload::Fqi(FqiPayload {
+            Self::Fqi(a) => Payload::Fqi(Box::new(FqiPayload {
                 config_toml: a.config.to_toml(),
                 values: a.values.clone(),
                 greedy: a.greedy.clone(),
                 summary: a.summary.clone(),
-            }),
+            })),
             Self::PointMass(f) => Payload::PointMass(to_toml(f)?),
             Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
         };
@@ -726,10 +726,22 @@ mod tests {
         let vback = point_mass(&vpath).unwrap();
         assert_eq!(vback, vfile);
         assert!(vback.q.features().is_codebook());
-        let (t1, _) =
-            crate::test_support::rollout_additive(&model, &vback.q, &crate::test_support::TINY_X0, 10, 0.95).unwrap();
-        let (t2, _) =
-            crate::test_support::rollout_additive(&model, &vfile.q, &crate::test_support::TINY_X0, 10, 0.95).unwrap();
+        let (t1, _) = crate::test_support::rollout_additive(
+            &model,
+            &vback.q,
+            &crate::test_support::TINY_X0,
+            10,
+            0.95,
+        )
+        .unwrap();
+        let (t2, _) = crate::test_support::rollout_additive(
+            &model,
+            &vfile.q,
+            &crate::test_support::TINY_X0,
+            10,
+            0.95,
+        )
+        .unwrap();
         assert_eq!(t1, t2);
 
         // Inconsistent files name the problem and the file.

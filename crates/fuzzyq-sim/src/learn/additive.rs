@@ -502,26 +502,26 @@ mod tests {
 
     #[test]
     fn bad_shapes_are_errors() {
-    // Bad shapes through the Q-function API.
-    let q = hand_q();
-    let mut out = [0.0; 2];
-    assert!(q.q_agent(0, &[0.5, 1.0], &mut out).is_err());
-    assert!(q.q_agent(0, &[f64::NAN], &mut out).is_err());
-    assert!(q.q_agent(2, &[0.5], &mut out).is_err());
-    assert!(q.q_agent(0, &[0.5], &mut [0.0; 3]).is_err());
-    q.q_agent(0, &[0.5], &mut out).unwrap();
-    assert_eq!(out, [2.0, 3.0]);
-    assert!(q.q(&[&[0.5], &[0.5]], &[2, 0]).is_err());
-    assert!(
-        AdditiveQ::from_params(q.features().clone(), vec![2, 3], vec![vec![0.0; 6]]).is_err()
-    );
-    assert!(
-        AdditiveQ::from_params(
-            q.features().clone(),
-            vec![2, 3],
-            vec![vec![0.0; 6], vec![f64::NAN; 6]]
-        )
-        .is_err()
-    );
+        // Bad shapes through the Q-function API.
+        let q = hand_q();
+        let mut out = [0.0; 2];
+        assert!(q.q_agent(0, &[0.5, 1.0], &mut out).is_err());
+        assert!(q.q_agent(0, &[f64::NAN], &mut out).is_err());
+        assert!(q.q_agent(2, &[0.5], &mut out).is_err());
+        assert!(q.q_agent(0, &[0.5], &mut [0.0; 3]).is_err());
+        q.q_agent(0, &[0.5], &mut out).unwrap();
+        assert_eq!(out, [2.0, 3.0]);
+        assert!(q.q(&[&[0.5], &[0.5]], &[2, 0]).is_err());
+        assert!(
+            AdditiveQ::from_params(q.features().clone(), vec![2, 3], vec![vec![0.0; 6]]).is_err()
+        );
+        assert!(
+            AdditiveQ::from_params(
+                q.features().clone(),
+                vec![2, 3],
+                vec![vec![0.0; 6], vec![f64::NAN; 6]]
+            )
+            .is_err()
+        );
     }
 }

@@ -1,7 +1,7 @@
 //! Learning from samples: model-free fuzzy Q-learning and VQQL, and the tasks as learning
 //! environments.
 //!
-//! - [`env`]: the episodic [`env::Environment`] a learner interacts with;
+//! - [`env`](mod@env): the episodic [`env::Environment`] a learner interacts with;
 //! - [`features`]: fuzzy partitions or codebooks turning observations into active cells;
 //! - [`codebook`]: VQQL's vector quantisers (exact k-d tree lookups);
 //! - [`additive`]: the additive Q-function and its sample update (the core's arithmetic);

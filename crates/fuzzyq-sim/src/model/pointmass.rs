@@ -221,7 +221,7 @@ enum Friction {
     Field(FrictionFn),
 }
 
-/// The point-mass model (implements [`Model`] for `f32` and `f64`).
+/// The point-mass model (implements [`Model`](fuzzyq_core::Model) for `f32` and `f64`).
 #[derive(Clone)]
 pub struct PointMass {
     config: PointMassConfig,

@@ -16,7 +16,7 @@ use crate::model::khepera::{self, KheperaConfig, MAX_ROBOTS};
 // Khepera robots
 // ---------------------------------------------------------------------------------------------
 
-/// Khepera IV robots as colliding discs with sonars (see the [module docs](self)).
+/// Khepera IV robots as colliding discs with sonars (see the [module docs](crate::world)).
 pub struct KheperaWorld {
     config: KheperaConfig,
     substeps: usize,

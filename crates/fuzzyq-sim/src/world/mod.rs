@@ -15,8 +15,8 @@
 //! - every control step of sample time `T` is split into `K` substeps (`substeps`, default 8)
 //!   of `h = T / K`;
 //! - at each substep the model's exact successor over `h` is computed in `f64` (the point
-//!   mass's zero-order hold under the held force, [`PointMass::step_f64`] with sample time
-//!   `h`; the robot's arc, [`khepera::drive`]), the body is placed at the current state (in
+//!   mass's zero-order hold under the held force, [`PointMass::step_f64`](crate::model::pointmass::PointMass::step_f64) with sample time
+//!   `h`; the robot's arc, [`khepera::drive`](crate::model::khepera::drive)), the body is placed at the current state (in
 //!   `f32`) and given the velocity that carries it there in `h` (`(s' - s) / h`, and for a
 //!   robot the wrapped heading change over `h`), and rapier steps by `h` (no gravity, no
 //!   damping, friction and restitution 0, so bodies slide along what they touch);
@@ -37,7 +37,7 @@
 //! # Arena
 //! The arena's walls are four thick cuboids just outside its rectangle and every obstacle is a
 //! (rotated) cuboid or a ball. For the Khepera robots the rectangle is the walls' inner face,
-//! as for [`Arena::ray_distance`]. For the point masses it bounds the discs' *centres*, as the
+//! as for [`Arena::ray_distance`](crate::model::arena::Arena::ray_distance). For the point masses it bounds the discs' *centres*, as the
 //! model clamps positions (to `[-6, 6]` in the paper; its start `[-4, -6, ...]` has a centre on
 //! that line): the wall cuboids stand `radius` further out.
 //!

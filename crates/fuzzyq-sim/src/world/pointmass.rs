@@ -21,7 +21,7 @@ pub struct PointMassPlantConfig {
     pub radius: f64,
     /// Substeps per sample time.
     pub substeps: usize,
-    /// The arena; its rectangle bounds the discs' centres (see the [module docs](self)).
+    /// The arena; its rectangle bounds the discs' centres (see the [module docs](crate::world)).
     pub arena: Arena,
 }
 
@@ -70,7 +70,7 @@ impl PointMassPlantConfig {
     }
 }
 
-/// The point masses of [`PointMass`] as colliding discs (see the [module docs](self)).
+/// The point masses of [`PointMass`] as colliding discs (see the [module docs](crate::world)).
 pub struct PointMassPlant {
     config: PointMassPlantConfig,
     physical: Arena,

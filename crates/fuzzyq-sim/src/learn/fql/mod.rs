@@ -62,7 +62,7 @@
 //!
 //! # Codebook features: tabular Q-learning ([`FeatureSpace::codebook`], VQQL)
 //! The cells of an observation need not be fuzzy. With codebook features each agent's
-//! observation activates exactly one cell, its nearest [`Codebook`] centroid, with membership
+//! observation activates exactly one cell, its nearest [`Codebook`](crate::learn::codebook::Codebook) centroid, with membership
 //! 1 ([`ActiveCores::single`]), so `Q(x, u) = sum_i phi[i][c_i(x) * M_i + u_i]` and the
 //! corrected update `phi[i][c_i(x_k) * M_i + u_{k,i}] += alpha_k * delta` is exactly tabular
 //! Q-learning over the cells (with the same additive joint value and decentralised greedy

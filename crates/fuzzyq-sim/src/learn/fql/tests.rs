@@ -246,9 +246,8 @@ fn same_seed_is_bit_identical_and_other_seeds_differ() {
         eval_every: 30,
         ..line_config()
     };
-    let run = |config: &FqlConfig| {
-        learn(&mut Lines::new(2), &features, config, continue_all).unwrap()
-    };
+    let run =
+        |config: &FqlConfig| learn(&mut Lines::new(2), &features, config, continue_all).unwrap();
     let a = run(&config);
     let b = run(&config);
     assert_eq!(params_bits(&a.q), params_bits(&b.q));
@@ -670,8 +669,7 @@ fn codebook_update_is_tabular_q_learning() {
 
     // Learning the corridor over an 11-cell codebook (the cores of the fuzzy test, crisp).
     let cells: Vec<Vec<f64>> = uniform_cores(11).into_iter().map(|c| vec![c]).collect();
-    let features =
-        FeatureSpace::codebook(vec![Codebook::new(cells, vec![1.0]).unwrap()]).unwrap();
+    let features = FeatureSpace::codebook(vec![Codebook::new(cells, vec![1.0]).unwrap()]).unwrap();
     let config = line_config();
     let out = learn(&mut Lines::new(1), &features, &config, continue_all).unwrap();
     for j in 0..=90 {

@@ -61,7 +61,7 @@ use crate::model::pointmass::{PointMass, Starts};
 /// over the whole field (`Uniform { position: 6.0, velocity: 0.0 }` for the paper's limits).
 ///
 /// It covers every start the learners are evaluated from (Table 1's `[-4, 5, 0, 0, 5, -3, 0, 0]`,
-/// [`random_starts`] within 5 m) and starts at rest as they do. Under the paper's reward (the
+/// [`random_starts`](crate::model::pointmass::random_starts) within 5 m) and starts at rest as they do. Under the paper's reward (the
 /// whole 8-D state within 0.1 of the origin) the learners essentially never meet the reward
 /// region from these starts. Measured with [`default_fql_config`] (seed 0) on the paper's task:
 /// not one of 3000 episodes (nor of 30,000, nor with velocities uniform in `[-3, 3]`) was

@@ -14,7 +14,7 @@
 //! Each sample time `Ts = 0.1` s is integrated with the force held constant, by classical RK4
 //! with `substeps` equal steps of `Ts / substeps` (the toolbox's `hillcar_mdp_ode4`, 10 steps).
 //! The episode ends when the successor leaves the box `|p| <= 1`, `|p_dot| <= 3`
-//! ([`Model::is_terminal`]; the model [declares](Model::has_terminal_states) terminal states,
+//! ([`Model::is_terminal`]; the model [declares][`Model::has_terminal_states`] terminal states,
 //! so fuzzy Q-iteration gives such transitions no future value, the toolbox's
 //! `cfg.term = 'zero'`). The reward belongs to the transition and depends on the successor:
 //! `+1` if it is terminal with `p > 1` and `p_dot <= 3` (the car reached the top of the hill
@@ -39,6 +39,12 @@
 //!   `p = -0.5`, `p_dot = 0` its greedy policy reaches the top in 19 steps, as the fine
 //!   grid's does; square equidistant grids of 16 to 25 cores per variable all do, 13 or
 //!   fewer do not.
+//!
+//! [`Model::is_terminal`]: fuzzyq_core::Model::is_terminal
+//! [`Model::has_terminal_states`]: fuzzyq_core::Model::has_terminal_states
+//! [`Model::reward`]: fuzzyq_core::Model::reward
+//! [`Model::step`]: fuzzyq_core::Model::step
+//! [`Model::is_goal`]: fuzzyq_core::Model::is_goal
 
 use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};

@@ -21,10 +21,10 @@
 //! - The reward is evaluated at the **current** state with the applied action:
 //!   `rho(x, u) = -x' Q x - R u^2`.
 //! - Grids are built the way the toolbox builds them, with Octave's colon ranges
-//!   ([`colon`], [`symequidgrid`]): the cores are the same doubles, bit for bit.
+//!   ([`colon`](octave::colon), [`symequidgrid`](octave::symequidgrid)): the cores are the same doubles, bit for bit.
 //! - The toolbox numbers cores in MATLAB's column-major order (first state variable fastest);
-//!   fuzzyq numbers them row-major (last variable fastest). [`toolbox_core_index`] and
-//!   [`core_index_from_toolbox`] convert.
+//!   fuzzyq numbers them row-major (last variable fastest). [`toolbox_core_index`](octave::toolbox_core_index) and
+//!   [`core_index_from_toolbox`](octave::core_index_from_toolbox) convert.
 
 pub mod arm;
 pub mod carhill;

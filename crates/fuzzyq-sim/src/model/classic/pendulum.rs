@@ -10,7 +10,7 @@
 //! `u` is limited to `[-3, 3]`, the ODE is integrated over `Ts = 0.005 s` with one classical
 //! RK4 step (the toolbox's `ode4` with one step per sample time; [`Integrator::Rk4`] selects
 //! more), then the angle is wrapped with MATLAB's `mod(alpha + pi, 2 pi) - pi` (into
-//! `[-pi, pi)`; [`wrap_angle`] reproduces Octave's `mod` exactly) and the velocity is
+//! `[-pi, pi)`; [`wrap_angle_octave`] reproduces Octave's `mod` exactly) and the velocity is
 //! saturated to `[-15 pi, 15 pi]`. The reward is evaluated at the current state with the
 //! limited `u`: `rho(x, u) = -x' Q x - R u^2`, `Q = diag(5, 0.1)`, `R = 1`.
 //! [`Integrator::Zoh`] is refused: the model is nonlinear.
