@@ -35,6 +35,10 @@ LAYERS = {
         {"train"},
         {"compare"},
     ],
+    "fuzzyq-cli": [
+        {"output", "plot"},
+        {"cmd"},
+    ],
 }
 
 

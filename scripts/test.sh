@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
-# Runs every test of fuzzyq: Rust unit, property, integration and CLI end-to-end tests and
-# doctests; the proof that fuzzyq-core builds without std and without an allocator; and the
-# Python package's tests (pytest, hypothesis, the Gymnasium and PettingZoo checkers, stubtest)
-# against a wheel built from this checkout and installed into a fresh virtual environment.
+# Runs every test of fuzzyq: the check that modules form layers without cycles; Rust unit,
+# property, integration and CLI end-to-end tests and doctests; the proof that fuzzyq-core
+# builds without std and without an allocator; and the Python package's tests (pytest,
+# hypothesis, the Gymnasium and PettingZoo checkers, stubtest) against a wheel built from this
+# checkout and installed into a fresh virtual environment.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Layers")
 cargo test --workspace --locked
 cargo build --release --locked \
     --manifest-path ci/nostd-check/Cargo.toml --target-dir target/nostd-check

@@ -50,7 +50,7 @@
 //! let (cur, next) = (grid.active(&[0.25]).unwrap(), grid.active(&[0.5]).unwrap());
 //! let mut agents = [Agent { phi: &mut phi, n_actions: 2, cur, next, action: 1 }];
 //! let delta = additive::update(Update::Corrected, &mut agents, 1.0, false, 0.9, 0.5).unwrap();
-//! assert_eq!(delta, 1.0); // r + gamma max Q(x') - Q(x, u) = 1 + 0 - 0
+//! assert_eq!(delta, Some(1.0)); // r + gamma max Q(x') - Q(x, u) = 1 + 0 - 0
 //! assert_eq!(phi, [0.0, 0.25, 0.0, 0.25, 0.0, 0.0]); // alpha delta mu_d(0.25) on action 1
 //! ```
 

@@ -381,6 +381,15 @@ impl AdditiveQ {
 mod tests {
     use super::*;
 
+    /// The sample both hand-computed updates take on [`hand_q`].
+    const HAND_SAMPLE: Sample<'static> = Sample {
+        obs: &[&[0.25], &[0.5]],
+        actions: &[1, 2],
+        reward: 1.0,
+        next_obs: &[&[1.5], &[1.0]],
+        terminal: false,
+    };
+
     /// Two agents: agent 0 on cores [0, 1, 2] with 2 actions, agent 1 on cores [0, 1] with 3.
     fn hand_q() -> AdditiveQ {
         let features =
@@ -409,13 +418,7 @@ mod tests {
         // delta = 1 + 0.8 * 6.5 - 3.25 = 2.95; alpha * delta = 0.295.
         let mut q = hand_q();
         let before = q.params().to_vec();
-        let sample = Sample {
-            obs: &[&[0.25], &[0.5]],
-            actions: &[1, 2],
-            reward: 1.0,
-            next_obs: &[&[1.5], &[1.0]],
-            terminal: false,
-        };
+        let sample = HAND_SAMPLE;
         assert!(close(q.q(sample.obs, sample.actions).unwrap(), 3.25));
         assert!(close(q.value(sample.next_obs).unwrap(), 6.5));
         let delta = q.update(Update::Corrected, &sample, 0.8, 0.1).unwrap();
@@ -457,13 +460,7 @@ mod tests {
         // agent 1 core 1 (action 2).
         let mut q = hand_q();
         let before = q.params().to_vec();
-        let sample = Sample {
-            obs: &[&[0.25], &[0.5]],
-            actions: &[1, 2],
-            reward: 1.0,
-            next_obs: &[&[1.5], &[1.0]],
-            terminal: false,
-        };
+        let sample = HAND_SAMPLE;
         let bracket = q.update(Update::Literal, &sample, 0.8, 0.1).unwrap();
         assert!(close(bracket, 1.7), "bracket {bracket}");
         let updated = [(0usize, 3usize), (0, 5), (1, 5)];

@@ -151,6 +151,9 @@ pub fn point_mass_starts(
     steps: usize,
     kind: PolicyKind,
 ) -> Result<Vec<RolloutMetrics>, SimError> {
+    if !matches!(policy.model(), Some(EnvModel::PointMass(_))) {
+        return Err(not_for(policy, "point-mass starts"));
+    }
     let spec = RolloutSpec {
         kind,
         steps,
