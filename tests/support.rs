@@ -85,6 +85,8 @@ pub struct Reference<T> {
 /// Fuzzy Q-iteration exactly as the paper writes it, storing every Q-value:
 /// `theta_{k+1}[d, u] = rho(x_d, u) + gamma sum_d' mu_d'(f(x_d, u)) max_u' theta_k[d', u']`,
 /// from `theta_0 = 0`, stopping at the first sweep with `||theta_{k+1} - theta_k|| <= xi`.
+/// A terminal successor is worth nothing (`theta[d, u] = rho`), and so is every successor of
+/// an absorbing goal core.
 pub fn brute_force<T: Real, M: Model<T>>(
     model: &M,
     grid: &Grid<T>,
@@ -96,59 +98,54 @@ pub fn brute_force<T: Real, M: Model<T>>(
     let joint = joint_actions(model).expect("joint actions");
     let (n, m, e) = (g.n_cores(), joint.n_joint(), g.n_dims());
     let gamma = T::from_f64(gamma);
-    // Precompute successors' active cores, rewards and goal flags.
-    let mut x = vec![T::ZERO; e];
-    let mut next = vec![T::ZERO; e];
-    let mut u = vec![T::ZERO; joint.dim()];
-    let mut succ: Vec<Vec<(usize, T)>> = Vec::with_capacity(n * m);
-    let mut rho = Vec::with_capacity(n * m);
-    let mut goal = Vec::with_capacity(n);
+    let (mut x, mut next, mut u) = (
+        vec![T::ZERO; e],
+        vec![T::ZERO; e],
+        vec![T::ZERO; joint.dim()],
+    );
+    // Per pair: reward and, unless terminal, the successor's memberships.
+    type Pair<T> = (T, Option<Vec<(usize, T)>>);
+    let mut pairs: Vec<Pair<T>> = Vec::new();
+    let mut goal = Vec::new();
     for d in 0..n {
         g.core_state(d, &mut x).unwrap();
         goal.push(absorbing_goal && model.is_goal(&x));
         for a in 0..m {
             joint.vector(a, &mut u).unwrap();
             model.step(&x, &u, &mut next);
-            rho.push(model.reward(&x, &u));
-            let mut s = Vec::new();
-            g.active(&next).unwrap().for_each(|k, w| s.push((k, w)));
-            succ.push(s);
+            let succ = (!model.is_terminal(&next)).then(|| {
+                let mut s = Vec::new();
+                g.active(&next).unwrap().for_each(|k, w| s.push((k, w)));
+                s
+            });
+            pairs.push((model.reward(&x, &u), succ));
         }
     }
     let sweep = |theta: &[T]| -> Vec<T> {
-        let v: Vec<T> = (0..n)
-            .map(|d| {
-                theta[d * m..(d + 1) * m]
-                    .iter()
-                    .copied()
-                    .fold(theta[d * m], T::max_of)
-            })
+        let v: Vec<T> = theta
+            .chunks(m)
+            .map(|r| r.iter().copied().fold(r[0], T::max_of))
             .collect();
-        let mut new = vec![T::ZERO; n * m];
-        for d in 0..n {
-            for a in 0..m {
-                let i = d * m + a;
-                new[i] = if goal[d] {
-                    rho[i]
-                } else {
+        (0..n * m)
+            .map(|i| match (&pairs[i], goal[i / m]) {
+                ((r, _), true) | ((r, None), false) => *r,
+                ((r, Some(s)), false) => {
                     let mut ev = T::ZERO;
-                    for &(k, w) in &succ[i] {
+                    for &(k, w) in s {
                         ev += w * v[k];
                     }
-                    rho[i] + gamma * ev
-                };
-            }
-        }
-        new
+                    *r + gamma * ev
+                }
+            })
+            .collect()
     };
     let mut theta = vec![T::ZERO; n * m];
     let mut deltas = Vec::new();
     loop {
         let new = sweep(&theta);
-        let delta = max_diff(&new, &theta);
+        deltas.push(max_diff(&new, &theta));
         theta = new;
-        deltas.push(delta);
-        if delta <= xi || deltas.len() >= 10_000 {
+        if *deltas.last().unwrap() <= xi || deltas.len() >= 10_000 {
             break;
         }
     }

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import _thread
-import json
 import os
-import subprocess
 import threading
 import time
 from pathlib import Path
@@ -16,8 +14,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import fuzzyq
-
-REPO = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -459,14 +455,6 @@ def test_callable_model_errors() -> None:
 # --- files: Python and the command line share the format ----------------------------------------
 
 
-def fuzzyq_cli() -> Path | None:
-    for profile in ("release", "debug"):
-        exe = REPO / "target" / profile / "fuzzyq"
-        if exe.exists():
-            return exe
-    return None
-
-
 def test_save_load_round_trip(tmp_path: Path, one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
     _, _, s = one_agent
     path = tmp_path / "one.fzq"
@@ -488,40 +476,6 @@ def test_save_load_round_trip(tmp_path: Path, one_agent: tuple[fuzzyq.PointMass,
         fuzzyq.load(tmp_path / "missing.fzq")
     with pytest.raises(fuzzyq.PolicyFileError, match="cannot write"):
         s.save(tmp_path / "no" / "dir" / "x.fzq")
-
-
-@pytest.mark.skipif(fuzzyq_cli() is None, reason="the fuzzyq binary is not built")
-def test_python_and_cli_policies_act_alike(tmp_path: Path) -> None:
-    exe = fuzzyq_cli()
-    assert exe is not None
-    model = fuzzyq.PointMass(agents=1)
-    x0 = "-4,-6,-2,2"
-    # Python -> CLI: the CLI's greedy rollout matches the Python policy step by step.
-    s = fuzzyq.solve(model, model.paper_grid())
-    s.save(tmp_path / "py.fzq")
-    subprocess.run(
-        [exe, "rollout", "--policy", tmp_path / "py.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "py.csv", "-q"],
-        check=True,
-    )
-    rows = np.loadtxt(tmp_path / "py.csv", delimiter=",", skiprows=1, max_rows=30)
-    pol = s.policy("greedy")
-    for row in rows:
-        np.testing.assert_array_equal(pol.act(row[1:5]), row[5:7])
-    # CLI -> Python.
-    config = subprocess.run([exe, "config"], check=True, capture_output=True, text=True).stdout
-    (tmp_path / "one.toml").write_text(config.replace("agents = 2 ", "agents = 1 "))
-    subprocess.run([exe, "train", "--config", tmp_path / "one.toml", "--out", tmp_path / "cli.fzq", "-q"], check=True)
-    subprocess.run(
-        [exe, "rollout", "--policy", tmp_path / "cli.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "cli.csv", "--json", tmp_path / "m.json", "-q"],
-        check=True,
-    )
-    cli_solution = fuzzyq.load(tmp_path / "cli.fzq")
-    assert isinstance(cli_solution, fuzzyq.Solution)
-    loaded = cli_solution.policy("greedy")
-    rows = np.loadtxt(tmp_path / "cli.csv", delimiter=",", skiprows=1, max_rows=30)
-    for row in rows:
-        np.testing.assert_array_equal(loaded.act(row[1:5]), row[5:7])
-    assert json.loads((tmp_path / "m.json").read_text())["final_error_m"][0] < 0.08
 
 
 def test_solve_releases_the_gil() -> None:

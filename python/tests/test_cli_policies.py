@@ -279,3 +279,36 @@ def test_python_solves_classic_models_as_the_cli_trains_them(work: Path) -> None
     q = fuzzyq.solve(motor, motor.grid(), operator="q-values")
     np.testing.assert_array_equal(q.V, q_ref.V)
     assert q.kernel == "q-values"
+
+
+def test_python_and_cli_policies_act_alike(tmp_path: Path) -> None:
+    exe = CLI
+    assert exe is not None
+    model = fuzzyq.PointMass(agents=1)
+    x0 = "-4,-6,-2,2"
+    # Python -> CLI: the CLI's greedy rollout matches the Python policy step by step.
+    s = fuzzyq.solve(model, model.paper_grid())
+    s.save(tmp_path / "py.fzq")
+    subprocess.run(
+        [exe, "rollout", "--policy", tmp_path / "py.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "py.csv", "-q"],
+        check=True,
+    )
+    rows = np.loadtxt(tmp_path / "py.csv", delimiter=",", skiprows=1, max_rows=30)
+    pol = s.policy("greedy")
+    for row in rows:
+        np.testing.assert_array_equal(pol.act(row[1:5]), row[5:7])
+    # CLI -> Python.
+    config = subprocess.run([exe, "config"], check=True, capture_output=True, text=True).stdout
+    (tmp_path / "one.toml").write_text(config.replace("agents = 2 ", "agents = 1 "))
+    subprocess.run([exe, "train", "--config", tmp_path / "one.toml", "--out", tmp_path / "cli.fzq", "-q"], check=True)
+    subprocess.run(
+        [exe, "rollout", "--policy", tmp_path / "cli.fzq", "--x0", x0, "--steps", "30", "--csv", tmp_path / "cli.csv", "--json", tmp_path / "m.json", "-q"],
+        check=True,
+    )
+    cli_solution = fuzzyq.load(tmp_path / "cli.fzq")
+    assert isinstance(cli_solution, fuzzyq.Solution)
+    loaded = cli_solution.policy("greedy")
+    rows = np.loadtxt(tmp_path / "cli.csv", delimiter=",", skiprows=1, max_rows=30)
+    for row in rows:
+        np.testing.assert_array_equal(loaded.act(row[1:5]), row[5:7])
+    assert json.loads((tmp_path / "m.json").read_text())["final_error_m"][0] < 0.08

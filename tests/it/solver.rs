@@ -10,8 +10,8 @@ use fuzzyq_core::solver::{
 use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
 use fuzzyq_sim::model::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
 use fuzzyq_tests::{
-    assert_close, brute_force, max_and_argmax, max_diff, medium_two_agent, small_one_agent,
-    small_two_agent, with_threads,
+    Reference, assert_close, brute_force, max_and_argmax, max_diff, medium_two_agent,
+    small_one_agent, small_two_agent, with_threads,
 };
 use proptest::prelude::*;
 
@@ -177,24 +177,17 @@ proptest! {
 /// point; asynchronous sweeps need fewer of them.
 #[test]
 fn sync_and_async_reach_the_same_fixed_point() {
-    let (m, g) = medium_two_agent::<f64>();
     let xi = 1e-5;
-    let sync = run(
-        &m,
-        &g,
-        &SolverConfig {
-            xi,
-            ..config(BackupPath::Block, SweepMode::Synchronous)
-        },
-    );
-    let asy = run(
-        &m,
-        &g,
-        &SolverConfig {
-            xi,
-            ..config(BackupPath::Block, SweepMode::Asynchronous)
-        },
-    );
+    let both = |m: &dyn Fn(&SolverConfig) -> Solution<f64>, path| {
+        [SweepMode::Synchronous, SweepMode::Asynchronous].map(|sweep| {
+            m(&SolverConfig {
+                xi,
+                ..config(path, sweep)
+            })
+        })
+    };
+    let (m, g) = medium_two_agent::<f64>();
+    let [sync, asy] = both(&|c| run(&m, &g, c), BackupPath::Block);
     assert!(sync.converged() && asy.converged());
     let bound = 2.0 * 0.96 / 0.04 * xi;
     let d = max_diff(&sync.v, &asy.v);
@@ -205,22 +198,7 @@ fn sync_and_async_reach_the_same_fixed_point() {
 
     // Generic asynchronous sweeps (different slabs) reach it too.
     let (m1, g1) = small_one_agent::<f64>();
-    let a = run(
-        &m1,
-        &g1,
-        &SolverConfig {
-            xi,
-            ..config(BackupPath::Generic, SweepMode::Asynchronous)
-        },
-    );
-    let s = run(
-        &m1,
-        &g1,
-        &SolverConfig {
-            xi,
-            ..config(BackupPath::Generic, SweepMode::Synchronous)
-        },
-    );
+    let [s, a] = both(&|c| run(&m1, &g1, c), BackupPath::Generic);
     assert!(max_diff(&a.v, &s.v) <= bound);
 }
 
@@ -823,75 +801,6 @@ impl<T: Real> Model<T> for Cliff<T> {
     }
 }
 
-/// Brute-force fuzzy Q-iteration storing every Q-value, with terminal successors worth
-/// nothing: `theta[d, u] = rho + gamma * (0 if f(x_d, u) terminal else sum mu V)` (only `rho`
-/// at an absorbing goal core). Returns `theta_K`, `theta_{K+1}` and every sweep's change.
-fn brute_force_terminal<T: Real, M: Model<T>>(
-    model: &M,
-    grid: &Grid<T>,
-    gamma: f64,
-    xi: f64,
-    absorbing_goal: bool,
-) -> (Vec<T>, Vec<T>, Vec<f64>) {
-    let g = grid.view();
-    let joint = fuzzyq_core::model::joint_actions(model).unwrap();
-    let (n, m, e) = (g.n_cores(), joint.n_joint(), g.n_dims());
-    let gamma = T::from_f64(gamma);
-    let (mut x, mut next, mut u) = (
-        vec![T::ZERO; e],
-        vec![T::ZERO; e],
-        vec![T::ZERO; joint.dim()],
-    );
-    // Per pair: reward and, unless terminal, the successor's memberships.
-    type Pair<T> = (T, Option<Vec<(usize, T)>>);
-    let mut pairs: Vec<Pair<T>> = Vec::new();
-    let mut goal = Vec::new();
-    for d in 0..n {
-        g.core_state(d, &mut x).unwrap();
-        goal.push(absorbing_goal && model.is_goal(&x));
-        for a in 0..m {
-            joint.vector(a, &mut u).unwrap();
-            model.step(&x, &u, &mut next);
-            let succ = (!model.is_terminal(&next)).then(|| {
-                let mut s = Vec::new();
-                g.active(&next).unwrap().for_each(|k, w| s.push((k, w)));
-                s
-            });
-            pairs.push((model.reward(&x, &u), succ));
-        }
-    }
-    let sweep = |theta: &[T]| -> Vec<T> {
-        let v: Vec<T> = theta
-            .chunks(m)
-            .map(|r| r.iter().copied().fold(r[0], T::max_of))
-            .collect();
-        (0..n * m)
-            .map(|i| match (&pairs[i], goal[i / m]) {
-                ((r, _), true) | ((r, None), false) => *r,
-                ((r, Some(s)), false) => {
-                    let mut ev = T::ZERO;
-                    for &(k, w) in s {
-                        ev += w * v[k];
-                    }
-                    *r + gamma * ev
-                }
-            })
-            .collect()
-    };
-    let mut theta = vec![T::ZERO; n * m];
-    let mut deltas = Vec::new();
-    loop {
-        let new = sweep(&theta);
-        deltas.push(max_diff(&new, &theta));
-        theta = new;
-        if *deltas.last().unwrap() <= xi || deltas.len() >= 10_000 {
-            break;
-        }
-    }
-    let next = sweep(&theta);
-    (theta, next, deltas)
-}
-
 /// Every `greedy[d]` attains `max_u theta[d, u]` within `tol`.
 fn assert_maximisers(greedy: &[u32], theta: &[f64], m: usize, tol: f64) {
     for (d, (&u, row)) in greedy.iter().zip(theta.chunks(m)).enumerate() {
@@ -925,8 +834,11 @@ fn terminal_states_match_brute_force_on_every_path() {
                     extrapolate: true,
                     ..config(BackupPath::Generic, SweepMode::Synchronous)
                 };
-                let (theta, theta_next, deltas) =
-                    brute_force_terminal(&m, &g, c.gamma, c.xi, absorbing);
+                let Reference {
+                    theta,
+                    theta_next,
+                    deltas,
+                } = brute_force(&m, &g, c.gamma, c.xi, absorbing);
                 let (v, _) = max_and_argmax(&theta, nj);
                 let (_, greedy) = max_and_argmax(&theta_next, nj);
                 let what = format!(

@@ -533,25 +533,22 @@ mod tests {
         let g = ProductPartition::try_new(&[&c[..]]).unwrap();
         let mut phi = [0.0, 3.0e38_f32, 0.0, 0.0, 0.0, 0.0];
         let a = g.active(&[0.0]).unwrap();
-        let mut agents = [Agent {
-            phi: &mut phi,
-            n_actions: 2,
-            cur: a,
-            next: a,
-            action: 1,
-        }];
+        fn one(phi: &mut [f32], a: ActiveCores<f32>) -> [Agent<'_, f32>; 1] {
+            [Agent {
+                phi,
+                n_actions: 2,
+                cur: a,
+                next: a,
+                action: 1,
+            }]
+        }
+        let mut agents = one(&mut phi, a);
         // delta = 3.4e38 - 3e38 = 4e37 and alpha delta = 8e37 are finite, but 3e38 + 8e37
         // overflows: nothing changes.
         let r = update(Update::Corrected, &mut agents, 3.4e38, true, 0.5, 2.0).unwrap();
         assert_eq!(r, None);
         assert_eq!(phi[1], 3.0e38);
-        let mut agents = [Agent {
-            phi: &mut phi,
-            n_actions: 2,
-            cur: a,
-            next: a,
-            action: 1,
-        }];
+        let mut agents = one(&mut phi, a);
         // A step that is itself infinite.
         assert_eq!(
             update(Update::Corrected, &mut agents, 3.4e38, true, 0.5, 10.0).unwrap(),

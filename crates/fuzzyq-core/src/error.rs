@@ -144,11 +144,7 @@ impl core::error::Error for EvalError {}
 
 /// Checks a slice length, naming the slice in the error.
 #[inline]
-pub(crate) fn check_len(
-    what: &'static str,
-    expected: usize,
-    found: usize,
-) -> Result<(), EvalError> {
+pub fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), EvalError> {
     if expected == found {
         Ok(())
     } else {

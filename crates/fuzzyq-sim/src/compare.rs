@@ -33,7 +33,7 @@ use fuzzyq_core::additive::Update;
 use fuzzyq_core::q::PolicyKind;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::io::config::{EnvConfig, TrainConfig};
 use crate::io::policy_file::PolicyArtifact;
 use crate::learn::fql::FqlConfig;
@@ -156,25 +156,21 @@ impl CompareConfig {
             return Err(ConfigError::invalid("learners", "name at least one learner").into());
         }
         for (i, l) in self.learners.iter().enumerate() {
-            if self.learners[..i].contains(l) {
-                return Err(ConfigError::invalid(
-                    "learners",
-                    format!("{} is named twice", l.name()),
-                )
-                .into());
-            }
+            require(
+                !self.learners[..i].contains(l),
+                "learners",
+                format!("{} is named twice", l.name()),
+            )?;
         }
         let bound = pointmass_bound(&model);
-        if !(self.start_position > 0.0 && self.start_position <= bound) {
-            return Err(ConfigError::invalid(
-                "start_position",
-                format!(
-                    "must be in (0, {bound}] (the position range), got {}",
-                    self.start_position
-                ),
-            )
-            .into());
-        }
+        require(
+            self.start_position > 0.0 && self.start_position <= bound,
+            "start_position",
+            format!(
+                "must be in (0, {bound}] (the position range), got {}",
+                self.start_position
+            ),
+        )?;
         self.fql.validate()?;
         self.fql_starts.validate(&model)?;
         if self.learners.contains(&Learner::Vqql) {

@@ -142,7 +142,18 @@ pub(crate) fn non_negative(field: &str, v: f64) -> Result<(), ConfigError> {
     }
 }
 
-/// `Ok` if `ok`, else an error naming `field` with `reason`.
+/// `Ok` if `v` is a discount factor in `[0, 1)`, else an error naming `field`.
+pub(crate) fn discount(field: &str, v: f64) -> Result<(), ConfigError> {
+    require(
+        (0.0..1.0).contains(&v),
+        field,
+        format!("must be in [0, 1), got {v}"),
+    )
+}
+
+/// `Ok` if `ok`, else an error naming `field` with `reason`. The reason is built before the
+/// test: for validation, not for per-step paths (use [`positive`] and friends there, which
+/// format only on failure).
 pub(crate) fn require(ok: bool, field: &str, reason: impl Into<String>) -> Result<(), ConfigError> {
     if ok {
         Ok(())

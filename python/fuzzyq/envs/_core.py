@@ -188,3 +188,32 @@ class PointMassSim:
         for name, (sx, sy, vx, vy) in zip(names, state.reshape(-1, 4), strict=True):
             lines.append(f"  {name}: s=({sx:+.3f}, {sy:+.3f}) v=({vx:+.3f}, {vy:+.3f})")
         return "\n".join(lines) + "\n"
+
+
+class SimBacked:
+    """What both environments read straight from their `PointMassSim`."""
+
+    _sim: PointMassSim
+    metadata: dict[str, Any]
+    render_mode: str | None
+
+    def _init_sim(
+        self, max_steps: int | None, render_mode: str | None, model_kwargs: dict[str, Any]
+    ) -> fuzzyq.PointMass:
+        """Builds the simulation and the per-instance metadata; returns the model."""
+        self._sim = PointMassSim(max_steps, model_kwargs)
+        model = self._sim.model
+        # Per-instance metadata: frames are one sample time apart.
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / model.sample_time}
+        self.render_mode = validate_render_mode(render_mode, self.metadata["render_modes"])
+        return model
+
+    @property
+    def model(self) -> fuzzyq.PointMass:
+        """The `fuzzyq.PointMass` being simulated (solve it to get a policy for this env)."""
+        return self._sim.model
+
+    @property
+    def max_steps(self) -> int | None:
+        """Steps after which an episode is truncated, for every agent (None: never)."""
+        return self._sim.max_steps

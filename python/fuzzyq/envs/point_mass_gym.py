@@ -12,14 +12,13 @@ import fuzzyq
 
 from ._core import (
     Observation,
-    PointMassSim,
+    SimBacked,
     agent_name,
     validate_index,
-    validate_render_mode,
 )
 
 
-class PointMassEnv(gymnasium.Env[Observation, np.int64]):
+class PointMassEnv(SimBacked, gymnasium.Env[Observation, np.int64]):
     """The paper's point-mass task (Luviano-Cruz et al. 2018, section 3.1) as a Gymnasium env.
 
     One environment drives all agents: the observation is the joint state and the action is a
@@ -74,24 +73,10 @@ class PointMassEnv(gymnasium.Env[Observation, np.int64]):
     def __init__(
         self, *, max_steps: int | None = 75, render_mode: str | None = None, **model_kwargs: Any
     ) -> None:
-        self._sim = PointMassSim(max_steps, model_kwargs)
-        model = self._sim.model
-        # Per-instance metadata: frames are one sample time apart.
-        self.metadata = {**type(self).metadata, "render_fps": 1.0 / model.sample_time}
-        self.render_mode = validate_render_mode(render_mode, self.metadata["render_modes"])
+        model = self._init_sim(max_steps, render_mode, model_kwargs)
         self.observation_space = cast("spaces.Space[Observation]", self._sim.observation_space())
         self.action_space = spaces.Discrete(model.n_joint_actions)
         self._names = [agent_name(i) for i in range(model.n_agents)]
-
-    @property
-    def model(self) -> fuzzyq.PointMass:
-        """The `fuzzyq.PointMass` being simulated (solve it to get a policy for this env)."""
-        return self._sim.model
-
-    @property
-    def max_steps(self) -> int | None:
-        """Steps after which an episode is truncated (None: never)."""
-        return self._sim.max_steps
 
     @property
     def state(self) -> np.ndarray | None:

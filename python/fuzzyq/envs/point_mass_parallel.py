@@ -16,14 +16,14 @@ import fuzzyq
 
 from ._core import (
     Observation,
-    PointMassSim,
+    SimBacked,
     agent_name,
     validate_index,
-    validate_render_mode,
 )
 
 
 class PointMassParallelEnv(
+    SimBacked,
     ParallelEnv[str, Observation, int]  # type: ignore[misc, unused-ignore]
 ):
     """The paper's point-mass task (Luviano-Cruz et al. 2018, section 3.1) as a PettingZoo env.
@@ -75,10 +75,7 @@ class PointMassParallelEnv(
     def __init__(
         self, *, max_steps: int | None = 75, render_mode: str | None = None, **model_kwargs: Any
     ) -> None:
-        self._sim = PointMassSim(max_steps, model_kwargs)
-        model = self._sim.model
-        self.metadata = {**type(self).metadata, "render_fps": 1.0 / model.sample_time}
-        self.render_mode = validate_render_mode(render_mode, self.metadata["render_modes"])
+        model = self._init_sim(max_steps, render_mode, model_kwargs)
         self.possible_agents = [agent_name(i) for i in range(model.n_agents)]
         self.agents: list[str] = []
         self.observation_spaces = {a: self._sim.observation_space() for a in self.possible_agents}
@@ -89,16 +86,6 @@ class PointMassParallelEnv(
         self._np_random_seed: int | None = None
 
     # --- properties --------------------------------------------------------------------------
-
-    @property
-    def model(self) -> fuzzyq.PointMass:
-        """The `fuzzyq.PointMass` being simulated (solve it to get a policy for this env)."""
-        return self._sim.model
-
-    @property
-    def max_steps(self) -> int | None:
-        """Steps after which all agents are truncated (None: never)."""
-        return self._sim.max_steps
 
     @property
     def np_random(self) -> np.random.Generator:

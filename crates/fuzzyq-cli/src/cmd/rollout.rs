@@ -13,9 +13,7 @@ use fuzzyq_sim::model::khepera::{poses_from_paper, random_starts};
 use fuzzyq_sim::model::pointmass::random_starts as point_mass_starts;
 use fuzzyq_sim::model::{EnvKind, EnvModel, EnvSpec, F64Model, StartsKind};
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
-use fuzzyq_sim::run::metrics::{
-    KheperaMetrics, PointMassReport, RolloutMetrics, SuccessReport, Trajectory,
-};
+use fuzzyq_sim::run::metrics::{PointMassReport, RolloutMetrics, Trajectory};
 use fuzzyq_sim::run::policy::Policy;
 use fuzzyq_sim::world::{Collisions, PointMassPlantConfig};
 use serde::Serialize;
@@ -430,6 +428,34 @@ fn point_mass_outputs(
     Ok(())
 }
 
+/// The JSON of `--starts` for the robots and the point masses: the task's report, the
+/// settings and every run's metrics.
+#[derive(Serialize)]
+struct StartsJson<'a, R, M> {
+    #[serde(flatten)]
+    report: &'a R,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    seed: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    start_position: Option<f64>,
+    policy_kind: PolicyKind,
+    steps: usize,
+    runs: &'a [M],
+}
+
+impl<'a, R, M> StartsJson<'a, R, M> {
+    fn new(report: &'a R, policy_kind: PolicyKind, steps: usize, runs: &'a [M]) -> Self {
+        Self {
+            report,
+            seed: None,
+            start_position: None,
+            policy_kind,
+            steps,
+            runs,
+        }
+    }
+}
+
 /// `--starts N`: many runs of the policy, as its task evaluates them.
 fn many_starts(
     args: &RolloutArgs,
@@ -462,23 +488,7 @@ fn many_starts(
                 )?;
             }
             if let Some(p) = &args.json {
-                #[derive(Serialize)]
-                struct Out<'a> {
-                    #[serde(flatten)]
-                    report: &'a SuccessReport,
-                    policy_kind: PolicyKind,
-                    steps: usize,
-                    runs: &'a [KheperaMetrics],
-                }
-                write_json(
-                    p,
-                    &Out {
-                        report: &report,
-                        policy_kind: kind,
-                        steps,
-                        runs: &runs,
-                    },
-                )?;
+                write_json(p, &StartsJson::new(&report, kind, steps, &runs))?;
             }
             if !args.quiet {
                 print_stdout(&format!(
@@ -501,27 +511,12 @@ fn many_starts(
             let runs = evaluate::point_mass_starts(policy, &starts, steps, kind)?;
             let report = PointMassReport::from_runs(&runs);
             if let Some(p) = &args.json {
-                #[derive(Serialize)]
-                struct Out<'a> {
-                    #[serde(flatten)]
-                    report: &'a PointMassReport,
-                    seed: u64,
-                    start_position: f64,
-                    policy_kind: PolicyKind,
-                    steps: usize,
-                    runs: &'a [RolloutMetrics],
-                }
-                write_json(
-                    p,
-                    &Out {
-                        report: &report,
-                        seed,
-                        start_position: POINT_MASS_START_POSITION,
-                        policy_kind: kind,
-                        steps,
-                        runs: &runs,
-                    },
-                )?;
+                let json = StartsJson {
+                    seed: Some(seed),
+                    start_position: Some(POINT_MASS_START_POSITION),
+                    ..StartsJson::new(&report, kind, steps, &runs)
+                };
+                write_json(p, &json)?;
             }
             if !args.quiet {
                 print_stdout(&format!(

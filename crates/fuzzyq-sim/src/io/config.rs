@@ -8,7 +8,7 @@ use fuzzyq_core::solver::{
 use fuzzyq_core::{Membership, Partition, Real};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, discount, positive, require};
 use crate::model::classic::arm::{Arm, ArmConfig};
 use crate::model::classic::carhill::{CarHill, CarHillConfig};
 use crate::model::classic::dcmotor::{DcMotor, DcMotorConfig};
@@ -355,30 +355,18 @@ impl SolverSettings {
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
-        if self.operator == IterationOperator::QValues && self.sweep == SweepMode::Asynchronous {
-            return Err(ConfigError::invalid(
-                "solver.operator",
-                "\"q-values\" runs synchronous sweeps; set sweep = \"sync\"",
-            ));
-        }
-        if !(self.gamma >= 0.0 && self.gamma < 1.0) {
-            return Err(ConfigError::invalid(
-                "solver.gamma",
-                format!("must be in [0, 1), got {}", self.gamma),
-            ));
-        }
-        if !(self.xi > 0.0 && self.xi.is_finite()) {
-            return Err(ConfigError::invalid(
-                "solver.xi",
-                format!("must be a positive number, got {}", self.xi),
-            ));
-        }
-        if self.max_sweeps == 0 {
-            return Err(ConfigError::invalid(
-                "solver.max_sweeps",
-                "must be at least 1",
-            ));
-        }
+        require(
+            !(self.operator == IterationOperator::QValues && self.sweep == SweepMode::Asynchronous),
+            "solver.operator",
+            "\"q-values\" runs synchronous sweeps; set sweep = \"sync\"",
+        )?;
+        discount("solver.gamma", self.gamma)?;
+        positive("solver.xi", self.xi)?;
+        require(
+            self.max_sweeps != 0,
+            "solver.max_sweeps",
+            "must be at least 1",
+        )?;
         Ok(())
     }
 }
@@ -533,12 +521,11 @@ impl TrainConfig {
         match &self.env {
             EnvConfig::Pointmass(_) => {
                 check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
-                if self.grid.heading_divisions.is_some() {
-                    return Err(ConfigError::invalid(
-                        "grid.heading_divisions",
-                        "applies to the khepera environment only",
-                    ));
-                }
+                require(
+                    self.grid.heading_divisions.is_none(),
+                    "grid.heading_divisions",
+                    "applies to the khepera environment only",
+                )?;
             }
             EnvConfig::Khepera(_) => {
                 if let Some(d) = self.grid.heading_divisions
@@ -553,35 +540,32 @@ impl TrainConfig {
             _ => {}
         }
         if self.env.is_classic() {
-            if self.grid.cores.is_none() {
-                return Err(ConfigError::invalid(
-                    "grid.cores",
-                    format!(
-                        "the {} environment needs its cores given per state variable",
-                        self.env.name()
-                    ),
-                ));
-            }
-            if self.grid.heading_divisions.is_some() {
-                return Err(ConfigError::invalid(
-                    "grid.heading_divisions",
-                    "applies to the khepera environment only",
-                ));
-            }
+            require(
+                self.grid.cores.is_some(),
+                "grid.cores",
+                format!(
+                    "the {} environment needs its cores given per state variable",
+                    self.env.name()
+                ),
+            )?;
+            require(
+                self.grid.heading_divisions.is_none(),
+                "grid.heading_divisions",
+                "applies to the khepera environment only",
+            )?;
         } else {
             check_cores("grid.position_cores", &self.grid.position_cores)?;
         }
         if let Some(cores) = &self.grid.cores {
             let want = self.env.state_dim();
-            if cores.len() != want {
-                return Err(ConfigError::invalid(
-                    "grid.cores",
-                    format!(
-                        "needs one list per state variable ({want}), got {}",
-                        cores.len()
-                    ),
-                ));
-            }
+            require(
+                cores.len() == want,
+                "grid.cores",
+                format!(
+                    "needs one list per state variable ({want}), got {}",
+                    cores.len()
+                ),
+            )?;
             for (i, c) in cores.iter().enumerate() {
                 check_cores(&format!("grid.cores[{i}]"), c)?;
             }
@@ -591,12 +575,11 @@ impl TrainConfig {
             .iter()
             .map(Vec::len)
             .try_fold(1u64, |a, l| a.checked_mul(l as u64));
-        if n.is_none_or(|n| n > u64::from(u32::MAX)) {
-            return Err(ConfigError::invalid(
-                "grid",
-                "the joint grid has more than 2^32 cores",
-            ));
-        }
+        require(
+            n.is_some_and(|n| n <= u64::from(u32::MAX)),
+            "grid",
+            "the joint grid has more than 2^32 cores",
+        )?;
         self.solver.validate()
     }
 

@@ -27,7 +27,7 @@ use std::path::Path;
 use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, PolicyFileError, SimError};
+use crate::error::{ConfigError, PolicyFileError, SimError, require};
 use crate::io::config::TrainConfig;
 use crate::io::write_atomically;
 use crate::learn::additive::AdditiveQ;
@@ -291,13 +291,11 @@ impl PointMassPolicyFile {
         match &self.vqql {
             Some(v) => {
                 v.validate()?;
-                if !features.is_codebook() {
-                    return Err(ConfigError::invalid(
-                        "q",
-                        "a VQQL policy (vqql set) needs codebook features",
-                    )
-                    .into());
-                }
+                require(
+                    features.is_codebook(),
+                    "q",
+                    "a VQQL policy (vqql set) needs codebook features",
+                )?;
                 if let Some(i) =
                     (0..features.n_agents()).find(|&i| features.n_cores(i) != Some(v.cells))
                 {
@@ -313,13 +311,11 @@ impl PointMassPolicyFile {
                 }
             }
             None => {
-                if features.is_codebook() {
-                    return Err(ConfigError::invalid(
-                        "q",
-                        "codebook features need the quantiser settings (vqql)",
-                    )
-                    .into());
-                }
+                require(
+                    !features.is_codebook(),
+                    "q",
+                    "codebook features need the quantiser settings (vqql)",
+                )?;
             }
         }
         Ok(model)

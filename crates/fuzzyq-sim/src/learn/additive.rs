@@ -5,10 +5,11 @@
 
 use fuzzyq_core::EvalError;
 use fuzzyq_core::additive::{self, Td, Update};
+use fuzzyq_core::error::check_len;
 use fuzzyq_core::partition::ActiveCores;
 use serde::{Deserialize, Deserializer, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, discount, positive, require};
 use crate::learn::features::FeatureSpace;
 
 /// One transition for [`AdditiveQ::update`]: per-agent observations before and after, the
@@ -129,31 +130,27 @@ impl AdditiveQ {
         phi: Vec<Vec<f64>>,
     ) -> Result<Self, SimError> {
         features.n_params(&actions)?;
-        if phi.len() != features.n_agents() {
-            return Err(ConfigError::invalid(
-                "phi",
-                format!(
-                    "expected one table per agent ({}), found {}",
-                    features.n_agents(),
-                    phi.len()
-                ),
-            )
-            .into());
-        }
+        require(
+            phi.len() == features.n_agents(),
+            "phi",
+            format!(
+                "expected one table per agent ({}), found {}",
+                features.n_agents(),
+                phi.len()
+            ),
+        )?;
         for (i, table) in phi.iter().enumerate() {
             let expected = features.n_cores[i] * actions[i];
-            if table.len() != expected {
-                return Err(ConfigError::invalid(
-                    format!("phi[{i}]"),
-                    format!(
-                        "expected {} cores x {} actions = {expected} values, found {}",
-                        features.n_cores[i],
-                        actions[i],
-                        table.len()
-                    ),
-                )
-                .into());
-            }
+            require(
+                table.len() == expected,
+                &format!("phi[{i}]"),
+                format!(
+                    "expected {} cores x {} actions = {expected} values, found {}",
+                    features.n_cores[i],
+                    actions[i],
+                    table.len()
+                ),
+            )?;
             if let Some(k) = table.iter().position(|v| !v.is_finite()) {
                 return Err(ConfigError::invalid(
                     format!("phi[{i}]"),
@@ -199,25 +196,11 @@ impl AdditiveQ {
     }
 
     fn check_joint(&self, obs: &[&[f64]], what: &'static str) -> Result<(), EvalError> {
-        if obs.len() == self.n_agents() {
-            Ok(())
-        } else {
-            Err(EvalError::Length {
-                what,
-                expected: self.n_agents(),
-                found: obs.len(),
-            })
-        }
+        check_len(what, self.n_agents(), obs.len())
     }
 
     fn check_actions(&self, actions: &[usize]) -> Result<(), EvalError> {
-        if actions.len() != self.n_agents() {
-            return Err(EvalError::Length {
-                what: "joint action",
-                expected: self.n_agents(),
-                found: actions.len(),
-            });
-        }
+        check_len("joint action", self.n_agents(), actions.len())?;
         for (&u, &m) in actions.iter().zip(&self.actions) {
             if u >= m {
                 return Err(EvalError::OutOfRange {
@@ -235,14 +218,7 @@ impl AdditiveQ {
     pub fn q_agent(&self, agent: usize, obs: &[f64], out: &mut [f64]) -> Result<(), SimError> {
         let active = self.active(agent, obs)?;
         let m = self.actions[agent];
-        if out.len() != m {
-            return Err(EvalError::Length {
-                what: "action values",
-                expected: m,
-                found: out.len(),
-            }
-            .into());
-        }
+        check_len("action values", m, out.len())?;
         additive::q_values_unchecked(&active, &self.phi[agent], out);
         Ok(())
     }
@@ -265,14 +241,7 @@ impl AdditiveQ {
     /// The greedy joint action: each agent's [`greedy`](Self::greedy) action, into `out`.
     pub fn greedy_joint(&self, obs: &[&[f64]], out: &mut [usize]) -> Result<(), SimError> {
         self.check_joint(obs, "observations")?;
-        if out.len() != self.n_agents() {
-            return Err(EvalError::Length {
-                what: "joint action",
-                expected: self.n_agents(),
-                found: out.len(),
-            }
-            .into());
-        }
+        check_len("joint action", self.n_agents(), out.len())?;
         for (i, (o, u)) in obs.iter().zip(out.iter_mut()).enumerate() {
             *u = self.greedy(i, o)?;
         }
@@ -313,18 +282,8 @@ impl AdditiveQ {
         gamma: f64,
         alpha: f64,
     ) -> Result<f64, SimError> {
-        if !(0.0..1.0).contains(&gamma) {
-            return Err(
-                ConfigError::invalid("gamma", format!("must be in [0, 1), got {gamma}")).into(),
-            );
-        }
-        if !(alpha > 0.0 && alpha.is_finite()) {
-            return Err(ConfigError::invalid(
-                "alpha",
-                format!("must be a positive number, got {alpha}"),
-            )
-            .into());
-        }
+        discount("gamma", gamma)?;
+        positive("alpha", alpha)?;
         if !sample.reward.is_finite() {
             return Err(EvalError::NotFinite {
                 what: "reward",

@@ -1,12 +1,13 @@
 //! Codebooks: the vector quantisers of VQQL (nearest centroid under a scaled distance,
 //! found exactly by a k-d tree).
 
+use fuzzyq_core::error::check_len;
 use fuzzyq_core::{EvalError, MAX_DIMS};
 use serde::de::{self, Deserializer};
 use serde::ser::SerializeStruct;
 use serde::{Deserialize, Serialize, Serializer};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 
 /// A vector quantiser of one agent's observation: `K` centroids `c_j` in `E` dimensions and a
 /// positive scale per dimension.
@@ -65,37 +66,31 @@ impl Codebook {
     /// [`new`](Self::new) with the centroids row-major in one slice (`K x dim` values).
     pub fn from_flat(dim: usize, centroids: Vec<f64>, scale: Vec<f64>) -> Result<Self, SimError> {
         let field = "codebook.centroids";
-        if dim == 0 || dim > MAX_DIMS {
-            return Err(ConfigError::invalid(
-                field,
-                format!("centroids need 1 to {MAX_DIMS} dimensions, found {dim}"),
-            )
-            .into());
-        }
-        if centroids.is_empty() || !centroids.len().is_multiple_of(dim) {
-            return Err(ConfigError::invalid(
-                field,
-                format!(
-                    "needs at least one centroid of {dim} values, found {} values",
-                    centroids.len()
-                ),
-            )
-            .into());
-        }
+        require(
+            (1..=MAX_DIMS).contains(&dim),
+            field,
+            format!("centroids need 1 to {MAX_DIMS} dimensions, found {dim}"),
+        )?;
+        require(
+            !centroids.is_empty() && centroids.len().is_multiple_of(dim),
+            field,
+            format!(
+                "needs at least one centroid of {dim} values, found {} values",
+                centroids.len()
+            ),
+        )?;
         let k = centroids.len() / dim;
         if k > u32::MAX as usize {
             return Err(ConfigError::invalid(field, format!("{k} centroids are too many")).into());
         }
-        if scale.len() != dim {
-            return Err(ConfigError::invalid(
-                "codebook.scale",
-                format!(
-                    "needs one value per dimension ({dim}), found {}",
-                    scale.len()
-                ),
-            )
-            .into());
-        }
+        require(
+            scale.len() == dim,
+            "codebook.scale",
+            format!(
+                "needs one value per dimension ({dim}), found {}",
+                scale.len()
+            ),
+        )?;
         if let Some(s) = scale.iter().find(|s| !(**s > 0.0 && s.is_finite())) {
             return Err(ConfigError::invalid(
                 "codebook.scale",
@@ -107,18 +102,16 @@ impl Codebook {
         let mut scaled = centroids.clone();
         for (k, v) in scaled.iter_mut().enumerate() {
             *v *= weights[k % dim];
-            if !v.is_finite() {
-                return Err(ConfigError::invalid(
-                    field,
-                    format!(
-                        "centroid {} element {} is {} (must be finite, also after scaling)",
-                        k / dim,
-                        k % dim,
-                        centroids[k]
-                    ),
-                )
-                .into());
-            }
+            require(
+                v.is_finite(),
+                field,
+                format!(
+                    "centroid {} element {} is {} (must be finite, also after scaling)",
+                    k / dim,
+                    k % dim,
+                    centroids[k]
+                ),
+            )?;
         }
         let tree = KdTree::build(dim, scaled);
         Ok(Self {
@@ -162,13 +155,7 @@ impl Codebook {
     }
 
     fn check(&self, x: &[f64]) -> Result<(), EvalError> {
-        if x.len() != self.dim {
-            return Err(EvalError::Length {
-                what: "observation",
-                expected: self.dim,
-                found: x.len(),
-            });
-        }
+        check_len("observation", self.dim, x.len())?;
         if let Some(index) = x.iter().position(|v| !v.is_finite()) {
             return Err(EvalError::NotFinite {
                 what: "observation",

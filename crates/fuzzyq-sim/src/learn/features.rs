@@ -9,7 +9,7 @@ use serde::de::value::{MapAccessDeserializer, SeqAccessDeserializer};
 use serde::de::{self, MapAccess, SeqAccess, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::learn::codebook::Codebook;
 
 /// How every agent's observation is turned into active cells: fuzzy partitions (the paper's
@@ -40,16 +40,14 @@ pub(crate) enum FeatureKind {
 
 /// Builds the product partition of one agent's cores (at most [`MAX_DIMS`] dimensions).
 fn grid_of<'a>(field: &str, cores: &'a [Vec<f64>]) -> Result<ProductPartition<'a, f64>, SimError> {
-    if cores.len() > MAX_DIMS {
-        return Err(ConfigError::invalid(
-            field,
-            format!(
-                "an observation has at most {MAX_DIMS} dimensions, found {}",
-                cores.len()
-            ),
-        )
-        .into());
-    }
+    require(
+        cores.len() <= MAX_DIMS,
+        field,
+        format!(
+            "an observation has at most {MAX_DIMS} dimensions, found {}",
+            cores.len()
+        ),
+    )?;
     let mut refs: [&[f64]; MAX_DIMS] = [&[]; MAX_DIMS];
     for (r, c) in refs.iter_mut().zip(cores) {
         *r = c.as_slice();
@@ -198,26 +196,22 @@ impl FeatureSpace {
     /// Number of parameters `sum_i N_i * M_i` of the additive layout for `actions[i] = M_i`
     /// actions per agent (one count per agent, each `>= 1`).
     pub fn n_params(&self, actions: &[usize]) -> Result<usize, SimError> {
-        if actions.len() != self.n_agents() {
-            return Err(ConfigError::invalid(
-                "actions",
-                format!(
-                    "expected one action count per agent ({}), found {}",
-                    self.n_agents(),
-                    actions.len()
-                ),
-            )
-            .into());
-        }
+        require(
+            actions.len() == self.n_agents(),
+            "actions",
+            format!(
+                "expected one action count per agent ({}), found {}",
+                self.n_agents(),
+                actions.len()
+            ),
+        )?;
         let mut total = 0usize;
         for (i, (&m, &n)) in actions.iter().zip(&self.n_cores).enumerate() {
-            if m == 0 {
-                return Err(ConfigError::invalid(
-                    format!("actions[{i}]"),
-                    "an agent needs at least one action",
-                )
-                .into());
-            }
+            require(
+                m != 0,
+                &format!("actions[{i}]"),
+                "an agent needs at least one action",
+            )?;
             total = n
                 .checked_mul(m)
                 .and_then(|p| total.checked_add(p))

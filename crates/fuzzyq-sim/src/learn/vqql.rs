@@ -51,7 +51,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::learn::codebook::{Codebook, sq_dist};
 use crate::learn::fql::{Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome};
 use crate::learn::tasks::pointmass::{PointMassEnv, train_fql};
@@ -277,16 +277,14 @@ fn seed_plus_plus(
     let mut dmin: Vec<f64> = (0..n).map(|i| sq_dist(row(i), row(first))).collect();
     while chosen.len() < cells {
         let total: f64 = dmin.iter().sum();
-        if total <= 0.0 || total.is_nan() {
-            return Err(ConfigError::invalid(
-                "vqql.samples",
-                format!(
-                    "the samples hold only {} distinct states, fewer than cells = {cells}",
-                    chosen.len()
-                ),
-            )
-            .into());
-        }
+        require(
+            total > 0.0,
+            "vqql.samples",
+            format!(
+                "the samples hold only {} distinct states, fewer than cells = {cells}",
+                chosen.len()
+            ),
+        )?;
         let r = rng.random::<f64>() * total;
         let mut acc = 0.0;
         let mut pick = None;
@@ -343,41 +341,33 @@ fn lloyd_with(
     tolerance: f64,
     rng: &mut Pcg64Mcg,
 ) -> Result<(Codebook, QuantiserReport), SimError> {
-    if dim == 0 || dim > MAX_DIMS {
-        return Err(ConfigError::invalid(
-            "samples",
-            format!("vectors need 1 to {MAX_DIMS} dimensions, got {dim}"),
-        )
-        .into());
-    }
-    if !samples.len().is_multiple_of(dim) {
-        return Err(ConfigError::invalid(
-            "samples",
-            format!("{} values are not whole vectors of {dim}", samples.len()),
-        )
-        .into());
-    }
+    require(
+        (1..=MAX_DIMS).contains(&dim),
+        "samples",
+        format!("vectors need 1 to {MAX_DIMS} dimensions, got {dim}"),
+    )?;
+    require(
+        samples.len().is_multiple_of(dim),
+        "samples",
+        format!("{} values are not whole vectors of {dim}", samples.len()),
+    )?;
     let n = samples.len() / dim;
     if cells == 0 {
         return Err(ConfigError::invalid("vqql.cells", "must be at least 1").into());
     }
-    if n < cells {
-        return Err(ConfigError::invalid(
-            "vqql.samples",
-            format!("must be at least cells = {cells}, got {n}"),
-        )
-        .into());
-    }
+    require(
+        n >= cells,
+        "vqql.samples",
+        format!("must be at least cells = {cells}, got {n}"),
+    )?;
     if max_iterations == 0 {
         return Err(ConfigError::invalid("vqql.lloyd_iterations", "must be at least 1").into());
     }
-    if !(tolerance >= 0.0 && tolerance.is_finite()) {
-        return Err(ConfigError::invalid(
-            "vqql.lloyd_tolerance",
-            format!("must be a finite number >= 0, got {tolerance}"),
-        )
-        .into());
-    }
+    require(
+        tolerance >= 0.0 && tolerance.is_finite(),
+        "vqql.lloyd_tolerance",
+        format!("must be a finite number >= 0, got {tolerance}"),
+    )?;
     if let Some(k) = samples.iter().position(|v| !v.is_finite()) {
         return Err(ConfigError::invalid(
             "samples",
@@ -466,17 +456,15 @@ fn iterate(
             };
             return Ok((book, report));
         }
-        if history.len() >= max_iterations + MAX_REPAIR_ITERATIONS {
-            return Err(ConfigError::invalid(
-                "vqql.cells",
-                format!(
-                    "{} of {cells} cells stayed empty after {} Lloyd iterations",
-                    counts.iter().filter(|&&c| c == 0).count(),
-                    history.len()
-                ),
-            )
-            .into());
-        }
+        require(
+            history.len() < max_iterations + MAX_REPAIR_ITERATIONS,
+            "vqql.cells",
+            format!(
+                "{} of {cells} cells stayed empty after {} Lloyd iterations",
+                counts.iter().filter(|&&c| c == 0).count(),
+                history.len()
+            ),
+        )?;
         // Means, summed in sample order.
         sums.fill(0.0);
         for i in 0..n {
@@ -514,13 +502,11 @@ fn iterate(
                         s = i;
                     }
                 }
-                if far[s] <= 0.0 || far[s].is_nan() {
-                    return Err(ConfigError::invalid(
-                        "vqql.samples",
-                        format!("too few distinct states to fill {cells} cells"),
-                    )
-                    .into());
-                }
+                require(
+                    far[s] > 0.0,
+                    "vqql.samples",
+                    format!("too few distinct states to fill {cells} cells"),
+                )?;
                 centroids[j * dim..(j + 1) * dim].copy_from_slice(x(s));
                 reseeded += 1;
                 let zs = z(s).to_vec();

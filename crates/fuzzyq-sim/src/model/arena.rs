@@ -27,7 +27,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 
 /// One obstacle.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -118,15 +118,14 @@ impl Arena {
     pub fn validate(&self) -> Result<(), ConfigError> {
         finite("arena.x", &self.x)?;
         finite("arena.y", &self.y)?;
-        if self.x[0] >= self.x[1] || self.y[0] >= self.y[1] {
-            return Err(ConfigError::invalid(
-                "arena",
-                format!(
-                    "walls must satisfy lo < hi, found x = {:?}, y = {:?}",
-                    self.x, self.y
-                ),
-            ));
-        }
+        require(
+            self.x[0] < self.x[1] && self.y[0] < self.y[1],
+            "arena",
+            format!(
+                "walls must satisfy lo < hi, found x = {:?}, y = {:?}",
+                self.x, self.y
+            ),
+        )?;
         for (i, o) in self.obstacles.iter().enumerate() {
             let field = format!("arena.obstacle[{i}]");
             match o {
@@ -138,22 +137,20 @@ impl Arena {
                     finite(&field, center)?;
                     finite(&field, half_extents)?;
                     finite(&field, &[*angle_deg])?;
-                    if half_extents.iter().any(|&h| h <= 0.0) {
-                        return Err(ConfigError::invalid(
-                            field,
-                            format!("half_extents must be positive, found {half_extents:?}"),
-                        ));
-                    }
+                    require(
+                        half_extents.iter().all(|&h| h > 0.0),
+                        &field,
+                        format!("half_extents must be positive, found {half_extents:?}"),
+                    )?;
                 }
                 Obstacle::Disc { center, radius } => {
                     finite(&field, center)?;
                     finite(&field, &[*radius])?;
-                    if *radius <= 0.0 {
-                        return Err(ConfigError::invalid(
-                            field,
-                            format!("radius must be positive, found {radius}"),
-                        ));
-                    }
+                    require(
+                        *radius > 0.0,
+                        &field,
+                        format!("radius must be positive, found {radius}"),
+                    )?;
                 }
             }
         }

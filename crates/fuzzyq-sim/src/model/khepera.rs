@@ -38,7 +38,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError, positive, require};
+use crate::error::{ConfigError, SimError, non_negative, positive, require};
 use crate::model::arena::Arena;
 use crate::model::{ActionTable, BlockSpec, F64Model};
 
@@ -180,14 +180,7 @@ impl KheperaConfig {
             "env.goal_reward",
             "must be a finite number",
         )?;
-        require(
-            self.collision_penalty.is_finite() && self.collision_penalty >= 0.0,
-            "env.collision_penalty",
-            format!(
-                "must be a non-negative number, got {}",
-                self.collision_penalty
-            ),
-        )?;
+        non_negative("env.collision_penalty", self.collision_penalty)?;
         require(
             !self.sonar_angles_deg.is_empty()
                 && self.sonar_angles_deg.len() <= 16
@@ -239,11 +232,7 @@ impl KheperaConfig {
             ("env.noise.sonar_std", self.noise.sonar_std),
             ("env.noise.wheel_std", self.noise.wheel_std),
         ] {
-            require(
-                v.is_finite() && v >= 0.0,
-                f,
-                format!("must be a non-negative number, got {v}"),
-            )?;
+            non_negative(f, v)?;
         }
         require(
             (0.0..=1.0).contains(&self.noise.sonar_dropout),
@@ -516,27 +505,23 @@ pub fn poses_from_paper(
     headings_deg: &[f64],
 ) -> Result<Vec<[f64; 3]>, SimError> {
     let n = config.agents;
-    if x0.len() != 4 * n {
-        return Err(ConfigError::invalid(
-            "x0",
-            format!(
-                "needs {} values ([s_x, s_y, v_x, v_y] per robot), got {}",
-                4 * n,
-                x0.len()
-            ),
-        )
-        .into());
-    }
-    if headings_deg.len() != n {
-        return Err(ConfigError::invalid(
-            "headings",
-            format!(
-                "needs {n} values (one per robot), got {}",
-                headings_deg.len()
-            ),
-        )
-        .into());
-    }
+    require(
+        x0.len() == 4 * n,
+        "x0",
+        format!(
+            "needs {} values ([s_x, s_y, v_x, v_y] per robot), got {}",
+            4 * n,
+            x0.len()
+        ),
+    )?;
+    require(
+        headings_deg.len() == n,
+        "headings",
+        format!(
+            "needs {n} values (one per robot), got {}",
+            headings_deg.len()
+        ),
+    )?;
     if let Some(v) = x0.iter().find(|v| !v.is_finite()) {
         return Err(ConfigError::invalid("x0", format!("must be finite, got {v}")).into());
     }
@@ -545,13 +530,11 @@ pub fn poses_from_paper(
     }
     (0..n)
         .map(|i| {
-            if x0[4 * i + 2] != 0.0 || x0[4 * i + 3] != 0.0 {
-                return Err(ConfigError::invalid(
-                    "x0",
-                    format!("robot {} must start at rest (zero velocity)", i + 1),
-                )
-                .into());
-            }
+            require(
+                x0[4 * i + 2] == 0.0 && x0[4 * i + 3] == 0.0,
+                "x0",
+                format!("robot {} must start at rest (zero velocity)", i + 1),
+            )?;
             Ok([
                 x0[4 * i],
                 x0[4 * i + 1],
@@ -583,13 +566,11 @@ pub fn random_starts(
         let mut tries = 0usize;
         while poses.len() < config.agents {
             tries += 1;
-            if tries > 100_000 {
-                return Err(ConfigError::invalid(
-                    "arena",
-                    "no room for random starts clear of the obstacles",
-                )
-                .into());
-            }
+            require(
+                tries <= 100_000,
+                "arena",
+                "no room for random starts clear of the obstacles",
+            )?;
             let p = [
                 rng.random_range(x0..x1),
                 rng.random_range(y0..y1),

@@ -27,7 +27,7 @@ pub mod pointmass;
 use fuzzyq_core::solver::Precision;
 use fuzzyq_core::{ActionSet, Model, Real};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::model::classic::arm::ArmModel;
 use crate::model::classic::carhill::CarHillModel;
 use crate::model::classic::dcmotor::DcMotorModel;
@@ -616,20 +616,18 @@ pub fn check_state_as<M: Model<f64> + ?Sized>(
     x0: &[f64],
 ) -> Result<(), ConfigError> {
     let n = Model::<f64>::state_dim(model);
-    if x0.len() != n {
-        return Err(ConfigError::invalid(
-            field,
-            format!("needs {n} values (the state length), got {}", x0.len()),
-        ));
-    }
+    require(
+        x0.len() == n,
+        field,
+        format!("needs {n} values (the state length), got {}", x0.len()),
+    )?;
     for (i, &v) in x0.iter().enumerate() {
         let (lo, hi) = Model::<f64>::state_bounds(model, i);
-        if !(v >= lo && v <= hi) {
-            return Err(ConfigError::invalid(
-                field,
-                format!("x0[{i}] = {v} is outside the state range [{lo}, {hi}]"),
-            ));
-        }
+        require(
+            v >= lo && v <= hi,
+            field,
+            format!("x0[{i}] = {v} is outside the state range [{lo}, {hi}]"),
+        )?;
     }
     Ok(())
 }

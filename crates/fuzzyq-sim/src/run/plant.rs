@@ -30,12 +30,20 @@ pub struct Observation<'a> {
 
 /// A system a policy acts on (see the [module docs](self)).
 pub trait Plant {
+    /// The model the plant follows (its sample time, agents and actions).
+    fn model(&self) -> &dyn F64Model;
     /// The sample time of one step (s).
-    fn sample_time(&self) -> f64;
+    fn sample_time(&self) -> f64 {
+        self.model().sample_time()
+    }
     /// Number of agents.
-    fn n_agents(&self) -> usize;
+    fn n_agents(&self) -> usize {
+        self.model().n_agents()
+    }
     /// Length of the joint action vector.
-    fn action_dim(&self) -> usize;
+    fn action_dim(&self) -> usize {
+        self.model().n_agents() * self.model().actions().dim()
+    }
     /// Starts a run at `start` (a model state; the robots' flat poses for the robot plant).
     fn reset(&mut self, start: &[f64]) -> Result<(), SimError>;
     /// What a controller sees now.
@@ -69,14 +77,8 @@ impl<'m, M: F64Model + Model<f64>> ModelPlant<'m, M> {
 }
 
 impl<M: F64Model + Model<f64>> Plant for ModelPlant<'_, M> {
-    fn sample_time(&self) -> f64 {
-        F64Model::sample_time(self.model)
-    }
-    fn n_agents(&self) -> usize {
-        F64Model::n_agents(self.model)
-    }
-    fn action_dim(&self) -> usize {
-        F64Model::n_agents(self.model) * F64Model::actions(self.model).dim()
+    fn model(&self) -> &dyn F64Model {
+        self.model
     }
     fn reset(&mut self, start: &[f64]) -> Result<(), SimError> {
         check_state(self.model, start)?;
@@ -126,14 +128,8 @@ impl<'m> RapierPointMasses<'m> {
 }
 
 impl Plant for RapierPointMasses<'_> {
-    fn sample_time(&self) -> f64 {
-        self.model.config().sample_time
-    }
-    fn n_agents(&self) -> usize {
-        self.model.config().agents
-    }
-    fn action_dim(&self) -> usize {
-        2 * self.model.config().agents
+    fn model(&self) -> &dyn F64Model {
+        self.model
     }
     fn reset(&mut self, start: &[f64]) -> Result<(), SimError> {
         check_state(self.model, start)?;
@@ -235,14 +231,8 @@ fn nearest_action(config: &KheperaConfig, w: [f64; 2]) -> usize {
 }
 
 impl Plant for KheperaPlant<'_> {
-    fn sample_time(&self) -> f64 {
-        self.model.config().sample_time
-    }
-    fn n_agents(&self) -> usize {
-        self.model.config().agents
-    }
-    fn action_dim(&self) -> usize {
-        2 * self.model.config().agents
+    fn model(&self) -> &dyn F64Model {
+        self.model
     }
     fn reset(&mut self, start: &[f64]) -> Result<(), SimError> {
         let poses: Vec<[f64; 3]> = start

@@ -14,11 +14,12 @@
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
+use fuzzyq_core::error::check_len;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{BackupPath, Grid, Operator, SolveError, TabulatedModel};
 use fuzzyq_core::{Backup, EvalError, Model, Real, q};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::io::config::TrainConfig;
 use crate::io::policy_file::{
     KheperaPolicyFile, PointMassPolicyFile, PolicyArtifact, PolicyFile, Values,
@@ -105,13 +106,7 @@ fn joint_vector<T: Real, M: Model<T>>(
     let joint = fuzzyq_core::model::joint_actions(&*p.model)?;
     let mut v = vec![T::ZERO; joint.dim()];
     joint.vector(u, &mut v)?;
-    if v.len() != out.len() {
-        return Err(EvalError::Length {
-            what: "joint action vector",
-            expected: v.len(),
-            found: out.len(),
-        });
-    }
+    check_len("joint action vector", v.len(), out.len())?;
     for (a, b) in out.iter_mut().zip(&v) {
         *a = b.to_f64();
     }
@@ -162,17 +157,15 @@ fn parts<T: Real, M: Model<T>>(
     absorbing_goal: bool,
 ) -> Result<Parts<T, M>, SimError> {
     let n = grid.n_cores();
-    if v.len() != n || greedy.len() != n {
-        return Err(ConfigError::invalid(
-            "policy",
-            format!(
-                "{} values and {} greedy actions for a grid of {n} cores",
-                v.len(),
-                greedy.len(),
-            ),
-        )
-        .into());
-    }
+    require(
+        v.len() == n && greedy.len() == n,
+        "policy",
+        format!(
+            "{} values and {} greedy actions for a grid of {n} cores",
+            v.len(),
+            greedy.len()
+        ),
+    )?;
     if Model::<T>::state_dim(&*model) != grid.n_dims() {
         return Err(SolveError::StateDim {
             model: Model::<T>::state_dim(&*model),
@@ -428,14 +421,7 @@ impl FqiPolicy {
         q: &mut [f64],
         u: &mut [f64],
     ) -> Result<Option<usize>, SimError> {
-        if x.len() != self.state_dim() {
-            return Err(EvalError::Length {
-                what: "state",
-                expected: self.state_dim(),
-                found: x.len(),
-            }
-            .into());
-        }
+        check_len("state", self.state_dim(), x.len())?;
         match kind {
             PolicyKind::Greedy => Ok(Some(self.engine.greedy(x, q, u)?)),
             PolicyKind::Interpolated => {
@@ -704,13 +690,11 @@ impl Policy {
         Ok(match self {
             Self::Fqi(p) => Box::new(p.controller(kind)),
             Self::Additive(p) => {
-                if kind != PolicyKind::Greedy {
-                    return Err(ConfigError::invalid(
-                        "policy_kind",
-                        "a policy learned from samples (fql, vqql) acts greedily (decentralised)",
-                    )
-                    .into());
-                }
+                require(
+                    kind == PolicyKind::Greedy,
+                    "policy_kind",
+                    "a policy learned from samples (fql, vqql) acts greedily (decentralised)",
+                )?;
                 Box::new(AdditiveController {
                     policy: p,
                     indices: vec![0; p.q.n_agents()],

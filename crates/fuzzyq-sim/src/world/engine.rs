@@ -2,6 +2,7 @@
 //! motion per substep and the touch state of every disc (see the [module docs](super)).
 
 use fuzzyq_core::EvalError;
+use fuzzyq_core::error::check_len;
 use rapier2d::math::{Rotation, Vector};
 use rapier2d::prelude::{
     ColliderBuilder, ColliderHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
@@ -305,14 +306,7 @@ pub(super) fn contact_velocity(v1: [f64; 2], dv: [f64; 2]) -> [f64; 2] {
 }
 
 pub(super) fn check_slice(what: &'static str, expected: usize, v: &[f64]) -> Result<(), SimError> {
-    if v.len() != expected {
-        return Err(EvalError::Length {
-            what,
-            expected,
-            found: v.len(),
-        }
-        .into());
-    }
+    check_len(what, expected, v.len())?;
     if let Some(index) = v.iter().position(|x| !x.is_finite()) {
         return Err(EvalError::NotFinite { what, index }.into());
     }

@@ -1,6 +1,7 @@
 //! Khepera IV robots as colliding discs with ray-cast sonars (see the [module docs](super)).
 
 use fuzzyq_core::EvalError;
+use fuzzyq_core::error::check_len;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use rand_pcg::Pcg64Mcg;
@@ -9,7 +10,7 @@ use rapier2d::prelude::{QueryFilter, Ray};
 
 use super::contacts::{Collisions, StepContacts};
 use super::engine::*;
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::model::khepera::{self, KheperaConfig, MAX_ROBOTS};
 
 // ---------------------------------------------------------------------------------------------
@@ -58,13 +59,11 @@ impl KheperaWorld {
         seed: u64,
     ) -> Result<Self, SimError> {
         config.validate()?;
-        if !(1..=MAX_SUBSTEPS).contains(&substeps) {
-            return Err(ConfigError::invalid(
-                "plant.substeps",
-                format!("must be between 1 and {MAX_SUBSTEPS}, got {substeps}"),
-            )
-            .into());
-        }
+        require(
+            (1..=MAX_SUBSTEPS).contains(&substeps),
+            "plant.substeps",
+            format!("must be between 1 and {MAX_SUBSTEPS}, got {substeps}"),
+        )?;
         let a = &config.arena;
         let n = config.agents;
         let engine = Engine::new(
@@ -109,14 +108,7 @@ impl KheperaWorld {
     /// another robot (touching is allowed).
     pub fn reset(&mut self, poses: &[[f64; 3]]) -> Result<(), SimError> {
         let n = self.config.agents;
-        if poses.len() != n {
-            return Err(EvalError::Length {
-                what: "poses",
-                expected: n,
-                found: poses.len(),
-            }
-            .into());
-        }
+        check_len("poses", n, poses.len())?;
         let r = self.config.radius;
         for (i, p) in poses.iter().enumerate() {
             if let Some(index) = p.iter().position(|v| !v.is_finite()) {
@@ -126,24 +118,20 @@ impl KheperaWorld {
                 }
                 .into());
             }
-            if self.config.arena.disc_collides([p[0], p[1]], r) {
-                return Err(ConfigError::invalid(
-                    format!("poses[{i}]"),
-                    format!(
-                        "robot {i} at ({}, {}) overlaps a wall or an obstacle",
-                        p[0], p[1]
-                    ),
-                )
-                .into());
-            }
+            require(
+                !self.config.arena.disc_collides([p[0], p[1]], r),
+                &format!("poses[{i}]"),
+                format!(
+                    "robot {i} at ({}, {}) overlaps a wall or an obstacle",
+                    p[0], p[1]
+                ),
+            )?;
             for (j, q) in poses[..i].iter().enumerate() {
-                if khepera::robots_overlap([p[0], p[1]], [q[0], q[1]], r) {
-                    return Err(ConfigError::invalid(
-                        format!("poses[{i}]"),
-                        format!("robot {i} overlaps robot {j}"),
-                    )
-                    .into());
-                }
+                require(
+                    !khepera::robots_overlap([p[0], p[1]], [q[0], q[1]], r),
+                    &format!("poses[{i}]"),
+                    format!("robot {i} overlaps robot {j}"),
+                )?;
             }
         }
         self.poses = poses
@@ -162,14 +150,7 @@ impl KheperaWorld {
     /// that started.
     pub fn step(&mut self, wheels: &[[f64; 2]]) -> Result<StepContacts, SimError> {
         let n = self.config.agents;
-        if wheels.len() != n {
-            return Err(EvalError::Length {
-                what: "wheels",
-                expected: n,
-                found: wheels.len(),
-            }
-            .into());
-        }
+        check_len("wheels", n, wheels.len())?;
         if let Some(index) = wheels.iter().flatten().position(|v| !v.is_finite()) {
             return Err(EvalError::NotFinite {
                 what: "wheels",
@@ -288,14 +269,7 @@ impl KheperaWorld {
                 ConfigError::invalid("poses", "reset the world before reading sonars").into(),
             );
         }
-        if out.len() != c.sonar_angles_deg.len() {
-            return Err(EvalError::Length {
-                what: "sonar readings",
-                expected: c.sonar_angles_deg.len(),
-                found: out.len(),
-            }
-            .into());
-        }
+        check_len("sonar readings", c.sonar_angles_deg.len(), out.len())?;
         let pose = self.poses[robot];
         let filter = QueryFilter::default().exclude_rigid_body(self.engine.robots[robot].body);
         let query = self.engine.world.query_pipeline_with_filter(filter);

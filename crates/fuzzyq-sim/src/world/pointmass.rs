@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use super::contacts::{Collisions, StepContacts};
 use super::engine::*;
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, positive, require};
 use crate::model::arena::Arena;
 use crate::model::khepera::MAX_ROBOTS;
 use crate::model::pointmass::{FrictionConfig, PointMass, PointMassConfig};
@@ -39,21 +39,15 @@ impl Default for PointMassPlantConfig {
 impl PointMassPlantConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if !(self.radius > 0.0 && self.radius.is_finite()) {
-            return Err(ConfigError::invalid(
-                "plant.radius",
-                format!("must be a positive number, got {}", self.radius),
-            ));
-        }
-        if !(1..=MAX_SUBSTEPS).contains(&self.substeps) {
-            return Err(ConfigError::invalid(
-                "plant.substeps",
-                format!(
-                    "must be between 1 and {MAX_SUBSTEPS}, got {}",
-                    self.substeps
-                ),
-            ));
-        }
+        positive("plant.radius", self.radius)?;
+        require(
+            (1..=MAX_SUBSTEPS).contains(&self.substeps),
+            "plant.substeps",
+            format!(
+                "must be between 1 and {MAX_SUBSTEPS}, got {}",
+                self.substeps
+            ),
+        )?;
         self.arena.validate()?;
         Ok(())
     }
@@ -167,45 +161,37 @@ impl PointMassPlant {
         let (r, a) = (self.config.radius, &self.config.arena);
         for i in 0..n {
             let s = [x[4 * i], x[4 * i + 1]];
-            if s[0] < a.x[0] || s[0] > a.x[1] || s[1] < a.y[0] || s[1] > a.y[1] {
-                return Err(ConfigError::invalid(
-                    "x0",
-                    format!(
-                        "agent {i} at ({}, {}) is outside the arena x = {:?}, y = {:?}",
-                        s[0], s[1], a.x, a.y
-                    ),
-                )
-                .into());
-            }
-            if self.physical.disc_collides(s, r) {
-                return Err(ConfigError::invalid(
-                    "x0",
-                    format!("agent {i} at ({}, {}) overlaps an obstacle", s[0], s[1]),
-                )
-                .into());
-            }
+            require(
+                !(s[0] < a.x[0] || s[0] > a.x[1] || s[1] < a.y[0] || s[1] > a.y[1]),
+                "x0",
+                format!(
+                    "agent {i} at ({}, {}) is outside the arena x = {:?}, y = {:?}",
+                    s[0], s[1], a.x, a.y
+                ),
+            )?;
+            require(
+                !self.physical.disc_collides(s, r),
+                "x0",
+                format!("agent {i} at ({}, {}) overlaps an obstacle", s[0], s[1]),
+            )?;
             for k in 2..4 {
                 let v = x[4 * i + k];
-                if v.abs() > self.velocity_limit {
-                    return Err(ConfigError::invalid(
-                        "x0",
-                        format!(
-                            "agent {i} velocity {v} exceeds the limit {}",
-                            self.velocity_limit
-                        ),
-                    )
-                    .into());
-                }
+                require(
+                    v.abs() <= self.velocity_limit,
+                    "x0",
+                    format!(
+                        "agent {i} velocity {v} exceeds the limit {}",
+                        self.velocity_limit
+                    ),
+                )?;
             }
             for j in 0..i {
                 let d = (s[0] - x[4 * j]).hypot(s[1] - x[4 * j + 1]);
-                if d < 2.0 * r {
-                    return Err(ConfigError::invalid(
-                        "x0",
-                        format!("agents {j} and {i} overlap (centres {d} m apart, radius {r} m)"),
-                    )
-                    .into());
-                }
+                require(
+                    d >= 2.0 * r,
+                    "x0",
+                    format!("agents {j} and {i} overlap (centres {d} m apart, radius {r} m)"),
+                )?;
             }
         }
         self.x.copy_from_slice(x);

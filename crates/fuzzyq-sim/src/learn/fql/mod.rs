@@ -147,7 +147,7 @@ use serde::{Deserialize, Serialize};
 
 pub use fuzzyq_core::additive::Update;
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, discount, require};
 pub use crate::learn::additive::{AdditiveQ, Sample};
 use crate::learn::additive::{Step, td_update};
 pub use crate::learn::env::{Environment, Transition};
@@ -238,9 +238,7 @@ impl FqlConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         let bad =
             |field: &str, reason: String| Err(ConfigError::invalid(format!("fql.{field}"), reason));
-        if !(0.0..1.0).contains(&self.gamma) {
-            return bad("gamma", format!("must be in [0, 1), got {}", self.gamma));
-        }
+        discount("fql.gamma", self.gamma)?;
         if self.episodes == 0 {
             return bad("episodes", "must be at least 1".into());
         }
@@ -534,28 +532,24 @@ fn check_reward(reward: f64, at: At) -> Result<(), SimError> {
 /// Checks that `env` matches `features` and returns its action counts.
 fn check_env<E: Environment>(env: &E, features: &FeatureSpace) -> Result<Vec<usize>, SimError> {
     let n = env.n_agents();
-    if n != features.n_agents() {
-        return Err(ConfigError::invalid(
-            "features",
-            format!(
-                "has {} agents, the environment has {n}",
-                features.n_agents()
-            ),
-        )
-        .into());
-    }
+    require(
+        n == features.n_agents(),
+        "features",
+        format!(
+            "has {} agents, the environment has {n}",
+            features.n_agents()
+        ),
+    )?;
     let mut m = Vec::with_capacity(n);
     for i in 0..n {
         let (dim, expected) = (env.obs_dim(i), features.obs_dim(i).unwrap_or(0));
-        if dim != expected {
-            return Err(ConfigError::invalid(
-                format!("features[{i}]"),
-                format!(
-                    "has {expected} observation dimensions, the environment observes {dim} for agent {i}"
-                ),
-            )
-            .into());
-        }
+        require(
+            dim == expected,
+            &format!("features[{i}]"),
+            format!(
+                "has {expected} observation dimensions, the environment observes {dim} for agent {i}"
+            ),
+        )?;
         let mi = env.n_actions(i);
         if mi == 0 {
             return Err(ConfigError::invalid("env", format!("agent {i} has no actions")).into());
@@ -620,16 +614,14 @@ pub fn evaluate<E: Environment>(
         return Err(ConfigError::invalid("episodes", "must be at least 1").into());
     }
     let m = check_env(env, &q.features)?;
-    if m != q.actions {
-        return Err(ConfigError::invalid(
-            "env",
-            format!(
-                "has action counts {m:?}, the Q-function was learned with {:?}",
-                q.actions
-            ),
-        )
-        .into());
-    }
+    require(
+        m == q.actions,
+        "env",
+        format!(
+            "has action counts {m:?}, the Q-function was learned with {:?}",
+            q.actions
+        ),
+    )?;
     match &q.features.kind {
         FeatureKind::Fuzzy(_) => {
             let grids = q.features.grids()?;

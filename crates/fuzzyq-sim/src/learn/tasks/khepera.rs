@@ -75,7 +75,7 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
@@ -137,17 +137,14 @@ pub fn feature_space(config: &KheperaConfig) -> Result<FeatureSpace, SimError> {
     config.validate()?;
     let [t0, t1] = config.sonar_levels;
     let mid = 0.5 * (t0 + t1);
-    if !(config.sonar_min_range < mid && mid < config.sonar_max_range) {
-        return Err(ConfigError::invalid(
-            "env.sonar_levels",
-            format!(
-                "the medium sonar core {mid} must lie strictly between sonar_min_range = {} and \
-                 sonar_max_range = {}",
-                config.sonar_min_range, config.sonar_max_range
-            ),
-        )
-        .into());
-    }
+    require(
+        config.sonar_min_range < mid && mid < config.sonar_max_range,
+        "env.sonar_levels",
+        format!(
+            "the medium sonar core {mid} must lie strictly between sonar_min_range = {} and sonar_max_range = {}",
+            config.sonar_min_range, config.sonar_max_range
+        ),
+    )?;
     let cores = observation_cores(config);
     FeatureSpace::new(vec![cores; config.agents])
 }
@@ -253,18 +250,16 @@ impl KheperaEnv {
     /// negative or non-finite weight or a discount outside `[0, 1]`.
     pub fn set_shaping(&mut self, shaping: Option<Shaping>) -> Result<(), ConfigError> {
         if let Some(s) = shaping {
-            if !(s.weight >= 0.0 && s.weight.is_finite()) {
-                return Err(ConfigError::invalid(
-                    "shaping.weight",
-                    format!("must be a finite number >= 0, got {}", s.weight),
-                ));
-            }
-            if !(0.0..=1.0).contains(&s.gamma) {
-                return Err(ConfigError::invalid(
-                    "shaping.gamma",
-                    format!("must be in [0, 1], got {}", s.gamma),
-                ));
-            }
+            require(
+                s.weight >= 0.0 && s.weight.is_finite(),
+                "shaping.weight",
+                format!("must be a finite number >= 0, got {}", s.weight),
+            )?;
+            require(
+                (0.0..=1.0).contains(&s.gamma),
+                "shaping.gamma",
+                format!("must be in [0, 1], got {}", s.gamma),
+            )?;
         }
         self.shaping = shaping;
         Ok(())
@@ -467,23 +462,19 @@ pub fn train_fql_on(
 /// Checks that `q` was learned on the feature space and actions of `config`.
 pub fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
     let features = feature_space(config)?;
-    if q.features() != &features {
-        return Err(ConfigError::invalid(
-            "q",
-            "its feature space is not the one of this configuration (observation_cores per robot)",
-        )
-        .into());
-    }
-    if q.actions().iter().any(|&m| m != N_ACTIONS) {
-        return Err(ConfigError::invalid(
-            "q",
-            format!(
-                "has action counts {:?}, the robots have {N_ACTIONS} actions",
-                q.actions()
-            ),
-        )
-        .into());
-    }
+    require(
+        q.features() == &features,
+        "q",
+        "its feature space is not the one of this configuration (observation_cores per robot)",
+    )?;
+    require(
+        q.actions().iter().all(|&m| m == N_ACTIONS),
+        "q",
+        format!(
+            "has action counts {:?}, the robots have {N_ACTIONS} actions",
+            q.actions()
+        ),
+    )?;
     Ok(())
 }
 
@@ -628,44 +619,22 @@ mod tests {
         let mut env = KheperaEnv::new(&config).unwrap();
         let mut rng = <Pcg64Mcg as rand::SeedableRng>::seed_from_u64(0);
         // Both robots 0.1 m from the origin on opposite sides, at rest: standing still keeps
-        // them in the region (reward 5, terminal, success).
-        env.reset_to(&[[0.1, 0.0, 0.0], [-0.1, 0.0, PI]], 0)
-            .unwrap();
-        assert!(env.in_region());
-        let t = env.step(&[3, 3], &mut rng);
-        assert_eq!(
-            t,
-            Transition {
-                reward: 5.0,
-                terminal: true
-            }
-        );
-        assert!(env.success());
-        // Driving forward from just outside the region, facing the origin: reach it.
-        env.reset_to(&[[0.16, 0.0, PI], [-0.16, 0.0, 0.0]], 0)
-            .unwrap();
-        assert!(!env.in_region());
-        let t = env.step(&[0, 0], &mut rng);
-        assert_eq!(
-            t,
-            Transition {
-                reward: 5.0,
-                terminal: true
-            }
-        );
-        assert!(env.success());
-        // Standing still just outside the region: nothing.
-        env.reset_to(&[[0.16, 0.0, PI], [-0.16, 0.0, 0.0]], 0)
-            .unwrap();
-        let t = env.step(&[3, 3], &mut rng);
-        assert_eq!(
-            t,
-            Transition {
-                reward: 0.0,
-                terminal: false
-            }
-        );
-        assert!(!env.success());
+        // them in the region (reward 5, terminal, success). Driving forward from just outside
+        // the region, facing the origin, reaches it; standing still there gets nothing.
+        let inside = [[0.1, 0.0, 0.0], [-0.1, 0.0, PI]];
+        let outside = [[0.16, 0.0, PI], [-0.16, 0.0, 0.0]];
+        for (start, action, reward) in [
+            (inside, [3, 3], 5.0),
+            (outside, [0, 0], 5.0),
+            (outside, [3, 3], 0.0),
+        ] {
+            env.reset_to(&start, 0).unwrap();
+            assert_eq!(env.in_region(), start == inside);
+            let t = env.step(&action, &mut rng);
+            let terminal = reward > 0.0;
+            assert_eq!(t, Transition { reward, terminal }, "{start:?} {action:?}");
+            assert_eq!(env.success(), terminal);
+        }
         // Facing each other 0.2 m apart (centres), driving forward: they bump (contact).
         env.reset_to(&[[1.0, 1.0, 0.0], [1.2, 1.0, PI]], 0).unwrap();
         let t = env.step(&[0, 0], &mut rng);

@@ -51,7 +51,7 @@ use fuzzyq_core::Model;
 use fuzzyq_core::partition::Partition;
 use rand_pcg::Pcg64Mcg;
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, require};
 use crate::learn::fql::{
     self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
@@ -110,39 +110,32 @@ pub fn feature_space(
 /// actions.
 pub fn check_q(model: &PointMass, q: &AdditiveQ) -> Result<(), SimError> {
     let agents = model.config().agents;
-    if q.n_agents() != agents {
-        return Err(ConfigError::invalid(
-            "q",
-            format!(
-                "has {} agents, the point-mass model has {agents}",
-                q.n_agents()
-            ),
-        )
-        .into());
-    }
+    require(
+        q.n_agents() == agents,
+        "q",
+        format!(
+            "has {} agents, the point-mass model has {agents}",
+            q.n_agents()
+        ),
+    )?;
     for i in 0..agents {
         let dim = q.features().obs_dim(i).unwrap_or(0);
-        if dim != 4 {
-            return Err(ConfigError::invalid(
-                "q",
-                format!(
-                    "agent {i} observes {dim} values; a point-mass agent observes its own \
-                     (s_x, s_y, v_x, v_y)"
-                ),
-            )
-            .into());
-        }
+        require(
+            dim == 4,
+            "q",
+            format!(
+                "agent {i} observes {dim} values; a point-mass agent observes its own (s_x, s_y, v_x, v_y)"
+            ),
+        )?;
         let m = Model::<f64>::action_set(model, i).n_actions();
-        if q.actions()[i] != m {
-            return Err(ConfigError::invalid(
-                "q",
-                format!(
-                    "agent {i} has {} actions, the model has {m} per agent",
-                    q.actions()[i]
-                ),
-            )
-            .into());
-        }
+        require(
+            q.actions()[i] == m,
+            "q",
+            format!(
+                "agent {i} has {} actions, the model has {m} per agent",
+                q.actions()[i]
+            ),
+        )?;
     }
     Ok(())
 }

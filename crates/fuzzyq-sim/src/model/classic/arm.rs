@@ -54,7 +54,7 @@ use serde::{Deserialize, Serialize};
 
 use super::octave::{rk4_step_sizes, wrap_angle_floor};
 use super::{Classic, Dynamics, Integrator, Preset, validate_actions};
-use crate::error::{ConfigError, non_negative, positive};
+use crate::error::{ConfigError, non_negative, positive, require};
 use crate::model::{ActionTable, EnvKind};
 
 /// The names of the arm's presets.
@@ -135,24 +135,21 @@ impl ArmConfig {
         }
         positive("env.sample_time", self.sample_time)?;
         self.integrator.validate("env.integrator")?;
-        if self.integrator == Integrator::Zoh {
-            return Err(ConfigError::invalid(
-                "env.integrator",
-                "the arm is nonlinear: use rk4 (no exact zero-order hold)",
-            ));
-        }
+        require(
+            self.integrator != Integrator::Zoh,
+            "env.integrator",
+            "the arm is nonlinear: use rk4 (no exact zero-order hold)",
+        )?;
         let [p1, p2, p3] = self.inertia_parameters();
         // det M = P_1 P_2 - P_3^2 cos^2(alpha_2) >= P_1 P_2 - P_3^2 > 0 keeps M invertible.
         let det = p1 * p2 - p3 * p3;
-        if !(det > 0.0 && det.is_finite() && p1.is_finite()) {
-            return Err(ConfigError::invalid(
-                "env.inertias",
-                format!(
-                    "the mass matrix must stay invertible (P1 P2 - P3^2 = {det} with these \
-                     masses, lengths, centres of mass and inertias)"
-                ),
-            ));
-        }
+        require(
+            det > 0.0 && det.is_finite() && p1.is_finite(),
+            "env.inertias",
+            format!(
+                "the mass matrix must stay invertible (P1 P2 - P3^2 = {det} with these masses, lengths, centres of mass and inertias)"
+            ),
+        )?;
         Ok(())
     }
 
@@ -218,16 +215,15 @@ impl Arm {
     ) -> Result<ActionTable, ConfigError> {
         validate_actions(field, tau1)?;
         validate_actions(field, tau2)?;
-        if tau1.len() * tau2.len() > MAX_JOINT_ACTIONS {
-            return Err(ConfigError::invalid(
-                field,
-                format!(
-                    "{} x {} torques make more than {MAX_JOINT_ACTIONS} joint actions",
-                    tau1.len(),
-                    tau2.len()
-                ),
-            ));
-        }
+        require(
+            tau1.len() * tau2.len() <= MAX_JOINT_ACTIONS,
+            field,
+            format!(
+                "{} x {} torques make more than {MAX_JOINT_ACTIONS} joint actions",
+                tau1.len(),
+                tau2.len()
+            ),
+        )?;
         let pairs = tau1
             .iter()
             .flat_map(|&a| tau2.iter().flat_map(move |&b| [a, b]))

@@ -51,7 +51,7 @@ use serde::{Deserialize, Serialize};
 
 use super::octave::{colon, rk4, symequidgrid};
 use super::{Classic, Dynamics, Integrator, Preset};
-use crate::error::{ConfigError, positive};
+use crate::error::{ConfigError, non_negative, positive, require};
 use crate::model::EnvKind;
 
 /// The names of the car's presets.
@@ -97,22 +97,16 @@ impl CarHillConfig {
     /// Checks every field's range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive("env.mass", self.mass)?;
-        if !(self.gravity >= 0.0 && self.gravity.is_finite()) {
-            return Err(ConfigError::invalid(
-                "env.gravity",
-                format!("must be a non-negative number, got {}", self.gravity),
-            ));
-        }
+        non_negative("env.gravity", self.gravity)?;
         positive("env.sample_time", self.sample_time)?;
         positive("env.position_limit", self.position_limit)?;
         positive("env.velocity_limit", self.velocity_limit)?;
         self.integrator.validate("env.integrator")?;
-        if self.integrator == Integrator::Zoh {
-            return Err(ConfigError::invalid(
-                "env.integrator",
-                "the car on the hill is nonlinear: use rk4 (no exact zero-order hold)",
-            ));
-        }
+        require(
+            self.integrator != Integrator::Zoh,
+            "env.integrator",
+            "the car on the hill is nonlinear: use rk4 (no exact zero-order hold)",
+        )?;
         Ok(())
     }
 }

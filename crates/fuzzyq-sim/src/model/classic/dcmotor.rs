@@ -35,7 +35,7 @@ use serde::{Deserialize, Serialize};
 
 use super::octave::{colon, rk4, rk4_step_sizes, sat, symequidgrid};
 use super::{Classic, Dynamics, Integrator, Preset};
-use crate::error::{ConfigError, non_negative, positive};
+use crate::error::{ConfigError, non_negative, positive, require};
 use crate::model::EnvKind;
 
 /// The names of the DC motor's presets.
@@ -102,12 +102,11 @@ impl DcMotorConfig {
         non_negative("env.r", self.r)?;
         self.integrator.validate("env.integrator")?;
         let (a, c) = self.continuous();
-        if !(a.is_finite() && c.is_finite() && (a * self.sample_time).is_finite()) {
-            return Err(ConfigError::invalid(
-                "env.inertia",
-                "the motor's time constant overflows with these parameters",
-            ));
-        }
+        require(
+            a.is_finite() && c.is_finite() && (a * self.sample_time).is_finite(),
+            "env.inertia",
+            "the motor's time constant overflows with these parameters",
+        )?;
         Ok(())
     }
 

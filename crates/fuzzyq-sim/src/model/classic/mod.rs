@@ -39,7 +39,7 @@ use fuzzyq_core::Real;
 use fuzzyq_core::solver::{Grid, Precision, SolverConfig};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{ConfigError, SimError};
+use crate::error::{ConfigError, SimError, discount, positive, require};
 use crate::model::{ActionTable, BlockSpec, EnvKind, F64Model};
 
 /// The preset of a classic benchmark when none is named: the toolbox's default fine grid.
@@ -99,42 +99,29 @@ pub struct Preset {
 impl Preset {
     /// Checks the grid, actions, `gamma` and `xi`.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.cores.is_empty() {
-            return Err(ConfigError::invalid(
-                "preset.cores",
-                "needs at least one state variable",
-            ));
-        }
+        require(
+            !self.cores.is_empty(),
+            "preset.cores",
+            "needs at least one state variable",
+        )?;
         for (dim, c) in self.cores.iter().enumerate() {
-            if c.len() < 2 {
-                return Err(ConfigError::invalid(
-                    "preset.cores",
-                    format!(
-                        "state variable {dim} needs at least 2 cores, got {}",
-                        c.len()
-                    ),
-                ));
-            }
-            if c.iter().any(|v| !v.is_finite()) || c.windows(2).any(|w| w[0] >= w[1]) {
-                return Err(ConfigError::invalid(
-                    "preset.cores",
-                    format!("the cores of state variable {dim} must be finite and increasing"),
-                ));
-            }
+            require(
+                c.len() >= 2,
+                "preset.cores",
+                format!(
+                    "state variable {dim} needs at least 2 cores, got {}",
+                    c.len()
+                ),
+            )?;
+            require(
+                !(c.iter().any(|v| !v.is_finite()) || c.windows(2).any(|w| w[0] >= w[1])),
+                "preset.cores",
+                format!("the cores of state variable {dim} must be finite and increasing"),
+            )?;
         }
         validate_actions("preset.actions", &self.actions)?;
-        if !(self.gamma >= 0.0 && self.gamma < 1.0) {
-            return Err(ConfigError::invalid(
-                "preset.gamma",
-                format!("must be in [0, 1), got {}", self.gamma),
-            ));
-        }
-        if !(self.xi > 0.0 && self.xi.is_finite()) {
-            return Err(ConfigError::invalid(
-                "preset.xi",
-                format!("must be a positive number, got {}", self.xi),
-            ));
-        }
+        discount("preset.gamma", self.gamma)?;
+        positive("preset.xi", self.xi)?;
         Ok(())
     }
 
@@ -171,12 +158,11 @@ impl Preset {
 
 /// Checks a discrete action list: 1 to 4096 finite values.
 pub(crate) fn validate_actions(field: &str, actions: &[f64]) -> Result<(), ConfigError> {
-    if actions.is_empty() || actions.len() > 4096 {
-        return Err(ConfigError::invalid(
-            field,
-            format!("needs 1 to 4096 actions, got {}", actions.len()),
-        ));
-    }
+    require(
+        (1..=4096).contains(&actions.len()),
+        field,
+        format!("needs 1 to 4096 actions, got {}", actions.len()),
+    )?;
     if let Some(a) = actions.iter().find(|a| !a.is_finite()) {
         return Err(ConfigError::invalid(
             field,
@@ -298,17 +284,16 @@ impl<S: Dynamics> Classic<S> {
     /// `preset.*`).
     pub fn for_preset(config: S::Config, preset: &Preset) -> Result<Self, ConfigError> {
         preset.validate()?;
-        if preset.cores.len() != S::STATE_DIM {
-            return Err(ConfigError::invalid(
-                "preset.cores",
-                format!(
-                    "the {} has {} state variables, the preset {}",
-                    S::ENV.name(),
-                    S::STATE_DIM,
-                    preset.cores.len()
-                ),
-            ));
-        }
+        require(
+            preset.cores.len() == S::STATE_DIM,
+            "preset.cores",
+            format!(
+                "the {} has {} state variables, the preset {}",
+                S::ENV.name(),
+                S::STATE_DIM,
+                preset.cores.len()
+            ),
+        )?;
         let dynamics = S::new(config)?;
         let table = dynamics.action_table("preset.actions", &preset.actions)?;
         Ok(Self::from_table(dynamics, table))

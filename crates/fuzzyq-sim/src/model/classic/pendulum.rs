@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use super::octave::{colon, rk4, rk4_step_sizes, sat, symequidgrid, symloggrid, wrap_angle_octave};
 use super::{Classic, Dynamics, Integrator, Preset};
-use crate::error::{ConfigError, non_negative, positive};
+use crate::error::{ConfigError, non_negative, positive, require};
 use crate::model::EnvKind;
 
 /// The names of the pendulum's presets.
@@ -122,20 +122,18 @@ impl PendulumConfig {
         non_negative("env.q", self.q[1])?;
         non_negative("env.r", self.r)?;
         self.integrator.validate("env.integrator")?;
-        if self.integrator == Integrator::Zoh {
-            return Err(ConfigError::invalid(
-                "env.integrator",
-                "\"zoh\" is exact for linear models only; the pendulum needs rk4",
-            ));
-        }
+        require(
+            self.integrator != Integrator::Zoh,
+            "env.integrator",
+            "\"zoh\" is exact for linear models only; the pendulum needs rk4",
+        )?;
         let c = self.coefficients();
         let rates = [c.mgl / c.inertia, c.friction / c.inertia, c.km / c.inertia];
-        if rates.iter().any(|r| !r.is_finite()) {
-            return Err(ConfigError::invalid(
-                "env.disc_inertia",
-                "the pendulum's rates overflow with these parameters",
-            ));
-        }
+        require(
+            rates.iter().all(|r| r.is_finite()),
+            "env.disc_inertia",
+            "the pendulum's rates overflow with these parameters",
+        )?;
         Ok(())
     }
 
