@@ -156,21 +156,21 @@ impl CompareConfig {
             return Err(ConfigError::invalid("learners", "name at least one learner").into());
         }
         for (i, l) in self.learners.iter().enumerate() {
-            require(
+            require!(
                 !self.learners[..i].contains(l),
                 "learners",
                 format!("{} is named twice", l.name()),
-            )?;
+            );
         }
         let bound = pointmass_bound(&model);
-        require(
+        require!(
             self.start_position > 0.0 && self.start_position <= bound,
             "start_position",
             format!(
                 "must be in (0, {bound}] (the position range), got {}",
                 self.start_position
             ),
-        )?;
+        );
         self.fql.validate()?;
         self.fql_starts.validate(&model)?;
         if self.learners.contains(&Learner::Vqql) {

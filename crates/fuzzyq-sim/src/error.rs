@@ -118,46 +118,45 @@ pub enum SimError {
     PolicyFile(#[from] PolicyFileError),
 }
 
+/// Returns `Err(ConfigError::invalid(field, reason).into())` from the enclosing function
+/// unless `ok` holds. `field` and `reason` are evaluated only on failure, so a check costs
+/// nothing when it passes (validation may sit on per-step paths).
+macro_rules! require {
+    ($ok:expr, $field:expr, $reason:expr $(,)?) => {{
+        let ok: bool = $ok;
+        if !ok {
+            return Err($crate::error::ConfigError::invalid($field, $reason).into());
+        }
+    }};
+}
+pub(crate) use require;
+
 /// `Ok` if `v` is a positive finite number, else an error naming `field`.
 pub(crate) fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
-    if v > 0.0 && v.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a positive number, got {v}"),
-        ))
-    }
+    require!(
+        v > 0.0 && v.is_finite(),
+        field,
+        format!("must be a positive number, got {v}")
+    );
+    Ok(())
 }
 
 /// `Ok` if `v` is a finite number `>= 0`, else an error naming `field`.
 pub(crate) fn non_negative(field: &str, v: f64) -> Result<(), ConfigError> {
-    if v >= 0.0 && v.is_finite() {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(
-            field,
-            format!("must be a non-negative number, got {v}"),
-        ))
-    }
+    require!(
+        v >= 0.0 && v.is_finite(),
+        field,
+        format!("must be a non-negative number, got {v}")
+    );
+    Ok(())
 }
 
 /// `Ok` if `v` is a discount factor in `[0, 1)`, else an error naming `field`.
 pub(crate) fn discount(field: &str, v: f64) -> Result<(), ConfigError> {
-    require(
+    require!(
         (0.0..1.0).contains(&v),
         field,
-        format!("must be in [0, 1), got {v}"),
-    )
-}
-
-/// `Ok` if `ok`, else an error naming `field` with `reason`. The reason is built before the
-/// test: for validation, not for per-step paths (use [`positive`] and friends there, which
-/// format only on failure).
-pub(crate) fn require(ok: bool, field: &str, reason: impl Into<String>) -> Result<(), ConfigError> {
-    if ok {
-        Ok(())
-    } else {
-        Err(ConfigError::invalid(field, reason))
-    }
+        format!("must be in [0, 1), got {v}")
+    );
+    Ok(())
 }

@@ -355,18 +355,18 @@ impl SolverSettings {
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
-        require(
+        require!(
             !(self.operator == IterationOperator::QValues && self.sweep == SweepMode::Asynchronous),
             "solver.operator",
             "\"q-values\" runs synchronous sweeps; set sweep = \"sync\"",
-        )?;
+        );
         discount("solver.gamma", self.gamma)?;
         positive("solver.xi", self.xi)?;
-        require(
+        require!(
             self.max_sweeps != 0,
             "solver.max_sweeps",
             "must be at least 1",
-        )?;
+        );
         Ok(())
     }
 }
@@ -521,11 +521,11 @@ impl TrainConfig {
         match &self.env {
             EnvConfig::Pointmass(_) => {
                 check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
-                require(
+                require!(
                     self.grid.heading_divisions.is_none(),
                     "grid.heading_divisions",
                     "applies to the khepera environment only",
-                )?;
+                );
             }
             EnvConfig::Khepera(_) => {
                 if let Some(d) = self.grid.heading_divisions
@@ -540,32 +540,32 @@ impl TrainConfig {
             _ => {}
         }
         if self.env.is_classic() {
-            require(
+            require!(
                 self.grid.cores.is_some(),
                 "grid.cores",
                 format!(
                     "the {} environment needs its cores given per state variable",
                     self.env.name()
                 ),
-            )?;
-            require(
+            );
+            require!(
                 self.grid.heading_divisions.is_none(),
                 "grid.heading_divisions",
                 "applies to the khepera environment only",
-            )?;
+            );
         } else {
             check_cores("grid.position_cores", &self.grid.position_cores)?;
         }
         if let Some(cores) = &self.grid.cores {
             let want = self.env.state_dim();
-            require(
+            require!(
                 cores.len() == want,
                 "grid.cores",
                 format!(
                     "needs one list per state variable ({want}), got {}",
                     cores.len()
                 ),
-            )?;
+            );
             for (i, c) in cores.iter().enumerate() {
                 check_cores(&format!("grid.cores[{i}]"), c)?;
             }
@@ -575,11 +575,11 @@ impl TrainConfig {
             .iter()
             .map(Vec::len)
             .try_fold(1u64, |a, l| a.checked_mul(l as u64));
-        require(
+        require!(
             n.is_some_and(|n| n <= u64::from(u32::MAX)),
             "grid",
             "the joint grid has more than 2^32 cores",
-        )?;
+        );
         self.solver.validate()
     }
 

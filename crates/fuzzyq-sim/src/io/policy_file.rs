@@ -291,11 +291,11 @@ impl PointMassPolicyFile {
         match &self.vqql {
             Some(v) => {
                 v.validate()?;
-                require(
+                require!(
                     features.is_codebook(),
                     "q",
                     "a VQQL policy (vqql set) needs codebook features",
-                )?;
+                );
                 if let Some(i) =
                     (0..features.n_agents()).find(|&i| features.n_cores(i) != Some(v.cells))
                 {
@@ -311,11 +311,11 @@ impl PointMassPolicyFile {
                 }
             }
             None => {
-                require(
+                require!(
                     !features.is_codebook(),
                     "q",
                     "codebook features need the quantiser settings (vqql)",
-                )?;
+                );
             }
         }
         Ok(model)

@@ -130,7 +130,7 @@ impl AdditiveQ {
         phi: Vec<Vec<f64>>,
     ) -> Result<Self, SimError> {
         features.n_params(&actions)?;
-        require(
+        require!(
             phi.len() == features.n_agents(),
             "phi",
             format!(
@@ -138,10 +138,10 @@ impl AdditiveQ {
                 features.n_agents(),
                 phi.len()
             ),
-        )?;
+        );
         for (i, table) in phi.iter().enumerate() {
             let expected = features.n_cores[i] * actions[i];
-            require(
+            require!(
                 table.len() == expected,
                 &format!("phi[{i}]"),
                 format!(
@@ -150,7 +150,7 @@ impl AdditiveQ {
                     actions[i],
                     table.len()
                 ),
-            )?;
+            );
             if let Some(k) = table.iter().position(|v| !v.is_finite()) {
                 return Err(ConfigError::invalid(
                     format!("phi[{i}]"),

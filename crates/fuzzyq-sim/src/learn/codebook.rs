@@ -66,31 +66,31 @@ impl Codebook {
     /// [`new`](Self::new) with the centroids row-major in one slice (`K x dim` values).
     pub fn from_flat(dim: usize, centroids: Vec<f64>, scale: Vec<f64>) -> Result<Self, SimError> {
         let field = "codebook.centroids";
-        require(
+        require!(
             (1..=MAX_DIMS).contains(&dim),
             field,
             format!("centroids need 1 to {MAX_DIMS} dimensions, found {dim}"),
-        )?;
-        require(
+        );
+        require!(
             !centroids.is_empty() && centroids.len().is_multiple_of(dim),
             field,
             format!(
                 "needs at least one centroid of {dim} values, found {} values",
                 centroids.len()
             ),
-        )?;
+        );
         let k = centroids.len() / dim;
         if k > u32::MAX as usize {
             return Err(ConfigError::invalid(field, format!("{k} centroids are too many")).into());
         }
-        require(
+        require!(
             scale.len() == dim,
             "codebook.scale",
             format!(
                 "needs one value per dimension ({dim}), found {}",
                 scale.len()
             ),
-        )?;
+        );
         if let Some(s) = scale.iter().find(|s| !(**s > 0.0 && s.is_finite())) {
             return Err(ConfigError::invalid(
                 "codebook.scale",
@@ -102,7 +102,7 @@ impl Codebook {
         let mut scaled = centroids.clone();
         for (k, v) in scaled.iter_mut().enumerate() {
             *v *= weights[k % dim];
-            require(
+            require!(
                 v.is_finite(),
                 field,
                 format!(
@@ -111,7 +111,7 @@ impl Codebook {
                     k % dim,
                     centroids[k]
                 ),
-            )?;
+            );
         }
         let tree = KdTree::build(dim, scaled);
         Ok(Self {

@@ -40,14 +40,14 @@ pub(crate) enum FeatureKind {
 
 /// Builds the product partition of one agent's cores (at most [`MAX_DIMS`] dimensions).
 fn grid_of<'a>(field: &str, cores: &'a [Vec<f64>]) -> Result<ProductPartition<'a, f64>, SimError> {
-    require(
+    require!(
         cores.len() <= MAX_DIMS,
         field,
         format!(
             "an observation has at most {MAX_DIMS} dimensions, found {}",
             cores.len()
         ),
-    )?;
+    );
     let mut refs: [&[f64]; MAX_DIMS] = [&[]; MAX_DIMS];
     for (r, c) in refs.iter_mut().zip(cores) {
         *r = c.as_slice();
@@ -196,7 +196,7 @@ impl FeatureSpace {
     /// Number of parameters `sum_i N_i * M_i` of the additive layout for `actions[i] = M_i`
     /// actions per agent (one count per agent, each `>= 1`).
     pub fn n_params(&self, actions: &[usize]) -> Result<usize, SimError> {
-        require(
+        require!(
             actions.len() == self.n_agents(),
             "actions",
             format!(
@@ -204,14 +204,14 @@ impl FeatureSpace {
                 self.n_agents(),
                 actions.len()
             ),
-        )?;
+        );
         let mut total = 0usize;
         for (i, (&m, &n)) in actions.iter().zip(&self.n_cores).enumerate() {
-            require(
+            require!(
                 m != 0,
                 &format!("actions[{i}]"),
                 "an agent needs at least one action",
-            )?;
+            );
             total = n
                 .checked_mul(m)
                 .and_then(|p| total.checked_add(p))

@@ -277,14 +277,14 @@ fn seed_plus_plus(
     let mut dmin: Vec<f64> = (0..n).map(|i| sq_dist(row(i), row(first))).collect();
     while chosen.len() < cells {
         let total: f64 = dmin.iter().sum();
-        require(
+        require!(
             total > 0.0,
             "vqql.samples",
             format!(
                 "the samples hold only {} distinct states, fewer than cells = {cells}",
                 chosen.len()
             ),
-        )?;
+        );
         let r = rng.random::<f64>() * total;
         let mut acc = 0.0;
         let mut pick = None;
@@ -341,33 +341,33 @@ fn lloyd_with(
     tolerance: f64,
     rng: &mut Pcg64Mcg,
 ) -> Result<(Codebook, QuantiserReport), SimError> {
-    require(
+    require!(
         (1..=MAX_DIMS).contains(&dim),
         "samples",
         format!("vectors need 1 to {MAX_DIMS} dimensions, got {dim}"),
-    )?;
-    require(
+    );
+    require!(
         samples.len().is_multiple_of(dim),
         "samples",
         format!("{} values are not whole vectors of {dim}", samples.len()),
-    )?;
+    );
     let n = samples.len() / dim;
     if cells == 0 {
         return Err(ConfigError::invalid("vqql.cells", "must be at least 1").into());
     }
-    require(
+    require!(
         n >= cells,
         "vqql.samples",
         format!("must be at least cells = {cells}, got {n}"),
-    )?;
+    );
     if max_iterations == 0 {
         return Err(ConfigError::invalid("vqql.lloyd_iterations", "must be at least 1").into());
     }
-    require(
+    require!(
         tolerance >= 0.0 && tolerance.is_finite(),
         "vqql.lloyd_tolerance",
         format!("must be a finite number >= 0, got {tolerance}"),
-    )?;
+    );
     if let Some(k) = samples.iter().position(|v| !v.is_finite()) {
         return Err(ConfigError::invalid(
             "samples",
@@ -456,7 +456,7 @@ fn iterate(
             };
             return Ok((book, report));
         }
-        require(
+        require!(
             history.len() < max_iterations + MAX_REPAIR_ITERATIONS,
             "vqql.cells",
             format!(
@@ -464,7 +464,7 @@ fn iterate(
                 counts.iter().filter(|&&c| c == 0).count(),
                 history.len()
             ),
-        )?;
+        );
         // Means, summed in sample order.
         sums.fill(0.0);
         for i in 0..n {
@@ -502,11 +502,11 @@ fn iterate(
                         s = i;
                     }
                 }
-                require(
+                require!(
                     far[s] > 0.0,
                     "vqql.samples",
                     format!("too few distinct states to fill {cells} cells"),
-                )?;
+                );
                 centroids[j * dim..(j + 1) * dim].copy_from_slice(x(s));
                 reseeded += 1;
                 let zs = z(s).to_vec();

@@ -118,14 +118,14 @@ impl Arena {
     pub fn validate(&self) -> Result<(), ConfigError> {
         finite("arena.x", &self.x)?;
         finite("arena.y", &self.y)?;
-        require(
+        require!(
             self.x[0] < self.x[1] && self.y[0] < self.y[1],
             "arena",
             format!(
                 "walls must satisfy lo < hi, found x = {:?}, y = {:?}",
                 self.x, self.y
             ),
-        )?;
+        );
         for (i, o) in self.obstacles.iter().enumerate() {
             let field = format!("arena.obstacle[{i}]");
             match o {
@@ -137,20 +137,20 @@ impl Arena {
                     finite(&field, center)?;
                     finite(&field, half_extents)?;
                     finite(&field, &[*angle_deg])?;
-                    require(
+                    require!(
                         half_extents.iter().all(|&h| h > 0.0),
                         &field,
                         format!("half_extents must be positive, found {half_extents:?}"),
-                    )?;
+                    );
                 }
                 Obstacle::Disc { center, radius } => {
                     finite(&field, center)?;
                     finite(&field, &[*radius])?;
-                    require(
+                    require!(
                         *radius > 0.0,
                         &field,
                         format!("radius must be positive, found {radius}"),
-                    )?;
+                    );
                 }
             }
         }

@@ -150,11 +150,11 @@ pub const ACTION_NAMES: [&str; N_ACTIONS] = ["forward", "turn_cw", "turn_ccw", "
 impl KheperaConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        require(
+        require!(
             (1..=MAX_ROBOTS).contains(&self.agents),
             "env.agents",
             format!("must be between 1 and {MAX_ROBOTS}, got {}", self.agents),
-        )?;
+        );
         positive("env.radius", self.radius)?;
         positive("env.wheel_base", self.wheel_base)?;
         positive("env.max_wheel_speed", self.max_wheel_speed)?;
@@ -166,48 +166,48 @@ impl KheperaConfig {
             ("env.forward_speed", self.forward_speed),
             ("env.turn_speed", self.turn_speed),
         ] {
-            require(
+            require!(
                 v <= self.max_wheel_speed,
                 f,
                 format!(
                     "{v} m/s exceeds max_wheel_speed = {} m/s",
                     self.max_wheel_speed
                 ),
-            )?;
+            );
         }
-        require(
+        require!(
             self.goal_reward.is_finite(),
             "env.goal_reward",
             "must be a finite number",
-        )?;
+        );
         non_negative("env.collision_penalty", self.collision_penalty)?;
-        require(
+        require!(
             !self.sonar_angles_deg.is_empty()
                 && self.sonar_angles_deg.len() <= 16
                 && self.sonar_angles_deg.iter().all(|a| a.is_finite()),
             "env.sonar_angles_deg",
             "needs 1 to 16 finite angles",
-        )?;
-        require(
+        );
+        require!(
             self.sonar_cone_deg.is_finite() && (0.0..180.0).contains(&self.sonar_cone_deg),
             "env.sonar_cone_deg",
             format!("must be in [0, 180), got {}", self.sonar_cone_deg),
-        )?;
-        require(
+        );
+        require!(
             (1..=32).contains(&self.rays_per_sonar),
             "env.rays_per_sonar",
             format!("must be between 1 and 32, got {}", self.rays_per_sonar),
-        )?;
+        );
         positive("env.sonar_min_range", self.sonar_min_range)?;
-        require(
+        require!(
             self.sonar_max_range.is_finite() && self.sonar_max_range > self.sonar_min_range,
             "env.sonar_max_range",
             format!(
                 "must exceed sonar_min_range = {}, got {}",
                 self.sonar_min_range, self.sonar_max_range
             ),
-        )?;
-        require(
+        );
+        require!(
             self.sonar_levels[0].is_finite()
                 && self.sonar_levels[0] < self.sonar_levels[1]
                 && self.sonar_levels[1].is_finite(),
@@ -216,8 +216,8 @@ impl KheperaConfig {
                 "must be two increasing thresholds, got {:?}",
                 self.sonar_levels
             ),
-        )?;
-        require(
+        );
+        require!(
             self.distance_edges
                 .iter()
                 .all(|e| e.is_finite() && *e > 0.0)
@@ -227,26 +227,26 @@ impl KheperaConfig {
                 "must be 8 increasing positive distances, got {:?}",
                 self.distance_edges
             ),
-        )?;
+        );
         for (f, v) in [
             ("env.noise.sonar_std", self.noise.sonar_std),
             ("env.noise.wheel_std", self.noise.wheel_std),
         ] {
             non_negative(f, v)?;
         }
-        require(
+        require!(
             (0.0..=1.0).contains(&self.noise.sonar_dropout),
             "env.noise.sonar_dropout",
             format!("must be a probability, got {}", self.noise.sonar_dropout),
-        )?;
+        );
         self.arena.validate()?;
         let lo = self.arena.x[0].max(self.arena.y[0]);
         let hi = self.arena.x[1].min(self.arena.y[1]);
-        require(
+        require!(
             hi - lo > 4.0 * self.radius,
             "env.arena",
             "is too small for the robots",
-        )?;
+        );
         Ok(())
     }
 
@@ -505,7 +505,7 @@ pub fn poses_from_paper(
     headings_deg: &[f64],
 ) -> Result<Vec<[f64; 3]>, SimError> {
     let n = config.agents;
-    require(
+    require!(
         x0.len() == 4 * n,
         "x0",
         format!(
@@ -513,15 +513,15 @@ pub fn poses_from_paper(
             4 * n,
             x0.len()
         ),
-    )?;
-    require(
+    );
+    require!(
         headings_deg.len() == n,
         "headings",
         format!(
             "needs {n} values (one per robot), got {}",
             headings_deg.len()
         ),
-    )?;
+    );
     if let Some(v) = x0.iter().find(|v| !v.is_finite()) {
         return Err(ConfigError::invalid("x0", format!("must be finite, got {v}")).into());
     }
@@ -530,11 +530,11 @@ pub fn poses_from_paper(
     }
     (0..n)
         .map(|i| {
-            require(
+            require!(
                 x0[4 * i + 2] == 0.0 && x0[4 * i + 3] == 0.0,
                 "x0",
                 format!("robot {} must start at rest (zero velocity)", i + 1),
-            )?;
+            );
             Ok([
                 x0[4 * i],
                 x0[4 * i + 1],
@@ -566,11 +566,11 @@ pub fn random_starts(
         let mut tries = 0usize;
         while poses.len() < config.agents {
             tries += 1;
-            require(
+            require!(
                 tries <= 100_000,
                 "arena",
                 "no room for random starts clear of the obstacles",
-            )?;
+            );
             let p = [
                 rng.random_range(x0..x1),
                 rng.random_range(y0..y1),

@@ -616,18 +616,18 @@ pub fn check_state_as<M: Model<f64> + ?Sized>(
     x0: &[f64],
 ) -> Result<(), ConfigError> {
     let n = Model::<f64>::state_dim(model);
-    require(
+    require!(
         x0.len() == n,
         field,
         format!("needs {n} values (the state length), got {}", x0.len()),
-    )?;
+    );
     for (i, &v) in x0.iter().enumerate() {
         let (lo, hi) = Model::<f64>::state_bounds(model, i);
-        require(
+        require!(
             v >= lo && v <= hi,
             field,
             format!("x0[{i}] = {v} is outside the state range [{lo}, {hi}]"),
-        )?;
+        );
     }
     Ok(())
 }

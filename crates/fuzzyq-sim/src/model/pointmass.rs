@@ -129,29 +129,29 @@ pub const MAX_POINT_MASS_AGENTS: usize = 4;
 impl PointMassConfig {
     /// Checks every field's range.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        require(
+        require!(
             (1..=MAX_POINT_MASS_AGENTS).contains(&self.agents),
             "env.agents",
             format!(
                 "must be between 1 and {MAX_POINT_MASS_AGENTS}, got {}",
                 self.agents
             ),
-        )?;
+        );
         positive("env.mass", self.mass)?;
         positive("env.sample_time", self.sample_time)?;
         positive("env.position_limit", self.position_limit)?;
         positive("env.velocity_limit", self.velocity_limit)?;
         non_negative("env.goal_radius", self.goal_radius)?;
-        require(
+        require!(
             self.goal_reward.is_finite(),
             "env.goal_reward",
             "must be a finite number",
-        )?;
-        require(
+        );
+        require!(
             !self.force_levels.is_empty(),
             "env.force_levels",
             "needs at least one level",
-        )?;
+        );
         if let Some(f) = self.force_levels.iter().find(|f| !f.is_finite()) {
             return Err(ConfigError::invalid(
                 "env.force_levels",
@@ -161,7 +161,7 @@ impl PointMassConfig {
         let joint = (self.force_levels.len() as u64)
             .checked_pow(2 * self.agents as u32)
             .unwrap_or(u64::MAX);
-        require(
+        require!(
             joint <= 1 << 20,
             "env.force_levels",
             format!(
@@ -169,12 +169,12 @@ impl PointMassConfig {
                 self.force_levels.len(),
                 self.agents
             ),
-        )?;
-        require(
+        );
+        require!(
             (1..=10_000).contains(&self.rk4_substeps),
             "env.rk4_substeps",
             format!("must be between 1 and 10000, got {}", self.rk4_substeps),
-        )?;
+        );
         match &self.friction {
             FrictionConfig::Constant { eta } => non_negative("env.friction.eta", *eta)?,
             FrictionConfig::Patches { base, patches } => {
@@ -182,17 +182,17 @@ impl PointMassConfig {
                 for p in patches {
                     non_negative("env.friction.patches.eta", p.eta)?;
                     positive("env.friction.patches.radius", p.radius)?;
-                    require(
+                    require!(
                         p.center[0].is_finite() && p.center[1].is_finite(),
                         "env.friction.patches.center",
                         "must be finite numbers",
-                    )?;
+                    );
                 }
-                require(
+                require!(
                     self.integrator != Integrator::Exact,
                     "env.integrator",
                     "\"exact\" needs constant friction; use \"rk4\" with friction patches",
-                )?;
+                );
             }
         }
         Ok(())

@@ -157,7 +157,7 @@ fn parts<T: Real, M: Model<T>>(
     absorbing_goal: bool,
 ) -> Result<Parts<T, M>, SimError> {
     let n = grid.n_cores();
-    require(
+    require!(
         v.len() == n && greedy.len() == n,
         "policy",
         format!(
@@ -165,7 +165,7 @@ fn parts<T: Real, M: Model<T>>(
             v.len(),
             greedy.len()
         ),
-    )?;
+    );
     if Model::<T>::state_dim(&*model) != grid.n_dims() {
         return Err(SolveError::StateDim {
             model: Model::<T>::state_dim(&*model),
@@ -690,11 +690,11 @@ impl Policy {
         Ok(match self {
             Self::Fqi(p) => Box::new(p.controller(kind)),
             Self::Additive(p) => {
-                require(
+                require!(
                     kind == PolicyKind::Greedy,
                     "policy_kind",
                     "a policy learned from samples (fql, vqql) acts greedily (decentralised)",
-                )?;
+                );
                 Box::new(AdditiveController {
                     policy: p,
                     indices: vec![0; p.q.n_agents()],

@@ -59,11 +59,11 @@ impl KheperaWorld {
         seed: u64,
     ) -> Result<Self, SimError> {
         config.validate()?;
-        require(
+        require!(
             (1..=MAX_SUBSTEPS).contains(&substeps),
             "plant.substeps",
             format!("must be between 1 and {MAX_SUBSTEPS}, got {substeps}"),
-        )?;
+        );
         let a = &config.arena;
         let n = config.agents;
         let engine = Engine::new(
@@ -118,20 +118,20 @@ impl KheperaWorld {
                 }
                 .into());
             }
-            require(
+            require!(
                 !self.config.arena.disc_collides([p[0], p[1]], r),
                 &format!("poses[{i}]"),
                 format!(
                     "robot {i} at ({}, {}) overlaps a wall or an obstacle",
                     p[0], p[1]
                 ),
-            )?;
+            );
             for (j, q) in poses[..i].iter().enumerate() {
-                require(
+                require!(
                     !khepera::robots_overlap([p[0], p[1]], [q[0], q[1]], r),
                     &format!("poses[{i}]"),
                     format!("robot {i} overlaps robot {j}"),
-                )?;
+                );
             }
         }
         self.poses = poses

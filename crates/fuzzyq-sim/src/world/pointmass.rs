@@ -40,14 +40,14 @@ impl PointMassPlantConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive("plant.radius", self.radius)?;
-        require(
+        require!(
             (1..=MAX_SUBSTEPS).contains(&self.substeps),
             "plant.substeps",
             format!(
                 "must be between 1 and {MAX_SUBSTEPS}, got {}",
                 self.substeps
             ),
-        )?;
+        );
         self.arena.validate()?;
         Ok(())
     }
@@ -161,37 +161,37 @@ impl PointMassPlant {
         let (r, a) = (self.config.radius, &self.config.arena);
         for i in 0..n {
             let s = [x[4 * i], x[4 * i + 1]];
-            require(
+            require!(
                 !(s[0] < a.x[0] || s[0] > a.x[1] || s[1] < a.y[0] || s[1] > a.y[1]),
                 "x0",
                 format!(
                     "agent {i} at ({}, {}) is outside the arena x = {:?}, y = {:?}",
                     s[0], s[1], a.x, a.y
                 ),
-            )?;
-            require(
+            );
+            require!(
                 !self.physical.disc_collides(s, r),
                 "x0",
                 format!("agent {i} at ({}, {}) overlaps an obstacle", s[0], s[1]),
-            )?;
+            );
             for k in 2..4 {
                 let v = x[4 * i + k];
-                require(
+                require!(
                     v.abs() <= self.velocity_limit,
                     "x0",
                     format!(
                         "agent {i} velocity {v} exceeds the limit {}",
                         self.velocity_limit
                     ),
-                )?;
+                );
             }
             for j in 0..i {
                 let d = (s[0] - x[4 * j]).hypot(s[1] - x[4 * j + 1]);
-                require(
+                require!(
                     d >= 2.0 * r,
                     "x0",
                     format!("agents {j} and {i} overlap (centres {d} m apart, radius {r} m)"),
-                )?;
+                );
             }
         }
         self.x.copy_from_slice(x);

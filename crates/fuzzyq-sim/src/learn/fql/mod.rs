@@ -532,24 +532,24 @@ fn check_reward(reward: f64, at: At) -> Result<(), SimError> {
 /// Checks that `env` matches `features` and returns its action counts.
 fn check_env<E: Environment>(env: &E, features: &FeatureSpace) -> Result<Vec<usize>, SimError> {
     let n = env.n_agents();
-    require(
+    require!(
         n == features.n_agents(),
         "features",
         format!(
             "has {} agents, the environment has {n}",
             features.n_agents()
         ),
-    )?;
+    );
     let mut m = Vec::with_capacity(n);
     for i in 0..n {
         let (dim, expected) = (env.obs_dim(i), features.obs_dim(i).unwrap_or(0));
-        require(
+        require!(
             dim == expected,
             &format!("features[{i}]"),
             format!(
                 "has {expected} observation dimensions, the environment observes {dim} for agent {i}"
             ),
-        )?;
+        );
         let mi = env.n_actions(i);
         if mi == 0 {
             return Err(ConfigError::invalid("env", format!("agent {i} has no actions")).into());
@@ -614,14 +614,14 @@ pub fn evaluate<E: Environment>(
         return Err(ConfigError::invalid("episodes", "must be at least 1").into());
     }
     let m = check_env(env, &q.features)?;
-    require(
+    require!(
         m == q.actions,
         "env",
         format!(
             "has action counts {m:?}, the Q-function was learned with {:?}",
             q.actions
         ),
-    )?;
+    );
     match &q.features.kind {
         FeatureKind::Fuzzy(_) => {
             let grids = q.features.grids()?;

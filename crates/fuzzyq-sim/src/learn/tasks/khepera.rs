@@ -137,14 +137,14 @@ pub fn feature_space(config: &KheperaConfig) -> Result<FeatureSpace, SimError> {
     config.validate()?;
     let [t0, t1] = config.sonar_levels;
     let mid = 0.5 * (t0 + t1);
-    require(
+    require!(
         config.sonar_min_range < mid && mid < config.sonar_max_range,
         "env.sonar_levels",
         format!(
             "the medium sonar core {mid} must lie strictly between sonar_min_range = {} and sonar_max_range = {}",
             config.sonar_min_range, config.sonar_max_range
         ),
-    )?;
+    );
     let cores = observation_cores(config);
     FeatureSpace::new(vec![cores; config.agents])
 }
@@ -250,16 +250,16 @@ impl KheperaEnv {
     /// negative or non-finite weight or a discount outside `[0, 1]`.
     pub fn set_shaping(&mut self, shaping: Option<Shaping>) -> Result<(), ConfigError> {
         if let Some(s) = shaping {
-            require(
+            require!(
                 s.weight >= 0.0 && s.weight.is_finite(),
                 "shaping.weight",
                 format!("must be a finite number >= 0, got {}", s.weight),
-            )?;
-            require(
+            );
+            require!(
                 (0.0..=1.0).contains(&s.gamma),
                 "shaping.gamma",
                 format!("must be in [0, 1], got {}", s.gamma),
-            )?;
+            );
         }
         self.shaping = shaping;
         Ok(())
@@ -462,19 +462,19 @@ pub fn train_fql_on(
 /// Checks that `q` was learned on the feature space and actions of `config`.
 pub fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
     let features = feature_space(config)?;
-    require(
+    require!(
         q.features() == &features,
         "q",
         "its feature space is not the one of this configuration (observation_cores per robot)",
-    )?;
-    require(
+    );
+    require!(
         q.actions().iter().all(|&m| m == N_ACTIONS),
         "q",
         format!(
             "has action counts {:?}, the robots have {N_ACTIONS} actions",
             q.actions()
         ),
-    )?;
+    );
     Ok(())
 }
 

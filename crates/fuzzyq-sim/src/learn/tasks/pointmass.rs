@@ -110,32 +110,32 @@ pub fn feature_space(
 /// actions.
 pub fn check_q(model: &PointMass, q: &AdditiveQ) -> Result<(), SimError> {
     let agents = model.config().agents;
-    require(
+    require!(
         q.n_agents() == agents,
         "q",
         format!(
             "has {} agents, the point-mass model has {agents}",
             q.n_agents()
         ),
-    )?;
+    );
     for i in 0..agents {
         let dim = q.features().obs_dim(i).unwrap_or(0);
-        require(
+        require!(
             dim == 4,
             "q",
             format!(
                 "agent {i} observes {dim} values; a point-mass agent observes its own (s_x, s_y, v_x, v_y)"
             ),
-        )?;
+        );
         let m = Model::<f64>::action_set(model, i).n_actions();
-        require(
+        require!(
             q.actions()[i] == m,
             "q",
             format!(
                 "agent {i} has {} actions, the model has {m} per agent",
                 q.actions()[i]
             ),
-        )?;
+        );
     }
     Ok(())
 }

@@ -135,21 +135,21 @@ impl ArmConfig {
         }
         positive("env.sample_time", self.sample_time)?;
         self.integrator.validate("env.integrator")?;
-        require(
+        require!(
             self.integrator != Integrator::Zoh,
             "env.integrator",
             "the arm is nonlinear: use rk4 (no exact zero-order hold)",
-        )?;
+        );
         let [p1, p2, p3] = self.inertia_parameters();
         // det M = P_1 P_2 - P_3^2 cos^2(alpha_2) >= P_1 P_2 - P_3^2 > 0 keeps M invertible.
         let det = p1 * p2 - p3 * p3;
-        require(
+        require!(
             det > 0.0 && det.is_finite() && p1.is_finite(),
             "env.inertias",
             format!(
                 "the mass matrix must stay invertible (P1 P2 - P3^2 = {det} with these masses, lengths, centres of mass and inertias)"
             ),
-        )?;
+        );
         Ok(())
     }
 
@@ -215,7 +215,7 @@ impl Arm {
     ) -> Result<ActionTable, ConfigError> {
         validate_actions(field, tau1)?;
         validate_actions(field, tau2)?;
-        require(
+        require!(
             tau1.len() * tau2.len() <= MAX_JOINT_ACTIONS,
             field,
             format!(
@@ -223,7 +223,7 @@ impl Arm {
                 tau1.len(),
                 tau2.len()
             ),
-        )?;
+        );
         let pairs = tau1
             .iter()
             .flat_map(|&a| tau2.iter().flat_map(move |&b| [a, b]))

@@ -102,11 +102,11 @@ impl CarHillConfig {
         positive("env.position_limit", self.position_limit)?;
         positive("env.velocity_limit", self.velocity_limit)?;
         self.integrator.validate("env.integrator")?;
-        require(
+        require!(
             self.integrator != Integrator::Zoh,
             "env.integrator",
             "the car on the hill is nonlinear: use rk4 (no exact zero-order hold)",
-        )?;
+        );
         Ok(())
     }
 }

@@ -102,11 +102,11 @@ impl DcMotorConfig {
         non_negative("env.r", self.r)?;
         self.integrator.validate("env.integrator")?;
         let (a, c) = self.continuous();
-        require(
+        require!(
             a.is_finite() && c.is_finite() && (a * self.sample_time).is_finite(),
             "env.inertia",
             "the motor's time constant overflows with these parameters",
-        )?;
+        );
         Ok(())
     }
 

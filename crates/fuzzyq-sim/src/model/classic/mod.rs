@@ -99,25 +99,25 @@ pub struct Preset {
 impl Preset {
     /// Checks the grid, actions, `gamma` and `xi`.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        require(
+        require!(
             !self.cores.is_empty(),
             "preset.cores",
             "needs at least one state variable",
-        )?;
+        );
         for (dim, c) in self.cores.iter().enumerate() {
-            require(
+            require!(
                 c.len() >= 2,
                 "preset.cores",
                 format!(
                     "state variable {dim} needs at least 2 cores, got {}",
                     c.len()
                 ),
-            )?;
-            require(
+            );
+            require!(
                 !(c.iter().any(|v| !v.is_finite()) || c.windows(2).any(|w| w[0] >= w[1])),
                 "preset.cores",
                 format!("the cores of state variable {dim} must be finite and increasing"),
-            )?;
+            );
         }
         validate_actions("preset.actions", &self.actions)?;
         discount("preset.gamma", self.gamma)?;
@@ -158,11 +158,11 @@ impl Preset {
 
 /// Checks a discrete action list: 1 to 4096 finite values.
 pub(crate) fn validate_actions(field: &str, actions: &[f64]) -> Result<(), ConfigError> {
-    require(
+    require!(
         (1..=4096).contains(&actions.len()),
         field,
         format!("needs 1 to 4096 actions, got {}", actions.len()),
-    )?;
+    );
     if let Some(a) = actions.iter().find(|a| !a.is_finite()) {
         return Err(ConfigError::invalid(
             field,
@@ -284,7 +284,7 @@ impl<S: Dynamics> Classic<S> {
     /// `preset.*`).
     pub fn for_preset(config: S::Config, preset: &Preset) -> Result<Self, ConfigError> {
         preset.validate()?;
-        require(
+        require!(
             preset.cores.len() == S::STATE_DIM,
             "preset.cores",
             format!(
@@ -293,7 +293,7 @@ impl<S: Dynamics> Classic<S> {
                 S::STATE_DIM,
                 preset.cores.len()
             ),
-        )?;
+        );
         let dynamics = S::new(config)?;
         let table = dynamics.action_table("preset.actions", &preset.actions)?;
         Ok(Self::from_table(dynamics, table))

@@ -15,11 +15,11 @@ use crate::error::{ConfigError, require};
 /// An empty range (`increment` of the wrong sign) is an empty vector. Non-finite arguments and
 /// ranges of more than 2^24 elements are refused.
 pub fn colon(base: f64, increment: f64, limit: f64) -> Result<Vec<f64>, ConfigError> {
-    require(
+    require!(
         base.is_finite() && increment.is_finite() && limit.is_finite(),
         "range",
         format!("{base} : {increment} : {limit} has a non-finite bound or increment"),
-    )?;
+    );
     if increment == 0.0 || (limit < base && increment > 0.0) || (limit > base && increment < 0.0) {
         return Ok(Vec::new());
     }
@@ -27,11 +27,11 @@ pub fn colon(base: f64, increment: f64, limit: f64) -> Result<Vec<f64>, ConfigEr
         return Ok(vec![base]);
     }
     let n = colon_numel(base, limit, increment);
-    require(
+    require!(
         n <= 1 << 24,
         "range",
         format!("{base} : {increment} : {limit} has {n} elements (at most 2^24)"),
-    )?;
+    );
     if n <= 1 {
         return Ok(if n == 1 { vec![base] } else { Vec::new() });
     }
@@ -85,17 +85,17 @@ fn tolerant_floor(x: f64, ct: f64) -> f64 {
 /// Octave's range `-b : 2*b/(n-1) : b` (so the doubles are Octave's: point `i` is
 /// `-b + i * (2b/(n-1))`, which is not exactly symmetric about 0, and the last is `b`).
 pub fn symequidgrid(b: f64, n: usize) -> Result<Vec<f64>, ConfigError> {
-    require(
+    require!(
         b > 0.0 && b.is_finite() && (2..=1 << 24).contains(&n),
         "symequidgrid",
         format!("needs a positive finite bound and 2 to 2^24 points, got b = {b}, n = {n}"),
-    )?;
+    );
     let grid = colon(-b, 2.0 * b / (n - 1) as f64, b)?;
-    require(
+    require!(
         grid.len() == n,
         "symequidgrid",
         format!("Octave's range gives {} points instead of {n}", grid.len()),
-    )?;
+    );
     Ok(grid)
 }
 
@@ -125,16 +125,16 @@ fn linspace(x1: f64, x2: f64, n: usize) -> Vec<f64> {
 /// union of `-b ls` and `b ls`. Computed with Octave's `linspace` and `10^x` through the
 /// platform's `pow`; the values agree with Octave's to the last bit where the two `pow`s do.
 pub fn symloggrid(n: usize, b: f64, sp: f64, ep: f64) -> Result<Vec<f64>, ConfigError> {
-    require(
+    require!(
         !n.is_multiple_of(2) && (3..=1 << 20).contains(&n),
         "symloggrid",
         format!("needs an odd number of points between 3 and 2^20, got {n}"),
-    )?;
-    require(
+    );
+    require!(
         b > 0.0 && b.is_finite() && sp.is_finite() && ep.is_finite() && sp < ep,
         "symloggrid",
         format!("needs b > 0 and finite powers sp < ep, got b = {b}, sp = {sp}, ep = {ep}"),
-    )?;
+    );
     let (lo, hi) = (10f64.powf(sp), 10f64.powf(ep));
     let ls: Vec<f64> = linspace(sp, ep, n.div_ceil(2))
         .into_iter()
@@ -158,11 +158,11 @@ pub fn symloggrid(n: usize, b: f64, sp: f64, ep: f64) -> Result<Vec<f64>, Config
             *v = 0.0; // +0, whichever zero sorted last
         }
     }
-    require(
+    require!(
         out.len() == n && !out.windows(2).any(|w| w[0] >= w[1]),
         "symloggrid",
         format!("the grid has {} distinct points instead of {n}", out.len()),
-    )?;
+    );
     Ok(out)
 }
 

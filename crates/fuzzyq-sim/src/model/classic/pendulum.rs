@@ -122,18 +122,18 @@ impl PendulumConfig {
         non_negative("env.q", self.q[1])?;
         non_negative("env.r", self.r)?;
         self.integrator.validate("env.integrator")?;
-        require(
+        require!(
             self.integrator != Integrator::Zoh,
             "env.integrator",
             "\"zoh\" is exact for linear models only; the pendulum needs rk4",
-        )?;
+        );
         let c = self.coefficients();
         let rates = [c.mgl / c.inertia, c.friction / c.inertia, c.km / c.inertia];
-        require(
+        require!(
             rates.iter().all(|r| r.is_finite()),
             "env.disc_inertia",
             "the pendulum's rates overflow with these parameters",
-        )?;
+        );
         Ok(())
     }
 
