@@ -83,8 +83,17 @@ fn two_robot_smoke_run_is_deterministic() {
         panic!("a khepera policy must be refused")
     };
     assert!(e.to_string().contains("khepera"), "{e}");
-    // A robot's start of the wrong length is refused.
-    assert!(point_mass_run(&policy, &[0.0; 8], 5, PolicyKind::Greedy).is_err());
+    // A robot's start of the wrong length (poses: 3 values per robot) is refused.
+    for len in [1, 7, 8] {
+        let Err(e) = point_mass_run(&policy, &vec![0.0; len], 5, PolicyKind::Greedy) else {
+            panic!("a start of {len} values must be refused")
+        };
+        assert!(
+            e.to_string()
+                .contains(&format!("expected length 6, found {len}")),
+            "{e}"
+        );
+    }
 }
 
 #[test]

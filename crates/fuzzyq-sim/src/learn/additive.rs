@@ -229,7 +229,11 @@ impl AdditiveQ {
     }
 
     /// Agent `agent`'s greedy action at `obs` and its value.
-    fn greedy_with_value(&self, agent: usize, obs: &[f64]) -> Result<(usize, f64), SimError> {
+    pub(crate) fn greedy_with_value(
+        &self,
+        agent: usize,
+        obs: &[f64],
+    ) -> Result<(usize, f64), SimError> {
         let active = self.active(agent, obs)?;
         Ok(additive::greedy(
             &active,

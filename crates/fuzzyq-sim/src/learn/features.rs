@@ -38,11 +38,13 @@ pub(crate) enum FeatureKind {
     Codebook(Vec<Codebook>),
 }
 
-/// Builds the product partition of one agent's cores (at most [`MAX_DIMS`] dimensions).
-fn grid_of<'a>(field: &str, cores: &'a [Vec<f64>]) -> Result<ProductPartition<'a, f64>, SimError> {
+/// Builds the product partition of agent `agent`'s cores (at most [`MAX_DIMS`] dimensions);
+/// errors name `features[agent]`.
+fn grid_of(agent: usize, cores: &[Vec<f64>]) -> Result<ProductPartition<'_, f64>, SimError> {
+    let field = || format!("features[{agent}]");
     require!(
         cores.len() <= MAX_DIMS,
-        field,
+        field(),
         format!(
             "an observation has at most {MAX_DIMS} dimensions, found {}",
             cores.len()
@@ -53,7 +55,7 @@ fn grid_of<'a>(field: &str, cores: &'a [Vec<f64>]) -> Result<ProductPartition<'a
         *r = c.as_slice();
     }
     ProductPartition::try_new(&refs[..cores.len()])
-        .map_err(|e| ConfigError::invalid(field, e.to_string()).into())
+        .map_err(|e| ConfigError::invalid(field(), e.to_string()).into())
 }
 
 impl FeatureSpace {
@@ -66,7 +68,7 @@ impl FeatureSpace {
         }
         let mut n_cores = Vec::with_capacity(per_agent_cores.len());
         for (i, cores) in per_agent_cores.iter().enumerate() {
-            n_cores.push(grid_of(&format!("features[{i}]"), cores)?.n_cores());
+            n_cores.push(grid_of(i, cores)?.n_cores());
         }
         Ok(Self {
             kind: FeatureKind::Fuzzy(per_agent_cores),
@@ -152,7 +154,7 @@ impl FeatureSpace {
             index: agent,
             len: cores.len(),
         })?;
-        grid_of(&format!("features[{agent}]"), cores)
+        grid_of(agent, cores)
     }
 
     pub(crate) fn grids(&self) -> Result<Vec<ProductPartition<'_, f64>>, SimError> {

@@ -10,6 +10,7 @@
 //! state; the robots' poses) and, on the robot plant, the sonar readings.
 
 use fuzzyq_core::Model;
+use fuzzyq_core::error::check_len;
 
 use crate::error::SimError;
 use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS};
@@ -235,10 +236,8 @@ impl Plant for KheperaPlant<'_> {
         self.model
     }
     fn reset(&mut self, start: &[f64]) -> Result<(), SimError> {
-        let poses: Vec<[f64; 3]> = start
-            .chunks(3)
-            .map(|p| [p[0], p[1], p.get(2).copied().unwrap_or(f64::NAN)])
-            .collect();
+        check_len("start", 3 * self.model.config().agents, start.len())?;
+        let poses: Vec<[f64; 3]> = start.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
         self.world.reset(&poses)?;
         self.started = false;
         self.log_poses.clear();

@@ -43,15 +43,19 @@ trait Engine: Send + Sync {
     /// Builds the greedy policy's backup operator now (it is built on first use otherwise).
     fn prepare(&self) -> Result<(), SolveError>;
     /// `Q(x, .)` (eq 7), one value per joint action.
-    fn q_values(&self, x: &[f64], out: &mut [f64]) -> Result<(), SolveError>;
+    fn q_values(&self, x: &[f64], out: &mut [f64], s: &mut Scratch) -> Result<(), SolveError>;
     /// The greedy joint action index at `x` and its vector (`q`: scratch of `M` values).
-    fn greedy(&self, x: &[f64], q: &mut [f64], u: &mut [f64]) -> Result<usize, SolveError>;
+    fn greedy(
+        &self,
+        x: &[f64],
+        q: &mut [f64],
+        u: &mut [f64],
+        s: &mut Scratch,
+    ) -> Result<usize, SolveError>;
     /// The interpolated policy (eq 22) at `x`.
-    fn interpolated(&self, x: &[f64], out: &mut [f64]) -> Result<(), EvalError>;
+    fn interpolated(&self, x: &[f64], out: &mut [f64], s: &mut Scratch) -> Result<(), EvalError>;
     /// `V` interpolated at `x`.
-    fn value(&self, x: &[f64]) -> Result<f64, EvalError>;
-    /// The joint action vector of joint action `u`.
-    fn joint_vector(&self, u: usize, out: &mut [f64]) -> Result<(), EvalError>;
+    fn value(&self, x: &[f64], s: &mut Scratch) -> Result<f64, EvalError>;
     /// The per-agent action indices of joint action `u`.
     fn agent_indices(&self, u: usize, out: &mut [usize]) -> Result<(), EvalError>;
     /// `theta[d, u]` at every core, core-major.
@@ -67,8 +71,38 @@ struct Parts<T, M> {
     backup: Backup<T>,
 }
 
-fn to_t<T: Real>(x: &[f64]) -> Vec<T> {
-    x.iter().map(|&v| T::from_f64(v)).collect()
+/// Reusable buffers of decisions in a solution's own precision (the state, `Q(x, .)` and the
+/// action vector): a [`FqiController`] keeps one, so its decisions allocate nothing after the
+/// first.
+#[derive(Debug, Default)]
+pub struct Scratch {
+    f32: Buffers<f32>,
+    f64: Buffers<f64>,
+}
+
+#[derive(Debug, Default)]
+struct Buffers<T> {
+    x: Vec<T>,
+    q: Vec<T>,
+    u: Vec<T>,
+}
+
+impl<T: Real> Buffers<T> {
+    /// `x` in `T`, and `m` and `d` values of room for `Q(x, .)` and an action vector.
+    fn load(&mut self, x: &[f64], m: usize, d: usize) -> (&[T], &mut [T], &mut [T]) {
+        self.x.clear();
+        self.x.extend(x.iter().map(|&v| T::from_f64(v)));
+        self.q.resize(m, T::ZERO);
+        self.u.resize(d, T::ZERO);
+        (&self.x, &mut self.q, &mut self.u)
+    }
+}
+
+/// Widens `from` into `to`.
+fn widen<T: Real>(from: &[T], to: &mut [f64]) {
+    for (a, b) in to.iter_mut().zip(from) {
+        *a = b.to_f64();
+    }
 }
 
 fn operator<'o, 'a, T: Real, M: Model<T> + Sync>(
@@ -89,42 +123,48 @@ fn q_values<T: Real, M: Model<T> + Sync>(
     op: &Operator<'_, T, M>,
     x: &[f64],
     out: &mut [f64],
+    b: &mut Buffers<T>,
 ) -> Result<(), SolveError> {
-    let mut q = vec![T::ZERO; out.len()];
-    op.q_values(&p.v, &to_t::<T>(x), &mut q)?;
-    for (a, b) in out.iter_mut().zip(&q) {
-        *a = b.to_f64();
-    }
+    let (x, q, _) = b.load(x, out.len(), 0);
+    op.q_values(&p.v, x, q)?;
+    widen(q, out);
     Ok(())
 }
 
-fn joint_vector<T: Real, M: Model<T>>(
+fn greedy<T: Real, M: Model<T> + Sync>(
     p: &Parts<T, M>,
-    u: usize,
+    op: &Operator<'_, T, M>,
+    x: &[f64],
+    q: &mut [f64],
     out: &mut [f64],
-) -> Result<(), EvalError> {
-    let joint = fuzzyq_core::model::joint_actions(&*p.model)?;
-    let mut v = vec![T::ZERO; joint.dim()];
-    joint.vector(u, &mut v)?;
-    check_len("joint action vector", v.len(), out.len())?;
-    for (a, b) in out.iter_mut().zip(&v) {
-        *a = b.to_f64();
-    }
-    Ok(())
+    b: &mut Buffers<T>,
+) -> Result<usize, SolveError> {
+    q_values(p, op, x, q, b)?;
+    let best = q::argmax(q).unwrap_or(0);
+    let joint = op.joint();
+    check_len("joint action vector", joint.dim(), out.len())?;
+    let (_, _, u) = b.load(&[], 0, joint.dim());
+    joint.vector(best, u)?;
+    widen(u, out);
+    Ok(best)
 }
 
 fn interpolated<T: Real, M: Model<T>>(
     p: &Parts<T, M>,
     x: &[f64],
     out: &mut [f64],
+    b: &mut Buffers<T>,
 ) -> Result<(), EvalError> {
     let joint = fuzzyq_core::model::joint_actions(&*p.model)?;
-    let mut u = vec![T::ZERO; out.len()];
-    q::interpolated_action(&p.grid.view(), &joint, &p.greedy, &to_t::<T>(x), &mut u)?;
-    for (a, b) in out.iter_mut().zip(&u) {
-        *a = b.to_f64();
-    }
+    let (x, _, u) = b.load(x, 0, out.len());
+    q::interpolated_action(&p.grid.view(), &joint, &p.greedy, x, u)?;
+    widen(u, out);
     Ok(())
+}
+
+fn value<T: Real, M>(p: &Parts<T, M>, x: &[f64], b: &mut Buffers<T>) -> Result<f64, EvalError> {
+    let (x, _, _) = b.load(x, 0, 0);
+    Ok(p.grid.view().active(x)?.interpolate(&p.v).to_f64())
 }
 
 fn theta<T: Real, M: Model<T> + Sync>(
@@ -189,7 +229,7 @@ fn parts<T: Real, M: Model<T>>(
 /// One engine type per (precision, model): the owner and its lazily built operator in one
 /// self-referential cell.
 macro_rules! engine {
-    ($name:ident, $dep:ident, $t:ty, $m:ty) => {
+    ($name:ident, $dep:ident, $t:ident, $m:ty) => {
         type $dep<'a> = OnceLock<Operator<'a, $t, $m>>;
 
         self_cell::self_cell!(
@@ -225,35 +265,33 @@ macro_rules! engine {
             fn prepare(&self) -> Result<(), SolveError> {
                 self.with_dependent(|p, op| operator(p, op).map(|_| ()))
             }
-            fn q_values(&self, x: &[f64], out: &mut [f64]) -> Result<(), SolveError> {
-                self.with_dependent(|p, op| q_values(p, operator(p, op)?, x, out))
+            fn q_values(
+                &self,
+                x: &[f64],
+                out: &mut [f64],
+                s: &mut Scratch,
+            ) -> Result<(), SolveError> {
+                self.with_dependent(|p, op| q_values(p, operator(p, op)?, x, out, &mut s.$t))
             }
             fn greedy(
                 &self,
                 x: &[f64],
-                qv: &mut [f64],
+                q: &mut [f64],
                 u: &mut [f64],
+                s: &mut Scratch,
             ) -> Result<usize, SolveError> {
-                self.with_dependent(|p, op| {
-                    q_values(p, operator(p, op)?, x, qv)?;
-                    let best = q::argmax(qv).unwrap_or(0);
-                    joint_vector(p, best, u)?;
-                    Ok(best)
-                })
+                self.with_dependent(|p, op| greedy(p, operator(p, op)?, x, q, u, &mut s.$t))
             }
-            fn interpolated(&self, x: &[f64], out: &mut [f64]) -> Result<(), EvalError> {
-                interpolated(self.borrow_owner(), x, out)
+            fn interpolated(
+                &self,
+                x: &[f64],
+                out: &mut [f64],
+                s: &mut Scratch,
+            ) -> Result<(), EvalError> {
+                interpolated(self.borrow_owner(), x, out, &mut s.$t)
             }
-            fn value(&self, x: &[f64]) -> Result<f64, EvalError> {
-                let p = self.borrow_owner();
-                Ok(p.grid
-                    .view()
-                    .active(&to_t::<$t>(x))?
-                    .interpolate(&p.v)
-                    .to_f64())
-            }
-            fn joint_vector(&self, u: usize, out: &mut [f64]) -> Result<(), EvalError> {
-                joint_vector(self.borrow_owner(), u, out)
+            fn value(&self, x: &[f64], s: &mut Scratch) -> Result<f64, EvalError> {
+                value(self.borrow_owner(), x, &mut s.$t)
             }
             fn agent_indices(&self, u: usize, out: &mut [usize]) -> Result<(), EvalError> {
                 fuzzyq_core::model::joint_actions::<$t, _>(&*self.borrow_owner().model)?
@@ -403,17 +441,18 @@ impl FqiPolicy {
 
     /// `Q(x, .)`: one value per joint action (the greedy policy's lookahead on `V`).
     pub fn q_values(&self, x: &[f64], out: &mut [f64]) -> Result<(), SimError> {
-        Ok(self.engine.q_values(x, out)?)
+        Ok(self.engine.q_values(x, out, &mut Scratch::default())?)
     }
 
     /// The fuzzy interpolation of `V` at `x`.
     pub fn value(&self, x: &[f64]) -> Result<f64, SimError> {
-        Ok(self.engine.value(x)?)
+        Ok(self.engine.value(x, &mut Scratch::default())?)
     }
 
     /// Writes the joint action vector of policy `kind` at `x` into `u`; returns the joint
     /// action index for the greedy policy (`None` for the interpolated one, whose action is
     /// continuous). `q` is scratch of [`n_joint_actions`](Self::n_joint_actions) values.
+    /// Repeated decisions reuse their buffers through [`act_with`](Self::act_with).
     pub fn act(
         &self,
         kind: PolicyKind,
@@ -421,19 +460,26 @@ impl FqiPolicy {
         q: &mut [f64],
         u: &mut [f64],
     ) -> Result<Option<usize>, SimError> {
+        self.act_with(kind, x, q, u, &mut Scratch::default())
+    }
+
+    /// [`act`](Self::act) with the caller's [`Scratch`]: no allocation once it has grown.
+    pub fn act_with(
+        &self,
+        kind: PolicyKind,
+        x: &[f64],
+        q: &mut [f64],
+        u: &mut [f64],
+        scratch: &mut Scratch,
+    ) -> Result<Option<usize>, SimError> {
         check_len("state", self.state_dim(), x.len())?;
         match kind {
-            PolicyKind::Greedy => Ok(Some(self.engine.greedy(x, q, u)?)),
+            PolicyKind::Greedy => Ok(Some(self.engine.greedy(x, q, u, scratch)?)),
             PolicyKind::Interpolated => {
-                self.engine.interpolated(x, u)?;
+                self.engine.interpolated(x, u, scratch)?;
                 Ok(None)
             }
         }
-    }
-
-    /// The joint action vector of joint action `u`.
-    pub fn joint_vector(&self, u: usize, out: &mut [f64]) -> Result<(), SimError> {
-        Ok(self.engine.joint_vector(u, out)?)
     }
 
     /// The per-agent action indices of joint action `u`.
@@ -453,6 +499,7 @@ impl FqiPolicy {
             policy: self,
             kind,
             q: vec![0.0; self.n_joint_actions()],
+            scratch: Scratch::default(),
         }
     }
 }
@@ -463,20 +510,13 @@ pub struct FqiController<'p> {
     policy: &'p FqiPolicy,
     kind: PolicyKind,
     q: Vec<f64>,
-}
-
-impl FqiController<'_> {
-    /// `Q(x, .)` of the last greedy decision.
-    #[must_use]
-    pub fn last_q(&self) -> &[f64] {
-        &self.q
-    }
+    scratch: Scratch,
 }
 
 impl Controller for FqiController<'_> {
     fn act(&mut self, obs: &Observation<'_>, u: &mut [f64]) -> Result<(), SimError> {
         self.policy
-            .act(self.kind, obs.state, &mut self.q, u)
+            .act_with(self.kind, obs.state, &mut self.q, u, &mut self.scratch)
             .map(|_| ())
     }
 
@@ -561,46 +601,66 @@ impl AdditivePolicy {
         self.gamma
     }
 
-    /// The observations of every agent at `obs` (one slice per agent).
-    fn observations(&self, obs: &Observation<'_>) -> Result<Vec<Vec<f64>>, SimError> {
+    /// Calls `f` with every agent's observation at `obs`: its own slice of the state (the point
+    /// masses), or its sensors computed into `buf` (the robots).
+    fn each_observation(
+        &self,
+        obs: &Observation<'_>,
+        buf: &mut Vec<f64>,
+        mut f: impl FnMut(usize, &[f64]) -> Result<(), SimError>,
+    ) -> Result<(), SimError> {
         let n = self.q.n_agents();
-        match self.observe {
-            Observe::OwnState => {
-                let dim = obs.state.len() / n.max(1);
-                Ok(obs.state.chunks(dim.max(1)).map(<[f64]>::to_vec).collect())
-            }
-            Observe::Sensors => (0..n)
-                .map(|i| {
+        let dim = obs.state.len() / n.max(1);
+        if self.observe == Observe::OwnState {
+            check_len("state", n * dim, obs.state.len())?;
+        }
+        for i in 0..n {
+            match self.observe {
+                Observe::OwnState => f(i, &obs.state[dim * i..dim * (i + 1)])?,
+                Observe::Sensors => {
                     let pose = obs.state.get(3 * i..3 * i + 3);
-                    match (pose, obs.sonar.get(i)) {
-                        (Some(p), Some(s)) => {
-                            let mut o = vec![0.0; s.len() + 2];
-                            observation([p[0], p[1], p[2]], s, &mut o);
-                            Ok(o)
-                        }
-                        _ => Err(ConfigError::invalid(
+                    let (Some(p), Some(sonar)) = (pose, obs.sonar.get(i)) else {
+                        return Err(ConfigError::invalid(
                             "plant",
                             "a robot policy needs the robots' poses and sonars",
                         )
-                        .into()),
-                    }
-                })
-                .collect(),
+                        .into());
+                    };
+                    buf.resize(sonar.len() + 2, 0.0);
+                    observation([p[0], p[1], p[2]], sonar, buf);
+                    f(i, buf)?;
+                }
+            }
         }
+        Ok(())
     }
 
     /// The greedy joint action at `obs`: each agent's action index into `out`.
     pub fn act_indices(&self, obs: &Observation<'_>, out: &mut [usize]) -> Result<(), SimError> {
-        let o = self.observations(obs)?;
-        let refs: Vec<&[f64]> = o.iter().map(Vec::as_slice).collect();
-        self.q.greedy_joint(&refs, out)
+        self.act_indices_with(obs, out, &mut Vec::new())
+    }
+
+    fn act_indices_with(
+        &self,
+        obs: &Observation<'_>,
+        out: &mut [usize],
+        buf: &mut Vec<f64>,
+    ) -> Result<(), SimError> {
+        check_len("joint action", self.q.n_agents(), out.len())?;
+        self.each_observation(obs, buf, |i, o| {
+            out[i] = self.q.greedy(i, o)?;
+            Ok(())
+        })
     }
 
     /// `max_u Q` at `obs`.
     pub fn value(&self, obs: &Observation<'_>) -> Result<f64, SimError> {
-        let o = self.observations(obs)?;
-        let refs: Vec<&[f64]> = o.iter().map(Vec::as_slice).collect();
-        self.q.value(&refs)
+        let mut total = 0.0;
+        self.each_observation(obs, &mut Vec::new(), |i, o| {
+            total += self.q.greedy_with_value(i, o)?.1;
+            Ok(())
+        })?;
+        Ok(total)
     }
 
     /// The action vector of agent action `a` (the model's per-agent actions).
@@ -619,11 +679,13 @@ impl AdditivePolicy {
 pub struct AdditiveController<'p> {
     policy: &'p AdditivePolicy,
     indices: Vec<usize>,
+    obs: Vec<f64>,
 }
 
 impl Controller for AdditiveController<'_> {
     fn act(&mut self, obs: &Observation<'_>, u: &mut [f64]) -> Result<(), SimError> {
-        self.policy.act_indices(obs, &mut self.indices)?;
+        self.policy
+            .act_indices_with(obs, &mut self.indices, &mut self.obs)?;
         let table = self.policy.actions();
         let d = table.dim();
         for (i, &a) in self.indices.iter().enumerate() {
@@ -698,6 +760,7 @@ impl Policy {
                 Box::new(AdditiveController {
                     policy: p,
                     indices: vec![0; p.q.n_agents()],
+                    obs: Vec::new(),
                 })
             }
         })
