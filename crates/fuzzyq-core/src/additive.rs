@@ -195,10 +195,13 @@ pub fn greedy<T: Real>(
 #[inline]
 #[must_use]
 pub fn max_value<T: Real>(q: &[T]) -> T {
-    q.iter().copied().fold(
-        -T::ONE / T::ZERO,
-        |m, v| if v > m || m.is_nan() { v } else { m },
-    )
+    largest(q.iter().copied())
+}
+
+/// The largest of `values`, NaNs ignored (`-inf` if there is none).
+#[inline]
+fn largest<T: Real>(values: impl Iterator<Item = T>) -> T {
+    values.fold(-T::ONE / T::ZERO, |m, v| if v > m { v } else { m })
 }
 
 /// What one transition contributes to an update, summed over the agents (see [`Td::add_agent`]).
@@ -219,9 +222,13 @@ impl<T: Real> Td<T> {
     /// `q_next`, its action values at `x_{k+1}`; and `next`, its active cores at `x_{k+1}`.
     /// `action` must index `q_next`.
     pub fn add_agent(&mut self, q_taken: T, q_next: &[T], action: usize, next: &ActiveCores<T>) {
+        self.add(q_taken, max_value(q_next), q_next[action], next);
+    }
+
+    fn add(&mut self, q_taken: T, next_max: T, next_taken: T, next: &ActiveCores<T>) {
         self.q_taken += q_taken;
-        self.next_max += max_value(q_next);
-        self.next_taken += q_next[action];
+        self.next_max += next_max;
+        self.next_taken += next_taken;
         next.for_each(|_, w| self.omega += w);
     }
 }
@@ -381,17 +388,13 @@ pub fn update<T: Real>(
         check_rows(&a.cur, a.phi, a.n_actions)?;
         check_rows(&a.next, a.phi, a.n_actions)?;
         check_action(a.action, a.n_actions)?;
-        td.q_taken += q_value_unchecked(&a.cur, a.phi, a.n_actions, a.action);
-        let mut next_max = -T::ONE / T::ZERO;
-        for j in 0..a.n_actions {
-            let v = q_value_unchecked(&a.next, a.phi, a.n_actions, j);
-            if v > next_max || next_max.is_nan() {
-                next_max = v;
-            }
-        }
-        td.next_max += next_max;
-        td.next_taken += q_value_unchecked(&a.next, a.phi, a.n_actions, a.action);
-        a.next.for_each(|_, w| td.omega += w);
+        let next = |j| q_value_unchecked(&a.next, a.phi, a.n_actions, j);
+        td.add(
+            q_value_unchecked(&a.cur, a.phi, a.n_actions, a.action),
+            largest((0..a.n_actions).map(next)),
+            next(a.action),
+            &a.next,
+        );
     }
     let Some(inc) = rule.increment(&td, reward, terminal, gamma, alpha) else {
         return Ok(None);
@@ -431,7 +434,10 @@ mod tests {
                     let eq12 = d + j * n + i * n * m;
                     assert!(!seen[ours]);
                     seen[ours] = true;
-                    assert_eq!(eq12 / (n * m), ours / (n * m), "same agent block");
+                    // Ours decodes to the same (agent, core, action) that eq 12 numbers.
+                    let (agent, within) = (ours / (n * m), ours % (n * m));
+                    let (core, action) = (within / m, within % m);
+                    assert_eq!(core + action * n + agent * n * m, eq12);
                 }
             }
         }

@@ -298,38 +298,24 @@ impl AdditiveQ {
         self.check_joint(sample.obs, "observations")?;
         self.check_joint(sample.next_obs, "next observations")?;
         self.check_actions(sample.actions)?;
-        let n = self.n_agents();
-        let mut cur = Vec::with_capacity(n);
-        let mut next = Vec::with_capacity(n);
-        let mut q = Vec::with_capacity(n);
-        let mut q_next = Vec::with_capacity(n);
-        for i in 0..n {
-            cur.push(self.active(i, sample.obs[i])?);
-            next.push(self.active(i, sample.next_obs[i])?);
-            for (active, out) in [(&cur[i], &mut q), (&next[i], &mut q_next)] {
-                let mut values = vec![0.0; self.actions[i]];
-                additive::q_values_unchecked(active, &self.phi[i], &mut values);
-                out.push(values);
-            }
+        let mut agents = Vec::with_capacity(self.n_agents());
+        for (i, phi) in self.phi.iter_mut().enumerate() {
+            agents.push(additive::Agent {
+                phi,
+                n_actions: self.actions[i],
+                cur: self.features.active(i, sample.obs[i])?,
+                next: self.features.active(i, sample.next_obs[i])?,
+                action: sample.actions[i],
+            });
         }
-        let step = Step {
-            cur: &cur,
-            next: &next,
-            q: &q,
-            q_next: &q_next,
-            actions: sample.actions,
-            reward: sample.reward,
-            terminal: sample.terminal,
-        };
-        td_update(
+        additive::update(
             rule,
-            &mut self.phi,
-            &self.actions,
-            &step,
+            &mut agents,
+            sample.reward,
+            sample.terminal,
             gamma,
             alpha,
-            |_, _, _| {},
-        )
+        )?
         .ok_or_else(|| {
             EvalError::NotFinite {
                 what: "parameter update",
