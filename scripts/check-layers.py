@@ -19,6 +19,7 @@ from collections import defaultdict
 # Layers of each crate's top-level modules, lowest first (docs/design.md, "Layers").
 LAYERS = {
     "fuzzyq-core": [
+        {"limits"},
         {"real", "error", "options"},
         {"partition", "action"},
         {"model"},
@@ -102,6 +103,45 @@ def references(text, here):
     return refs
 
 
+def reexports(files, modules):
+    """`pub use` items: (module, name) path -> the path it re-exports, so that `crate::Item`
+    counts as naming the module that defines `Item`."""
+    out = {}
+    for here, text in files.items():
+        for m in re.finditer(r"\bpub(?:\([\w:]+\))?\s+use\s+([^;]+);", text):
+            tree = m.group(1).strip()
+            g = re.match(r"^([\w:]*?)::\{(.*)\}$", tree, re.S)
+            paths = expand_group(g.group(1).split("::"), g.group(2)) if g else [tree.split("::")]
+            for path in paths:
+                name = path[-1]
+                head, rest = path[0], path[1:]
+                if head == "crate":
+                    base = []
+                elif head == "self":
+                    base = list(here)
+                elif head == "super":
+                    base = list(here[:-1])
+                elif tuple(here) + (head,) in modules:
+                    base, rest = list(here) + [head], path[1:]
+                else:
+                    continue  # another crate's item
+                out[tuple(here) + (name.split(" as ")[-1].strip(),)] = tuple(base + [p.split(" as ")[0].strip() for p in rest])
+    return out
+
+
+def resolve(ref, modules, exports):
+    """The module `ref` names: its longest module prefix, after following re-exports."""
+    for _ in range(8):
+        k = len(ref)
+        while k > 0 and ref[:k] not in modules:
+            k -= 1
+        if k < len(ref) and ref[: k + 1] in exports:
+            ref = exports[ref[: k + 1]] + ref[k + 1 :]
+            continue
+        return ref[:k] if k > 0 else None
+    return None
+
+
 def check_crate(crate_dir, name):
     src = os.path.join(crate_dir, "src")
     files = {}
@@ -116,16 +156,12 @@ def check_crate(crate_dir, name):
     for m in modules:
         for i in range(len(m)):
             children[m[:i]].add(m[i])
+    exports = reexports(files, modules)
     findings = []
     edges = defaultdict(lambda: defaultdict(set))  # folder -> a -> {b}
     for here, text in files.items():
         for ref in references(text, here):
-            # the longest known module prefix of the reference
-            target = None
-            for k in range(len(ref), 0, -1):
-                if ref[:k] in modules:
-                    target = ref[:k]
-                    break
+            target = resolve(ref, modules, exports)
             if target is None:
                 continue
             # common folder of here and target, and the children they sit under

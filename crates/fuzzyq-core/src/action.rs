@@ -10,8 +10,7 @@
 use crate::error::{EvalError, check_len};
 use crate::real::Real;
 
-/// The largest number of agents a [`JointActions`] supports.
-pub const MAX_AGENTS: usize = 16;
+pub use crate::limits::MAX_AGENTS;
 
 /// The discrete action set of one agent: `n_actions` vectors of `dim` components, stored
 /// action-major in one slice.

@@ -72,7 +72,7 @@ impl fmt::Display for PartitionError {
             Self::TooManyDimensions { found } => write!(
                 f,
                 "a fuzzy grid has at most {} state variables, found {found}",
-                crate::MAX_DIMS
+                crate::limits::MAX_DIMS
             ),
             Self::TooManyCores => f.write_str("the number of joint cores does not fit in 32 bits"),
         }
@@ -134,7 +134,7 @@ impl fmt::Display for EvalError {
             Self::Agents { found } => write!(
                 f,
                 "a model needs between 1 and {} agents, found {found}",
-                crate::MAX_AGENTS
+                crate::limits::MAX_AGENTS
             ),
         }
     }

@@ -62,6 +62,7 @@ pub mod action;
 pub mod additive;
 pub mod backup;
 pub mod error;
+pub mod limits;
 pub mod model;
 pub mod options;
 pub mod partition;
@@ -70,10 +71,11 @@ pub mod real;
 #[cfg(feature = "std")]
 pub mod solver;
 
-pub use action::{ActionSet, JointActions, MAX_AGENTS};
+pub use action::{ActionSet, JointActions};
 pub use backup::Backup;
 pub use error::{CoresError, EvalError, PartitionError};
+pub use limits::{MAX_AGENTS, MAX_DIMS};
 pub use model::{Block, Model, Tabulated};
 pub use options::NamedOption;
-pub use partition::{ActiveCores, MAX_DIMS, Membership, Partition, ProductPartition, Segment};
+pub use partition::{ActiveCores, Membership, Partition, ProductPartition, Segment};
 pub use real::Real;

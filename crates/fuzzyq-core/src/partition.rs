@@ -35,8 +35,7 @@
 use crate::error::{CoresError, EvalError, PartitionError};
 use crate::real::Real;
 
-/// The largest number of state variables a [`ProductPartition`] supports.
-pub const MAX_DIMS: usize = 16;
+pub use crate::limits::MAX_DIMS;
 
 crate::named_option! {
     /// The membership functions a [`Partition`] puts on its cores.
