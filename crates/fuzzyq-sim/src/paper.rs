@@ -1,7 +1,8 @@
 //! The numbers fuzzyq takes from the paper (Luviano-Cruz et al. 2018), in one place.
 //!
-//! Everything else that reproduces the paper (the default configurations, the figures'
-//! starts, Table 1) refers to these constants; `docs/design.md` explains how each is read.
+//! The code that reproduces the paper (the default grids and learners, the figures' starts,
+//! Table 1) uses these constants; the default configuration files, written out as commented
+//! TOML, are tested against them. `docs/design.md` explains how each is read.
 
 /// The position cores of every agent and axis (section 3.1, figure 1), m.
 pub const POSITION_CORES: [f64; 9] = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];

@@ -8,7 +8,6 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::Real;
-use fuzzyq_core::additive::Update;
 use fuzzyq_core::solver::{
     self, Delta, IterationOperator, Precision, Progress, Solution, SweepRecord,
 };
@@ -192,13 +191,6 @@ impl SampleLearning {
             starts: pointmass_task::default_starts(),
             vqql,
         })
-    }
-
-    /// The literal (printed) update instead of the corrected one, or back.
-    #[must_use]
-    pub fn with_update(mut self, update: Update) -> Self {
-        self.fql.update = update;
-        self
     }
 }
 

@@ -648,6 +648,7 @@ mod tests {
         let c = TrainConfig::from_toml(DEFAULT_POINTMASS_TOML).unwrap();
         assert_eq!(c, TrainConfig::default());
         assert_eq!(c.n_cores(), 4_100_625);
+        assert_eq!((c.solver.gamma, c.solver.xi), (paper::GAMMA, paper::XI));
         let again = TrainConfig::from_toml(&c.to_toml()).unwrap();
         assert_eq!(again, c);
     }
@@ -660,6 +661,10 @@ mod tests {
         };
         assert_eq!(k, &KheperaConfig::default());
         assert_eq!(c.n_cores(), (19 * 19 * 17usize).pow(2));
+        assert_eq!(
+            (c.solver.gamma, c.solver.xi),
+            (paper::GAMMA, paper::KHEPERA_XI)
+        );
         let cores = c.grid_cores();
         assert_eq!(cores[2].first(), Some(&-std::f64::consts::PI));
         assert_eq!(cores[2].last(), Some(&std::f64::consts::PI));

@@ -167,7 +167,7 @@ pub struct PolicyArtifact {
 /// A fuzzy Q-iteration policy as version 1 and the [`Payload::Fqi`] of version 2 encode it:
 /// the configuration travels as its TOML text (postcard cannot encode the config's internally
 /// tagged enums, and TOML keeps it readable and stable across versions).
-#[derive(Serialize, Deserialize)]
+#[derive(Deserialize)]
 struct FqiPayload {
     config_toml: String,
     values: Values,
@@ -175,11 +175,22 @@ struct FqiPayload {
     summary: TrainSummary,
 }
 
-/// What a version 2 payload holds.
+/// [`FqiPayload`] borrowed for writing (the same fields in the same order: postcard encodes a
+/// reference, a slice and a `Vec` alike), so saving copies no table.
+#[derive(Serialize)]
+struct FqiPayloadRef<'a> {
+    config_toml: String,
+    values: &'a Values,
+    greedy: &'a [u32],
+    summary: &'a TrainSummary,
+}
+
+/// What a version 2 payload holds: `F` is [`FqiPayload`] when reading, [`FqiPayloadRef`]
+/// when writing.
 #[derive(Serialize, Deserialize)]
-enum Payload {
-    /// Fuzzy Q-iteration (boxed to keep the enum small; serde encodes a box as its content).
-    Fqi(Box<FqiPayload>),
+enum Payload<F> {
+    /// Fuzzy Q-iteration.
+    Fqi(F),
     /// A point-mass policy learned from samples, as TOML text.
     PointMass(String),
     /// A Khepera policy learned from samples, as TOML text.
@@ -219,18 +230,7 @@ impl PolicyArtifact {
     /// Number of joint actions of the configured environment.
     #[must_use]
     pub fn n_joint_actions(&self) -> usize {
-        match &self.config.env {
-            crate::io::config::EnvConfig::Pointmass(p) => {
-                p.force_levels.len().pow(2 * p.agents as u32)
-            }
-            crate::io::config::EnvConfig::Khepera(k) => {
-                crate::model::khepera::N_ACTIONS.pow(k.agents as u32)
-            }
-            crate::io::config::EnvConfig::Dcmotor(c) => c.actions.len(),
-            crate::io::config::EnvConfig::Pendulum(c) => c.actions.len(),
-            crate::io::config::EnvConfig::Carhill(c) => c.actions.len(),
-            crate::io::config::EnvConfig::Arm(c) => c.actions.len().pow(2),
-        }
+        self.config.n_joint_actions()
     }
 }
 
@@ -430,8 +430,8 @@ impl PolicyFile {
         if crc32fast::hash(payload) != crc {
             return Err(PolicyFileError::Checksum { path: path_buf });
         }
-        let payload = if version == 1 {
-            postcard::from_bytes(payload).map(|p| Payload::Fqi(Box::new(p)))
+        let payload: Payload<FqiPayload> = if version == 1 {
+            postcard::from_bytes(payload).map(Payload::Fqi)
         } else {
             postcard::from_bytes(payload)
         }
@@ -491,12 +491,12 @@ impl PolicyFile {
     /// Encodes the file with its header.
     pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
         let payload = match self {
-            Self::Fqi(a) => Payload::Fqi(Box::new(FqiPayload {
+            Self::Fqi(a) => Payload::Fqi(FqiPayloadRef {
                 config_toml: a.config.to_toml(),
-                values: a.values.clone(),
-                greedy: a.greedy.clone(),
-                summary: a.summary.clone(),
-            })),
+                values: &a.values,
+                greedy: &a.greedy,
+                summary: &a.summary,
+            }),
             Self::PointMass(f) => Payload::PointMass(to_toml(f)?),
             Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
         };
@@ -630,11 +630,11 @@ mod tests {
     #[test]
     fn version_1_files_still_load() {
         let a = tiny();
-        let payload = postcard::to_stdvec(&FqiPayload {
+        let payload = postcard::to_stdvec(&FqiPayloadRef {
             config_toml: a.config.to_toml(),
-            values: a.values.clone(),
-            greedy: a.greedy.clone(),
-            summary: a.summary.clone(),
+            values: &a.values,
+            greedy: &a.greedy,
+            summary: &a.summary,
         })
         .unwrap();
         let mut v1 = Vec::new();

@@ -275,7 +275,7 @@ impl AdditiveQ {
         Ok(total)
     }
 
-    /// Applies one sample update (see the [module docs](self)) with discount `gamma` in
+    /// Applies one sample update ([`fuzzyq_core::additive::update`]) with discount `gamma` in
     /// `[0, 1)` and step size `alpha > 0`. Returns the TD error `delta` ([`Update::Corrected`])
     /// or the bracket `r + beta - Gamma` ([`Update::Literal`]). An update that would make a
     /// parameter non-finite is refused and leaves the parameters unchanged.

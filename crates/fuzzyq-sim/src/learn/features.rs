@@ -78,7 +78,8 @@ impl FeatureSpace {
 
     /// Crisp features: agent `i` quantises its observation with `codebooks[i]` (at least one
     /// agent). Its "cores" are the codebook's cells, and the additive Q-function over them is
-    /// a table: [`learn`](crate::learn::fql::learn) then runs tabular Q-learning (see the [module docs](self)).
+    /// a table: [`learn`](crate::learn::fql::learn) then runs tabular Q-learning (see
+    /// "Codebook features" in [`fql`](crate::learn::fql)).
     pub fn codebook(codebooks: Vec<Codebook>) -> Result<Self, SimError> {
         if codebooks.is_empty() {
             return Err(ConfigError::invalid("features", "needs at least one agent").into());

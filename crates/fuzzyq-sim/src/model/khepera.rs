@@ -636,7 +636,7 @@ impl F64Model for KheperaModel {
     }
 }
 
-crate::impl_model!(KheperaModel);
+crate::model::impl_model!(KheperaModel);
 
 #[cfg(test)]
 mod tests {

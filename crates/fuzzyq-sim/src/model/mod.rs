@@ -9,7 +9,7 @@
 //!
 //! # Models in `f64`, solved in either precision
 //! Every built-in model computes in `f64` whatever the solver's precision: it implements
-//! [`F64Model`], and [`impl_model!`](crate::impl_model) (applied once per model) derives
+//! [`F64Model`], and `impl_model!` (applied once per model) derives
 //! [`fuzzyq_core::Model`] for `f32` and `f64` from it, widening the solver's values to `f64`
 //! and rounding the results once. [`EnvModel`] holds any of them behind one type, so that
 //! training, policies and policy files handle every environment alike.
@@ -315,7 +315,7 @@ impl ActionTable {
 }
 
 /// A model computed in `f64`: what every built-in model implements.
-/// [`impl_model!`](crate::impl_model) turns it into [`fuzzyq_core::Model`] for `f32` and `f64`.
+/// `impl_model!` turns it into [`fuzzyq_core::Model`] for `f32` and `f64`.
 pub trait F64Model {
     /// Length of the state vector.
     fn state_dim(&self) -> usize;
@@ -430,14 +430,12 @@ impl Wide for f32 {
 /// Implements [`fuzzyq_core::Model`] for `f32` and `f64` on a type that implements
 /// [`F64Model`]: the solver's values are widened to `f64`, the model computes, the results are
 /// rounded once. The one place where a model meets the solver's precision.
-#[macro_export]
-#[doc(hidden)]
 macro_rules! impl_model {
     ($ty:ty) => {
-        $crate::impl_model!(@impl [] $ty);
+        $crate::model::impl_model!(@impl [] $ty);
     };
     ($ty:ty where $($p:ident: $b:path),+) => {
-        $crate::impl_model!(@impl [$($p: $b),+] $ty);
+        $crate::model::impl_model!(@impl [$($p: $b),+] $ty);
     };
     (@impl [$($g:tt)*] $ty:ty) => {
         impl<T: $crate::model::Wide, $($g)*> ::fuzzyq_core::Model<T> for $ty {
@@ -493,6 +491,7 @@ macro_rules! impl_model {
         }
     };
 }
+pub(crate) use impl_model;
 
 /// A built-in environment's model.
 #[derive(Clone, Debug)]
@@ -602,7 +601,7 @@ impl F64Model for EnvModel {
     }
 }
 
-crate::impl_model!(EnvModel);
+impl_model!(EnvModel);
 
 /// Checks that `x0` is a state of `model`: the right length, finite, within the bounds.
 pub fn check_state<M: Model<f64> + ?Sized>(model: &M, x0: &[f64]) -> Result<(), SimError> {

@@ -541,7 +541,7 @@ impl F64Model for PointMass {
     }
 }
 
-crate::impl_model!(PointMass);
+crate::model::impl_model!(PointMass);
 
 #[cfg(test)]
 mod tests {

@@ -59,7 +59,8 @@ pub struct RolloutMetrics {
     pub discounted_return: f64,
     /// Steps spent in the reward region.
     pub steps_in_goal: usize,
-    /// `V` interpolated at `x0`: the value the solution predicts for the start.
+    /// The value the policy predicts for the start: `V` interpolated at `x0` (fuzzy
+    /// Q-iteration) or `max_u Q` at the first observations (a policy learned from samples).
     pub value_x0: f64,
 }
 
@@ -266,7 +267,8 @@ pub struct RunSummary {
     pub discounted_return: f64,
     /// The final state.
     pub final_state: Vec<f64>,
-    /// `V` interpolated at `x0`: the value the solution predicts for the start.
+    /// The value the policy predicts for the start: `V` interpolated at `x0` (fuzzy
+    /// Q-iteration) or `max_u Q` at the first observations (a policy learned from samples).
     pub value_x0: f64,
 }
 

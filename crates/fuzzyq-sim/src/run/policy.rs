@@ -579,6 +579,7 @@ impl AdditivePolicy {
 
     /// The policy of a Khepera fuzzy Q-learning policy file.
     pub fn from_khepera_file(file: KheperaPolicyFile) -> Result<Self, SimError> {
+        file.validate()?;
         let model = KheperaModel::new(file.config)?;
         Self::robots(model, file.q, file.fql.gamma)
     }

@@ -268,9 +268,6 @@ impl PointMassPlant {
     }
 }
 
-/// Runs `policy` for `steps` steps from `x0` on the point-mass plant: as
-/// [`rollout`](crate::run::rollout::rollout), with the discs colliding; also returns the
-/// collisions.
 #[cfg(test)]
 mod tests {
 

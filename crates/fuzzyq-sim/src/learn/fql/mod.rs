@@ -215,7 +215,7 @@ impl Default for FqlConfig {
     fn default() -> Self {
         Self {
             update: Update::Corrected,
-            gamma: 0.96,
+            gamma: crate::paper::GAMMA,
             episodes: 1000,
             max_steps: 200,
             alpha: 0.1,

@@ -326,10 +326,6 @@ impl Dynamics for Arm {
         Arm::new(config)
     }
 
-    fn config(&self) -> &ArmConfig {
-        &self.config
-    }
-
     /// See the [module docs](self) for where each value comes from.
     fn preset(name: &str) -> Result<Preset, ConfigError> {
         let (angles, velocities, xi): (&[f64], &[f64], f64) = match name {
@@ -731,7 +727,8 @@ mod tests {
             for _ in 0..100 {
                 op.q_values(&s.v, &x, &mut qx).unwrap();
                 let a = q::argmax(&qx).unwrap();
-                x = m.step_f64(x, [m.actions()[2 * a], m.actions()[2 * a + 1]]);
+                let u = crate::model::F64Model::actions(&m).action(a);
+                x = m.step_f64(x, [u[0], u[1]]);
             }
             assert!(cost(x) < 0.05 * cost(x0), "{x0:?} -> {x:?}");
         }

@@ -237,10 +237,6 @@ impl Dynamics for CarHill {
         CarHill::new(config)
     }
 
-    fn config(&self) -> &CarHillConfig {
-        &self.config
-    }
-
     /// See the [module docs](self) for where each value comes from.
     fn preset(name: &str) -> Result<Preset, ConfigError> {
         match name {
@@ -524,7 +520,7 @@ mod tests {
         let mut qx = [0.0; 2];
         for k in 1..=steps {
             op.q_values(v, &x, &mut qx).unwrap();
-            let u = m.actions()[q::argmax(&qx).unwrap()];
+            let u = crate::model::F64Model::actions(m).action(q::argmax(&qx).unwrap())[0];
             x = m.step_f64(x, u);
             if m.is_terminal_f64(x) {
                 return m.is_success_f64(x).then_some(k);

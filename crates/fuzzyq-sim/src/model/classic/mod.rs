@@ -9,9 +9,14 @@
 //! - [`pendulum`]: the inverted pendulum swing-up (`ipsetup_problem`, type `ip`, LQR reward):
 //!   a weight on a DC motor's disc that the motor alone cannot lift in one go, integrated with
 //!   one classical RK4 step per sample time, angle wrapped to `[-pi, pi)`.
+//! - [`carhill`]: the car on the hill (`hillcar_problem`): state `[p, p_dot]`, force `u`,
+//!   terminal states outside the box, reward on reaching the top slowly enough.
+//! - [`arm`]: the two-link robot arm (`rarm_problem`): state of two angles and their
+//!   velocities, a torque per joint.
 //!
-//! Each model implements [`fuzzyq_core::Model`] for `f32` and `f64` (one agent, one action
-//! component), computes in `f64` whatever the solver's precision, and comes with named
+//! Every benchmark is one [`Dynamics`] implementation wrapped by the generic [`Classic`]
+//! (the action table, [`F64Model`] and so [`fuzzyq_core::Model`] for `f32` and `f64`, one
+//! agent), computes in `f64` whatever the solver's precision, and comes with named
 //! [`Preset`]s: the grid, actions, `gamma` and stopping threshold of a toolbox run. The
 //! `"toolbox-demo"` presets are the configurations the parity tests check transition by
 //! transition, sweep by sweep and step by step against the toolbox run under GNU Octave
@@ -187,8 +192,6 @@ pub trait Dynamics: Clone + std::fmt::Debug + Send + Sync + Sized {
 
     /// Builds the dynamics from validated parameters.
     fn new(config: Self::Config) -> Result<Self, ConfigError>;
-    /// The parameters.
-    fn config(&self) -> &Self::Config;
     /// The named preset (an error listing the presets for an unknown name).
     fn preset(name: &str) -> Result<Preset, ConfigError>;
     /// The action list of a preset or config (`actions = [...]`) when none is given.
@@ -303,18 +306,6 @@ impl<S: Dynamics> Classic<S> {
     pub fn with_actions(self, actions: &[f64]) -> Result<Self, ConfigError> {
         Self::new(self.dynamics, actions)
     }
-
-    /// The dynamics.
-    #[must_use]
-    pub fn dynamics(&self) -> &S {
-        &self.dynamics
-    }
-
-    /// The discrete action vectors, action-major.
-    #[must_use]
-    pub fn actions(&self) -> &[f64] {
-        self.actions.values()
-    }
 }
 
 impl<S> std::ops::Deref for Classic<S> {
@@ -373,7 +364,7 @@ impl<S: Dynamics> F64Model for Classic<S> {
     }
 }
 
-crate::impl_model!(Classic<S> where S: Dynamics);
+crate::model::impl_model!(Classic<S> where S: Dynamics);
 
 #[cfg(test)]
 mod tests {

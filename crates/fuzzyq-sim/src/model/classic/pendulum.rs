@@ -234,10 +234,6 @@ impl Dynamics for Pendulum {
         Pendulum::new(config)
     }
 
-    fn config(&self) -> &PendulumConfig {
-        &self.config
-    }
-
     /// See the [module docs](self) for where each value comes from.
     fn preset(name: &str) -> Result<Preset, ConfigError> {
         match name {
