@@ -16,7 +16,9 @@ venv=target/python-test-venv
 rm -rf "$venv"
 ./scripts/setup-python.sh "$venv"
 "$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib
-# Run from outside the source tree so that `import fuzzyq` finds the installed wheel.
+# Run from outside the source tree so that `import fuzzyq` finds the installed wheel; the
+# Python-CLI tests use the binary `cargo test` just built from this checkout.
+export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"
 (cd target && "$OLDPWD/$venv/bin/python" -m pytest "$OLDPWD/python/tests" -q -p no:cacheprovider)
 (cd target && "$OLDPWD/$venv/bin/python" -m mypy.stubtest fuzzyq._fuzzyq)
 echo "all tests passed"

@@ -192,7 +192,8 @@ class ClassicModel:
     def reward(self, x: npt.ArrayLike, u: npt.ArrayLike) -> float: ...
     def is_terminal(self, x: npt.ArrayLike) -> bool: ...
 
-# An integrator: "zoh", "rk4" (the default substeps) or {"rk4": {"substeps": n}}.
+# An integrator: "zoh", "rk4" (the model's default substeps; 1 for the DC motor, whose default
+# is "zoh") or {"rk4": {"substeps": n}}.
 _Integrator = str | dict[str, dict[str, int]]
 
 @final

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,11 +28,16 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def fuzzyq_cli() -> Path | None:
-    for profile in ("release", "debug"):
-        exe = REPO / "target" / profile / "fuzzyq"
-        if exe.exists():
-            return exe
-    return None
+    """`$FUZZYQ_BIN` (`scripts/test.sh` sets it to the binary it just built; missing is an
+    error), else the most recently built of `target/{release,debug}/fuzzyq`."""
+    given = os.environ.get("FUZZYQ_BIN")
+    if given:
+        if not Path(given).is_file():
+            raise FileNotFoundError(f"FUZZYQ_BIN={given} does not exist")
+        return Path(given)
+    built = [REPO / "target" / p / "fuzzyq" for p in ("release", "debug")]
+    built = [exe for exe in built if exe.exists()]
+    return max(built, key=lambda exe: exe.stat().st_mtime, default=None)
 
 
 CLI = fuzzyq_cli()

@@ -39,8 +39,9 @@ pub struct ClassicModel {
 }
 
 /// The model's parameters from keyword arguments: the configuration's fields (`[env.model]`
-/// of a config file), each optional. `integrator="rk4"` stands for RK4 with the default
-/// number of substeps.
+/// of a config file), each optional. `integrator="rk4"` stands for RK4 with the model's
+/// default number of substeps (one step per sample time for the DC motor, whose default is
+/// the exact `"zoh"`).
 fn parameters<S>(py: Python<'_>, params: Option<&Bound<'_, PyDict>>) -> PyResult<S::Config>
 where
     S: Dynamics,
