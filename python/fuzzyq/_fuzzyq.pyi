@@ -350,7 +350,7 @@ class Policy:
         *,
         seed: int = 0,
         headings: npt.ArrayLike | None = None,
-        plant: str = "model",
+        plant: str | None = None,
         radius: float | None = None,
     ) -> dict[str, Any]: ...
 

@@ -221,7 +221,8 @@ def test_loaded_policy_acts_as_the_cli_rollout(work: Path, case: Case, kind: str
 
 
 def test_the_robots_start_from_poses_too(work: Path) -> None:
-    policy = fuzzyq.load(train(work, CASES[3]))
+    path = train(work, CASES[3])
+    policy = fuzzyq.load(path)
     assert isinstance(policy, fuzzyq.Solution)
     greedy = policy.policy("greedy")
     a = greedy.rollout([-4, 5, 0, 0], 10, headings=[90])
@@ -230,6 +231,12 @@ def test_the_robots_start_from_poses_too(work: Path) -> None:
     np.testing.assert_array_equal(a["actions"], b["actions"])
     # The robots turn towards the goal: the policy does not only drive straight on.
     assert len({tuple(u) for u in a["actions"]}) > 1
+    # As on the command line, the robots run on their rapier plant only.
+    with pytest.raises(fuzzyq.ConfigError, match="rapier plant only"):
+        greedy.rollout([-4, 5, 0, 0], 10, headings=[90], plant="model")
+    # The command line reads poses as --x0 too.
+    ref = cli_rollout(path, b["actions"].shape[1], "--x0", f"-4,5,{np.pi / 2}", "--steps", 10)
+    np.testing.assert_array_equal(ref.actions, b["actions"])
 
 
 def test_point_masses_on_the_rapier_plant(work: Path) -> None:

@@ -7,8 +7,7 @@ use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::SimError;
 use fuzzyq_sim::learn::tasks::khepera::observation;
-use fuzzyq_sim::model::khepera::poses_from_paper;
-use fuzzyq_sim::model::{EnvModel, F64Model};
+use fuzzyq_sim::model::F64Model;
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use fuzzyq_sim::run::metrics::{KheperaRun, Trajectory};
 use fuzzyq_sim::run::policy::{AdditivePolicy, Policy as SimPolicy};
@@ -169,46 +168,6 @@ impl Policy {
                     .collect()
             }
         }
-    }
-
-    /// The start of a rollout in the sim crate's terms (the robots' flat poses).
-    fn start(
-        &self,
-        py: Python<'_>,
-        model: &EnvModel,
-        x0: Option<&Bound<'_, PyAny>>,
-        headings: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<Vec<f64>> {
-        let spec = model.kind().spec();
-        let agents = F64Model::n_agents(model);
-        let x0 = match x0 {
-            Some(x) => vector(x, "x0", None)?,
-            None if spec.multi_agent && agents != 2 => {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!(
-                        "x0: the policy has {agents} agent{}; give x0 with {} values (the \
-                         default start is the paper's, for 2 agents)",
-                        if agents == 1 { "" } else { "s" },
-                        spec.state_names.len() * agents
-                    ),
-                ));
-            }
-            None => spec.default_start.to_vec(),
-        };
-        let EnvModel::Khepera(k) = model else {
-            return Ok(x0);
-        };
-        if headings.is_none() && x0.len() == 3 * agents {
-            return Ok(x0);
-        }
-        let headings = match headings {
-            Some(h) => vector(h, "headings", None)?,
-            None => vec![0.0; agents],
-        };
-        let poses = poses_from_paper(k.config(), &x0, &headings).map_err(|e| sim_error(py, &e))?;
-        Ok(poses.into_iter().flatten().collect())
     }
 }
 
@@ -434,17 +393,18 @@ impl Policy {
     /// as `fuzzyq rollout`'s): the model's state; for the robots the paper's 8-D state
     /// `[s_x, s_y, v_x, v_y]` per robot at rest, with `headings` in degrees (default 0), or
     /// their poses `[x, y, heading (rad)]` per robot. `steps` defaults to the environment's
-    /// (75 for the point masses, 250 for the robots, ...). The point masses run on
-    /// `plant="model"` or on `plant="rapier"` (colliding discs of `radius`); the robots always
-    /// run on their rapier plant (sonars, contacts, noise seeded by `seed`), the classic
-    /// benchmarks on their model (a run may end early at a terminal state).
+    /// (75 for the point masses, 250 for the robots, ...). `plant` defaults to the
+    /// environment's own: the point masses run on `plant="model"` or on `plant="rapier"`
+    /// (colliding discs of `radius`); the robots always run on their rapier plant (sonars,
+    /// contacts, noise seeded by `seed`), the classic benchmarks on their model (a run may
+    /// end early at a terminal state).
     ///
     /// Returns a dict of numpy arrays: `states` (K+1, E) as `fuzzyq rollout --csv` writes them
     /// (the robots' paper state), `actions` (K, A), `rewards` (K,), `times` (K+1,); for the
     /// robots also `poses` (K+1, n, 3), `sonar` (K+1, n, S), `observations` (K+1, n, S+2)
     /// (what a policy learned on the robots acts on) and `action_indices` (K, n); and
     /// `metrics`, a dict with the fields of `fuzzyq rollout --json`.
-    #[pyo3(signature = (x0 = None, steps = None, *, seed = 0, headings = None, plant = "model", radius = None))]
+    #[pyo3(signature = (x0 = None, steps = None, *, seed = 0, headings = None, plant = None, radius = None))]
     #[allow(clippy::too_many_arguments)] // the rollout's settings, as keyword arguments
     fn rollout<'py>(
         &self,
@@ -453,7 +413,7 @@ impl Policy {
         steps: Option<usize>,
         seed: u64,
         headings: Option<&Bound<'py, PyAny>>,
-        plant: &str,
+        plant: Option<&str>,
         radius: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let Some(model) = self.inner.model() else {
@@ -467,9 +427,17 @@ impl Policy {
         let env = model.kind();
         let spec = env.spec();
         let rapier = match plant {
-            "model" => false,
-            "rapier" => true,
-            other => {
+            None => spec.robot_plant,
+            Some("model") if spec.robot_plant => {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "plant: khepera policies run on the rapier plant only",
+                ));
+            }
+            Some("model") => false,
+            Some("rapier") => true,
+            Some(other) => {
                 return Err(error(
                     py,
                     Kind::Config,
@@ -504,7 +472,10 @@ impl Policy {
         if steps == 0 {
             return Err(error(py, Kind::Config, "steps: must be at least 1"));
         }
-        let start = self.start(py, model, x0, headings)?;
+        let x0 = x0.map(|x| vector(x, "x0", None)).transpose()?;
+        let headings = headings.map(|h| vector(h, "headings", None)).transpose()?;
+        let start =
+            evaluate::start_for(model, x0, headings.as_deref()).map_err(|e| sim_error(py, &e))?;
         let plant = if rapier && spec.rapier_point_masses {
             let defaults = PointMassPlantConfig::default();
             PlantChoice::Rapier(PointMassPlantConfig {

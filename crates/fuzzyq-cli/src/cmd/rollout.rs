@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 use fuzzyq_core::q::PolicyKind;
-use fuzzyq_sim::model::khepera::{poses_from_paper, random_starts};
+use fuzzyq_sim::model::khepera::random_starts;
 use fuzzyq_sim::model::pointmass::random_starts as point_mass_starts;
 use fuzzyq_sim::model::{EnvKind, EnvModel, EnvSpec, F64Model, StartsKind};
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
@@ -28,8 +28,9 @@ pub(crate) struct RolloutArgs {
     /// A policy file written by `fuzzyq train` (any learner).
     #[arg(long, value_name = "POLICY")]
     policy: PathBuf,
-    /// Initial state, comma-separated [default: the environment's; for the point masses the
-    /// paper's -4,-6,-2,2,5,3,2,-1, for the robots -4,5,0,0,5,3,0,0].
+    /// Initial state, comma-separated (for the robots the paper's state, or their poses x,y,heading
+    /// per robot) [default: the environment's; for the point masses the paper's
+    /// -4,-6,-2,2,5,3,2,-1, for the robots -4,5,0,0,5,3,0,0].
     #[arg(long, value_name = "X0", allow_hyphen_values = true)]
     x0: Option<String>,
     /// Khepera: initial headings in degrees, one per robot [default: 0 for every robot].
@@ -117,21 +118,17 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     if let Some(n) = args.starts {
         return many_starts(&args, &policy, model, n, steps, seed);
     }
-    let x0 = match &args.x0 {
-        Some(t) => parse_list(t, "--x0")?,
-        None => default_start(spec, model)?,
-    };
-    let start = match model {
-        EnvModel::Khepera(k) => {
-            let headings = match &args.headings {
-                Some(t) => parse_list(t, "--headings")?,
-                None => vec![0.0; k.config().agents],
-            };
-            let poses = poses_from_paper(k.config(), &x0, &headings)?;
-            poses.iter().flatten().copied().collect()
-        }
-        _ => x0.clone(),
-    };
+    let x0 = args
+        .x0
+        .as_deref()
+        .map(|t| parse_list(t, "--x0"))
+        .transpose()?;
+    let headings = args
+        .headings
+        .as_deref()
+        .map(|t| parse_list(t, "--headings"))
+        .transpose()?;
+    let start = evaluate::start_for(model, x0, headings.as_deref())?;
     let plant = match args.plant {
         Some(PlantArg::Rapier) => PlantChoice::Rapier(PointMassPlantConfig {
             radius: args
@@ -223,7 +220,7 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
             }
             if !args.quiet {
                 print_stdout(&format!(
-                    "{} policy, {} steps of {} s from {x0:?}{}: discounted return {:.4}, final \
+                    "{} policy, {} steps of {} s from {start:?}{}: discounted return {:.4}, final \
                      state {:?}, V(x0) {:.4}\n",
                     kind.name(),
                     summary.steps,
@@ -303,19 +300,6 @@ fn check_flags(
         )?;
     }
     Ok(())
-}
-
-/// The environment's default start for this policy's agents.
-fn default_start(spec: &EnvSpec, model: &EnvModel) -> anyhow::Result<Vec<f64>> {
-    let agents = F64Model::n_agents(model);
-    if spec.multi_agent && agents != 2 {
-        anyhow::bail!(
-            "the policy has {agents} agents; give --x0 with {} values (the default start is the \
-             paper's, for 2 agents)",
-            spec.state_names.len() * agents
-        );
-    }
-    Ok(spec.default_start.to_vec())
 }
 
 /// The trajectory as CSV: time, the state's and the action's variables (suffixed by the agent

@@ -12,7 +12,7 @@
 use fuzzyq_core::q::PolicyKind;
 
 use crate::error::{ConfigError, SimError};
-use crate::model::khepera::random_starts;
+use crate::model::khepera::{poses_from_paper, random_starts};
 use crate::model::{EnvModel, F64Model};
 use crate::run::metrics::{
     KheperaMetrics, KheperaRun, MonteCarlo, RolloutMetrics, RunSummary, SuccessReport, Trajectory,
@@ -142,6 +142,44 @@ fn run_with(
             }
         }
     })
+}
+
+/// The start of one run of a policy of `model`, as [`run`] takes it: `x0` (`None`: the
+/// environment's default start, the paper's for two agents); for the robots, their poses from
+/// the paper's state `x0` and `headings` in degrees (`None`: 0 for every robot), or `x0`
+/// itself when it already holds `[x, y, heading]` per robot and no headings are given.
+pub fn start_for(
+    model: &EnvModel,
+    x0: Option<Vec<f64>>,
+    headings: Option<&[f64]>,
+) -> Result<Vec<f64>, SimError> {
+    let spec = model.kind().spec();
+    let agents = F64Model::n_agents(model);
+    let x0 = match x0 {
+        Some(x0) => x0,
+        None if spec.multi_agent && agents != 2 => {
+            return Err(ConfigError::invalid(
+                "x0",
+                format!(
+                    "the policy has {agents} agent{}; give x0 with {} values (the default start \
+                     is the paper's, for 2 agents)",
+                    if agents == 1 { "" } else { "s" },
+                    spec.state_names.len() * agents
+                ),
+            )
+            .into());
+        }
+        None => spec.default_start.to_vec(),
+    };
+    let EnvModel::Khepera(k) = model else {
+        return Ok(x0);
+    };
+    if headings.is_none() && x0.len() == 3 * agents {
+        return Ok(x0);
+    }
+    let headings = headings.map_or_else(|| vec![0.0; agents], <[f64]>::to_vec);
+    let poses = poses_from_paper(k.config(), &x0, &headings)?;
+    Ok(poses.into_iter().flatten().collect())
 }
 
 /// The point masses from every state of `starts` on the model: each run's metrics.
