@@ -136,7 +136,7 @@ impl CompareConfig {
             steps: 100,
             starts: 100,
             seed: 7,
-            start_position: 5.0,
+            start_position: crate::model::pointmass::START_POSITION,
             learners: <Learner as fuzzyq_core::NamedOption>::ALL.to_vec(),
             fql: pointmass_task::default_fql_config(),
             fql_starts: pointmass_task::default_starts(),

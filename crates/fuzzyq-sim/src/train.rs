@@ -150,34 +150,10 @@ impl SampleLearning {
     /// per agent as the grid has own-state cores (so that it has as many parameters as the
     /// additive fuzzy layout).
     pub fn defaults(config: &TrainConfig, learner: Learner) -> Result<Self, SimError> {
-        let mut fql = match (&config.env, learner) {
-            (_, Learner::Fqi) => {
-                return Err(ConfigError::invalid(
-                    "learner",
-                    "fqi learns on the model (train), not from samples",
-                )
-                .into());
-            }
-            (EnvConfig::Pointmass(_), _) => pointmass_task::default_fql_config(),
-            (EnvConfig::Khepera(_), Learner::Fql) => khepera_task::default_fql_config(),
-            (EnvConfig::Khepera(_), Learner::Vqql) => {
-                return Err(ConfigError::invalid(
-                    "learner",
-                    "vqql is available for the pointmass environment only",
-                )
-                .into());
-            }
-            (other, _) => {
-                return Err(ConfigError::invalid(
-                    "learner",
-                    format!(
-                        "fql and vqql are available for the pointmass and khepera environments, \
-                         not {}",
-                        other.name()
-                    ),
-                )
-                .into());
-            }
+        check_available(&config.env, learner)?;
+        let mut fql = match &config.env {
+            EnvConfig::Pointmass(_) => pointmass_task::default_fql_config(),
+            _ => khepera_task::default_fql_config(),
         };
         fql.gamma = config.solver.gamma;
         let g = &config.grid;
@@ -191,6 +167,28 @@ impl SampleLearning {
             starts: pointmass_task::default_starts(),
             vqql,
         })
+    }
+}
+
+/// Whether `learner` learns from samples on `env`; the error says why not.
+fn check_available(env: &EnvConfig, learner: Learner) -> Result<(), ConfigError> {
+    match (env, learner) {
+        (_, Learner::Fqi) => Err(ConfigError::invalid(
+            "learner",
+            "fqi learns on the model (train), not from samples",
+        )),
+        (EnvConfig::Pointmass(_), _) | (EnvConfig::Khepera(_), Learner::Fql) => Ok(()),
+        (EnvConfig::Khepera(_), Learner::Vqql) => Err(ConfigError::invalid(
+            "learner",
+            "vqql is available for the pointmass environment only",
+        )),
+        (other, _) => Err(ConfigError::invalid(
+            "learner",
+            format!(
+                "fql and vqql are available for the pointmass and khepera environments, not {}",
+                other.name()
+            ),
+        )),
     }
 }
 
@@ -213,6 +211,7 @@ pub fn learn_from_samples(
     progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
 ) -> Result<Learned, SimError> {
     config.validate()?;
+    check_available(&config.env, learning.learner)?;
     learning.fql.validate()?;
     if let Some(v) = &learning.vqql {
         v.validate()?;
@@ -274,10 +273,6 @@ pub fn learn_from_samples(
                 lloyd,
             })
         }
-        _ => Err(SampleLearning::defaults(config, learning.learner)
-            .err()
-            .unwrap_or_else(|| {
-                ConfigError::invalid("learner", "not available for this environment").into()
-            })),
+        _ => unreachable!("check_available refused the other pairs"),
     }
 }

@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::model::khepera::random_starts;
-use fuzzyq_sim::model::pointmass::random_starts as point_mass_starts;
+use fuzzyq_sim::model::pointmass::{START_POSITION, random_starts as point_mass_starts};
 use fuzzyq_sim::model::{EnvKind, EnvModel, EnvSpec, F64Model, StartsKind};
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use fuzzyq_sim::run::metrics::{PointMassReport, RolloutMetrics, Trajectory};
@@ -83,10 +83,6 @@ enum PlantArg {
     /// rapier2d rigid bodies.
     Rapier,
 }
-
-/// Random point-mass starts put each agent within this distance of the goal per axis (m), as
-/// `fuzzyq compare` does.
-const POINT_MASS_START_POSITION: f64 = 5.0;
 
 pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     check_outputs(&[
@@ -491,20 +487,20 @@ fn many_starts(
             }
         }
         EnvModel::PointMass(pm) => {
-            let starts = point_mass_starts(pm, n, seed, POINT_MASS_START_POSITION)?;
+            let starts = point_mass_starts(pm, n, seed, START_POSITION)?;
             let runs = evaluate::point_mass_starts(policy, &starts, steps, kind)?;
             let report = PointMassReport::from_runs(&runs);
             if let Some(p) = &args.json {
                 let json = StartsJson {
                     seed: Some(seed),
-                    start_position: Some(POINT_MASS_START_POSITION),
+                    start_position: Some(START_POSITION),
                     ..StartsJson::new(&report, kind, steps, &runs)
                 };
                 write_json(p, &json)?;
             }
             if !args.quiet {
                 print_stdout(&format!(
-                    "{} policy, {n} random starts at rest within {POINT_MASS_START_POSITION} m \
+                    "{} policy, {n} random starts at rest within {START_POSITION} m \
                      (seed {seed}), {steps} steps: {:.0}% reach the reward region, mean time \
                      {}, mean final error {:.1} cm\n",
                     kind.name(),

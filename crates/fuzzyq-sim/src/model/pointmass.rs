@@ -410,6 +410,10 @@ fn half_width(field: &'static str, v: f64, limit: f64) -> Result<(), ConfigError
     }
 }
 
+/// The usual `position` of [`random_starts`] (m): every start of Table 1's evaluation, and of
+/// `fuzzyq rollout --starts`, has each position coordinate within this distance of the goal.
+pub const START_POSITION: f64 = 5.0;
+
 /// `count` starts at rest, each agent's position uniform in `[-position, position]^2`, drawn
 /// from a [`Pcg64Mcg`] seeded with `seed` (agent-major, `s_x` then `s_y`): the same starts for
 /// every learner, whatever its own seed. `position` must lie in `[0, position_limit]`.
