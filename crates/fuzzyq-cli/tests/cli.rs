@@ -256,7 +256,10 @@ fn bad_input_fails_cleanly_without_touching_files() {
             ("rollout --policy nothing.fzq", "cannot read nothing.fzq"),
             ("rollout --policy cut.fzq", "is truncated"),
             // Bad rollout arguments.
-            ("rollout --policy p.fzq", "give --x0 with 4 values"),
+            (
+                "rollout --policy p.fzq",
+                "x0: the policy has 1 agent; give x0 with 4 values",
+            ),
             ("rollout --policy p.fzq --x0 1,2,x,4", "--x0: value 3"),
             (
                 "rollout --policy p.fzq --x0 1,2,30,4",
