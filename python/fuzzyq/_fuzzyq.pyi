@@ -363,6 +363,7 @@ def solve(
     max_sweeps: int = 1000,
     sweep: str = "sync",
     extrapolate: bool | None = None,
+    evaluation_sweeps: int | None = None,
     absorbing_goal: bool = False,
     precision: str | None = None,
     backup: str = "auto",

@@ -207,16 +207,18 @@ fn sync_and_async_reach_the_same_fixed_point() {
 fn results_do_not_depend_on_thread_count() {
     let (m, medium) = medium_two_agent::<f32>();
     let (_, small) = small_two_agent::<f32>();
-    for (path, sweep, max_sweeps, extrapolate) in [
-        (BackupPath::Block, SweepMode::Synchronous, 1000, false),
-        (BackupPath::Block, SweepMode::Synchronous, 1000, true),
-        (BackupPath::Block, SweepMode::Asynchronous, 1000, false),
-        (BackupPath::Generic, SweepMode::Synchronous, 4, true),
-        (BackupPath::Generic, SweepMode::Asynchronous, 4, false),
+    for (path, sweep, max_sweeps, extrapolate, evaluation_sweeps) in [
+        (BackupPath::Block, SweepMode::Synchronous, 1000, false, 0),
+        (BackupPath::Block, SweepMode::Synchronous, 1000, true, 0),
+        (BackupPath::Block, SweepMode::Synchronous, 1000, true, 5),
+        (BackupPath::Block, SweepMode::Asynchronous, 1000, false, 0),
+        (BackupPath::Generic, SweepMode::Synchronous, 4, true, 0),
+        (BackupPath::Generic, SweepMode::Asynchronous, 4, false, 0),
     ] {
         let c = SolverConfig {
             max_sweeps,
             extrapolate,
+            evaluation_sweeps,
             ..config(path, sweep)
         };
         let g = if path == BackupPath::Block {
@@ -430,6 +432,7 @@ fn kernel_instances_give_identical_solutions() {
             let c = SolverConfig {
                 kernel: Some(k),
                 extrapolate: true,
+                evaluation_sweeps: 5,
                 ..SolverConfig::default()
             };
             (k, run(&m, &g, &c))
@@ -497,6 +500,96 @@ fn extrapolation_stops_within_the_same_bound_in_fewer_sweeps() {
         },
     );
     assert_eq!(a.v, b.v);
+}
+
+/// Modified policy iteration stops by the span rule within the paper's guarantee
+/// `gamma/(1-gamma) xi` of a tightly converged reference, in fewer full backups than value
+/// iteration needs sweeps; its greedy actions are those of the returned `V`; where its
+/// conditions fail, value iteration runs.
+#[test]
+fn modified_policy_iteration_stops_within_the_same_bound_in_fewer_full_backups() {
+    use fuzzyq_core::solver::Scheme;
+    let (m, g) = medium_two_agent::<f64>();
+    let reference = run(
+        &m,
+        &g,
+        &SolverConfig {
+            xi: 1e-9,
+            extrapolate: true,
+            ..SolverConfig::default()
+        },
+    );
+    let gamma = 0.96;
+    for xi in [0.05, 0.005] {
+        let value = run(
+            &m,
+            &g,
+            &SolverConfig {
+                xi,
+                extrapolate: true,
+                ..SolverConfig::default()
+            },
+        );
+        let mpi = run(
+            &m,
+            &g,
+            &SolverConfig {
+                xi,
+                extrapolate: true,
+                evaluation_sweeps: 5,
+                ..SolverConfig::default()
+            },
+        );
+        assert_eq!(value.scheme, Scheme::Value);
+        assert_eq!(mpi.scheme, Scheme::ModifiedPolicy);
+        assert!(mpi.converged() && mpi.final_delta <= xi);
+        assert!(mpi.evaluation_sweeps() > 0);
+        let err = max_diff(&mpi.v, &reference.v);
+        let bound = mpi.error_bound(gamma);
+        assert!(
+            err <= bound + 1e-9,
+            "xi {xi}: error {err} > its bound {bound}"
+        );
+        assert!(bound <= gamma / (1.0 - gamma) * xi);
+        assert!(
+            mpi.full_backups() < value.sweeps.len(),
+            "xi {xi}: {} full backups vs {} sweeps",
+            mpi.full_backups(),
+            value.sweeps.len()
+        );
+        let op = Operator::new(
+            &m,
+            g.view(),
+            Backup {
+                gamma,
+                absorbing_goal: false,
+            },
+            BackupPath::Block,
+        )
+        .unwrap();
+        assert_eq!(op.greedy(&mpi.v).unwrap(), mpi.greedy);
+    }
+    // Absorbing goals, asynchronous sweeps and the generic path run value iteration.
+    for c in [
+        SolverConfig {
+            absorbing_goal: true,
+            ..SolverConfig::default()
+        },
+        config(BackupPath::Block, SweepMode::Asynchronous),
+        SolverConfig {
+            max_sweeps: 3,
+            ..config(BackupPath::Generic, SweepMode::Synchronous)
+        },
+    ] {
+        let c = SolverConfig {
+            extrapolate: true,
+            evaluation_sweeps: 5,
+            ..c
+        };
+        let s = run(&m, &g, &c);
+        assert_eq!(s.scheme, Scheme::Value, "{c:?}");
+        assert_eq!(s.evaluation_sweeps(), 0);
+    }
 }
 
 /// A model given only as a table at the cores (as a Python callable is) solves to the same `V`

@@ -45,6 +45,7 @@ struct Settings<'a> {
     max_sweeps: usize,
     sweep: &'a str,
     extrapolate: Option<bool>,
+    evaluation_sweeps: Option<usize>,
     absorbing_goal: bool,
     precision: Option<&'a str>,
     backup: &'a str,
@@ -78,6 +79,11 @@ impl Settings<'_> {
             extrapolate: self
                 .extrapolate
                 .unwrap_or(classic.is_none() && defaults.extrapolate),
+            evaluation_sweeps: self.evaluation_sweeps.unwrap_or(if classic.is_none() {
+                defaults.evaluation_sweeps
+            } else {
+                0
+            }),
             kernel: self
                 .kernel
                 .map(|k| parse_option::<Kernel>(py, "kernel", k))
@@ -115,6 +121,7 @@ fn observer<'a>(
                     d.set_item("delta_lower", p.record.delta.lower)?;
                     d.set_item("delta_upper", p.record.delta.upper)?;
                     d.set_item("extrapolated", p.record.extrapolated)?;
+                    d.set_item("evaluation", p.record.evaluation)?;
                     d.set_item("seconds", p.record.seconds)?;
                     d.set_item("bound", p.bound)?;
                     d.set_item("xi", p.xi)?;
@@ -137,11 +144,12 @@ fn observer<'a>(
 /// `model` is a built-in model (`PointMass`, `DcMotor`, `Pendulum`, `CarHill`, `Arm`), solved
 /// through the same code as `fuzzyq train`, or a `CallableModel`, tabulated on the grid first.
 /// Settings left at `None` take the model's defaults: for a classic benchmark its preset's
-/// `gamma` and `xi`, plain sweeps (`extrapolate=False`) in `"f64"`, as `fuzzyq train --preset`
-/// runs it; otherwise `gamma=0.96`, `xi=0.05`, `extrapolate=True`, `"f32"`.
+/// `gamma` and `xi`, plain sweeps (`extrapolate=False`, `evaluation_sweeps=0`) in `"f64"`, as
+/// `fuzzyq train --preset` runs it; otherwise `gamma=0.96`, `xi=0.05`, `extrapolate=True`,
+/// `evaluation_sweeps=5` (modified policy iteration where it applies), `"f32"`.
 /// `operator="q-values"` runs Busoniu's fuzzy Q-iteration (theta stored; built-in models).
 /// `callback(info)` is called after every sweep with a dict (`sweep`, `delta_lower`,
-/// `delta_upper`, `extrapolated`, `seconds`, `bound`, `xi`); an exception it raises stops the
+/// `delta_upper`, `extrapolated`, `evaluation`, `seconds`, `bound`, `xi`); an exception it raises stops the
 /// solve and propagates. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
 #[pyfunction]
 #[pyo3(signature = (
@@ -153,6 +161,7 @@ fn observer<'a>(
     max_sweeps = 1000,
     sweep = "sync",
     extrapolate = None,
+    evaluation_sweeps = None,
     absorbing_goal = false,
     precision = None,
     backup = "auto",
@@ -171,6 +180,7 @@ pub(crate) fn solve(
     max_sweeps: usize,
     sweep: &str,
     extrapolate: Option<bool>,
+    evaluation_sweeps: Option<usize>,
     absorbing_goal: bool,
     precision: Option<&str>,
     backup: &str,
@@ -185,6 +195,7 @@ pub(crate) fn solve(
         max_sweeps,
         sweep,
         extrapolate,
+        evaluation_sweeps,
         absorbing_goal,
         precision,
         backup,

@@ -89,6 +89,7 @@ where
             delta_v: f64::NAN,
             seconds: start.elapsed().as_secs_f64(),
             extrapolated: false,
+            evaluation: false,
         };
         records.push(record);
         observer(&Progress {
@@ -106,12 +107,14 @@ where
         final_delta: q.deltas.last().copied().unwrap_or(f64::NAN),
         reward_bound: q.deltas.first().copied().unwrap_or(0.0),
         sweeps: records,
+        scheme: solver::Scheme::Value,
         stop: q.stop,
         bound,
         path: solver::BackupPath::Generic,
         kernel: "q-values",
         multiply_adds_per_sweep: None,
         sweep_seconds: q.seconds,
+        evaluation_seconds: 0.0,
         seconds: start.elapsed().as_secs_f64(),
     })
 }

@@ -62,6 +62,10 @@ pub(crate) struct TrainArgs {
     /// Plain sweeps from theta_0 = 0, as in the paper.
     #[arg(long)]
     no_extrapolate: bool,
+    /// Modified policy iteration: at most N policy-evaluation sweeps after each full backup
+    /// (default 5; 0 = value iteration, one full backup per sweep, as in the paper).
+    #[arg(long, value_name = "N")]
+    evaluation_sweeps: Option<usize>,
     /// Backup implementation.
     #[arg(long, value_parser = output::named::<BackupPath>())]
     backup: Option<BackupPath>,
@@ -119,6 +123,8 @@ struct Summary<'a> {
     env: &'a str,
     policy: String,
     sweeps: usize,
+    full_backups: usize,
+    evaluation_sweeps: usize,
     converged: bool,
     delta_inf: f64,
     xi: f64,
@@ -134,6 +140,7 @@ struct Summary<'a> {
     kernel: &'a str,
     multiply_adds_per_sweep: Option<f64>,
     sweep_seconds: f64,
+    evaluation_seconds: f64,
     gflops_fma: Option<f64>,
     precision: Precision,
     sweep: SweepMode,
@@ -216,6 +223,7 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     if args.no_extrapolate {
         s.extrapolate = false;
     }
+    s.evaluation_sweeps = args.evaluation_sweeps.unwrap_or(s.evaluation_sweeps);
     config.validate()?;
     Ok(config)
 }
@@ -230,6 +238,9 @@ fn peak_memory_mb() -> Option<f64> {
 
 fn fmt_delta(p: &Progress) -> String {
     let d = p.record.delta;
+    if p.record.evaluation {
+        return format!("evaluation, half-span {:.4}", d.lower);
+    }
     if p.record.extrapolated {
         return "extrapolated".into();
     }
@@ -369,6 +380,8 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             env,
             policy: args.out.display().to_string(),
             sweeps: s.sweeps,
+            full_backups: s.sweeps - s.evaluation.len(),
+            evaluation_sweeps: s.evaluation.len(),
             converged: s.converged,
             delta_inf: s.final_delta,
             xi: config.solver.xi,
@@ -384,10 +397,13 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             kernel: &s.kernel,
             multiply_adds_per_sweep: s.multiply_adds_per_sweep,
             sweep_seconds: s.sweep_seconds,
-            // Billions of multiply-adds per second over the sweeps.
-            gflops_fma: s
-                .multiply_adds_per_sweep
-                .map(|m| m * s.sweeps as f64 / s.sweep_seconds.max(1e-9) / 1e9),
+            evaluation_seconds: s.evaluation_seconds,
+            // Billions of multiply-adds per second over the full backups.
+            gflops_fma: s.multiply_adds_per_sweep.map(|m| {
+                m * (s.sweeps - s.evaluation.len()) as f64
+                    / (s.sweep_seconds - s.evaluation_seconds).max(1e-9)
+                    / 1e9
+            }),
             precision: config.solver.precision,
             sweep: config.solver.sweep,
             absorbing_goal: config.solver.absorbing_goal,

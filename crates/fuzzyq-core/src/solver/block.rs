@@ -77,15 +77,18 @@ enum Last {
         /// Maximum of the absolute values.
         abs: bool,
     },
-    /// The lowest maximising action of each core: one [`Out::Arg`] per run.
+    /// The maximum and the lowest maximising action of each core: one [`Out::Arg`] per run.
     Argmax,
+    /// The expected value under one given action per core (policy evaluation): one
+    /// [`Out::Max`] per run.
+    Eval,
 }
 
 /// What a run delivers: for the core(s) starting at its first argument.
 enum Out<'a, T> {
     Row(&'a [T]),
     Max(&'a [T]),
-    Arg(&'a [u32]),
+    Arg(&'a [T], &'a [u32]),
 }
 
 /// Per-task buffers of the block path.
@@ -594,7 +597,9 @@ impl<T: Real> BlockOperator<T> {
         }
     }
 
-    /// The fused last stage on `input` for the last-block cores `first..first + n`.
+    /// The fused last stage on `input` for the last-block cores `first..first + n`;
+    /// `policy` holds their product actions for [`Last::Eval`].
+    #[allow(clippy::too_many_arguments)] // the stage's context, spelled out
     fn last_stage<'w>(
         &self,
         level: usize,
@@ -603,6 +608,7 @@ impl<T: Real> BlockOperator<T> {
         input: &[T],
         last: Last,
         extra: &'w mut Extra<T>,
+        policy: &[u32],
     ) -> Out<'w, T> {
         let t = &self.tables[level];
         let (rows, na, p) = (t.rows.view(), t.n_actions, self.p_len[level]);
@@ -610,14 +616,17 @@ impl<T: Real> BlockOperator<T> {
         let bounds = &mut extra.bounds;
         match last {
             Last::Max { abs } => {
-                (self.kernels.last)(rows, first, na, p, abs, input, m, bounds);
+                (self.kernels.last)(rows, first, na, p, abs, input, m, bounds, None);
                 Out::Max(m)
             }
             Last::Argmax => {
-                (self.kernels.last)(rows, first, na, p, false, input, m, bounds);
                 let a = &mut extra.args[..n];
-                (self.kernels.argmax)(rows, first, na, p, input, m, a);
-                Out::Arg(a)
+                (self.kernels.last)(rows, first, na, p, false, input, m, bounds, Some(&mut *a));
+                Out::Arg(m, a)
+            }
+            Last::Eval => {
+                (self.kernels.eval)(rows, first, na, p, input, &policy[..n], m);
+                Out::Max(m)
             }
             Last::Rows => unreachable!("rows are not fused"),
         }
@@ -625,7 +634,8 @@ impl<T: Real> BlockOperator<T> {
 
     /// Runs stage `level` for block core `c` on `input`, then the later stages for every core
     /// of the later blocks, delivering the results as `last` says; `local` numbers the cores
-    /// among those sharing the blocks before `level`.
+    /// among those sharing the blocks before `level`, and `policy` holds the product actions
+    /// of those cores for [`Last::Eval`] (empty otherwise).
     #[allow(clippy::too_many_arguments)] // recursion state, spelled out
     fn run<E: FnMut(usize, Out<'_, T>)>(
         &self,
@@ -636,13 +646,40 @@ impl<T: Real> BlockOperator<T> {
         extra: &mut Extra<T>,
         local: usize,
         last: Last,
+        policy: &[u32],
         emit: &mut E,
     ) {
         let nb = self.tables.len();
+        let pol = |first: usize, n: usize| {
+            if policy.is_empty() {
+                policy
+            } else {
+                &policy[first..first + n]
+            }
+        };
         if last != Last::Rows && level + 1 == nb {
             // A single block: this stage is the last one, for core `c` alone.
-            let out = self.last_stage(level, c, 1, input, last, extra);
+            let out = self.last_stage(level, c, 1, input, last, extra, pol(local, 1));
             emit(local, out);
+            return;
+        }
+        if last == Last::Eval && level >= 1 && level + 2 == nb {
+            // The last two stages for the given actions only: a few products per core
+            // instead of this stage for every action (the same sums, the same bits).
+            let next = &self.tables[level + 1];
+            let n = next.n_cores;
+            let m = &mut extra.maxima[..n];
+            (self.kernels.eval_pair)(
+                self.tables[level].rows.view(),
+                c,
+                next.rows.view(),
+                (self.tables[level].n_actions, next.n_actions),
+                self.p_len[level],
+                input,
+                pol(local * n, n),
+                m,
+            );
+            emit(local * n, Out::Max(m));
             return;
         }
         let (out, deeper) = stages.split_first_mut().expect("one buffer per stage");
@@ -653,8 +690,9 @@ impl<T: Real> BlockOperator<T> {
         }
         let next = &self.tables[level + 1];
         if last != Last::Rows && level + 2 == nb {
-            let out = self.last_stage(level + 1, 0, next.n_cores, out, last, extra);
-            emit(local * next.n_cores, out);
+            let n = next.n_cores;
+            let out = self.last_stage(level + 1, 0, n, out, last, extra, pol(local * n, n));
+            emit(local * n, out);
             return;
         }
         for c2 in 0..next.n_cores {
@@ -666,6 +704,7 @@ impl<T: Real> BlockOperator<T> {
                 extra,
                 local * next.n_cores + c2,
                 last,
+                policy,
                 emit,
             );
         }
@@ -680,7 +719,7 @@ impl<T: Real> BlockOperator<T> {
         last: Last,
         emit: &mut E,
     ) {
-        self.run(0, c0, v, &mut w.stages, &mut w.extra, 0, last, emit);
+        self.run(0, c0, v, &mut w.stages, &mut w.extra, 0, last, &[], emit);
     }
 
     /// Whether the last stage can be fused with the reduction `kind`: the maximum over the
@@ -753,10 +792,11 @@ impl<T: Real> BlockOperator<T> {
                     out[at + i] = pick((v, 0));
                 }
             }
-            Out::Arg(a) => {
-                for (i, &u) in a.iter().enumerate() {
-                    let u = if op.is_goal(base + first + i) { 0 } else { u };
-                    out[at + i] = pick((T::ZERO, u));
+            Out::Arg(m, a) => {
+                for (i, (&x, &u)) in m.iter().zip(a).enumerate() {
+                    let core = base + first + i;
+                    let u = if op.is_goal(core) { 0 } else { u };
+                    out[at + i] = pick((op.finish_max(core, x), u));
                 }
             }
         }
@@ -800,9 +840,79 @@ impl<T: Real> BlockOperator<T> {
             extra,
             reduce,
         } = w;
-        self.run(0, c0, v, stages, extra, 0, last, &mut |first, values| {
-            self.deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
-        });
+        self.run(
+            0,
+            c0,
+            v,
+            stages,
+            extra,
+            0,
+            last,
+            &[],
+            &mut |first, values| {
+                self.deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
+            },
+        );
+    }
+
+    /// Whether [`Self::evaluate`] can run for `op`: the last stage fuses (several blocks, the
+    /// identity action map, a state-only reward) and no slab has terminal pairs.
+    pub(super) fn can_evaluate<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+    ) -> bool {
+        self.fused(op, Reduce::Max).is_some() && self.terminals.is_none()
+    }
+
+    /// One policy-evaluation sweep: `out[i] = rho_i + gamma (P_{policy[i]} v)_i` for every core
+    /// (internal order; `policy` holds joint actions, which equal product actions here). The
+    /// stages before the last run as in a full backup; the last computes one row per core.
+    pub(super) fn evaluate<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        policy: &[u32],
+        out: &mut [T],
+    ) {
+        debug_assert!(self.can_evaluate(op));
+        let slab = self.slab_len();
+        par::for_each_chunk_mut(
+            out,
+            slab,
+            || self.work(op),
+            |w, c0, chunk| {
+                let base = c0 * slab;
+                let pol = &policy[base..base + chunk.len()];
+                let Work {
+                    stages,
+                    extra,
+                    reduce,
+                } = w;
+                self.run(
+                    0,
+                    c0,
+                    v,
+                    stages,
+                    extra,
+                    0,
+                    Last::Eval,
+                    pol,
+                    &mut |first, values| {
+                        self.deliver(
+                            op,
+                            Reduce::Max,
+                            base,
+                            0,
+                            first,
+                            values,
+                            chunk,
+                            reduce,
+                            &|r: (T, u32)| r.0,
+                        );
+                    },
+                );
+            },
+        );
     }
 
     pub(super) fn sweep_async<M: Model<T> + Sync + ?Sized>(
@@ -861,6 +971,7 @@ impl<T: Real> BlockOperator<T> {
                             extra,
                             c1,
                             last,
+                            &[],
                             &mut |first, values| {
                                 self.deliver(
                                     op,

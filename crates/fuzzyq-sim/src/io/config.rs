@@ -55,6 +55,7 @@ absorbing_goal = false                      # true: goal states collect their re
 backup = "auto"                             # "auto", "block" or "generic"
 precision = "f32"                           # "f32" or "f64"
 extrapolate = true                          # MacQueen extrapolation: fewer sweeps, same guarantee; false = the paper's plain sweeps
+evaluation_sweeps = 5                       # modified policy iteration: evaluation sweeps per full backup; 0 = value iteration (the paper)
 "#;
 
 /// The default Khepera configuration: the robot experiment of sections 3.2-3.3.
@@ -110,6 +111,7 @@ absorbing_goal = false
 backup = "auto"
 precision = "f32"
 extrapolate = true
+evaluation_sweeps = 5
 "#;
 
 /// A whole training configuration.
@@ -308,6 +310,10 @@ pub struct SolverSettings {
     /// Extrapolate synchronous sweeps with MacQueen's bounds (see the solver docs).
     #[serde(default)]
     pub extrapolate: bool,
+    /// Modified policy iteration: at most this many policy-evaluation sweeps after each full
+    /// backup, 0 for value iteration (see [`fuzzyq_core::solver::Scheme`]).
+    #[serde(default = "default_evaluation_sweeps")]
+    pub evaluation_sweeps: usize,
     /// Force a kernel instance (`"scalar"`, `"avx2"`, `"avx512"`); all give the same results.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<Kernel>,
@@ -318,6 +324,13 @@ pub struct SolverSettings {
     /// [`fuzzyq_core::solver::solve_q`]).
     #[serde(default, skip_serializing_if = "is_values")]
     pub operator: IterationOperator,
+}
+
+/// The default cap on evaluation sweeps per full backup.
+pub const DEFAULT_EVALUATION_SWEEPS: usize = 5;
+
+fn default_evaluation_sweeps() -> usize {
+    DEFAULT_EVALUATION_SWEEPS
 }
 
 impl Default for SolverSettings {
@@ -332,6 +345,7 @@ impl Default for SolverSettings {
             backup: c.path,
             precision: Precision::F32,
             extrapolate: true,
+            evaluation_sweeps: DEFAULT_EVALUATION_SWEEPS,
             kernel: None,
             operator: IterationOperator::Values,
         }
@@ -351,6 +365,7 @@ impl SolverSettings {
             path: self.backup,
             kernel: self.kernel,
             extrapolate: self.extrapolate,
+            evaluation_sweeps: self.evaluation_sweeps,
         }
     }
 
@@ -432,6 +447,7 @@ impl TrainConfig {
                 gamma: p.gamma,
                 xi: p.xi,
                 extrapolate: false,
+                evaluation_sweeps: 0,
                 precision: Precision::F64,
                 ..SolverSettings::default()
             },

@@ -115,6 +115,13 @@ pub struct TrainSummary {
     pub sweep_seconds: f64,
     /// The fuzzyq version that trained it.
     pub fuzzyq_version: String,
+    /// The sweeps (from 1) that were policy-evaluation sweeps of modified policy iteration,
+    /// and the seconds they took; known after training, not stored in the file.
+    #[serde(skip)]
+    pub evaluation: Vec<usize>,
+    /// Seconds of the evaluation sweeps (not stored in the file).
+    #[serde(skip)]
+    pub evaluation_seconds: f64,
 }
 
 impl TrainSummary {
@@ -147,6 +154,13 @@ impl TrainSummary {
             multiply_adds_per_sweep: s.multiply_adds_per_sweep,
             sweep_seconds: s.sweep_seconds,
             fuzzyq_version: env!("CARGO_PKG_VERSION").into(),
+            evaluation: s
+                .sweeps
+                .iter()
+                .filter(|r| r.evaluation)
+                .map(|r| r.sweep)
+                .collect(),
+            evaluation_seconds: s.evaluation_seconds,
         }
     }
 }
@@ -580,6 +594,8 @@ mod tests {
                 multiply_adds_per_sweep: Some(1e6),
                 sweep_seconds: 0.4,
                 fuzzyq_version: "test".into(),
+                evaluation: Vec::new(),
+                evaluation_seconds: 0.0,
             },
         }
     }

@@ -106,7 +106,8 @@ pub type StageFn<T> = fn(
 );
 
 /// The fused last stage: `out[i] = max_{a,p} (|.| if `abs`) sum_e w_e in[k_e P + p]` over the
-/// rows `(first_core + i) A + a`.
+/// rows `(first_core + i) A + a`; with `args` (and not `abs`), also each core's lowest
+/// `a P + p` whose expected value equals its maximum (the greedy product action).
 ///
 /// `bounds` is scratch of at least [`last_scratch_len`] values.
 pub type LastFn<T> = fn(
@@ -118,6 +119,7 @@ pub type LastFn<T> = fn(
     input: &[T],
     out: &mut [T],
     bounds: &mut [T],
+    args: Option<&mut [u32]>,
 );
 
 /// Scratch the last stage needs: one bound per input row and register block (with the
@@ -130,16 +132,34 @@ pub(super) fn last_scratch_len(n_cols: usize, p_len: usize) -> usize {
 /// Largest block action count for which the last stage prunes rows (a stack array).
 const PRUNE_MAX_ACTIONS: usize = 64;
 
-/// For each core, the lowest `a * p_len + p` whose expected value equals `maxima[i]` (the
-/// core's maximum from [`LastFn`]): the greedy product action, lowest index first.
-pub type ArgmaxFn<T> = fn(
+/// The last stage for one given action per core: `out[i] = sum_e w_e in[k_e P + p]` over the
+/// row `(first_core + i) A + a`, where `policy[i] = a P + p` is the core's product action.
+/// Entries are summed in the row's order with fused multiply-adds from 0, as [`LastFn`] does,
+/// so for the greedy action the value is bit-identical to the core's maximum.
+pub type EvalFn<T> = fn(
     rows: Rows<'_, T>,
     first_core: usize,
     n_actions: usize,
     p_len: usize,
     input: &[T],
-    maxima: &[T],
-    out: &mut [u32],
+    policy: &[u32],
+    out: &mut [T],
+);
+
+/// The last two stages for one given action per core: for each core `c` of the last block,
+/// with `policy[c] = (a_last A_b + a_b) P + p`,
+/// `out[c] = sum_{(k, w) in last[c, a_last]} w sum_{(j, v) in block[core_b, a_b]} v in[(j R + k) P + p]`,
+/// both sums in row order with fused multiply-adds from 0: the same arithmetic as the stage
+/// kernel followed by [`EvalFn`], without computing the stage for every action.
+pub type EvalPairFn<T> = fn(
+    block: Rows<'_, T>,
+    core_b: usize,
+    last: Rows<'_, T>,
+    n_actions: (usize, usize),
+    p_len: usize,
+    input: &[T],
+    policy: &[u32],
+    out: &mut [T],
 );
 
 /// The kernels of one instruction set for one scalar type.
@@ -148,10 +168,12 @@ pub struct Kernels<T> {
     pub(super) name: &'static str,
     /// One contraction stage.
     pub(super) stage: StageFn<T>,
-    /// The last stage fused with the maximum.
+    /// The last stage fused with the maximum (and the lowest maximiser).
     pub(super) last: LastFn<T>,
-    /// The last stage's lowest maximiser.
-    pub(super) argmax: ArgmaxFn<T>,
+    /// The last stage for one given action per core (policy evaluation).
+    pub(super) eval: EvalFn<T>,
+    /// The last two stages for one given action per core.
+    pub(super) eval_pair: EvalPairFn<T>,
 }
 
 fn check_stage<T>(
@@ -677,6 +699,81 @@ unsafe fn last_block_pruned<T: Real, I: Isa<T>, const NV: usize, const ABS: bool
     }
 }
 
+/// [`last_block_pruned`] that also keeps the lowest index `a * p_len + p` holding the
+/// maximum (`best_idx`, `usize::MAX` before any). Rows whose bound equals the best so far are
+/// still visited (they may tie at a lower index); rows whose bound is below it cannot hold the
+/// maximum. The maximum is the same bits as [`last_block_pruned`]'s, and the index the one
+/// [`argmax_impl`] finds.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+    bounds: &[T],
+    (mut best, mut best_idx): (T, usize),
+) -> (T, usize) {
+    unsafe {
+        let mut ub = [T::ZERO; PRUNE_MAX_ACTIONS];
+        let mut order = [0u8; PRUNE_MAX_ACTIONS];
+        for a in 0..na {
+            let (cols, ws) = rows.row(c * na + a);
+            let mut b = T::ZERO;
+            for (&k, &w) in cols.iter().zip(ws) {
+                b = I::fma1(w, bounds[k as usize], b);
+            }
+            let mut i = a;
+            while i > 0 && ub[order[i - 1] as usize] < b {
+                order[i] = order[i - 1];
+                i -= 1;
+            }
+            order[i] = a as u8;
+            ub[a] = b;
+        }
+        let all = I::mask(I::LANES);
+        for &a in &order[..na] {
+            let a = a as usize;
+            if ub[a] < best {
+                break;
+            }
+            let (cols, ws) = rows.row(c * na + a);
+            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+            let mut top = I::neg_inf();
+            for (j, &v) in acc.iter().enumerate() {
+                top = I::max(
+                    top,
+                    if j + 1 == NV {
+                        I::load_part_from(v, m)
+                    } else {
+                        v
+                    },
+                );
+            }
+            let v = I::reduce_max(top, all);
+            if v < best {
+                continue;
+            }
+            let mut idx = usize::MAX;
+            for (j, &x) in acc.iter().enumerate() {
+                let mask = if j + 1 == NV { m } else { all };
+                if let Some(lane) = I::first_equal(x, v, mask) {
+                    idx = a * p_len + p0 + j * I::LANES + lane;
+                    break;
+                }
+            }
+            if v > best || idx < best_idx {
+                best = v;
+                best_idx = idx;
+            }
+        }
+        (best, best_idx)
+    }
+}
+
 macro_rules! by_nv {
     ($nv:expr, $f:ident::<$t:ty, $i:ty, _ $(, $c:ident)*>($($arg:expr),* $(,)?)) => {
         match $nv {
@@ -702,8 +799,12 @@ unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     input: &[T],
     out: &mut [T],
     bounds: &mut [T],
+    mut args: Option<&mut [u32]>,
 ) {
     check_last(&rows, first_core, na, p_len, input, out);
+    if let Some(a) = &args {
+        assert_eq!(a.len(), out.len(), "one action per core");
+    }
     let ip = input.as_ptr();
     let n_cols = rows.n_cols;
     let prune = na <= PRUNE_MAX_ACTIONS;
@@ -723,6 +824,28 @@ unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                     bounds[bi * n_cols + k] = by_nv!(nv, row_bound::<T, I, _, ABS>(x, m));
                 }
             }
+        }
+        if let Some(args) = args.as_deref_mut().filter(|_| prune && !ABS) {
+            for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
+                let c = first_core + i;
+                let mut best = (T::from_f64(f64::NEG_INFINITY), usize::MAX);
+                for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                    let m = I::mask(tail);
+                    let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+                    best = by_nv!(
+                        nv,
+                        last_block_pruned_arg::<T, I, _>(&rows, c, na, p_len, p0, m, ip, b, best)
+                    );
+                }
+                *o = best.0;
+                // Every row was computed by the same arithmetic, so some lane holds the maximum.
+                *arg = if best.1 == usize::MAX {
+                    0
+                } else {
+                    best.1 as u32
+                };
+            }
+            return;
         }
         for (i, o) in out.iter_mut().enumerate() {
             let c = first_core + i;
@@ -745,6 +868,10 @@ unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
             }
             *o = best;
         }
+    }
+    if let Some(args) = args {
+        // Without pruning (more actions than the stack arrays hold): a separate scan.
+        unsafe { argmax_impl::<T, I>(rows, first_core, na, p_len, input, out, args) };
     }
 }
 
@@ -809,6 +936,85 @@ unsafe fn argmax_impl<T: Real, I: Isa<T>>(
             // The maximum was computed by the same arithmetic, so it is always found.
             *o = found.unwrap_or(0) as u32;
         }
+    }
+}
+
+#[inline(always)]
+unsafe fn eval_impl<T: Real, I: Isa<T>>(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    policy: &[u32],
+    out: &mut [T],
+) {
+    assert_eq!(policy.len(), out.len(), "one action per core");
+    check_last(&rows, first_core, na, p_len, input, out);
+    for (i, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+        let u = u as usize;
+        assert!(
+            u < na * p_len,
+            "policy action beyond the product action set"
+        );
+        let (cols, ws) = rows.row((first_core + i) * na + u / p_len);
+        let p = u % p_len;
+        let mut acc = T::ZERO;
+        for (&k, &w) in cols.iter().zip(ws) {
+            // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
+            acc = unsafe { I::fma1(w, *input.get_unchecked(k as usize * p_len + p), acc) };
+        }
+        *o = acc;
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the kernel's signature
+unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
+    block: Rows<'_, T>,
+    core_b: usize,
+    last: Rows<'_, T>,
+    (na_b, na_last): (usize, usize),
+    p_len: usize,
+    input: &[T],
+    policy: &[u32],
+    out: &mut [T],
+) {
+    let r_len = last.n_cols;
+    let n = out.len();
+    assert_eq!(policy.len(), n, "one action per core");
+    assert!(
+        (core_b + 1) * na_b <= block.n_rows(),
+        "block rows out of range"
+    );
+    assert!(n * na_last <= last.n_rows(), "last-stage rows out of range");
+    assert!(p_len > 0, "empty rows");
+    assert!(
+        block.n_cols * r_len * p_len <= input.len(),
+        "stage input too short"
+    );
+    for (c, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+        let u = u as usize;
+        assert!(
+            u < na_last * na_b * p_len,
+            "policy action beyond the product action set"
+        );
+        let (a_last, rest) = (u / (na_b * p_len), u % (na_b * p_len));
+        let (a_b, p) = (rest / p_len, rest % p_len);
+        let (cols_b, ws_b) = block.row(core_b * na_b + a_b);
+        let (cols, ws) = last.row(c * na_last + a_last);
+        let mut acc = T::ZERO;
+        for (&k, &w) in cols.iter().zip(ws) {
+            let mut inner = T::ZERO;
+            for (&j, &v) in cols_b.iter().zip(ws_b) {
+                let at = (j as usize * r_len + k as usize) * p_len + p;
+                // SAFETY: `j < block.n_cols` and `k < r_len` (the rows' column bounds), so
+                // `at` is below the input length checked above.
+                inner = unsafe { I::fma1(v, *input.get_unchecked(at), inner) };
+            }
+            acc = unsafe { I::fma1(w, inner, acc) };
+        }
+        *o = acc;
     }
 }
 
@@ -1089,12 +1295,29 @@ mod x86 {
         }
         #[inline(always)]
         unsafe fn store_part(p: *mut f32, v: __m256, _m: __m256i, n: usize) {
-            // Masked stores (vmaskmovps) are microcoded and very slow on AMD CPUs: store
-            // through a buffer instead.
-            let mut buf = [0.0f32; 8];
+            // Masked stores (vmaskmovps) are microcoded and very slow on AMD CPUs, and a
+            // variable-length copy calls the C library: store 4, 2 and 1 lanes as `n`'s bits
+            // say (the branches are predictable: a kernel call has one tail length).
             unsafe {
-                _mm256_storeu_ps(buf.as_mut_ptr(), v);
-                core::ptr::copy_nonoverlapping(buf.as_ptr(), p, n);
+                if n == 8 {
+                    _mm256_storeu_ps(p, v);
+                    return;
+                }
+                let mut p = p;
+                let mut x = _mm256_castps256_ps128(v);
+                if n & 4 != 0 {
+                    _mm_storeu_ps(p, x);
+                    p = p.add(4);
+                    x = _mm256_extractf128_ps::<1>(v);
+                }
+                if n & 2 != 0 {
+                    _mm_storel_pd(p.cast(), _mm_castps_pd(x));
+                    p = p.add(2);
+                    x = _mm_movehl_ps(x, x);
+                }
+                if n & 1 != 0 {
+                    _mm_store_ss(p, x);
+                }
             }
         }
         #[inline(always)]
@@ -1181,10 +1404,21 @@ mod x86 {
         #[inline(always)]
         unsafe fn store_part(p: *mut f64, v: __m256d, _m: __m256i, n: usize) {
             // See the f32 instance.
-            let mut buf = [0.0f64; 4];
             unsafe {
-                _mm256_storeu_pd(buf.as_mut_ptr(), v);
-                core::ptr::copy_nonoverlapping(buf.as_ptr(), p, n);
+                if n == 4 {
+                    _mm256_storeu_pd(p, v);
+                    return;
+                }
+                let mut p = p;
+                let mut x = _mm256_castpd256_pd128(v);
+                if n & 2 != 0 {
+                    _mm_storeu_pd(p, x);
+                    p = p.add(2);
+                    x = _mm256_extractf128_pd::<1>(v);
+                }
+                if n & 1 != 0 {
+                    _mm_store_sd(p, x);
+                }
             }
         }
         #[inline(always)]
@@ -1234,48 +1468,15 @@ mod x86 {
     }
 }
 
-/// Declares the entry points of one instance: `unsafe` inner functions compiled with the
-/// instance's target features, and safe wrappers that check the features (a cached atomic
-/// load) before entering them.
-macro_rules! entry_points {
-    ($t:ty, $isa:ty, [$($features:literal)?], $detect:expr, $stage:ident, $last:ident, $argmax:ident) => {
-        fn $argmax(
-            rows: Rows<'_, $t>,
-            first_core: usize,
-            na: usize,
-            p_len: usize,
-            input: &[$t],
-            maxima: &[$t],
-            out: &mut [u32],
-        ) {
-            $(#[target_feature(enable = $features)])?
-            unsafe fn inner(
-                rows: Rows<'_, $t>,
-                first_core: usize,
-                na: usize,
-                p_len: usize,
-                input: &[$t],
-                maxima: &[$t],
-                out: &mut [u32],
-            ) {
-                unsafe { argmax_impl::<$t, $isa>(rows, first_core, na, p_len, input, maxima, out) }
-            }
-            assert!($detect, "CPU features missing for this kernel");
-            // SAFETY: as for the stage kernel, with `check_last`.
-            unsafe { inner(rows, first_core, na, p_len, input, maxima, out) }
-        }
+/// Declares one instance: a module of `unsafe` inner functions compiled with the instance's
+/// target features, safe wrappers that check the features (a cached atomic load) before
+/// entering them, and the instance's [`Kernels`] as `KERNELS`.
+macro_rules! instance {
+    ($module:ident, $label:literal, $t:ty, $isa:ty, [$($features:literal)?], $detect:expr) => {
+        mod $module {
+            use super::*;
 
-        fn $stage(
-            rows: Rows<'_, $t>,
-            first_row: usize,
-            na: usize,
-            r_len: usize,
-            p_len: usize,
-            input: &[$t],
-            out: &mut [$t],
-        ) {
-            $(#[target_feature(enable = $features)])?
-            unsafe fn inner(
+            fn stage(
                 rows: Rows<'_, $t>,
                 first_row: usize,
                 na: usize,
@@ -1284,28 +1485,26 @@ macro_rules! entry_points {
                 input: &[$t],
                 out: &mut [$t],
             ) {
-                unsafe { stage_impl::<$t, $isa>(rows, first_row, na, r_len, p_len, input, out) }
+                $(#[target_feature(enable = $features)])?
+                unsafe fn inner(
+                    rows: Rows<'_, $t>,
+                    first_row: usize,
+                    na: usize,
+                    r_len: usize,
+                    p_len: usize,
+                    input: &[$t],
+                    out: &mut [$t],
+                ) {
+                    unsafe { stage_impl::<$t, $isa>(rows, first_row, na, r_len, p_len, input, out) }
+                }
+                assert!($detect, "CPU features missing for this kernel");
+                // SAFETY: the features were just detected; `stage_impl` checks every bound its
+                // pointer arithmetic relies on (`check_stage`, and the rows' column bound).
+                unsafe { inner(rows, first_row, na, r_len, p_len, input, out) }
             }
-            assert!($detect, "CPU features missing for this kernel");
-            // SAFETY: the features were just detected; `stage_impl` checks every bound its
-            // pointer arithmetic relies on (`check_stage`, and the rows' column bound).
-            unsafe { inner(rows, first_row, na, r_len, p_len, input, out) }
-        }
 
-        #[allow(clippy::too_many_arguments)] // the kernel's signature
-        fn $last(
-            rows: Rows<'_, $t>,
-            first_core: usize,
-            na: usize,
-            p_len: usize,
-            abs: bool,
-            input: &[$t],
-            out: &mut [$t],
-            bounds: &mut [$t],
-        ) {
-            $(#[target_feature(enable = $features)])?
             #[allow(clippy::too_many_arguments)] // the kernel's signature
-            unsafe fn inner(
+            fn last(
                 rows: Rows<'_, $t>,
                 first_core: usize,
                 na: usize,
@@ -1314,18 +1513,101 @@ macro_rules! entry_points {
                 input: &[$t],
                 out: &mut [$t],
                 bounds: &mut [$t],
+                args: Option<&mut [u32]>,
             ) {
-                unsafe {
-                    if abs {
-                        last_impl::<$t, $isa, true>(rows, first_core, na, p_len, input, out, bounds)
-                    } else {
-                        last_impl::<$t, $isa, false>(rows, first_core, na, p_len, input, out, bounds)
+                $(#[target_feature(enable = $features)])?
+                #[allow(clippy::too_many_arguments)] // the kernel's signature
+                unsafe fn inner(
+                    rows: Rows<'_, $t>,
+                    first_core: usize,
+                    na: usize,
+                    p_len: usize,
+                    abs: bool,
+                    input: &[$t],
+                    out: &mut [$t],
+                    bounds: &mut [$t],
+                    args: Option<&mut [u32]>,
+                ) {
+                    unsafe {
+                        if abs {
+                            last_impl::<$t, $isa, true>(rows, first_core, na, p_len, input, out, bounds, args)
+                        } else {
+                            last_impl::<$t, $isa, false>(rows, first_core, na, p_len, input, out, bounds, args)
+                        }
                     }
                 }
+                assert!($detect, "CPU features missing for this kernel");
+                // SAFETY: as above, with `check_last` and the scratch length check.
+                unsafe { inner(rows, first_core, na, p_len, abs, input, out, bounds, args) }
             }
-            assert!($detect, "CPU features missing for this kernel");
-            // SAFETY: as above, with `check_last` and the scratch length check.
-            unsafe { inner(rows, first_core, na, p_len, abs, input, out, bounds) }
+
+            fn eval(
+                rows: Rows<'_, $t>,
+                first_core: usize,
+                na: usize,
+                p_len: usize,
+                input: &[$t],
+                policy: &[u32],
+                out: &mut [$t],
+            ) {
+                $(#[target_feature(enable = $features)])?
+                unsafe fn inner(
+                    rows: Rows<'_, $t>,
+                    first_core: usize,
+                    na: usize,
+                    p_len: usize,
+                    input: &[$t],
+                    policy: &[u32],
+                    out: &mut [$t],
+                ) {
+                    unsafe { eval_impl::<$t, $isa>(rows, first_core, na, p_len, input, policy, out) }
+                }
+                assert!($detect, "CPU features missing for this kernel");
+                // SAFETY: as above; `eval_impl` checks the policy's actions and the lengths.
+                unsafe { inner(rows, first_core, na, p_len, input, policy, out) }
+            }
+
+            #[allow(clippy::too_many_arguments)] // the kernel's signature
+            fn eval_pair(
+                block: Rows<'_, $t>,
+                core_b: usize,
+                last: Rows<'_, $t>,
+                n_actions: (usize, usize),
+                p_len: usize,
+                input: &[$t],
+                policy: &[u32],
+                out: &mut [$t],
+            ) {
+                $(#[target_feature(enable = $features)])?
+                #[allow(clippy::too_many_arguments)] // the kernel's signature
+                unsafe fn inner(
+                    block: Rows<'_, $t>,
+                    core_b: usize,
+                    last: Rows<'_, $t>,
+                    n_actions: (usize, usize),
+                    p_len: usize,
+                    input: &[$t],
+                    policy: &[u32],
+                    out: &mut [$t],
+                ) {
+                    unsafe {
+                        eval_pair_impl::<$t, $isa>(
+                            block, core_b, last, n_actions, p_len, input, policy, out,
+                        )
+                    }
+                }
+                assert!($detect, "CPU features missing for this kernel");
+                // SAFETY: as above; `eval_pair_impl` checks the actions and the lengths.
+                unsafe { inner(block, core_b, last, n_actions, p_len, input, policy, out) }
+            }
+
+            pub(super) const KERNELS: Kernels<$t> = Kernels {
+                name: $label,
+                stage,
+                last,
+                eval,
+                eval_pair,
+            };
         }
     };
 }
@@ -1341,64 +1623,30 @@ fn has_avx2() -> bool {
 }
 
 // The scalar instance needs no features: its "detection" is `true`.
-entry_points!(
-    f32,
-    Scalar,
-    [],
-    true,
-    stage_scalar_f32,
-    last_scalar_f32,
-    argmax_scalar_f32
-);
-entry_points!(
-    f64,
-    Scalar,
-    [],
-    true,
-    stage_scalar_f64,
-    last_scalar_f64,
-    argmax_scalar_f64
-);
+instance!(scalar_f32, "scalar", f32, Scalar, [], true);
+instance!(scalar_f64, "scalar", f64, Scalar, [], true);
 #[cfg(target_arch = "x86_64")]
-entry_points!(
+instance!(
+    avx512_f32,
+    "avx512",
     f32,
     x86::Avx512,
     ["avx512f,fma"],
-    has_avx512(),
-    stage_avx512_f32,
-    last_avx512_f32,
-    argmax_avx512_f32
+    has_avx512()
 );
 #[cfg(target_arch = "x86_64")]
-entry_points!(
+instance!(
+    avx512_f64,
+    "avx512",
     f64,
     x86::Avx512,
     ["avx512f,fma"],
-    has_avx512(),
-    stage_avx512_f64,
-    last_avx512_f64,
-    argmax_avx512_f64
+    has_avx512()
 );
 #[cfg(target_arch = "x86_64")]
-entry_points!(
-    f32,
-    x86::Avx2,
-    ["avx2,fma"],
-    has_avx2(),
-    stage_avx2_f32,
-    last_avx2_f32,
-    argmax_avx2_f32
-);
+instance!(avx2_f32, "avx2", f32, x86::Avx2, ["avx2,fma"], has_avx2());
 #[cfg(target_arch = "x86_64")]
-entry_points!(
-    f64,
-    x86::Avx2,
-    ["avx2,fma"],
-    has_avx2(),
-    stage_avx2_f64,
-    last_avx2_f64,
-    argmax_avx2_f64
-);
+instance!(avx2_f64, "avx2", f64, x86::Avx2, ["avx2,fma"], has_avx2());
 
 /// The kernel instances of a scalar type, best first; only those the CPU supports.
 pub(crate) trait KernelSet: Sized + 'static {
@@ -1407,7 +1655,7 @@ pub(crate) trait KernelSet: Sized + 'static {
 }
 
 macro_rules! kernel_set {
-    ($t:ty, [$s:ident, $l:ident, $a:ident], [$s2:ident, $l2:ident, $a2:ident], [$s5:ident, $l5:ident, $a5:ident]) => {
+    ($t:ty, $scalar:ident, $avx2:ident, $avx512:ident) => {
         impl KernelSet for $t {
             fn available() -> &'static [Kernels<$t>] {
                 static SET: OnceLock<Vec<Kernels<$t>>> = OnceLock::new();
@@ -1416,28 +1664,13 @@ macro_rules! kernel_set {
                     #[cfg(target_arch = "x86_64")]
                     {
                         if has_avx512() {
-                            v.push(Kernels {
-                                name: "avx512",
-                                stage: $s5,
-                                last: $l5,
-                                argmax: $a5,
-                            });
+                            v.push($avx512::KERNELS);
                         }
                         if has_avx2() {
-                            v.push(Kernels {
-                                name: "avx2",
-                                stage: $s2,
-                                last: $l2,
-                                argmax: $a2,
-                            });
+                            v.push($avx2::KERNELS);
                         }
                     }
-                    v.push(Kernels {
-                        name: "scalar",
-                        stage: $s,
-                        last: $l,
-                        argmax: $a,
-                    });
+                    v.push($scalar::KERNELS);
                     v
                 })
             }
@@ -1445,18 +1678,8 @@ macro_rules! kernel_set {
     };
 }
 
-kernel_set!(
-    f32,
-    [stage_scalar_f32, last_scalar_f32, argmax_scalar_f32],
-    [stage_avx2_f32, last_avx2_f32, argmax_avx2_f32],
-    [stage_avx512_f32, last_avx512_f32, argmax_avx512_f32]
-);
-kernel_set!(
-    f64,
-    [stage_scalar_f64, last_scalar_f64, argmax_scalar_f64],
-    [stage_avx2_f64, last_avx2_f64, argmax_avx2_f64],
-    [stage_avx512_f64, last_avx512_f64, argmax_avx512_f64]
-);
+kernel_set!(f32, scalar_f32, avx2_f32, avx512_f32);
+kernel_set!(f64, scalar_f64, avx2_f64, avx512_f64);
 
 /// The instance to use: `choice` if given (`None` if this CPU cannot run it), else the best
 /// available.
