@@ -817,23 +817,28 @@ impl<T: Real> BlockOperator<T> {
             out,
             slab,
             || self.work(op),
-            |w, c0, chunk| self.slab_into(op, v, kind, c0, w, chunk, &pick),
+            |w, c0, chunk| self.slab_into(op, v, kind, None, c0, w, chunk, &pick),
         );
     }
 
     /// Reduces every core of slab `c0` against `v` into `chunk` (one entry per slab core).
+    /// With `policy` (the slab's actions), evaluates them instead ([`Last::Eval`]).
     #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out
     fn slab_into<U, M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         v: &[T],
         kind: Reduce,
+        policy: Option<&[u32]>,
         c0: usize,
         w: &mut Work<T>,
         chunk: &mut [U],
         pick: &impl Fn((T, u32)) -> U,
     ) {
-        let last = self.last_for(self.fused(op, kind), c0);
+        let last = match policy {
+            Some(_) => Last::Eval,
+            None => self.last_for(self.fused(op, kind), c0),
+        };
         let base = c0 * self.slab_len();
         let Work {
             stages,
@@ -848,7 +853,7 @@ impl<T: Real> BlockOperator<T> {
             extra,
             0,
             last,
-            &[],
+            policy.unwrap_or(&[]),
             &mut |first, values| {
                 self.deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
             },
@@ -866,7 +871,8 @@ impl<T: Real> BlockOperator<T> {
 
     /// One policy-evaluation sweep: `out[i] = rho_i + gamma (P_{policy[i]} v)_i` for every core
     /// (internal order; `policy` holds joint actions, which equal product actions here). The
-    /// stages before the last run as in a full backup; the last computes one row per core.
+    /// early stages run as in a full backup; the last two (the last alone for two blocks)
+    /// compute one row per core.
     pub(super) fn evaluate<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
@@ -881,35 +887,16 @@ impl<T: Real> BlockOperator<T> {
             slab,
             || self.work(op),
             |w, c0, chunk| {
-                let base = c0 * slab;
-                let pol = &policy[base..base + chunk.len()];
-                let Work {
-                    stages,
-                    extra,
-                    reduce,
-                } = w;
-                self.run(
-                    0,
-                    c0,
+                let pol = &policy[c0 * slab..c0 * slab + chunk.len()];
+                self.slab_into(
+                    op,
                     v,
-                    stages,
-                    extra,
-                    0,
-                    Last::Eval,
-                    pol,
-                    &mut |first, values| {
-                        self.deliver(
-                            op,
-                            Reduce::Max,
-                            base,
-                            0,
-                            first,
-                            values,
-                            chunk,
-                            reduce,
-                            &|r: (T, u32)| r.0,
-                        );
-                    },
+                    Reduce::Max,
+                    Some(pol),
+                    c0,
+                    w,
+                    chunk,
+                    &|r: (T, u32)| r.0,
                 );
             },
         );
@@ -1009,7 +996,7 @@ impl<T: Real> BlockOperator<T> {
             1,
             || (self.work(op), vec![T::ZERO; slab]),
             |(w, buf), c0| {
-                self.slab_into(op, dv, Reduce::AbsMax, c0, w, buf, &|r: (T, u32)| r.0);
+                self.slab_into(op, dv, Reduce::AbsMax, None, c0, w, buf, &|r: (T, u32)| r.0);
                 buf.iter().copied().fold(T::ZERO, T::max_of)
             },
         );

@@ -1167,13 +1167,7 @@ where
                 // midpoint.
                 shift_in = T::ZERO;
                 if extrapolate && testable && !converged {
-                    let s = T::from_f64(gamma / (1.0 - gamma) * 0.5 * (lo + hi));
-                    if s != T::ZERO {
-                        for x in v_next.iter_mut() {
-                            *x += s;
-                        }
-                        shift_in = s;
-                    }
+                    shift_in = midpoint(&mut v_next, gamma, lo, hi);
                 }
                 core::mem::swap(&mut v_prev, &mut v_cur);
                 core::mem::swap(&mut v_cur, &mut v_next);
@@ -1287,14 +1281,15 @@ where
 const EVALUATION_PROGRESS: f64 = 0.1;
 
 /// Moves `v` to the midpoint of MacQueen's bounds after a sweep whose change `v - prev` lies
-/// in `[lo, hi]`: adds `gamma/(1-gamma) (lo + hi)/2`.
-fn midpoint<T: Real>(v: &mut [T], gamma: f64, lo: f64, hi: f64) {
+/// in `[lo, hi]`: adds `gamma/(1-gamma) (lo + hi)/2`, and returns that shift.
+fn midpoint<T: Real>(v: &mut [T], gamma: f64, lo: f64, hi: f64) -> T {
     let s = T::from_f64(gamma / (1.0 - gamma) * 0.5 * (lo + hi));
     if s != T::ZERO {
         for x in v.iter_mut() {
             *x += s;
         }
     }
+    s
 }
 
 /// [`Scheme::ModifiedPolicy`]: full backups recording the greedy actions, each followed by
@@ -1322,6 +1317,34 @@ where
     let mut sweep_seconds = 0.0;
     let mut evaluation_seconds = 0.0;
     let mut full = 0usize;
+    // Ends a sweep whose result is in `next`: moves it to the midpoint of MacQueen's bounds,
+    // makes it `v`, records the sweep and shows it to the observer. Returns the half-span of
+    // the sweep's change and the observer's answer.
+    let mut settle = |v: &mut Vec<T>,
+                      next: &mut Vec<T>,
+                      records: &mut Vec<SweepRecord>,
+                      extrapolated: bool,
+                      evaluation: bool| {
+        let (dv, lo, hi) = diff_stats(next, v, T::ZERO);
+        let half = 0.5 * (hi - lo);
+        midpoint(next, gamma, lo, hi);
+        core::mem::swap(v, next);
+        let record = SweepRecord {
+            sweep: records.len() + 1,
+            delta: Delta::exact(half),
+            delta_v: dv,
+            seconds: start.elapsed().as_secs_f64(),
+            extrapolated,
+            evaluation,
+        };
+        records.push(record);
+        let flow = observer(&Progress {
+            record,
+            bound: run.bound,
+            xi: config.xi,
+        });
+        (half, flow)
+    };
     'outer: while full < config.max_sweeps {
         let t0 = Instant::now();
         if full == 0 {
@@ -1339,27 +1362,9 @@ where
         }
         sweep_seconds += t0.elapsed().as_secs_f64();
         full += 1;
-        let (dv, lo, hi) = diff_stats(&next, &v, T::ZERO);
-        let half = 0.5 * (hi - lo);
-        midpoint(&mut next, gamma, lo, hi);
-        core::mem::swap(&mut v, &mut next);
+        let (half, flow) = settle(&mut v, &mut next, &mut records, full > 1, false);
         final_delta = half;
-        let converged = half <= config.xi;
-        let record = SweepRecord {
-            sweep: records.len() + 1,
-            delta: Delta::exact(half),
-            delta_v: dv,
-            seconds: start.elapsed().as_secs_f64(),
-            extrapolated: full > 1,
-            evaluation: false,
-        };
-        records.push(record);
-        let flow = observer(&Progress {
-            record,
-            bound: run.bound,
-            xi: config.xi,
-        });
-        if converged {
+        if half <= config.xi {
             stop = Stop::Converged;
             break;
         }
@@ -1383,24 +1388,7 @@ where
             let dt = t0.elapsed().as_secs_f64();
             sweep_seconds += dt;
             evaluation_seconds += dt;
-            let (dv, lo, hi) = diff_stats(&next, &v, T::ZERO);
-            let half = 0.5 * (hi - lo);
-            midpoint(&mut next, gamma, lo, hi);
-            core::mem::swap(&mut v, &mut next);
-            let record = SweepRecord {
-                sweep: records.len() + 1,
-                delta: Delta::exact(half),
-                delta_v: dv,
-                seconds: start.elapsed().as_secs_f64(),
-                extrapolated: true,
-                evaluation: true,
-            };
-            records.push(record);
-            let flow = observer(&Progress {
-                record,
-                bound: run.bound,
-                xi: config.xi,
-            });
+            let (half, flow) = settle(&mut v, &mut next, &mut records, true, true);
             if flow.is_break() {
                 return Err(SolveError::Interrupted {
                     sweeps: records.len(),
