@@ -37,6 +37,9 @@ enum Command {
     Compare(cmd::compare::CompareArgs),
     /// Print an environment's default configuration (the paper's values) as TOML.
     Config(cmd::config::ConfigArgs),
+    /// Know the machine: CPU, caches, kernels, the measured multiply-add peak, and the
+    /// solver's full backups on a problem (the paper's by default) as a fraction of it.
+    Bench(cmd::bench::BenchArgs),
 }
 
 /// Why the program stops with a non-zero exit code other than 2.
@@ -77,6 +80,7 @@ fn main() -> ExitCode {
         Command::Rollout(args) => cmd::rollout::run(args),
         Command::Compare(args) => cmd::compare::run(args),
         Command::Config(args) => cmd::config::run(args),
+        Command::Bench(args) => cmd::bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

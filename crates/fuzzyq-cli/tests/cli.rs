@@ -777,3 +777,55 @@ fn classic_benchmarks_train_roll_out_and_evaluate() {
     );
     assert!(!d.join("x.fzq").exists());
 }
+
+#[test]
+fn bench_reports_the_machine_and_the_backup_against_the_peak() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let o = fuzzyq(
+        &[
+            "bench",
+            "--config",
+            "one.toml",
+            "--kernel",
+            "scalar",
+            "--backups",
+            "2",
+            "--peak-seconds",
+            "0.05",
+            "--json",
+            "b.json",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8(o.stdout).unwrap();
+    for line in ["cpu ", "caches ", "kernels ", "FMA peak ", "backup "] {
+        assert!(out.contains(line), "{line:?} missing from {out}");
+    }
+    let j = json(&d.join("b.json"));
+    assert_eq!(j["kernel"], "scalar");
+    assert_eq!(j["backup"], "block");
+    assert_eq!(j["backup_seconds"].as_array().unwrap().len(), 2);
+    assert!(j["peak_gfma_per_second"].as_f64().unwrap() > 0.0);
+    let f = j["fraction_of_peak"].as_f64().unwrap();
+    assert!(f > 0.0 && f.is_finite(), "fraction {f}");
+    assert!(j["kernels"].as_array().unwrap().contains(&"scalar".into()));
+
+    assert_all_fail(
+        d,
+        &[
+            ("bench --backups 0", "--backups must be at least 1"),
+            (
+                "bench --peak-seconds 0",
+                "--peak-seconds must be in (0, 60]",
+            ),
+            (
+                "bench --config missing.toml",
+                "cannot read config missing.toml",
+            ),
+            ("bench --threads 0", "--threads must be at least 1"),
+        ],
+    );
+}

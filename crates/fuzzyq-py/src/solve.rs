@@ -340,7 +340,7 @@ pub(crate) fn load(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
     }
 }
 
-/// The kernel instances this CPU runs, fastest first (`"avx512"`, `"avx2"`, `"scalar"`).
+/// The kernel instances this CPU runs, fastest first (`"avx512"`, `"avx2"`, `"portable"`, `"scalar"`).
 #[pyfunction]
 pub(crate) fn available_kernels() -> Vec<&'static str> {
     <Kernel as NamedOption>::ALL
@@ -560,7 +560,7 @@ impl Solution {
         self.summary.seconds
     }
 
-    /// The kernel instance used (`"avx512"`, `"avx2"`, `"scalar"`, `"generic"` or
+    /// The kernel instance used (`"avx512"`, `"avx2"`, `"portable"`, `"scalar"`, `"generic"` or
     /// `"q-values"`).
     #[getter]
     fn kernel(&self) -> &str {

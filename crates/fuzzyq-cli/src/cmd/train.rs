@@ -194,6 +194,20 @@ pub(crate) fn load_config(
     Ok(config)
 }
 
+/// Starts the global thread pool with `threads` workers (default: one per core).
+pub(crate) fn start_pool(threads: Option<usize>) -> anyhow::Result<()> {
+    if let Some(n) = threads {
+        if n == 0 {
+            anyhow::bail!("--threads must be at least 1");
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot start the thread pool")?;
+    }
+    Ok(())
+}
+
 /// The configuration with every flag applied, validated.
 fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
@@ -284,15 +298,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     check_writable(&args.out, "policy")?;
     check_outputs(&[(&args.json, "summary")])?;
-    if let Some(n) = args.threads {
-        if n == 0 {
-            anyhow::bail!("--threads must be at least 1");
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("cannot start the thread pool")?;
-    }
+    start_pool(args.threads)?;
     let threads = rayon::current_num_threads();
     let stop = output::interrupt_flag();
 

@@ -35,7 +35,7 @@
 
 use std::vec::Vec;
 
-use super::simd::{Kernels, RowsBuf, last_scratch_len};
+use super::simd::{INPUT_PAD, Kernels, RowsBuf, last_scratch_len};
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
 use crate::backup::{SparseRows, contract};
@@ -525,7 +525,7 @@ impl<T: Real> BlockOperator<T> {
         Ok(())
     }
 
-    /// Name of the kernel instance in use (`"avx512"`, `"avx2"` or `"scalar"`).
+    /// Name of the kernel instance in use (`"avx512"`, `"avx2"`, `"portable"` or `"scalar"`).
     pub(super) fn kernel_name(&self) -> &'static str {
         self.kernels.name
     }
@@ -542,6 +542,11 @@ impl<T: Real> BlockOperator<T> {
         total
     }
 
+    /// Length of stage `b`'s output for one block core.
+    fn stage_len(&self, b: usize) -> usize {
+        self.r_len[b] * self.tables[b].n_actions * self.p_len[b]
+    }
+
     /// Fresh per-task buffers.
     fn work<M: Model<T> + Sync + ?Sized>(&self, op: &Operator<'_, T, M>) -> Work<T> {
         let last = self.tables.last().expect("at least one block");
@@ -551,7 +556,8 @@ impl<T: Real> BlockOperator<T> {
                 .tables
                 .iter()
                 .enumerate()
-                .map(|(b, t)| vec![T::ZERO; self.r_len[b] * t.n_actions * self.p_len[b]])
+                // Padded so that every kernel instance reads them with its fastest loads.
+                .map(|(b, _)| vec![T::ZERO; self.stage_len(b) + INPUT_PAD])
                 .collect(),
             extra: Extra {
                 scratch: vec![T::ZERO; self.r_len[0] * self.tables[0].n_actions],
@@ -685,7 +691,7 @@ impl<T: Real> BlockOperator<T> {
         let (out, deeper) = stages.split_first_mut().expect("one buffer per stage");
         self.stage(level, c, input, out, &mut extra.scratch);
         if level + 1 == nb {
-            emit(local, Out::Row(out));
+            emit(local, Out::Row(&out[..self.stage_len(level)]));
             return;
         }
         let next = &self.tables[level + 1];

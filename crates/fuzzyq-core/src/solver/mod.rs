@@ -210,8 +210,11 @@ crate::named_option! {
         Avx512 = "avx512" => "x86-64 AVX-512F",
         /// x86-64 AVX2 with FMA.
         Avx2 = "avx2" => "x86-64 AVX2 with FMA",
-        /// Portable scalar code (fused multiply-add through `mul_add`).
-        Scalar = "scalar" => "portable scalar code",
+        /// Portable code the compiler vectorises (no intrinsics); on x86-64 built for AVX2
+        /// with FMA, elsewhere for the target's baseline.
+        Portable = "portable" => "portable code the compiler vectorises (AVX2 + FMA on x86-64)",
+        /// Scalar code, one lane at a time (fused multiply-add through `mul_add`).
+        Scalar = "scalar" => "scalar code, one lane at a time",
     }
 }
 
@@ -221,6 +224,59 @@ impl Kernel {
     pub fn is_available(self) -> bool {
         simd::select::<f32>(Some(self)).is_some()
     }
+
+    /// The instance the block path uses by default on this CPU (the fastest it runs).
+    #[must_use]
+    pub fn best() -> Self {
+        let name = simd::select::<f32>(None).map_or("scalar", |k| k.name);
+        <Self as crate::NamedOption>::ALL
+            .iter()
+            .copied()
+            .find(|k| k.name() == name)
+            .unwrap_or(Self::Scalar)
+    }
+}
+
+/// The machine's measured fused multiply-add throughput ([`fma_peak`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FmaPeak {
+    /// The kernel instance measured.
+    pub kernel: &'static str,
+    /// Threads that ran the probe at once.
+    pub threads: usize,
+    /// Fused multiply-adds per second over all threads, in billions.
+    pub gfma_per_second: f64,
+}
+
+/// Measures the fused multiply-add throughput this machine reaches with a kernel instance
+/// (`None`: the best available) in precision `T`: every thread of the pool (one without
+/// feature `parallel`) runs 12 independent chains of vector fused multiply-adds, in
+/// registers, for about `seconds`. This is the ceiling the block backup's kernels are
+/// measured against (`fuzzyq bench`); `None` if this CPU cannot run the instance.
+#[must_use]
+pub fn fma_peak<T: Real>(kernel: Option<Kernel>, seconds: f64) -> Option<FmaPeak> {
+    let k = simd::select_real::<T>(kernel)?;
+    const ITERS: usize = 1 << 16;
+    let per_call = (ITERS * simd::PEAK_CHAINS * k.lanes) as f64;
+    use core::hint::black_box as bb;
+    let (seed, a, b) = (T::from_f64(0.5), T::from_f64(0.999_999), T::from_f64(1e-7));
+    let runs = par::broadcast(|| {
+        let start = Instant::now();
+        let mut calls = 0u64;
+        loop {
+            bb((k.peak)(bb(ITERS), bb(seed), bb(a), bb(b)));
+            calls += 1;
+            let t = start.elapsed().as_secs_f64();
+            if t >= seconds {
+                return calls as f64 * per_call / t;
+            }
+        }
+    });
+    Some(FmaPeak {
+        kernel: k.name,
+        threads: runs.len(),
+        gfma_per_second: runs.iter().sum::<f64>() / 1e9,
+    })
 }
 
 crate::named_option! {
@@ -711,7 +767,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         }
     }
 
-    /// The kernel instance of the block path (`"avx512"`, `"avx2"`, `"scalar"`), or
+    /// The kernel instance of the block path (`"avx512"`, `"avx2"`, `"portable"`, `"scalar"`), or
     /// `"generic"` for the generic path.
     #[must_use]
     pub fn kernel(&self) -> &'static str {

@@ -49,3 +49,20 @@ where
         (0..n).map(|i| f(&mut s, i)).collect()
     }
 }
+
+/// `f()` on every thread of the pool at once (one call without feature `parallel`), for
+/// measurements of the whole machine.
+pub(super) fn broadcast<R, F>(f: F) -> Vec<R>
+where
+    R: Send,
+    F: Fn() -> R + Sync,
+{
+    #[cfg(feature = "parallel")]
+    {
+        rayon::broadcast(|_| f())
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        vec![f()]
+    }
+}

@@ -314,7 +314,7 @@ pub struct SolverSettings {
     /// backup, 0 for value iteration (see [`fuzzyq_core::solver::Scheme`]).
     #[serde(default = "default_evaluation_sweeps")]
     pub evaluation_sweeps: usize,
-    /// Force a kernel instance (`"scalar"`, `"avx2"`, `"avx512"`); all give the same results.
+    /// Force a kernel instance (`"scalar"`, `"portable"`, `"avx2"`, `"avx512"`); all give the same results.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<Kernel>,
     /// The iteration: `"values"` (default) interpolates the per-core maxima and keeps only

@@ -107,7 +107,7 @@ pub struct TrainSummary {
     pub reward_bound: f64,
     /// Backup path used: `"block"` or `"generic"`.
     pub backup: String,
-    /// Kernel instance: `"avx512"`, `"avx2"`, `"scalar"` or `"generic"`.
+    /// Kernel instance: `"avx512"`, `"avx2"`, `"portable"`, `"scalar"` or `"generic"`.
     pub kernel: String,
     /// Multiply-adds of one sweep on the block path.
     pub multiply_adds_per_sweep: Option<f64>,

@@ -12,8 +12,9 @@
 //!   action per core (the evaluation sweeps of modified policy iteration).
 //!
 //! Both are written once, generic over a small [`Isa`] trait (vector type, masked loads and
-//! stores, fused multiply-add, maximum), and instantiated for AVX-512F, AVX2 + FMA and scalar
-//! code, in `f32` and `f64`. The instance is chosen at run time from the CPU's features (a
+//! stores, fused multiply-add, maximum), and instantiated for AVX-512F, AVX2 + FMA, portable
+//! arrays the compiler vectorises (`portable`, no intrinsics: the fast path off x86-64) and
+//! scalar code, in `f32` and `f64`. The instance is chosen at run time from the CPU's features (a
 //! distributed binary cannot assume the build machine's CPU); [`super::Kernel`] forces one,
 //! for tests and benchmarks.
 //!
@@ -21,10 +22,12 @@
 //! (`acc = fma(w_e, x_e, acc)` from `acc = 0`), and fused multiply-add is exactly rounded, so
 //! all instances return **bit-identical** results; the tests check that.
 //!
-//! Register blocking: a row is processed in blocks of up to 8 (AVX-512) or 6 (AVX2) vectors
+//! Register blocking: a row is processed in blocks of up to 8 vectors (6 for AVX2 in `f64`)
 //! kept in registers while every entry's input row streams through, so each loaded vector
-//! feeds one fused multiply-add and nothing else touches memory. The last vector of a block is
-//! masked, so rows need no padding.
+//! feeds one fused multiply-add and nothing else touches memory. (Eight AVX2 `f32` vectors
+//! measured 17% faster than six on a Zen 3 host: `BENCHMARKS.md`.) The last vector of a block
+//! is masked, so rows need no padding; inputs padded by [`INPUT_PAD`] elements let the portable
+//! instance load whole vectors there too.
 #![allow(unsafe_code)] // SIMD intrinsics: unaligned loads and stores through raw pointers.
 
 use std::sync::OnceLock;
@@ -132,6 +135,11 @@ pub(super) fn last_scratch_len(n_cols: usize, p_len: usize) -> usize {
     n_cols * p_len.div_ceil(4).max(1)
 }
 
+/// Elements a kernel's input may extend past the tensor to let every instance use its fastest
+/// partial loads (the portable instance reads whole vectors at row tails and discards the
+/// extra lanes). Inputs without them are still correct, on the instance's exact loads.
+pub(super) const INPUT_PAD: usize = 16;
+
 /// Largest block action count for which the last stage prunes rows (a stack array).
 const PRUNE_MAX_ACTIONS: usize = 64;
 
@@ -165,10 +173,23 @@ pub type EvalPairFn<T> = fn(
     out: &mut [T],
 );
 
+/// The throughput probe: `iters` rounds of [`PEAK_CHAINS`] independent vector chains
+/// `x = fma(x, a, b)` from `x = seed` (kept in registers, no memory traffic); returns the
+/// largest final value so the work cannot be optimised away.
+pub type PeakFn<T> = fn(iters: usize, seed: T, a: T, b: T) -> T;
+
+/// Independent chains in the throughput probe: enough to cover the latency of every current
+/// CPU's fused multiply-add units (two units of 4-cycle latency need 8).
+pub(super) const PEAK_CHAINS: usize = 12;
+
 /// The kernels of one instruction set for one scalar type.
 pub struct Kernels<T> {
-    /// `"avx512"`, `"avx2"` or `"scalar"`.
+    /// `"avx512"`, `"avx2"`, `"portable"` or `"scalar"`.
     pub(super) name: &'static str,
+    /// Lanes per vector.
+    pub(super) lanes: usize,
+    /// The fused multiply-add throughput probe ([`super::fma_peak`]).
+    pub(super) peak: PeakFn<T>,
     /// One contraction stage.
     pub(super) stage: StageFn<T>,
     /// The last stage fused with the maximum (and the lowest maximiser).
@@ -225,6 +246,13 @@ trait Isa<T: Copy> {
     const LANES: usize;
     /// Vectors per register block.
     const BLOCK: usize;
+    /// Elements past a tensor's end that [`Isa::load_part`] may read (and discard): 0 for
+    /// instances with masked loads. The kernels run such an instance only on inputs that
+    /// long ([`INPUT_PAD`] covers every instance): the stage kernel runs [`Isa::Exact`] on
+    /// shorter ones, the last stage the scalar instance (a single block's `V`, a rare case).
+    const OVERREAD: usize;
+    /// The instance's variant without over-reads (`Self` where `OVERREAD` is 0).
+    type Exact: Isa<T>;
     unsafe fn zero() -> Self::V;
     unsafe fn neg_inf() -> Self::V;
     unsafe fn splat(x: T) -> Self::V;
@@ -476,6 +504,11 @@ unsafe fn stage_impl<T: Real, I: Isa<T>>(
                 }
             }
             return;
+        }
+        if I::OVERREAD > 0 && input.len() < rows.n_cols * r_len * p_len + I::OVERREAD {
+            // Vector loads on an unpadded input (the first stage reads `V` this way): the
+            // instance's exact variant (rows of one value, above, never load vectors).
+            return stage_impl::<T, I::Exact>(rows, first_row, na, r_len, p_len, input, out);
         }
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
             let m = I::mask(tail);
@@ -808,6 +841,9 @@ unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     if let Some(a) = &args {
         assert_eq!(a.len(), out.len(), "one action per core");
     }
+    if I::OVERREAD > 0 && input.len() < rows.n_cols * p_len + I::OVERREAD {
+        return (scalar::<T>().last)(rows, first_core, na, p_len, ABS, input, out, bounds, args);
+    }
     let ip = input.as_ptr();
     let n_cols = rows.n_cols;
     let prune = na <= PRUNE_MAX_ACTIONS;
@@ -1021,6 +1057,24 @@ unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
     }
 }
 
+#[inline(always)]
+unsafe fn peak_impl<T: Real, I: Isa<T>>(iters: usize, seed: T, a: T, b: T) -> T {
+    unsafe {
+        let (a, b) = (I::splat(a), I::splat(b));
+        let mut acc = [I::splat(seed); PEAK_CHAINS];
+        for _ in 0..iters {
+            for x in &mut acc {
+                *x = I::fma(*x, a, b);
+            }
+        }
+        let mut m = acc[0];
+        for &x in &acc[1..] {
+            m = I::max(m, x);
+        }
+        I::reduce_max(m, I::mask(I::LANES))
+    }
+}
+
 /// Scalar instance: one lane, `mul_add` for the fused multiply-add.
 struct Scalar;
 
@@ -1031,6 +1085,8 @@ macro_rules! scalar_isa {
             type M = bool;
             const LANES: usize = 1;
             const BLOCK: usize = 4;
+            const OVERREAD: usize = 0;
+            type Exact = Self;
             #[inline(always)]
             unsafe fn zero() -> $t {
                 0.0
@@ -1103,6 +1159,7 @@ macro_rules! scalar_isa {
 scalar_isa!(f32);
 scalar_isa!(f64);
 
+mod portable;
 #[cfg(target_arch = "x86_64")]
 mod x86;
 
@@ -1239,8 +1296,20 @@ macro_rules! instance {
                 unsafe { inner(block, core_b, last, n_actions, p_len, input, policy, out) }
             }
 
+            fn peak(iters: usize, seed: $t, a: $t, b: $t) -> $t {
+                $(#[target_feature(enable = $features)])?
+                unsafe fn inner(iters: usize, seed: $t, a: $t, b: $t) -> $t {
+                    unsafe { peak_impl::<$t, $isa>(iters, seed, a, b) }
+                }
+                assert!($detect, "CPU features missing for this kernel");
+                // SAFETY: the features were just detected; no memory is touched.
+                unsafe { inner(iters, seed, a, b) }
+            }
+
             pub(super) const KERNELS: Kernels<$t> = Kernels {
                 name: $label,
+                lanes: <$isa as Isa<$t>>::LANES,
+                peak,
                 stage,
                 last,
                 eval,
@@ -1285,6 +1354,45 @@ instance!(
 instance!(avx2_f32, "avx2", f32, x86::Avx2, ["avx2,fma"], has_avx2());
 #[cfg(target_arch = "x86_64")]
 instance!(avx2_f64, "avx2", f64, x86::Avx2, ["avx2,fma"], has_avx2());
+// The portable instance: on x86-64 compiled with AVX2 + FMA (so it can be compared with the
+// hand-written AVX2 kernels on the same machine, and runs at full width there), elsewhere for
+// the target's baseline, where `mul_add` is one instruction on every 64-bit ARM CPU.
+#[cfg(target_arch = "x86_64")]
+instance!(
+    portable_f32,
+    "portable",
+    f32,
+    portable::Portable<true>,
+    ["avx2,fma"],
+    has_avx2()
+);
+#[cfg(target_arch = "x86_64")]
+instance!(
+    portable_f64,
+    "portable",
+    f64,
+    portable::Portable<true>,
+    ["avx2,fma"],
+    has_avx2()
+);
+#[cfg(not(target_arch = "x86_64"))]
+instance!(
+    portable_f32,
+    "portable",
+    f32,
+    portable::Portable<true>,
+    [],
+    true
+);
+#[cfg(not(target_arch = "x86_64"))]
+instance!(
+    portable_f64,
+    "portable",
+    f64,
+    portable::Portable<true>,
+    [],
+    true
+);
 
 /// The kernel instances of a scalar type, best first; only those the CPU supports.
 pub(crate) trait KernelSet: Sized + 'static {
@@ -1293,7 +1401,7 @@ pub(crate) trait KernelSet: Sized + 'static {
 }
 
 macro_rules! kernel_set {
-    ($t:ty, $scalar:ident, $avx2:ident, $avx512:ident) => {
+    ($t:ty, $scalar:ident, $portable:ident, $avx2:ident, $avx512:ident) => {
         impl KernelSet for $t {
             fn available() -> &'static [Kernels<$t>] {
                 static SET: OnceLock<Vec<Kernels<$t>>> = OnceLock::new();
@@ -1306,8 +1414,11 @@ macro_rules! kernel_set {
                         }
                         if has_avx2() {
                             v.push($avx2::KERNELS);
+                            v.push($portable::KERNELS);
                         }
                     }
+                    #[cfg(not(target_arch = "x86_64"))]
+                    v.push($portable::KERNELS);
                     v.push($scalar::KERNELS);
                     v
                 })
@@ -1316,8 +1427,8 @@ macro_rules! kernel_set {
     };
 }
 
-kernel_set!(f32, scalar_f32, avx2_f32, avx512_f32);
-kernel_set!(f64, scalar_f64, avx2_f64, avx512_f64);
+kernel_set!(f32, scalar_f32, portable_f32, avx2_f32, avx512_f32);
+kernel_set!(f64, scalar_f64, portable_f64, avx2_f64, avx512_f64);
 
 /// The instance to use: `choice` if given (`None` if this CPU cannot run it), else the best
 /// available.
@@ -1327,6 +1438,12 @@ pub(crate) fn select<T: KernelSet>(choice: Option<super::Kernel>) -> Option<&'st
         None => all.first(),
         Some(k) => all.iter().find(|i| i.name == k.name()),
     }
+}
+
+/// The scalar instance of `T` (always available): over-reading instances run it on inputs
+/// without padding (a function pointer, so its code is not inlined into theirs again).
+fn scalar<T: Real>() -> &'static Kernels<T> {
+    select_real::<T>(Some(super::Kernel::Scalar)).expect("the scalar instance always runs")
 }
 
 /// [`select`] for any [`Real`]: the solver is generic over `Real`, whose two types both have

@@ -24,6 +24,14 @@ fn rows_strategy(n_rows: usize, n_cols: usize) -> impl Strategy<Value = RowsBuf<
     })
 }
 
+/// `input` followed by [`INPUT_PAD`] NaNs: what an over-reading instance may load and must
+/// discard.
+fn padded(input: &[f32]) -> Vec<f32> {
+    let mut v = input.to_vec();
+    v.extend([f32::NAN; INPUT_PAD]);
+    v
+}
+
 fn values(n: usize, seed: u64) -> Vec<f32> {
     let mut s = seed | 1;
     (0..n)
@@ -71,6 +79,9 @@ proptest! {
                 (k.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut a);
                 (scalar.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut b);
                 prop_assert_eq!(&a, &b, "stage, {} kernels", k.name);
+                // Padded input (NaN past the tensor): over-reading instances discard it.
+                (k.stage)(rows.view(), c * na, na, r_len, p_len, &padded(&input), &mut a);
+                prop_assert_eq!(&a, &b, "stage on padded input, {} kernels", k.name);
 
                 // The unfused reference agrees to rounding.
                 let sr = SparseRows { ptr: &rows.ptr, col: &rows.col, weight: &rows.weight };
@@ -89,11 +100,17 @@ proptest! {
                 (k.last)(rows.view(), 0, na, p_len, abs, last_in, &mut m, &mut bounds, None);
                 (scalar.last)(rows.view(), 0, na, p_len, abs, last_in, &mut ms, &mut bounds, None);
                 prop_assert_eq!(&m, &ms, "last, {} kernels", k.name);
+                let mut mp = vec![0.0f32; n_c];
+                let mut ap = vec![0u32; n_c];
+                let args_p = (!abs).then_some(&mut ap[..]);
+                (k.last)(rows.view(), 0, na, p_len, abs, &padded(last_in), &mut mp, &mut bounds, args_p);
+                prop_assert_eq!(&mp, &ms, "last on padded input, {} kernels", k.name);
                 let mut args = vec![0u32; n_c];
                 if !abs {
                     let mut ma = vec![0.0f32; n_c];
                     (k.last)(rows.view(), 0, na, p_len, false, last_in, &mut ma, &mut bounds, Some(&mut args));
                     prop_assert_eq!(&ma, &m, "last with actions, {} kernels", k.name);
+                    prop_assert_eq!(&ap, &args, "actions on padded input, {} kernels", k.name);
                     // Evaluating the greedy actions gives the maxima, bit for bit.
                     let mut ev = vec![0.0f32; n_c];
                     (k.eval)(rows.view(), 0, na, p_len, last_in, &args, &mut ev);

@@ -15,6 +15,8 @@ impl Isa<f32> for Avx512 {
     type M = __mmask16;
     const LANES: usize = 16;
     const BLOCK: usize = 8;
+    const OVERREAD: usize = 0;
+    type Exact = Self;
     #[inline(always)]
     unsafe fn zero() -> __m512 {
         unsafe { _mm512_setzero_ps() }
@@ -87,6 +89,8 @@ impl Isa<f64> for Avx512 {
     type M = __mmask8;
     const LANES: usize = 8;
     const BLOCK: usize = 8;
+    const OVERREAD: usize = 0;
+    type Exact = Self;
     #[inline(always)]
     unsafe fn zero() -> __m512d {
         unsafe { _mm512_setzero_pd() }
@@ -162,7 +166,9 @@ impl Isa<f32> for Avx2 {
     type V = __m256;
     type M = __m256i;
     const LANES: usize = 8;
-    const BLOCK: usize = 6;
+    const BLOCK: usize = 8;
+    const OVERREAD: usize = 0;
+    type Exact = Self;
     #[inline(always)]
     unsafe fn zero() -> __m256 {
         unsafe { _mm256_setzero_ps() }
@@ -268,6 +274,8 @@ impl Isa<f64> for Avx2 {
     type M = __m256i;
     const LANES: usize = 4;
     const BLOCK: usize = 6;
+    const OVERREAD: usize = 0;
+    type Exact = Self;
     #[inline(always)]
     unsafe fn zero() -> __m256d {
         unsafe { _mm256_setzero_pd() }

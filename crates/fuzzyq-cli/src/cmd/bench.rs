@@ -1,0 +1,358 @@
+//! `fuzzyq bench`: what this machine is, and how well the solver runs on it.
+//!
+//! Prints the CPU, its caches (as the OS reports them), the kernel instances it runs, the
+//! fused multiply-add peak measured with the chosen instance, and the time of the solver's
+//! full backups on a problem (the paper's grid by default), as multiply-adds per second and as
+//! a fraction of that peak.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use fuzzyq_core::NamedOption;
+use fuzzyq_core::solver::{self, Kernel, Precision};
+use fuzzyq_sim::model::EnvKind;
+use fuzzyq_sim::train;
+use serde::Serialize;
+
+use crate::cmd::train::{load_config, start_pool};
+use crate::output::{self, check_outputs, write_json};
+
+#[derive(Args, Debug)]
+pub(crate) struct BenchArgs {
+    /// The environment whose problem is timed.
+    #[arg(long, value_parser = output::env(), default_value = "pointmass")]
+    env: EnvKind,
+    /// A TOML configuration (see `fuzzyq config`) whose problem is timed instead.
+    #[arg(long, value_name = "FILE.toml")]
+    config: Option<PathBuf>,
+    /// A classic benchmark's named grid.
+    #[arg(long, value_name = "NAME")]
+    preset: Option<String>,
+    /// Kernel instance (default: the fastest this CPU runs).
+    #[arg(long, value_parser = output::named::<Kernel>())]
+    kernel: Option<Kernel>,
+    /// Solver precision (default: the configuration's).
+    #[arg(long, value_parser = output::named::<Precision>())]
+    precision: Option<Precision>,
+    /// Worker threads (default: one per core).
+    #[arg(long, value_name = "N")]
+    threads: Option<usize>,
+    /// Full backups timed (after a first one that is not).
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    backups: usize,
+    /// Seconds of the fused multiply-add peak measurement.
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    peak_seconds: f64,
+    /// Also write the results as JSON.
+    #[arg(long, value_name = "FILE.json")]
+    json: Option<PathBuf>,
+}
+
+/// One cache level as the OS reports it.
+#[derive(Debug, Serialize)]
+struct Cache {
+    level: u32,
+    kind: String,
+    bytes: u64,
+    /// Logical CPUs sharing it.
+    shared_by: usize,
+}
+
+/// The `--json` output.
+#[derive(Debug, Serialize)]
+struct Report {
+    cpu: String,
+    logical_cpus: usize,
+    threads: usize,
+    features: Vec<&'static str>,
+    caches: Vec<Cache>,
+    kernels: Vec<&'static str>,
+    kernel: &'static str,
+    precision: &'static str,
+    peak_gfma_per_second: f64,
+    env: &'static str,
+    cores: usize,
+    joint_actions: usize,
+    backup: String,
+    multiply_adds_per_backup: Option<f64>,
+    backup_seconds: Vec<f64>,
+    median_backup_seconds: f64,
+    gfma_per_second: Option<f64>,
+    fraction_of_peak: Option<f64>,
+}
+
+pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
+    if args.backups == 0 {
+        anyhow::bail!("--backups must be at least 1");
+    }
+    if !(args.peak_seconds > 0.0 && args.peak_seconds <= 60.0) {
+        anyhow::bail!(
+            "--peak-seconds must be in (0, 60], got {}",
+            args.peak_seconds
+        );
+    }
+    check_outputs(&[(&args.json, "JSON")])?;
+    let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
+    start_pool(args.threads)?;
+    let kernel = args.kernel.unwrap_or_else(Kernel::best);
+    if !kernel.is_available() {
+        anyhow::bail!("this CPU cannot run --kernel {}", kernel.name());
+    }
+    // Plain value-iteration sweeps: each one a full backup over every core and joint action.
+    let s = &mut config.solver;
+    s.kernel = Some(kernel);
+    s.precision = args.precision.unwrap_or(s.precision);
+    s.max_sweeps = args.backups + 1;
+    s.xi = f64::MIN_POSITIVE;
+    s.extrapolate = false;
+    s.evaluation_sweeps = 0;
+    config.validate()?;
+
+    let cpu = cpu_name();
+    let logical_cpus = std::thread::available_parallelism().map_or(1, usize::from);
+    let threads = rayon::current_num_threads();
+    let features = features();
+    let caches = caches();
+    let kernels: Vec<&'static str> = Kernel::ALL
+        .iter()
+        .filter(|k| k.is_available())
+        .map(|k| k.name())
+        .collect();
+    println!("cpu        {cpu} ({logical_cpus} logical CPUs, {threads} threads used)");
+    println!(
+        "features   {}",
+        if features.is_empty() {
+            "none of avx512f, avx2, fma".to_string()
+        } else {
+            features.join(" ")
+        }
+    );
+    println!("caches     {}", fmt_caches(&caches));
+    println!(
+        "kernels    {} (fastest first); timing {}",
+        kernels.join(", "),
+        kernel.name()
+    );
+
+    let precision = config.solver.precision;
+    let peak = match precision {
+        Precision::F32 => solver::fma_peak::<f32>(Some(kernel), args.peak_seconds),
+        Precision::F64 => solver::fma_peak::<f64>(Some(kernel), args.peak_seconds),
+    }
+    .context("the kernel instance is not available")?;
+    println!(
+        "FMA peak   {:.1} GFMA/s ({} {}, {} threads, {} s)",
+        peak.gfma_per_second,
+        peak.kernel,
+        precision.name(),
+        peak.threads,
+        args.peak_seconds
+    );
+
+    let (cores, joint) = (config.n_cores(), config.n_joint_actions());
+    eprintln!(
+        "timing {} full backups of {}: {cores} cores x {joint} joint actions ...",
+        args.backups + 1,
+        config.env.name()
+    );
+    let start = Instant::now();
+    let mut ends = Vec::new();
+    let artifact = train::train(&config, |p| {
+        ends.push(p.record.seconds);
+        std::ops::ControlFlow::Continue(())
+    })?;
+    let summary = artifact.summary;
+    // Sweep k's time is the gap between the end of sweep k - 1 and its own; the first one
+    // (after the set-up, from V = 0) is not timed.
+    let times: Vec<f64> = ends.windows(2).map(|w| w[1] - w[0]).collect();
+    let median = median(&times);
+    let fma = summary.multiply_adds_per_sweep;
+    let rate = fma.map(|f| f / median / 1e9);
+    let fraction = rate.map(|r| r / peak.gfma_per_second);
+    println!(
+        "problem    {}: {cores} cores x {joint} joint actions, {} path{}",
+        config.env.name(),
+        summary.backup,
+        fma.map_or(String::new(), |f| format!(
+            ", {f:.3e} multiply-adds per full backup"
+        )),
+    );
+    println!(
+        "backup     {:.3} s median of {} full backups{}",
+        median,
+        times.len(),
+        match (rate, fraction) {
+            (Some(r), Some(f)) =>
+                format!(": {r:.1} GFMA/s, {:.0}% of the measured peak", 100.0 * f),
+            _ => " (the generic path: no multiply-add count)".to_string(),
+        }
+    );
+    eprintln!(
+        "(run {:.1} s including set-up and the final greedy pass)",
+        start.elapsed().as_secs_f64()
+    );
+    if let Some(path) = &args.json {
+        let report = Report {
+            cpu,
+            logical_cpus,
+            threads,
+            features,
+            caches,
+            kernels,
+            kernel: kernel.name(),
+            precision: precision.name(),
+            peak_gfma_per_second: peak.gfma_per_second,
+            env: config.env.name(),
+            cores,
+            joint_actions: joint,
+            backup: summary.backup,
+            multiply_adds_per_backup: fma,
+            backup_seconds: times,
+            median_backup_seconds: median,
+            gfma_per_second: rate,
+            fraction_of_peak: fraction,
+        };
+        write_json(path, &report)?;
+    }
+    Ok(())
+}
+
+fn median(xs: &[f64]) -> f64 {
+    let mut v = xs.to_vec();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => v[n / 2],
+        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
+    }
+}
+
+/// The CPU's model name (Linux `/proc/cpuinfo`), or the architecture elsewhere.
+fn cpu_name() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.trim().to_string())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string())
+}
+
+/// The vector features the kernels use, as this CPU reports them.
+fn features() -> Vec<&'static str> {
+    #[allow(unused_mut)] // empty off x86-64
+    let mut out = Vec::new();
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            out.push("avx512f");
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            out.push("avx2");
+        }
+        if std::arch::is_x86_feature_detected!("fma") {
+            out.push("fma");
+        }
+    }
+    out
+}
+
+/// The caches of CPU 0 (Linux `/sys/devices/system/cpu/cpu0/cache`); empty elsewhere.
+fn caches() -> Vec<Cache> {
+    let dir = Path::new("/sys/devices/system/cpu/cpu0/cache");
+    let mut out = Vec::new();
+    for i in 0..8 {
+        let d = dir.join(format!("index{i}"));
+        let read = |f: &str| std::fs::read_to_string(d.join(f)).ok();
+        let (Some(level), Some(kind), Some(size)) = (read("level"), read("type"), read("size"))
+        else {
+            continue;
+        };
+        let Some(bytes) = parse_size(size.trim()) else {
+            continue;
+        };
+        out.push(Cache {
+            level: level.trim().parse().unwrap_or(0),
+            kind: kind.trim().to_string(),
+            bytes,
+            shared_by: read("shared_cpu_list").map_or(1, |l| count_cpus(l.trim())),
+        });
+    }
+    out
+}
+
+/// `"32K"`, `"512K"`, `"32768K"`, `"8M"` in bytes.
+fn parse_size(s: &str) -> Option<u64> {
+    let (n, unit) = s.split_at(s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len()));
+    let n: u64 = n.parse().ok()?;
+    Some(match unit {
+        "" => n,
+        "K" => n << 10,
+        "M" => n << 20,
+        "G" => n << 30,
+        _ => return None,
+    })
+}
+
+/// The number of CPUs in a list such as `"0-3,8"`.
+fn count_cpus(list: &str) -> usize {
+    list.split(',')
+        .filter(|p| !p.is_empty())
+        .map(|p| match p.split_once('-') {
+            Some((a, b)) => match (a.parse::<usize>(), b.parse::<usize>()) {
+                (Ok(a), Ok(b)) if b >= a => b - a + 1,
+                _ => 1,
+            },
+            None => 1,
+        })
+        .sum()
+}
+
+fn fmt_caches(caches: &[Cache]) -> String {
+    if caches.is_empty() {
+        return "not reported by the OS".to_string();
+    }
+    caches
+        .iter()
+        .map(|c| {
+            let kind = match c.kind.as_str() {
+                "Data" => "d",
+                "Instruction" => "i",
+                _ => "",
+            };
+            let size = if c.bytes >= 1 << 20 && c.bytes % (1 << 20) == 0 {
+                format!("{} MiB", c.bytes >> 20)
+            } else {
+                format!("{} KiB", c.bytes >> 10)
+            };
+            let shared = if c.shared_by > 1 {
+                format!(" per {} CPUs", c.shared_by)
+            } else {
+                String::new()
+            };
+            format!("L{}{kind} {size}{shared}", c.level)
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cache_sizes_and_cpu_lists_parse() {
+        assert_eq!(parse_size("32K"), Some(32 << 10));
+        assert_eq!(parse_size("8M"), Some(8 << 20));
+        assert_eq!(parse_size("512"), Some(512));
+        assert_eq!(parse_size("12Q"), None);
+        assert_eq!(count_cpus("0-3,8"), 5);
+        assert_eq!(count_cpus("1"), 1);
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+}

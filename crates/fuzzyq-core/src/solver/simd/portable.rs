@@ -1,0 +1,188 @@
+//! The portable instance of [`Isa`]: plain arrays and loops, no intrinsics, written so the
+//! compiler's vectorisers turn each lane loop into one vector instruction.
+//!
+//! A vector is `[T; N]` (8 lanes of `f32`, 4 of `f64`: one 256-bit register on x86-64 AVX2,
+//! two 128-bit registers on AArch64 NEON); each operation is a loop over the lanes that LLVM's
+//! SLP vectoriser maps to one instruction, the fused multiply-add through `mul_add` (an exactly
+//! rounded `llvm.fma`, a single instruction wherever the target has FMA). The maximum is
+//! `if a > b { a } else { b }`, the pattern x86's `maxps` implements exactly. Sums run in the
+//! same order as every other instance's, so the results are bit-identical to theirs.
+//!
+//! Partial vectors (a row's tail) are where portable code loses most: a variable-length loop
+//! becomes a call to `memcpy` and the accumulators leave registers, and even fixed-size copies
+//! (one per length) break the vectoriser's lanes apart (the instance ran at 31% and 69% of the
+//! AVX2 one that way). So a partial load reads the whole vector and zeroes the extra lanes,
+//! which needs the input to extend a vector past the tensor: the block path pads its stage
+//! buffers by [`super::INPUT_PAD`]; on unpadded inputs (`V` itself, read by the first stage)
+//! the stage kernel runs `Portable<false>`, whose partial loads copy one fixed-size head per
+//! length, and the last stage the scalar instance (same bits). Partial stores copy one
+//! fixed-size head per length (they must not write past the row).
+//!
+//! On x86-64 the instance is compiled with AVX2 + FMA enabled (see `instance!` in the parent
+//! module), which is how the tests and benchmarks compare it with the hand-written AVX2
+//! instance on the same machine; elsewhere it is compiled for the target's baseline.
+#![allow(unsafe_code)] // unaligned loads and stores through raw pointers.
+
+use super::Isa;
+
+/// Portable instance. With `PADDED`, partial loads read the whole vector and zero the lanes
+/// past the row (the input must extend [`Isa::OVERREAD`] elements past the tensor, which the
+/// kernels check); without, they copy exactly the row's lanes, one fixed-size copy per length.
+pub(super) struct Portable<const PADDED: bool>;
+
+macro_rules! portable_isa {
+    ($t:ty, $n:literal, [$($k:literal),*]) => {
+        impl<const PADDED: bool> Isa<$t> for Portable<PADDED> {
+            type V = [$t; $n];
+            /// The number of active lanes.
+            type M = usize;
+            const LANES: usize = $n;
+            const BLOCK: usize = 8;
+            const OVERREAD: usize = if PADDED { $n } else { 0 };
+            type Exact = Portable<false>;
+            #[inline(always)]
+            unsafe fn zero() -> [$t; $n] {
+                [0.0; $n]
+            }
+            #[inline(always)]
+            unsafe fn neg_inf() -> [$t; $n] {
+                [<$t>::NEG_INFINITY; $n]
+            }
+            #[inline(always)]
+            unsafe fn splat(x: $t) -> [$t; $n] {
+                [x; $n]
+            }
+            #[inline(always)]
+            unsafe fn mask(n: usize) -> usize {
+                n
+            }
+            #[inline(always)]
+            unsafe fn load(p: *const $t) -> [$t; $n] {
+                // SAFETY: the caller guarantees the `$n` lanes are in bounds.
+                unsafe { p.cast::<[$t; $n]>().read_unaligned() }
+            }
+            #[inline(always)]
+            unsafe fn load_part(p: *const $t, m: usize) -> [$t; $n] {
+                if !PADDED {
+                    // SAFETY: lanes below `m` are in bounds.
+                    return unsafe {
+                        match m {
+                            $($k => load_first::<$t, $n, $k>(p),)*
+                            _ => Self::load(p),
+                        }
+                    };
+                }
+                // A whole-vector load and a select: two vector instructions.
+                // SAFETY: the kernels checked that the whole vector is in bounds.
+                let v = unsafe { Self::load(p) };
+                let mut r = [0.0; $n];
+                #[allow(clippy::needless_range_loop)] // this form vectorises; iterators did not
+                for i in 0..$n {
+                    r[i] = if i < m { v[i] } else { 0.0 };
+                }
+                r
+            }
+            #[inline(always)]
+            unsafe fn store(p: *mut $t, v: [$t; $n]) {
+                // SAFETY: the caller guarantees the `$n` lanes are in bounds.
+                unsafe { p.cast::<[$t; $n]>().write_unaligned(v) }
+            }
+            #[inline(always)]
+            unsafe fn store_part(p: *mut $t, v: [$t; $n], _m: usize, n: usize) {
+                // SAFETY: lanes below `n` are in bounds.
+                unsafe {
+                    match n {
+                        $($k => store_first::<$t, $n, $k>(p, v),)*
+                        _ => Self::store(p, v),
+                    }
+                }
+            }
+            #[inline(always)]
+            unsafe fn first_equal(v: [$t; $n], t: $t, m: usize) -> Option<usize> {
+                v.iter().take(m).position(|&x| x == t)
+            }
+            #[inline(always)]
+            unsafe fn fma(a: [$t; $n], b: [$t; $n], c: [$t; $n]) -> [$t; $n] {
+                let mut r = c;
+                for i in 0..$n {
+                    r[i] = a[i].mul_add(b[i], c[i]);
+                }
+                r
+            }
+            #[inline(always)]
+            unsafe fn max(a: [$t; $n], b: [$t; $n]) -> [$t; $n] {
+                let mut r = b;
+                for i in 0..$n {
+                    r[i] = if a[i] > b[i] { a[i] } else { b[i] };
+                }
+                r
+            }
+            #[inline(always)]
+            unsafe fn abs(a: [$t; $n]) -> [$t; $n] {
+                let mut r = a;
+                for x in &mut r {
+                    *x = x.abs();
+                }
+                r
+            }
+            #[inline(always)]
+            unsafe fn reduce_max(v: [$t; $n], m: usize) -> $t {
+                let mut w = [<$t>::NEG_INFINITY; $n];
+                for i in 0..$n {
+                    w[i] = if i < m { v[i] } else { <$t>::NEG_INFINITY };
+                }
+                let mut half = $n / 2;
+                while half > 0 {
+                    for i in 0..half {
+                        w[i] = if w[i + half] > w[i] { w[i + half] } else { w[i] };
+                    }
+                    half /= 2;
+                }
+                w[0]
+            }
+            #[inline(always)]
+            unsafe fn load_part_from(v: [$t; $n], m: usize) -> [$t; $n] {
+                let mut r = v;
+                for x in r.iter_mut().skip(m) {
+                    *x = <$t>::NEG_INFINITY;
+                }
+                r
+            }
+            #[inline(always)]
+            unsafe fn fma1(a: $t, b: $t, c: $t) -> $t {
+                a.mul_add(b, c)
+            }
+            #[inline(always)]
+            unsafe fn max1(a: $t, b: $t) -> $t {
+                if a >= b { a } else { b }
+            }
+        }
+    };
+}
+portable_isa!(f32, 8, [1, 2, 3, 4, 5, 6, 7]);
+portable_isa!(f64, 4, [1, 2, 3]);
+
+/// The first `K` lanes from `p`, the others zero.
+///
+/// # Safety
+/// `K` values from `p` must be readable; `K <= N`.
+#[inline(always)]
+unsafe fn load_first<T: Copy + Default, const N: usize, const K: usize>(p: *const T) -> [T; N] {
+    let mut v = [T::default(); N];
+    // SAFETY: the caller's contract.
+    let head = unsafe { p.cast::<[T; K]>().read_unaligned() };
+    v[..K].copy_from_slice(&head);
+    v
+}
+
+/// Stores the first `K` lanes of `v` at `p`.
+///
+/// # Safety
+/// `K` values from `p` must be writable; `K <= N`.
+#[inline(always)]
+unsafe fn store_first<T: Copy + Default, const N: usize, const K: usize>(p: *mut T, v: [T; N]) {
+    let mut head = [T::default(); K];
+    head.copy_from_slice(&v[..K]);
+    // SAFETY: the caller's contract.
+    unsafe { p.cast::<[T; K]>().write_unaligned(head) }
+}
