@@ -167,6 +167,12 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
     // Sweep k's time is the gap between the end of sweep k - 1 and its own; the first one
     // (after the set-up, from V = 0) is not timed.
     let times: Vec<f64> = ends.windows(2).map(|w| w[1] - w[0]).collect();
+    if times.is_empty() {
+        anyhow::bail!(
+            "the solve stopped after {} sweep(s) (its values did not change): no full backup to time",
+            ends.len()
+        );
+    }
     let median = median(&times);
     let fma = summary.multiply_adds_per_sweep;
     let rate = fma.map(|f| f / median / 1e9);

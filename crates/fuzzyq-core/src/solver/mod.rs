@@ -267,7 +267,8 @@ pub fn fma_peak<T: Real>(kernel: Option<Kernel>, seconds: f64) -> Option<FmaPeak
             bb((k.peak)(bb(ITERS), bb(seed), bb(a), bb(b)));
             calls += 1;
             let t = start.elapsed().as_secs_f64();
-            if t >= seconds {
+            // A NaN or non-positive duration ends after one call.
+            if t >= seconds || seconds.is_nan() {
                 return calls as f64 * per_call / t;
             }
         }

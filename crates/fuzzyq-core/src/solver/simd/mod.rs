@@ -25,7 +25,7 @@
 //! Register blocking: a row is processed in blocks of up to 8 vectors (6 for AVX2 in `f64`)
 //! kept in registers while every entry's input row streams through, so each loaded vector
 //! feeds one fused multiply-add and nothing else touches memory. (Eight AVX2 `f32` vectors
-//! measured 17% faster than six on a Zen 3 host: `BENCHMARKS.md`.) The last vector of a block
+//! took 17% less time than six on a Zen 3 host: `BENCHMARKS.md`.) The last vector of a block
 //! is masked, so rows need no padding; inputs padded by [`INPUT_PAD`] elements let the portable
 //! instance load whole vectors there too.
 #![allow(unsafe_code)] // SIMD intrinsics: unaligned loads and stores through raw pointers.
@@ -137,7 +137,7 @@ pub(super) fn last_scratch_len(n_cols: usize, p_len: usize) -> usize {
 
 /// Elements a kernel's input may extend past the tensor to let every instance use its fastest
 /// partial loads (the portable instance reads whole vectors at row tails and discards the
-/// extra lanes). Inputs without them are still correct, on the instance's exact loads.
+/// extra lanes). Inputs without them are still correct, on exact loads ([`Isa::OVERREAD`]).
 pub(super) const INPUT_PAD: usize = 16;
 
 /// Largest block action count for which the last stage prunes rows (a stack array).
@@ -249,7 +249,8 @@ trait Isa<T: Copy> {
     /// Elements past a tensor's end that [`Isa::load_part`] may read (and discard): 0 for
     /// instances with masked loads. The kernels run such an instance only on inputs that
     /// long ([`INPUT_PAD`] covers every instance): the stage kernel runs [`Isa::Exact`] on
-    /// shorter ones, the last stage the scalar instance (a single block's `V`, a rare case).
+    /// shorter ones (the first stage reads `V`), the last stage the scalar instance (the block
+    /// path always passes it a padded stage buffer; other callers may not).
     const OVERREAD: usize;
     /// The instance's variant without over-reads (`Self` where `OVERREAD` is 0).
     type Exact: Isa<T>;
