@@ -517,7 +517,8 @@ fn modified_policy_iteration_stops_within_the_same_bound_in_fewer_full_backups()
     let (m, g) = medium_two_agent::<f64>();
     let reference = tight_reference(&m, &g);
     let gamma = 0.96;
-    for xi in [0.05, 0.005] {
+    let mut returned_input = Vec::new();
+    for xi in [0.5, 0.05, 0.005] {
         let value = run(
             &m,
             &g,
@@ -565,7 +566,24 @@ fn modified_policy_iteration_stops_within_the_same_bound_in_fewer_full_backups()
         )
         .unwrap();
         assert_eq!(op.greedy(&mpi.v).unwrap(), mpi.greedy);
+        // Which `V` the run returned: the last full backup's input (final delta = its change
+        // over gamma) or its midpoint-shifted result (final delta = its half-span).
+        let last = mpi.sweeps.last().unwrap();
+        assert!(!last.evaluation);
+        if mpi.final_delta == last.delta_v / gamma {
+            returned_input.push(xi);
+            let change = max_diff(&op.apply(&mpi.v).unwrap(), &mpi.v);
+            assert_eq!(change, last.delta_v);
+            assert!(change <= gamma * xi);
+        } else {
+            assert_eq!(mpi.final_delta, last.delta.upper);
+        }
     }
+    // Both returns are exercised above.
+    assert!(
+        !returned_input.is_empty() && returned_input.len() < 3,
+        "returned the backup's input for xi in {returned_input:?}"
+    );
     // Absorbing goals, asynchronous sweeps and the generic path run value iteration.
     for c in [
         SolverConfig {

@@ -578,6 +578,13 @@ pub enum Scheme {
     /// and `theta = rho + gamma P V` is within `gamma` times it of `theta*`.
     /// [`Solution::final_delta`] is that half-span.
     ///
+    /// When the backup's input is itself close enough, `||d||_inf <= gamma xi`, the run
+    /// returns that input instead: `||V - V*||_inf <= ||d||_inf / (1-gamma)` is within the
+    /// same guarantee, and the greedy actions the backup recorded are exactly those of the
+    /// returned `V`, so no greedy pass is needed (a full backup's cost saved).
+    /// [`Solution::final_delta`] is then `||d||_inf / gamma`, so that
+    /// [`Solution::error_bound`] stays `gamma/(1-gamma) final_delta`.
+    ///
     /// It needs [`SolverConfig::extrapolate`] and the bounds (no absorbing goal, no terminal
     /// states), synchronous sweeps and the
     /// block path with a fused last stage (several blocks, a state-only reward); elsewhere
@@ -599,7 +606,8 @@ pub struct Solution<T> {
     /// Why it stopped.
     pub stop: Stop,
     /// The exact change of the last sweep (for asynchronous sweeps, of `V`; for
-    /// [`Scheme::ModifiedPolicy`], the last full backup's half-span).
+    /// [`Scheme::ModifiedPolicy`], the last full backup's half-span or its change over
+    /// `gamma`, see there).
     pub final_delta: f64,
     /// The a-priori sweep bound (eq 37).
     pub bound: usize,
@@ -1138,22 +1146,32 @@ struct ReduceWork<T> {
     ev: Vec<T>,
 }
 
-/// `(max |a - (b - s)|, min (a - b), max (a - b))`, in `f64`.
+/// Elements per task of the passes over `V` between sweeps.
+const PASS_CHUNK: usize = 1 << 16;
+
+/// `(max |a - (b - s)|, min (a - b), max (a - b))`, in `f64`: maxima and minima, so the same
+/// bits for any split over threads.
 fn diff_stats<T: Real>(a: &[T], b: &[T], s: T) -> (f64, f64, f64) {
     let s = s.to_f64();
-    a.iter().zip(b).fold(
+    par::map_reduce(
+        a.len().min(b.len()),
+        PASS_CHUNK,
         (0.0f64, f64::INFINITY, f64::NEG_INFINITY),
-        |(m, lo, hi), (&x, &y)| {
-            let d = x.to_f64() - y.to_f64();
-            (m.max((d + s).abs()), lo.min(d), hi.max(d))
+        |r| {
+            a[r.clone()].iter().zip(&b[r]).fold(
+                (0.0f64, f64::INFINITY, f64::NEG_INFINITY),
+                |(m, lo, hi), (&x, &y)| {
+                    let d = x.to_f64() - y.to_f64();
+                    (m.max((d + s).abs()), lo.min(d), hi.max(d))
+                },
+            )
         },
+        |x, y| (x.0.max(y.0), x.1.min(y.1), x.2.max(y.2)),
     )
 }
 
 fn max_abs_diff<T: Real>(a: &[T], b: &[T]) -> f64 {
-    a.iter()
-        .zip(b)
-        .fold(0.0f64, |m, (&x, &y)| m.max((x.to_f64() - y.to_f64()).abs()))
+    diff_stats(a, b, T::ZERO).0
 }
 
 /// Runs fuzzy Q-iteration on `model` over `grid` from `theta_0 = 0`.
@@ -1342,9 +1360,16 @@ const EVALUATION_PROGRESS: f64 = 0.1;
 fn midpoint<T: Real>(v: &mut [T], gamma: f64, lo: f64, hi: f64) -> T {
     let s = T::from_f64(gamma / (1.0 - gamma) * 0.5 * (lo + hi));
     if s != T::ZERO {
-        for x in v.iter_mut() {
-            *x += s;
-        }
+        par::for_each_chunk_mut(
+            v,
+            PASS_CHUNK,
+            || (),
+            |_, _, c| {
+                for x in c {
+                    *x += s;
+                }
+            },
+        );
     }
     s
 }
@@ -1374,6 +1399,8 @@ where
     let mut sweep_seconds = 0.0;
     let mut evaluation_seconds = 0.0;
     let mut full = 0usize;
+    // The greedy actions of the returned `V`, when the last full backup already gave them.
+    let mut greedy: Option<Vec<u32>> = None;
     // Ends a sweep whose result is in `next`: moves it to the midpoint of MacQueen's bounds,
     // makes it `v`, records the sweep and shows it to the observer. Returns the half-span of
     // the sweep's change and the observer's answer.
@@ -1384,6 +1411,7 @@ where
                       evaluation: bool| {
         let (dv, lo, hi) = diff_stats(next, v, T::ZERO);
         let half = 0.5 * (hi - lo);
+        let change = dv;
         midpoint(next, gamma, lo, hi);
         core::mem::swap(v, next);
         let record = SweepRecord {
@@ -1400,7 +1428,7 @@ where
             bound: run.bound,
             xi: config.xi,
         });
-        (half, flow)
+        (half, change, flow)
     };
     'outer: while full < config.max_sweeps {
         let t0 = Instant::now();
@@ -1419,8 +1447,18 @@ where
         }
         sweep_seconds += t0.elapsed().as_secs_f64();
         full += 1;
-        let (half, flow) = settle(&mut v, &mut next, &mut records, full > 1, false);
+        let (half, change, flow) = settle(&mut v, &mut next, &mut records, full > 1, false);
         final_delta = half;
+        if full > 1 && change <= gamma * config.xi {
+            // The backup's input is already within `change / (1 - gamma)` of `V*`, at most
+            // the guarantee, and `policy` is exactly its greedy policy: return it as it was
+            // (`settle` left it in `next`) and skip the greedy pass.
+            core::mem::swap(&mut v, &mut next);
+            final_delta = change / gamma;
+            stop = Stop::Converged;
+            greedy = Some(core::mem::take(&mut policy));
+            break;
+        }
         if half <= config.xi {
             stop = Stop::Converged;
             break;
@@ -1445,7 +1483,7 @@ where
             let dt = t0.elapsed().as_secs_f64();
             sweep_seconds += dt;
             evaluation_seconds += dt;
-            let (half, flow) = settle(&mut v, &mut next, &mut records, true, true);
+            let (half, _, flow) = settle(&mut v, &mut next, &mut records, true, true);
             if flow.is_break() {
                 return Err(SolveError::Interrupted {
                     sweeps: records.len(),
@@ -1456,8 +1494,14 @@ where
             }
         }
     }
-    let mut greedy = vec![0u32; n];
-    op.greedy_internal(&v, &mut greedy)?;
+    let greedy = match greedy {
+        Some(g) => g,
+        None => {
+            let mut g = vec![0u32; n];
+            op.greedy_internal(&v, &mut g)?;
+            g
+        }
+    };
     Ok(Solution {
         v: op.to_grid(&v),
         greedy: op.to_grid(&greedy),

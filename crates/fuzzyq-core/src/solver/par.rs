@@ -66,3 +66,27 @@ where
         vec![f()]
     }
 }
+
+/// `map` over the ranges `chunk` items long that cover `0..n`, combined by `reduce` from
+/// `identity`. The grouping of the combinations depends on the split, so `reduce` must give
+/// the same result in any grouping and order (exactly: a maximum, a minimum, not a float sum).
+pub(super) fn map_reduce<R, F, G>(n: usize, chunk: usize, identity: R, map: F, reduce: G) -> R
+where
+    R: Copy + Send + Sync,
+    F: Fn(core::ops::Range<usize>) -> R + Sync + Send,
+    G: Fn(R, R) -> R + Sync + Send,
+{
+    let range = move |i: usize| i * chunk..n.min((i + 1) * chunk);
+    let chunks = n.div_ceil(chunk);
+    #[cfg(feature = "parallel")]
+    {
+        (0..chunks)
+            .into_par_iter()
+            .map(|i| map(range(i)))
+            .reduce(|| identity, &reduce)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        (0..chunks).map(|i| map(range(i))).fold(identity, reduce)
+    }
+}
