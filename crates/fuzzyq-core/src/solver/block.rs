@@ -669,26 +669,34 @@ impl<T: Real> BlockOperator<T> {
             emit(local, out);
             return;
         }
-        if last == Last::Eval && level >= 1 && level + 2 == nb {
-            // The last two stages for the given actions only: a few products per core
-            // instead of this stage for every action (the same sums, the same bits).
-            let next = &self.tables[level + 1];
+        let (out, deeper) = stages.split_first_mut().expect("one buffer per stage");
+        if last == Last::Eval && level + 3 == nb {
+            // The stage before the last two, action by action along whole rows (`[a][r][p]`,
+            // full vectors), then the last two stages for the given actions only: a few
+            // products per core instead of the next stage for every action. Every element is
+            // the same sum as in a full backup, so evaluating the greedy actions gives its bits.
+            let t = &self.tables[level];
+            let (na, rp) = (t.n_actions, self.r_len[level] * self.p_len[level]);
+            (self.kernels.stage)(t.rows.view(), c * na, na, 1, rp, input, &mut out[..na * rp]);
+            let (block, next) = (&self.tables[level + 1], &self.tables[level + 2]);
             let n = next.n_cores;
-            let m = &mut extra.maxima[..n];
-            (self.kernels.eval_pair)(
-                self.tables[level].rows.view(),
-                c,
-                next.rows.view(),
-                (self.tables[level].n_actions, next.n_actions),
-                self.p_len[level],
-                input,
-                pol(local * n, n),
-                m,
-            );
-            emit(local * n, Out::Max(m));
+            for c2 in 0..block.n_cores {
+                let first = (local * block.n_cores + c2) * n;
+                let m = &mut extra.maxima[..n];
+                (self.kernels.eval_pair)(
+                    block.rows.view(),
+                    c2,
+                    next.rows.view(),
+                    (block.n_actions, next.n_actions),
+                    (self.p_len[level + 1], self.p_len[level]),
+                    out,
+                    pol(first, n),
+                    m,
+                );
+                emit(first, Out::Max(m));
+            }
             return;
         }
-        let (out, deeper) = stages.split_first_mut().expect("one buffer per stage");
         self.stage(level, c, input, out, &mut extra.scratch);
         if level + 1 == nb {
             emit(local, Out::Row(&out[..self.stage_len(level)]));
@@ -877,8 +885,9 @@ impl<T: Real> BlockOperator<T> {
 
     /// One policy-evaluation sweep: `out[i] = rho_i + gamma (P_{policy[i]} v)_i` for every core
     /// (internal order; `policy` holds joint actions, which equal product actions here). The
-    /// early stages run as in a full backup; the last two (the last alone for two blocks)
-    /// compute one row per core.
+    /// early stages run as in a full backup, the one before the last two action by action
+    /// along whole rows, and the last two (the last alone for two blocks) compute one row per
+    /// core.
     pub(super) fn evaluate<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,

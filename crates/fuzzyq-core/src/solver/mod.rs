@@ -444,6 +444,8 @@ pub enum SolveError {
     },
     /// The requested kernel instance cannot run on this CPU.
     KernelUnavailable(Kernel),
+    /// [`Operator::evaluate_policy`] on an operator that cannot evaluate a policy.
+    PolicyEvaluation,
     /// The observer asked to stop.
     Interrupted {
         /// Sweeps completed before the stop.
@@ -482,6 +484,10 @@ impl core::fmt::Display for SolveError {
             Self::KernelUnavailable(k) => {
                 write!(f, "this CPU cannot run the {} kernels", k.name())
             }
+            Self::PolicyEvaluation => f.write_str(
+                "policy evaluation needs the block backup with several blocks, a state-only \
+                 reward, no absorbing goal and no terminal states",
+            ),
             Self::Interrupted { sweeps } => write!(f, "interrupted after {sweeps} sweeps"),
         }
     }
@@ -1049,6 +1055,35 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         self.each_core(v, out, Reduce::Argmax, |r| r.1)
     }
 
+    /// One policy-evaluation sweep of `v` (grid order) under the joint actions `policy` (one
+    /// per core, grid order): `rho + gamma P_policy v` per core, the evaluation sweep of
+    /// [`Scheme::ModifiedPolicy`]. Under the greedy actions of `v` it equals [`Self::apply`]
+    /// bit for bit.
+    ///
+    /// Needs what that scheme needs of the operator: the block path with several blocks, a
+    /// state-only reward, no absorbing goal and no terminal states
+    /// ([`SolveError::PolicyEvaluation`] otherwise).
+    pub fn evaluate_policy(&self, v: &[T], policy: &[u32]) -> Result<Vec<T>, SolveError> {
+        crate::error::check_len("V", self.n_cores(), v.len())?;
+        crate::error::check_len("policy", self.n_cores(), policy.len())?;
+        let n_joint = self.joint.n_joint();
+        if let Some(&u) = policy.iter().find(|&&u| u as usize >= n_joint) {
+            return Err(EvalError::OutOfRange {
+                what: "joint action",
+                index: u as usize,
+                len: n_joint,
+            }
+            .into());
+        }
+        if !self.can_evaluate() {
+            return Err(SolveError::PolicyEvaluation);
+        }
+        let (vi, pi) = (self.to_internal(v), self.to_internal(policy));
+        let mut out = self.zeros();
+        self.evaluate(&vi, &pi, &mut out);
+        Ok(self.to_grid(&out))
+    }
+
     /// Whether [`Self::evaluate`] runs on this operator (see [`Scheme::ModifiedPolicy`]).
     fn can_evaluate(&self) -> bool {
         match &self.path {
@@ -1066,11 +1101,11 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     }
 
     /// Row-major grid order -> internal order.
-    fn to_internal(&self, v: &[T]) -> Vec<T> {
+    fn to_internal<U: Copy + Default>(&self, v: &[U]) -> Vec<U> {
         match &self.path {
             Path::Generic(_) => v.to_vec(),
             Path::Block(b) => {
-                let mut out = self.zeros();
+                let mut out = vec![U::default(); v.len()];
                 b.for_each_grid_index(|i, g| out[i] = v[g]);
                 out
             }

@@ -158,16 +158,19 @@ pub type EvalFn<T> = fn(
 );
 
 /// The last two stages for one given action per core: for each core `c` of the last block,
-/// with `policy[c] = (a_last A_b + a_b) P + p`,
-/// `out[c] = sum_{(k, w) in last[c, a_last]} w sum_{(j, v) in block[core_b, a_b]} v in[(j R + k) P + p]`,
-/// both sums in row order with fused multiply-adds from 0: the same arithmetic as the stage
-/// kernel followed by [`EvalFn`], without computing the stage for every action.
+/// with `policy[c] = (a_last A_b + a_b) P + p` and `p = q P_in + p_in` (`prior = (P, P_in)`),
+/// `out[c] = sum_{(k, w) in last[c, a_last]} w sum_{(j, v) in block[core_b, a_b]} v in[((q J + j) R + k) P_in + p_in]`
+/// (`J` the block's successor cores, `R` the last block's), both sums in row order with fused
+/// multiply-adds from 0: the same arithmetic as the stage kernel followed by [`EvalFn`],
+/// without computing the stage for every action. `P_in = P` is the stage kernel's layout
+/// (`in[(j R + k) P + p]`); a smaller `P_in` reads the earlier stage's actions `q` as the
+/// outermost index, the layout of a stage computed action by action along whole rows.
 pub type EvalPairFn<T> = fn(
     block: Rows<'_, T>,
     core_b: usize,
     last: Rows<'_, T>,
     n_actions: (usize, usize),
-    p_len: usize,
+    prior: (usize, usize),
     input: &[T],
     policy: &[u32],
     out: &mut [T],
@@ -1015,7 +1018,7 @@ unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
     core_b: usize,
     last: Rows<'_, T>,
     (na_b, na_last): (usize, usize),
-    p_len: usize,
+    (p_len, p_in): (usize, usize),
     input: &[T],
     policy: &[u32],
     out: &mut [T],
@@ -1030,9 +1033,14 @@ unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
     assert!(n * na_last <= last.n_rows(), "last-stage rows out of range");
     assert!(p_len > 0, "empty rows");
     assert!(
+        p_in > 0 && p_len.is_multiple_of(p_in),
+        "inner prior actions must divide the prior actions"
+    );
+    assert!(
         block.n_cols * r_len * p_len <= input.len(),
         "stage input too short"
     );
+    let q_stride = block.n_cols * r_len;
     for (c, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
         let u = u as usize;
         assert!(
@@ -1041,15 +1049,16 @@ unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
         );
         let (a_last, rest) = (u / (na_b * p_len), u % (na_b * p_len));
         let (a_b, p) = (rest / p_len, rest % p_len);
+        let (q, p) = (p / p_in, p % p_in);
         let (cols_b, ws_b) = block.row(core_b * na_b + a_b);
         let (cols, ws) = last.row(c * na_last + a_last);
         let mut acc = T::ZERO;
         for (&k, &w) in cols.iter().zip(ws) {
             let mut inner = T::ZERO;
             for (&j, &v) in cols_b.iter().zip(ws_b) {
-                let at = (j as usize * r_len + k as usize) * p_len + p;
-                // SAFETY: `j < block.n_cols` and `k < r_len` (the rows' column bounds), so
-                // `at` is below the input length checked above.
+                let at = ((q * q_stride + j as usize * r_len) + k as usize) * p_in + p;
+                // SAFETY: `q < p_len / p_in`, `j < block.n_cols` and `k < r_len` (the rows'
+                // column bounds), so `at` is below the input length checked above.
                 inner = unsafe { I::fma1(v, *input.get_unchecked(at), inner) };
             }
             acc = unsafe { I::fma1(w, inner, acc) };
@@ -1269,7 +1278,7 @@ macro_rules! instance {
                 core_b: usize,
                 last: Rows<'_, $t>,
                 n_actions: (usize, usize),
-                p_len: usize,
+                prior: (usize, usize),
                 input: &[$t],
                 policy: &[u32],
                 out: &mut [$t],
@@ -1281,20 +1290,20 @@ macro_rules! instance {
                     core_b: usize,
                     last: Rows<'_, $t>,
                     n_actions: (usize, usize),
-                    p_len: usize,
+                    prior: (usize, usize),
                     input: &[$t],
                     policy: &[u32],
                     out: &mut [$t],
                 ) {
                     unsafe {
                         eval_pair_impl::<$t, $isa>(
-                            block, core_b, last, n_actions, p_len, input, policy, out,
+                            block, core_b, last, n_actions, prior, input, policy, out,
                         )
                     }
                 }
                 assert!($detect, "CPU features missing for this kernel");
                 // SAFETY: as above; `eval_pair_impl` checks the actions and the lengths.
-                unsafe { inner(block, core_b, last, n_actions, p_len, input, policy, out) }
+                unsafe { inner(block, core_b, last, n_actions, prior, input, policy, out) }
             }
 
             fn peak(iters: usize, seed: $t, a: $t, b: $t) -> $t {

@@ -136,7 +136,8 @@ proptest! {
 }
 
 /// The last two stages for given actions (`eval_pair`) equal the stage kernel followed by the
-/// last stage with actions, bit for bit, for the greedy actions of every core.
+/// last stage with actions, bit for bit, for the greedy actions of every core, on the stage
+/// kernel's layout and on every action-major layout of the same input.
 #[test]
 fn evaluating_two_stages_matches_the_full_stages() {
     // Block rows: 3 block cores x 2 actions over 4 successor block cores.
@@ -147,7 +148,7 @@ fn evaluating_two_stages_matches_the_full_stages() {
         4,
     )
     .unwrap();
-    for (r_len, p_len) in [(5usize, 1usize), (5, 3), (7, 13)] {
+    for (r_len, p_len) in [(5usize, 1usize), (5, 3), (7, 13), (4, 6)] {
         // Last rows: r_len cores x 3 actions over r_len successor cores.
         let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
         for i in 0..r_len * 3 {
@@ -177,18 +178,32 @@ fn evaluating_two_stages_matches_the_full_stages() {
                     &mut bounds,
                     Some(&mut args),
                 );
-                let mut ev = vec![0.0f32; r_len];
-                (k.eval_pair)(
-                    block.view(),
-                    c,
-                    last.view(),
-                    (2, 3),
-                    p_len,
-                    &input,
-                    &args,
-                    &mut ev,
-                );
-                assert_eq!(ev, m, "{} kernels, r {r_len}, p {p_len}, core {c}", k.name);
+                for p_in in (1..=p_len).filter(|d| p_len % d == 0) {
+                    // `input[(j R + k) P + q P_in + p_in]` moved to
+                    // `[((q J + j) R + k) P_in + p_in]`.
+                    let mut moved = vec![f32::NAN; input.len()];
+                    for (i, &x) in input.iter().enumerate() {
+                        let (jk, p) = (i / p_len, i % p_len);
+                        let (q, pi) = (p / p_in, p % p_in);
+                        moved[(q * 4 * r_len + jk) * p_in + pi] = x;
+                    }
+                    let mut ev = vec![0.0f32; r_len];
+                    (k.eval_pair)(
+                        block.view(),
+                        c,
+                        last.view(),
+                        (2, 3),
+                        (p_len, p_in),
+                        &moved,
+                        &args,
+                        &mut ev,
+                    );
+                    assert_eq!(
+                        ev, m,
+                        "{} kernels, r {r_len}, p {p_len} ({p_in} inner), core {c}",
+                        k.name
+                    );
+                }
             }
         }
     }
