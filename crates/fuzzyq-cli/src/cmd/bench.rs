@@ -186,7 +186,7 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
         )),
     );
     println!(
-        "backup     {:.3} s median of {} full backups{}",
+        "backup     {:.3} s median of {} full backups (value iteration from V = 0){}",
         median,
         times.len(),
         match (rate, fraction) {
@@ -194,6 +194,10 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
                 format!(": {r:.1} GFMA/s, {:.0}% of the measured peak", 100.0 * f),
             _ => " (the generic path: no multiply-add count)".to_string(),
         }
+    );
+    eprintln!(
+        "(the last stage skips the most rows on these early sweeps; full backups of a nearly \
+         converged V can take longer: see BENCHMARKS.md)"
     );
     eprintln!(
         "(run {:.1} s including set-up and the final greedy pass)",
