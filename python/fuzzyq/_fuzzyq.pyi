@@ -94,6 +94,7 @@ class PointMass:
         rk4_substeps: int = 10,
         friction: float = 1.0,
         friction_patches: Sequence[tuple[tuple[float, float], float, float]] | None = None,
+        velocity_noise: float = 0.0,
     ) -> PointMass: ...
     @property
     def state_dim(self) -> int: ...

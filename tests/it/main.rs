@@ -2,6 +2,7 @@
 
 mod approxrl;
 mod khepera;
+mod learned;
 mod memberships;
 mod solver;
 mod train_rollout;

@@ -454,6 +454,8 @@ fn compare_writes_the_table_and_figures() {
             "60",
             "--cells",
             "64",
+            "--samples",
+            "2000",
             "--out",
             "cmp",
         ],
@@ -469,7 +471,14 @@ fn compare_writes_the_table_and_figures() {
     for f in ["table1.md", "table1.csv", "paths.png"] {
         assert!(out.join(f).is_file(), "{f}");
     }
-    let learners = ["fqi", "crisp", "fql", "fql-literal", "vqql"];
+    let learners = [
+        "fqi",
+        "crisp",
+        "fql",
+        "fql-literal",
+        "vqql",
+        "learned-model",
+    ];
     for l in learners {
         assert!(out.join(format!("rollout-{l}.png")).is_file(), "{l}");
     }
@@ -492,6 +501,12 @@ fn compare_writes_the_table_and_figures() {
     assert_eq!(reports[2]["parameters"], 2025 * 25);
     assert_eq!(reports[4]["parameters"], 64 * 25);
     assert_eq!(reports[2]["iterations"], 60);
+    // The learned model (2,000 transitions) is the true one here: the same run as fqi's.
+    let learned = &reports[5];
+    assert_eq!(learned["parameters"], 2025 * 25);
+    assert_eq!(learned["iteration_unit"], "sweeps");
+    assert_eq!(learned["time_to_goal_s"], fqi["time_to_goal_s"]);
+    assert_eq!(learned["success_rate"], fqi["success_rate"]);
     assert_eq!(j["trajectories"].as_array().unwrap().len(), learners.len());
 
     // Bad input: exit code 2, one line, nothing written (no output directory either).
@@ -515,6 +530,10 @@ fn compare_writes_the_table_and_figures() {
             (
                 "compare --config one.toml --out fresh --x0=-4,5,0,0 --steps 0",
                 "steps",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --samples 0",
+                "samples",
             ),
             (
                 "compare --config one.toml --out fresh --x0=-4,5,0,0 --start-position 9",
@@ -629,6 +648,97 @@ fn point_mass_learners_from_samples_train_and_roll_out() {
         ],
     );
     assert!(!d.join("z.fzq").exists());
+}
+
+/// `--learner learned-model` on one noisy point mass: the model is learned from the plant,
+/// the fit report lands in the JSON, the policy file carries the tables and rolls out like
+/// the exact model's on the same grid, and bad input is refused.
+#[test]
+fn learned_model_trains_from_interaction_and_rolls_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let one = std::fs::read_to_string(one_agent_config(d)).unwrap();
+    assert!(one.contains("velocity_noise = 0.0 "));
+    std::fs::write(
+        d.join("noisy.toml"),
+        one.replace("velocity_noise = 0.0 ", "velocity_noise = 0.05"),
+    )
+    .unwrap();
+    for (config, out) in [("one.toml", "l.fzq"), ("noisy.toml", "n.fzq")] {
+        let args = [
+            "train",
+            "--config",
+            config,
+            "--learner",
+            "learned-model",
+            "--samples",
+            "3000",
+            "--seed",
+            "4",
+            "--out",
+            out,
+            "--json",
+            "s.json",
+            "-q",
+        ];
+        let o = fuzzyq(&args, d);
+        assert!(o.status.success(), "{config}: {}", stderr(&o));
+        let s = json(&d.join("s.json"));
+        let l = &s["learned_model"];
+        assert_eq!(l["samples"], 3000);
+        assert_eq!(l["fit"]["blocks"].as_array().unwrap().len(), 2);
+        let err = l["table_error"][0]["max_l1"].as_f64().unwrap();
+        if config == "one.toml" {
+            assert!(err < 1e-9, "noise-free tables are exact: {err}");
+        } else {
+            assert!(err > 1e-3, "noise spreads the rows: {err}");
+        }
+    }
+    // Without noise the learned tables are the true ones: the same policy as the model's.
+    let o = fuzzyq(
+        &["train", "--config", "one.toml", "--out", "e.fzq", "-q"],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for policy in ["l.fzq", "e.fzq", "n.fzq"] {
+        let o = fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                policy,
+                "--starts",
+                "10",
+                "--json",
+                &format!("{policy}.json"),
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{policy}: {}", stderr(&o));
+    }
+    let (l, e) = (json(&d.join("l.fzq.json")), json(&d.join("e.fzq.json")));
+    assert_eq!(l["success_rate"], e["success_rate"]);
+    assert!(e["success_rate"].as_f64().unwrap() > 0.5, "{e}");
+    assert_all_fail(
+        d,
+        &[
+            (
+                "train --config one.toml --samples 100 --out z.fzq",
+                "--samples applies",
+            ),
+            (
+                "train --config one.toml --learner learned-model --samples 0 --out z.fzq",
+                "samples",
+            ),
+            (
+                "train --env khepera --learner learned-model --out z.fzq",
+                "khepera",
+            ),
+            (
+                "train --env carhill --learner learned-model --out z.fzq",
+                "terminal",
+            ),
+        ],
+    );
 }
 
 #[test]

@@ -75,7 +75,7 @@ pub use action::{ActionSet, JointActions};
 pub use backup::Backup;
 pub use error::{CoresError, EvalError, PartitionError};
 pub use limits::{MAX_AGENTS, MAX_DIMS};
-pub use model::{Block, Model, Tabulated};
+pub use model::{Block, BlockRows, Model, Tabulated};
 pub use options::NamedOption;
 pub use partition::{ActiveCores, Membership, Partition, ProductPartition, Segment};
 pub use real::Real;

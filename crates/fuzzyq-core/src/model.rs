@@ -17,6 +17,17 @@
 //! For the gather-free fast path, declare blocks in the order of the joint action's mixed
 //! radix, slowest first (for point masses: agent 1 x, agent 1 y, agent 2 x, ...).
 //!
+//! # Block tables given directly (learned or stochastic models)
+//! A model that knows its blocks' transitions only as tables (estimated from samples, or with
+//! a successor *distribution* instead of one successor) returns them from
+//! [`Model::block_rows`]: per (block core, block action) the expected memberships of the
+//! block's successor over the block's cores. Rows are non-negative and sum to 1, so the backup
+//! `rho + gamma sum_k P[d, u, k] V[k]` stays a gamma-contraction, and the product of the
+//! blocks' rows is the joint successor distribution (the blocks' noises are independent). A
+//! deterministic successor is the special case of one point: its row is its memberships. Only
+//! the block path reads such tables; the generic path, which steps the model, refuses the
+//! model (`SolveError::BlockRowsOnly`).
+//!
 //! # Terminal states
 //! An episodic model declares [terminal states](Model::is_terminal): a transition into one is
 //! worth its reward and nothing after it. This is independent of the blocks (the block backup
@@ -34,6 +45,29 @@ pub struct Block<'a> {
     pub state_dims: &'a [usize],
     /// The joint-action-vector components the block's next value depends on.
     pub action_components: &'a [usize],
+}
+
+/// One block's transition table, given directly by the model ([`Model::block_rows`]).
+///
+/// Block cores are numbered row-major over the block's state variables in the order of
+/// [`Block::state_dims`] (the last variable fastest), with each variable's cores those of the
+/// grid being solved. Row `c * n_actions + a` holds the entries `ptr[i]..ptr[i + 1]` of
+/// `col` (block cores) and `weight` (expected memberships: finite, non-negative, summing to 1
+/// within `1e-4`).
+#[derive(Clone, Copy, Debug)]
+pub struct BlockRows<'a, T> {
+    /// Number of block actions (rows per block core).
+    pub n_actions: usize,
+    /// The values of the block's action components per block action, in row order:
+    /// `n_actions * action_components.len()` values. Every value the joint actions give the
+    /// components must be one of them.
+    pub actions: &'a [T],
+    /// Row starts, `n_cores * n_actions + 1` values from 0 to `col.len()`.
+    pub ptr: &'a [u32],
+    /// Block core of each entry.
+    pub col: &'a [u32],
+    /// Expected membership of each entry.
+    pub weight: &'a [T],
 }
 
 /// Transitions precomputed at every (core, joint action) pair of a grid: what a model
@@ -128,6 +162,14 @@ pub trait Model<T: Real> {
     /// and rewards from the table instead of calling [`step`](Self::step) and
     /// [`reward`](Self::reward).
     fn tabulated(&self) -> Option<Tabulated<'_, T>> {
+        None
+    }
+
+    /// Block `b`'s transition table on the grid being solved, if the model gives it directly
+    /// (a learned or stochastic model; see the [module docs](self)). The default, `None`,
+    /// makes the solver build it by stepping the model from each block core.
+    fn block_rows(&self, b: usize) -> Option<BlockRows<'_, T>> {
+        let _ = b;
         None
     }
 

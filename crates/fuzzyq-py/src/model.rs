@@ -204,6 +204,8 @@ impl Grid {
 /// held over each sample time. The state is `[s1x, s1y, v1x, v1y, s2x, ...]`; each agent's
 /// actions are the square of `force_levels` (`u_x` slowest); the shared reward is
 /// `goal_reward` while the whole state is within `goal_radius` of the origin.
+/// `velocity_noise` (m/s, default 0) is the standard deviation of the plant's Gaussian
+/// process noise on every velocity per step; the model solved stays noise-free.
 #[pyclass(module = "fuzzyq", frozen)]
 pub struct PointMass {
     pub(crate) model: Arc<fuzzyq_sim::PointMass>,
@@ -239,6 +241,7 @@ impl PointMass {
         rk4_substeps = 10,
         friction = 1.0,
         friction_patches = None,
+        velocity_noise = 0.0,
     ))]
     #[allow(clippy::too_many_arguments)] // the model's parameters, as keyword arguments
     fn new(
@@ -255,6 +258,7 @@ impl PointMass {
         rk4_substeps: usize,
         friction: f64,
         friction_patches: Option<Vec<Patch>>,
+        velocity_noise: f64,
     ) -> PyResult<Self> {
         let integrator = match integrator {
             "exact" => Integrator::Exact,
@@ -299,6 +303,7 @@ impl PointMass {
                 integrator,
                 rk4_substeps,
                 friction,
+                velocity_noise,
             },
         )
     }

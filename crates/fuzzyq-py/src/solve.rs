@@ -16,6 +16,7 @@ use fuzzyq_core::solver::{
 use fuzzyq_core::{NamedOption, Real};
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary, Values};
+use fuzzyq_sim::model::learned::BlockTables;
 use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
@@ -353,8 +354,9 @@ pub(crate) fn available_kernels() -> Vec<&'static str> {
 
 /// What a solution's policy needs besides `V` and the greedy actions.
 enum Source {
-    /// A built-in model: the training configuration (model, grid, settings); can be saved.
-    Env(Box<TrainConfig>),
+    /// A built-in model: the training configuration (model, grid, settings) and, for a
+    /// policy of a learned model, its transition tables; can be saved.
+    Env(Box<TrainConfig>, Option<Box<BlockTables>>),
     /// A tabulated model (from a Python callable), in the solver's precision.
     Table32(Arc<TabulatedModel<f32>>),
     Table64(Arc<TabulatedModel<f64>>),
@@ -421,7 +423,7 @@ impl Solution {
             grid,
             a.summary,
             &settings,
-            Source::Env(Box::new(a.config)),
+            Source::Env(Box::new(a.config), a.learned),
         )
     }
 
@@ -449,9 +451,12 @@ impl Solution {
         let (gamma, absorbing) = (self.gamma, self.absorbing_goal);
         let prepared = |p: FqiPolicy| p.prepare().map(|()| p);
         let built = match (&self.source, values) {
-            (Source::Env(config), values) => {
+            (Source::Env(config, learned), values) => {
                 let config = (**config).clone();
-                py.detach(|| FqiPolicy::new(config, values, greedy).and_then(prepared))
+                let learned = learned.as_deref().cloned();
+                py.detach(|| {
+                    FqiPolicy::with_model(config, learned, values, greedy).and_then(prepared)
+                })
             }
             (Source::Table32(t), Values::F32(v)) => {
                 let grid = self.grid.get().to_precision::<f32>();
@@ -510,7 +515,7 @@ impl Solution {
     #[getter]
     fn env(&self) -> Option<&'static str> {
         match &self.source {
-            Source::Env(c) => Some(c.env.name()),
+            Source::Env(c, _) => Some(c.env.name()),
             _ => None,
         }
     }
@@ -619,7 +624,7 @@ impl Solution {
     /// Writes the policy file (the format `fuzzyq rollout` reads), atomically. Only solutions
     /// of built-in models can be saved.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let Source::Env(config) = &self.source else {
+        let Source::Env(config, learned) = &self.source else {
             return Err(error(
                 py,
                 Kind::Config,
@@ -632,6 +637,7 @@ impl Solution {
             values: self.values(py)?,
             greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
             summary: self.summary.clone(),
+            learned: learned.clone(),
         };
         artifact
             .check()

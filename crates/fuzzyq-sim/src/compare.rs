@@ -23,6 +23,7 @@
 //! | [`Learner::Fql`] | fuzzy Q-learning, additive layout, corrected update ([`crate::learn::fql`]) | `sum_i N_i * M_i` |
 //! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
 //! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
+//! | [`Learner::LearnedModel`] | joint fuzzy Q-iteration on a fuzzy model learned from transitions collected on the plant ([`crate::train::train_learned`]) | `N * M`; only `V` and the learned tables are stored |
 //!
 //! Everything is seeded: the same configuration gives the same table (bar the seconds).
 
@@ -45,7 +46,7 @@ use crate::paper;
 use crate::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use crate::run::metrics::{PointMassReport, RolloutMetrics, Trajectory, mean_final_error_cm};
 use crate::run::policy::{FqiPolicy, Policy};
-use crate::train::{self, SampleLearning};
+use crate::train::{self, ModelLearning, SampleLearning};
 
 fuzzyq_core::named_option! {
     /// A learner of the comparison (a column of the table).
@@ -60,6 +61,8 @@ fuzzyq_core::named_option! {
         FqlLiteral = "fql-literal" => "fuzzy Q-learning, additive layout, update as printed",
         /// VQQL: per-agent k-means cells and tabular Q-learning (CMOMMT's learner).
         Vqql = "vqql" => "VQQL (CMOMMT): k-means cells + tabular Q-learning",
+        /// Joint fuzzy Q-iteration on a fuzzy model learned from transitions.
+        LearnedModel = "learned-model" => "joint fuzzy Q-iteration on a model learned from transitions",
     }
 }
 
@@ -79,7 +82,7 @@ impl Learner {
     /// Whether the learner is model-based (iterates over a grid with the model).
     #[must_use]
     pub fn is_model_based(self) -> bool {
-        matches!(self, Self::Fqi | Self::Crisp)
+        matches!(self, Self::Fqi | Self::Crisp | Self::LearnedModel)
     }
 }
 
@@ -108,6 +111,9 @@ pub struct CompareConfig {
     pub fql_starts: Starts,
     /// VQQL's quantiser.
     pub vqql: VqqlConfig,
+    /// The learned-model learner's interaction with the plant and fit (its seed is the
+    /// fuzzy Q-learning seed's).
+    pub model_learning: ModelLearning,
 }
 
 impl Default for CompareConfig {
@@ -141,6 +147,7 @@ impl CompareConfig {
             fql: pointmass_task::default_fql_config(),
             fql_starts: pointmass_task::default_starts(),
             vqql,
+            model_learning: ModelLearning::new(20_000, pointmass_task::default_fql_config().seed),
         }
     }
 
@@ -173,6 +180,9 @@ impl CompareConfig {
         );
         self.fql.validate()?;
         self.fql_starts.validate(&model)?;
+        if self.learners.contains(&Learner::LearnedModel) {
+            self.model_learning.collection.validate()?;
+        }
         if self.learners.contains(&Learner::Vqql) {
             self.vqql.validate()?;
         }
@@ -383,6 +393,36 @@ fn train_one(
             report.converged = artifact.summary.converged;
             report.parameters = n * artifact.n_joint_actions() as u64;
             report.stored_values = n;
+            Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
+        }
+        Learner::LearnedModel => {
+            let mut task = config.task.clone();
+            task.grid.membership = Membership::Triangular;
+            let run = train::train_learned(&task, &config.model_learning, |_| {
+                std::ops::ControlFlow::Continue(())
+            })?;
+            let artifact = run.artifact;
+            let n = task.n_cores() as u64;
+            report.iterations = artifact.summary.sweeps;
+            report.iteration_unit = "sweeps".into();
+            report.converged = artifact.summary.converged;
+            report.parameters = n * artifact.n_joint_actions() as u64;
+            let entries: usize = artifact
+                .learned
+                .as_ref()
+                .map_or(0, |t| t.blocks.iter().map(|b| b.weight.len()).sum());
+            report.stored_values = n + entries as u64;
+            let c = &config.model_learning.collection;
+            let worst = run.table_error.iter().fold(0.0f64, |m, e| m.max(e.max_l1));
+            report.notes.push(format!(
+                "model learned from {} transitions (random actions, episodes of {} steps, seed \
+                 {}); {} of its rows needed a wider kernel; largest L1 distance of a row to the \
+                 true noise-free model's {worst:.2e}",
+                c.samples,
+                c.episode_steps,
+                c.seed,
+                run.fit.under_sampled_rows()
+            ));
             Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
         }
         Learner::Fql | Learner::FqlLiteral | Learner::Vqql => {

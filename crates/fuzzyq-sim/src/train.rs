@@ -1,6 +1,8 @@
 //! Training: a configuration in, a policy file's content out, for every learner.
 //!
 //! - [`train`]: joint fuzzy Q-iteration on the model (the paper's method), either operator;
+//! - [`train_learned`]: the same on a fuzzy model learned from transitions collected on the
+//!   plant ([`crate::learn::samples`], [`crate::learn::fit`]), the model never consulted;
 //! - [`learn_from_samples`]: fuzzy Q-learning (the additive layout, corrected or printed
 //!   update) on the point masses or the robots, and VQQL on the point masses, with the
 //!   defaults of [`SampleLearning::defaults`].
@@ -17,11 +19,14 @@ use crate::io::config::{EnvConfig, TrainConfig};
 use crate::io::policy_file::{
     KheperaPolicyFile, PointMassPolicyFile, PolicyArtifact, PolicyFile, TrainSummary, Values,
 };
+use crate::learn::fit::{self, FitConfig, FitReport, TableError};
 use crate::learn::fql::{EpisodeRecord, FqlConfig, FqlOutcome};
+use crate::learn::samples::{self, Collection, Transitions};
 use crate::learn::tasks::{khepera as khepera_task, pointmass as pointmass_task};
 use crate::learn::vqql::{self, LloydReport, VqqlConfig};
-use crate::model::EnvModel;
+use crate::model::learned::LearnedModel;
 use crate::model::pointmass::{PointMass, Starts};
+use crate::model::{BlockSpec, EnvModel, F64Model};
 
 fuzzyq_core::named_option! {
     /// What learns a policy.
@@ -34,6 +39,8 @@ fuzzyq_core::named_option! {
         Fql = "fql" => "model-free fuzzy Q-learning (additive layout)",
         /// VQQL: k-means cells per agent and tabular Q-learning (point masses).
         Vqql = "vqql" => "VQQL: k-means cells and tabular Q-learning (point masses)",
+        /// Joint fuzzy Q-iteration on a fuzzy model learned from transitions.
+        LearnedModel = "learned-model" => "fuzzy Q-iteration on a model learned from transitions",
     }
 }
 
@@ -44,38 +51,48 @@ pub fn train(
     observer: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<PolicyArtifact, SimError> {
     config.validate()?;
+    let model = config.build_model()?;
+    solve_and_pack(&model, config, observer)
+}
+
+/// Solves `model` with the grid and solver settings of `config` in its precision.
+fn solve_and_pack<M>(
+    model: &M,
+    config: &TrainConfig,
+    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, SimError>
+where
+    M: fuzzyq_core::Model<f32> + fuzzyq_core::Model<f64> + Sync,
+{
     match config.solver.precision {
         Precision::F32 => Ok(artifact(
             config,
-            solve::<f32>(config, observer)?,
+            solve::<f32, M>(model, config, observer)?,
             Values::F32,
         )),
         Precision::F64 => Ok(artifact(
             config,
-            solve::<f64>(config, observer)?,
+            solve::<f64, M>(model, config, observer)?,
             Values::F64,
         )),
     }
 }
 
-fn solve<T: Real>(
+fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(
+    model: &M,
     config: &TrainConfig,
     mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
-) -> Result<Solution<T>, SimError>
-where
-    EnvModel: fuzzyq_core::Model<T>,
-{
-    let model = config.build_model()?;
+) -> Result<Solution<T>, SimError> {
     let grid = config.grid::<T>()?;
     let solver_config = config.solver.solver_config();
     if config.solver.operator == IterationOperator::Values {
-        return Ok(solver::solve(&model, &grid, &solver_config, observer)?);
+        return Ok(solver::solve(model, &grid, &solver_config, observer)?);
     }
     // Busoniu's operator: theta stored; reported in the solver's terms (exact deltas).
     let start = std::time::Instant::now();
     let mut records: Vec<SweepRecord> = Vec::new();
     let mut bound = 0;
-    let q = solver::solve_q(&model, &grid, &solver_config, |k, delta| {
+    let q = solver::solve_q(model, &grid, &solver_config, |k, delta| {
         if k == 1 {
             // theta_1 = rho, so the first change is max |rho|.
             bound = solver_config.sweep_bound(delta);
@@ -129,7 +146,164 @@ fn artifact<T>(
         summary: TrainSummary::from_solution(&s),
         values: values(s.v),
         greedy: s.greedy,
+        learned: None,
     }
+}
+
+/// How the learned-model learner gathers its data and fits its model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ModelLearning {
+    /// The interaction with the plant.
+    pub collection: Collection,
+    /// The estimator's settings.
+    pub fit: FitConfig,
+}
+
+impl ModelLearning {
+    /// `samples` transitions in episodes of 50 steps from `seed`, the default fit.
+    #[must_use]
+    pub fn new(samples: usize, seed: u64) -> Self {
+        Self {
+            collection: Collection {
+                samples,
+                episode_steps: 50,
+                seed,
+            },
+            fit: FitConfig::default(),
+        }
+    }
+}
+
+/// What [`train_learned`] produced.
+#[derive(Clone, Debug)]
+pub struct LearnedModelRun {
+    /// The policy file's content (it carries the learned tables).
+    pub artifact: PolicyArtifact,
+    /// How the estimation went.
+    pub fit: FitReport,
+    /// The estimated rows' distance to the true noise-free model's (a check the built-in
+    /// environments allow; the learner never used the model).
+    pub table_error: Vec<TableError>,
+    /// Seconds spent collecting and fitting (the solve's are in the artifact's summary).
+    pub learning_seconds: f64,
+}
+
+/// Where the episodes of the learned-model learner start: the point masses' random starts
+/// at rest over the whole field (those of [`pointmass_task::default_starts`]), the classic
+/// benchmarks' uniformly over their state ranges.
+fn draw_start(model: &EnvModel) -> impl FnMut(&mut rand_pcg::Pcg64Mcg, &mut [f64]) + '_ {
+    use rand::Rng;
+    let starts = pointmass_task::default_starts();
+    move |rng, x| match model {
+        EnvModel::PointMass(_) => starts.draw(rng, x),
+        other => {
+            for (d, v) in x.iter_mut().enumerate() {
+                let (lo, hi) = F64Model::state_bounds(other, d);
+                *v = rng.random_range(lo..=hi);
+            }
+        }
+    }
+}
+
+/// Fuzzy Q-iteration on a model learned from interaction: collects
+/// `learning.collection.samples` transitions on the plant of `config`'s environment (with its
+/// process noise), estimates the block tables on the configured grid ([`fit::fit`]; the
+/// blocks are the environment's declared ones, or one block of the whole state), and solves
+/// the learned model as [`train`] solves the true one. The point masses and the classic
+/// benchmarks without terminal states are supported.
+pub fn train_learned(
+    config: &TrainConfig,
+    learning: &ModelLearning,
+    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<LearnedModelRun, SimError> {
+    config.validate()?;
+    let start = std::time::Instant::now();
+    check_learnable(config)?;
+    let task = config.build_model()?;
+    let data = samples::collect(&task, &learning.collection, draw_start(&task))?;
+    let (artifact, fit, table_error, learning_seconds) =
+        fit_and_solve(config, &task, &data, &learning.fit, start, observer)?;
+    Ok(LearnedModelRun {
+        artifact,
+        fit,
+        table_error,
+        learning_seconds,
+    })
+}
+
+/// Whether the learned-model learner can learn the environment of `config`: the point
+/// masses and the classic benchmarks without terminal states; the error says why not.
+pub fn check_learnable(config: &TrainConfig) -> Result<(), SimError> {
+    if let EnvConfig::Khepera(_) = config.env {
+        return Err(ConfigError::invalid(
+            "learner",
+            "learned-model does not learn the khepera robots yet (point masses and the \
+             classic benchmarks only)",
+        )
+        .into());
+    }
+    let task = config.build_model()?;
+    if F64Model::has_terminal_states(&task) {
+        return Err(ConfigError::invalid(
+            "learner",
+            format!(
+                "learned-model cannot learn {}: its episodes end in terminal states, which \
+                 block tables cannot represent",
+                task.name()
+            ),
+        )
+        .into());
+    }
+    Ok(())
+}
+
+/// Fits `data` on the grid of `config` and solves the learned model.
+fn fit_and_solve(
+    config: &TrainConfig,
+    task: &EnvModel,
+    data: &Transitions,
+    fit_config: &FitConfig,
+    start: std::time::Instant,
+    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<(PolicyArtifact, FitReport, Vec<TableError>, f64), SimError> {
+    let declared = F64Model::blocks(task);
+    let whole = [BlockSpec {
+        state_dims: (0..F64Model::state_dim(task)).collect(),
+        action_components: (0..F64Model::actions(task).dim() * F64Model::n_agents(task)).collect(),
+    }];
+    let blocks = if declared.is_empty() {
+        &whole[..]
+    } else {
+        declared
+    };
+    let (tables, report) = fit::fit(task, &config.grid_cores(), blocks, data, fit_config)?;
+    let table_error = fit::table_error(&tables, task)?;
+    let learned = LearnedModel::new(task.clone(), tables.clone())?;
+    let learning_seconds = start.elapsed().as_secs_f64();
+    let mut artifact = solve_and_pack(&learned, config, observer)?;
+    artifact.learned = Some(Box::new(tables));
+    Ok((artifact, report, table_error, learning_seconds))
+}
+
+/// [`train_learned`] on given transitions (a user's logged data) instead of collecting them.
+pub fn train_on_transitions(
+    config: &TrainConfig,
+    data: &Transitions,
+    fit_config: &FitConfig,
+    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<LearnedModelRun, SimError> {
+    config.validate()?;
+    check_learnable(config)?;
+    let start = std::time::Instant::now();
+    let task = config.build_model()?;
+    let (artifact, fit, table_error, learning_seconds) =
+        fit_and_solve(config, &task, data, fit_config, start, observer)?;
+    Ok(LearnedModelRun {
+        artifact,
+        fit,
+        table_error,
+        learning_seconds,
+    })
 }
 
 /// How a learner from samples learns: its settings, where its episodes start (point masses)
@@ -176,9 +350,10 @@ impl SampleLearning {
 /// Whether `learner` learns from samples on `env`; the error says why not.
 fn check_available(env: &EnvConfig, learner: Learner) -> Result<(), ConfigError> {
     match (env, learner) {
-        (_, Learner::Fqi) => Err(ConfigError::invalid(
+        (_, Learner::Fqi | Learner::LearnedModel) => Err(ConfigError::invalid(
             "learner",
-            "fqi learns on the model (train), not from samples",
+            "fqi and learned-model solve a model (train, train_learned), they are not \
+             learners from samples of this kind",
         )),
         (EnvConfig::Pointmass(_), _) | (EnvConfig::Khepera(_), Learner::Fql) => Ok(()),
         (EnvConfig::Khepera(_), Learner::Vqql) => Err(ConfigError::invalid(

@@ -44,6 +44,9 @@ pub(crate) struct CompareArgs {
     /// Episodes of the learners from samples (fql, fql-literal, vqql) [default: 3000].
     #[arg(long, value_name = "N")]
     episodes: Option<usize>,
+    /// learned-model: transitions collected on the plant [default: 20000].
+    #[arg(long, value_name = "N")]
+    samples: Option<usize>,
     /// fql, fql-literal, vqql: learning episodes start at rest with each agent uniformly
     /// within this distance of the goal per axis (m) [default: the whole field, 6].
     #[arg(long, value_name = "M")]
@@ -95,6 +98,10 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
     }
     c.fql.seed = args.seed;
     c.vqql.seed = args.seed;
+    c.model_learning.collection.seed = args.seed;
+    if let Some(n) = args.samples {
+        c.model_learning.collection.samples = n;
+    }
     c.validate()?;
     Ok(c)
 }

@@ -87,6 +87,10 @@ pub(crate) struct TrainArgs {
     /// on the point masses' own states or the robots' sonars; vqql: point masses).
     #[arg(long, value_parser = output::named::<Learner>(), default_value = "fqi")]
     learner: Learner,
+    /// learned-model: transitions to collect on the plant (random actions from seeded starts)
+    /// [default: 20000].
+    #[arg(long, value_name = "N")]
+    samples: Option<usize>,
     /// fql, vqql: number of episodes [default: 3000 for the point masses, 2000 for the
     /// robots].
     #[arg(long, value_name = "N")]
@@ -97,7 +101,7 @@ pub(crate) struct TrainArgs {
     /// vqql: cells per agent [default: the own-state cores of the grid].
     #[arg(long, value_name = "K")]
     cells: Option<usize>,
-    /// fql, vqql: seed of exploration and starts.
+    /// fql, vqql, learned-model: seed of exploration, starts and the plant's noise.
     #[arg(long, value_name = "S", default_value_t = 0)]
     seed: u64,
     /// fql, vqql: write the learning curve (one row per episode) as CSV.
@@ -149,6 +153,19 @@ struct Summary<'a> {
     peak_memory_mb: Option<f64>,
     deltas: &'a [(f64, f64)],
     extrapolated: &'a [usize],
+    /// `--learner learned-model`: the data and the fit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    learned_model: Option<LearnedSummary<'a>>,
+}
+
+/// The `--json` part of `--learner learned-model`.
+#[derive(Serialize)]
+struct LearnedSummary<'a> {
+    samples: usize,
+    seed: u64,
+    learning_seconds: f64,
+    fit: &'a fuzzyq_sim::learn::fit::FitReport,
+    table_error: &'a [fuzzyq_sim::learn::fit::TableError],
 }
 
 /// The `--json` summary of a learner from samples.
@@ -284,9 +301,15 @@ fn stop_if(stop: &AtomicBool) -> ControlFlow<()> {
 
 pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let config = build_config(&args)?;
-    if args.learner != Learner::Fqi {
+    let learned = args.learner == Learner::LearnedModel;
+    if args.learner != Learner::Fqi && !learned {
         return run_from_samples(&args, &config);
     }
+    refuse(
+        args.samples.is_some() && !learned,
+        "--samples",
+        "applies to --learner learned-model only",
+    )?;
     for (set, flag) in [
         (args.episodes.is_some(), "--episodes"),
         (args.literal, "--literal"),
@@ -295,6 +318,12 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         (args.plot.is_some(), "--plot"),
     ] {
         refuse(set, flag, "applies to --learner fql or vqql only")?;
+    }
+    let learning =
+        learned.then(|| train::ModelLearning::new(args.samples.unwrap_or(20_000), args.seed));
+    if let Some(l) = &learning {
+        l.collection.validate()?;
+        train::check_learnable(&config)?;
     }
     check_writable(&args.out, "policy")?;
     check_outputs(&[(&args.json, "summary")])?;
@@ -333,11 +362,18 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     bar.set_message("preparing");
     bar.enable_steady_tick(Duration::from_millis(200));
     let plain = !args.quiet && !std::io::stderr().is_terminal();
-    let result = train::train(&config, |p| {
+    if let (Some(l), false) = (&learning, args.quiet) {
+        eprintln!(
+            "learned model: {} transitions from the plant (random actions, episodes of {} \
+             steps, seed {}), fitted per dynamics block, then solved",
+            l.collection.samples, l.collection.episode_steps, l.collection.seed
+        );
+    }
+    let observer = |p: &fuzzyq_core::solver::Progress| {
         bar.set_length(p.bound as u64);
         bar.set_position(p.record.sweep as u64);
         bar.set_message(fmt_delta(p));
-        if plain && (p.record.sweep == 1 || p.record.sweep % 10 == 0) {
+        if plain && (p.record.sweep == 1 || p.record.sweep.is_multiple_of(10)) {
             eprintln!(
                 "sweep {}/{} (a-priori bound): {}, {:.1} s",
                 p.record.sweep,
@@ -347,9 +383,16 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             );
         }
         stop_if(&stop)
-    });
+    };
+    let result = match &learning {
+        Some(l) => train::train_learned(&config, l, observer).map(|r| {
+            let artifact = r.artifact.clone();
+            (artifact, Some(r))
+        }),
+        None => train::train(&config, observer).map(|a| (a, None)),
+    };
     bar.finish_and_clear();
-    let artifact = match result {
+    let (artifact, learned_run) = match result {
         Ok(a) => a,
         Err(SimError::Solve(SolveError::Interrupted { sweeps })) => {
             return Err(Failure::Interrupted(format!(
@@ -365,6 +408,31 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         unreachable!("just built")
     };
     let s = &artifact.summary;
+    if let (Some(r), false) = (&learned_run, args.quiet) {
+        let rows: usize = r.fit.blocks.iter().map(|b| b.rows).sum();
+        let (max_l1, mean_l1) = r.table_error.iter().fold((0.0f64, 0.0), |(m, a), t| {
+            (m.max(t.max_l1), a + t.mean_l1 / r.table_error.len() as f64)
+        });
+        eprintln!(
+            "learned model: {} transitions collected and fitted in {:.2} s; {} of {rows} rows \
+             needed a wider kernel than their core's{}; L1 distance of the rows to the true \
+             noise-free model's: max {max_l1:.3}, mean {mean_l1:.4}",
+            r.fit.samples,
+            r.learning_seconds,
+            r.fit.under_sampled_rows(),
+            if args.json.is_some() {
+                " (listed in the JSON)"
+            } else {
+                ""
+            },
+        );
+        if r.fit.reward_mismatches > 0 {
+            eprintln!(
+                "warning: {} transitions recorded a reward other than the task's",
+                r.fit.reward_mismatches
+            );
+        }
+    }
     if !args.quiet {
         eprintln!(
             "{} after {} sweeps in {:.1} s (final delta {:.4}, xi {}); policy written to {}",
@@ -417,6 +485,13 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             peak_memory_mb: peak_memory_mb(),
             deltas: &s.deltas,
             extrapolated: &s.extrapolated,
+            learned_model: learned_run.as_ref().map(|r| LearnedSummary {
+                samples: r.fit.samples,
+                seed: args.seed,
+                learning_seconds: r.learning_seconds,
+                fit: &r.fit,
+                table_error: &r.table_error,
+            }),
         };
         write_json(path, &summary)?;
     }

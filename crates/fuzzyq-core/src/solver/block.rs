@@ -170,6 +170,78 @@ fn local_rows<T: Real, R: Iterator<Item = (usize, T)>>(
     (ptr, col, weight)
 }
 
+/// The row-major grid offset of every core of `sub`, the sub-grid over `dims`.
+fn grid_offsets<T: Real>(
+    sub: &ProductPartition<'_, T>,
+    grid: &ProductPartition<'_, T>,
+    dims: &[usize],
+) -> Result<Vec<usize>, SolveError> {
+    let mut idx = vec![0usize; dims.len()];
+    (0..sub.n_cores())
+        .map(|c| {
+            sub.unravel(c, &mut idx)?;
+            Ok(dims
+                .iter()
+                .zip(&idx)
+                .map(|(&d, &i)| i * grid.strides()[d])
+                .sum())
+        })
+        .collect()
+}
+
+/// A block table the model gives directly ([`Model::block_rows`]), checked and with its rows
+/// reordered to the operator's block actions `tuples`; with the cores' grid offsets.
+fn given_rows<T: Real>(
+    given: &crate::model::BlockRows<'_, T>,
+    comps: &[usize],
+    tuples: &[Vec<T>],
+    sub: &ProductPartition<'_, T>,
+    grid: &ProductPartition<'_, T>,
+    dims: &[usize],
+) -> Result<(RowsBuf<T>, Vec<usize>), &'static str> {
+    let n_cores = sub.n_cores();
+    let k = comps.len();
+    if given.actions.len() != given.n_actions * k {
+        return Err("its table's action values do not match its action count");
+    }
+    if given.ptr.len() != n_cores * given.n_actions + 1 {
+        return Err("its table does not have one row per (block core, block action)");
+    }
+    // Operator block action -> the table's block action.
+    let mut order = Vec::with_capacity(tuples.len());
+    for t in tuples {
+        let found = (0..given.n_actions).find(|&a| given.actions[a * k..(a + 1) * k] == t[..]);
+        order.push(found.ok_or("its table has no row for a value the joint actions give it")?);
+    }
+    let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
+    for c in 0..n_cores {
+        for &a in &order {
+            let row = c * given.n_actions + a;
+            let (lo, hi) = (given.ptr[row] as usize, given.ptr[row + 1] as usize);
+            if lo > hi || hi > given.col.len() || given.col.len() != given.weight.len() {
+                return Err("its table's row starts are not increasing within its entries");
+            }
+            let mut sum = 0.0;
+            for (&kc, &w) in given.col[lo..hi].iter().zip(&given.weight[lo..hi]) {
+                if kc as usize >= n_cores || !w.is_finite() || w < T::ZERO {
+                    return Err("its table has an entry outside the block's cores or a \
+                                negative or non-finite weight");
+                }
+                sum += w.to_f64();
+                col.push(kc);
+                weight.push(w);
+            }
+            if (sum - 1.0).abs() > 1e-4 {
+                return Err("a row of its table does not sum to 1");
+            }
+            ptr.push(u32::try_from(col.len()).map_err(|_| "its table is too large")?);
+        }
+    }
+    let rows = RowsBuf::new(ptr, col, weight, n_cores).ok_or("its table is malformed")?;
+    let offsets = grid_offsets(sub, grid, dims).map_err(|_| "its cores do not fit the grid")?;
+    Ok((rows, offsets))
+}
+
 /// The values of `dims` in `x`.
 fn x_block<T: Real>(x: &[T], dims: &[usize]) -> Vec<T> {
     dims.iter().map(|&d| x[d]).collect()
@@ -270,6 +342,25 @@ impl<T: Real> BlockOperator<T> {
 
             let n_cores = sub.n_cores();
             let n_actions = tuples.len();
+            if let Some(given) = model.block_rows(b) {
+                if terminal {
+                    return Err(SolveError::BlockDeclaration {
+                        block: b,
+                        reason: "a model with terminal states cannot give its block tables",
+                    });
+                }
+                let (rows, grid_offset) = given_rows(&given, comps, &tuples, &sub, grid, &dims)
+                    .map_err(|reason| SolveError::BlockDeclaration { block: b, reason })?;
+                tables.push(BlockTable {
+                    dims,
+                    n_cores,
+                    n_actions,
+                    grid_offset,
+                    rows,
+                    succ: Vec::new(),
+                });
+                continue;
+            }
             let mut ptr = Vec::with_capacity(n_cores * n_actions + 1);
             let mut col = Vec::new();
             let mut weight = Vec::new();
@@ -280,17 +371,9 @@ impl<T: Real> BlockOperator<T> {
             let mut next_alt = vec![T::ZERO; e];
             let mut sub_x = vec![T::ZERO; dims.len()];
             let mut ua = base_u.clone();
-            let mut grid_offset = Vec::with_capacity(n_cores);
-            let mut idx = vec![0usize; dims.len()];
+            let grid_offset = grid_offsets(&sub, grid, &dims)?;
             for c in 0..n_cores {
                 sub.core_state(c, &mut sub_x)?;
-                sub.unravel(c, &mut idx)?;
-                grid_offset.push(
-                    dims.iter()
-                        .zip(&idx)
-                        .map(|(&d, &i)| i * grid.strides()[d])
-                        .sum(),
-                );
                 for (&d, &v) in dims.iter().zip(&sub_x) {
                     x[d] = v;
                 }

@@ -435,6 +435,13 @@ pub enum SolveError {
     },
     /// The block path was requested for a model without blocks.
     NoBlocks,
+    /// The model gives its transitions as block tables ([`Model::block_rows`]: learned or
+    /// stochastic), which only the block path of the value iteration reads; `what` asked for
+    /// something else.
+    BlockRowsOnly {
+        /// What was asked for (`"the generic backup path"`, `"Q-iteration"`).
+        what: &'static str,
+    },
     /// The model produced a non-finite successor state or reward.
     NonFinite {
         /// Where (`"successor"` or `"reward"`).
@@ -467,6 +474,11 @@ impl core::fmt::Display for SolveError {
                 "the grid has {grid} state variables but the model's state has {model}"
             ),
             Self::Eval(e) => write!(f, "{e}"),
+            Self::BlockRowsOnly { what } => write!(
+                f,
+                "the model gives its transitions as block tables (learned or stochastic), \
+                 which {what} cannot use; use the block backup path"
+            ),
             Self::BlockCoverage { dim, count } => write!(
                 f,
                 "state variable {dim} appears in {count} dynamics blocks (must be exactly 1)"
@@ -727,6 +739,12 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             }
             crate::error::check_len("tabulated rewards", n * m, t.rewards.len())?;
             crate::error::check_len("tabulated next states", n * m * e, t.next_states.len())?;
+        }
+        let given_rows = (0..model.n_blocks()).any(|b| model.block_rows(b).is_some());
+        if given_rows && (path == BackupPath::Generic || table.is_some()) {
+            return Err(SolveError::BlockRowsOnly {
+                what: "the generic backup path",
+            });
         }
         let use_blocks = match path {
             _ if table.is_some() => false,

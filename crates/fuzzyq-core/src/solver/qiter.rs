@@ -115,6 +115,11 @@ where
     let (n, m, e) = (view.n_cores(), joint.n_joint(), view.n_dims());
     let gamma = T::from_f64(config.gamma);
     let terminals = model.has_terminal_states();
+    if (0..model.n_blocks()).any(|b| model.block_rows(b).is_some()) {
+        return Err(SolveError::BlockRowsOnly {
+            what: "Q-iteration (Busoniu's operator)",
+        });
+    }
     let table = model.tabulated();
     if let Some(t) = &table {
         crate::error::check_len("tabulated rewards", n * m, t.rewards.len())?;

@@ -35,6 +35,7 @@ goal_radius = 0.1                           # reward region ||x||_2 < 0.1 over t
 goal_reward = 5.0                           # reward inside the region (eq 40)
 integrator = "exact"                        # "exact" (constant friction) or "rk4"
 rk4_substeps = 10                           # substeps per sample time for "rk4"
+velocity_noise = 0.0                        # m/s: std dev of Gaussian process noise on every velocity per step (the plant's; 0 = the paper's)
 
 [env.friction]
 kind = "constant"                           # or "patches" with base = ..., patches = [{ center = [x, y], radius = r, eta = e }]

@@ -5,14 +5,16 @@
 //! | bytes | content |
 //! |---|---|
 //! | 8 | magic tag `\x89FUZZYQ\n` (the high byte catches 7-bit and text-mode mangling) |
-//! | 4 | format version, `u32` (2; version 1 files, fuzzy Q-iteration only, are still read) |
+//! | 4 | format version, `u32` (3 for a policy of a learned model, else 2; version 1 files, fuzzy Q-iteration only, are still read) |
 //! | 8 | payload length in bytes, `u64` |
 //! | 4 | CRC-32 of the payload, `u32` |
 //! | n | payload in postcard encoding: which learner, then its content |
 //!
 //! The payload of a fuzzy Q-iteration policy ([`PolicyArtifact`]) holds the training
 //! configuration (as its TOML text), `V` per core, the per-core greedy joint actions and the
-//! training summary. A policy learned from samples ([`PointMassPolicyFile`],
+//! training summary; a policy of a learned model (`--learner learned-model`) also holds the
+//! learned transition tables ([`BlockTables`]), since its model cannot be rebuilt from the
+//! configuration. A policy learned from samples ([`PointMassPolicyFile`],
 //! [`KheperaPolicyFile`]) travels as the TOML text of its task, learning settings and
 //! parameters (floats round-trip exactly). Files written before version 2 kept learned
 //! policies as plain TOML; [`PolicyFile::from_bytes`] still reads them.
@@ -36,12 +38,15 @@ use crate::learn::tasks::khepera as khepera_task;
 use crate::learn::tasks::pointmass as pointmass_task;
 use crate::learn::vqql::VqqlConfig;
 use crate::model::khepera::KheperaConfig;
+use crate::model::learned::{BlockTables, LearnedModel};
 use crate::model::pointmass::{PointMass, PointMassConfig, Starts};
 
 /// The magic tag every policy file starts with.
 pub const MAGIC: [u8; 8] = *b"\x89FUZZYQ\n";
-/// The format version this build writes (it reads versions 1 and 2).
-pub const FORMAT_VERSION: u32 = 2;
+/// The newest format version this build writes (it reads versions 1 to 3): version 3 adds
+/// the payload of a learned model's policy, the only one written as version 3, so that
+/// every other file stays readable by builds that read version 2.
+pub const FORMAT_VERSION: u32 = 3;
 const HEADER_LEN: usize = 8 + 4 + 8 + 4;
 
 /// Per-core values in the solver's precision.
@@ -176,6 +181,9 @@ pub struct PolicyArtifact {
     pub greedy: Vec<u32>,
     /// How training went.
     pub summary: TrainSummary,
+    /// The transition tables of the learned model it was solved on (`--learner
+    /// learned-model`); `None` for the environment's own model.
+    pub learned: Option<Box<BlockTables>>,
 }
 
 /// A fuzzy Q-iteration policy as version 1 and the [`Payload::Fqi`] of version 2 encode it:
@@ -199,16 +207,19 @@ struct FqiPayloadRef<'a> {
     summary: &'a TrainSummary,
 }
 
-/// What a version 2 payload holds: `F` is [`FqiPayload`] when reading, [`FqiPayloadRef`]
-/// when writing.
+/// What a version 2 or 3 payload holds: `F` is [`FqiPayload`] and `L` [`BlockTables`] when
+/// reading, [`FqiPayloadRef`] and a reference when writing. Variants are only ever added at
+/// the end (postcard encodes the variant's index).
 #[derive(Serialize, Deserialize)]
-enum Payload<F> {
+enum Payload<F, L> {
     /// Fuzzy Q-iteration.
     Fqi(F),
     /// A point-mass policy learned from samples, as TOML text.
     PointMass(String),
     /// A Khepera policy learned from samples, as TOML text.
     Khepera(String),
+    /// Fuzzy Q-iteration on a learned model, with its tables (version 3).
+    LearnedFqi(F, L),
 }
 
 impl PolicyArtifact {
@@ -227,6 +238,13 @@ impl PolicyArtifact {
                 "{} greedy actions for a grid of {n} cores",
                 self.greedy.len()
             ));
+        }
+        if let Some(tables) = &self.learned {
+            let task = self.config.build_model().map_err(|e| e.to_string())?;
+            if tables.cores != self.config.grid_cores() {
+                return Err("the learned tables are not on the configured grid".into());
+            }
+            LearnedModel::new(task, (**tables).clone()).map_err(|e| e.to_string())?;
         }
         if self.values.precision() != self.config.solver.precision {
             return Err("values are not in the configured precision".into());
@@ -444,23 +462,26 @@ impl PolicyFile {
         if crc32fast::hash(payload) != crc {
             return Err(PolicyFileError::Checksum { path: path_buf });
         }
-        let payload: Payload<FqiPayload> = if version == 1 {
+        let payload: Payload<FqiPayload, BlockTables> = if version == 1 {
             postcard::from_bytes(payload).map(Payload::Fqi)
         } else {
             postcard::from_bytes(payload)
         }
         .map_err(|e| malformed(path, e.to_string()))?;
+        let fqi = |p: FqiPayload, learned: Option<Box<BlockTables>>| {
+            let config = TrainConfig::from_toml(&p.config_toml)
+                .map_err(|e| malformed(path, format!("its configuration: {e}")))?;
+            Ok::<_, PolicyFileError>(Self::Fqi(PolicyArtifact {
+                config,
+                values: p.values,
+                greedy: p.greedy,
+                summary: p.summary,
+                learned,
+            }))
+        };
         let file = match payload {
-            Payload::Fqi(p) => {
-                let config = TrainConfig::from_toml(&p.config_toml)
-                    .map_err(|e| malformed(path, format!("its configuration: {e}")))?;
-                Self::Fqi(PolicyArtifact {
-                    config,
-                    values: p.values,
-                    greedy: p.greedy,
-                    summary: p.summary,
-                })
-            }
+            Payload::Fqi(p) => fqi(p, None)?,
+            Payload::LearnedFqi(p, tables) => fqi(p, Some(Box::new(tables)))?,
             Payload::PointMass(text) => Self::PointMass(from_toml(&text, path)?),
             Payload::Khepera(text) => Self::Khepera(from_toml(&text, path)?),
         };
@@ -504,20 +525,30 @@ impl PolicyFile {
 
     /// Encodes the file with its header.
     pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
+        let mut version = 2;
         let payload = match self {
-            Self::Fqi(a) => Payload::Fqi(FqiPayloadRef {
-                config_toml: a.config.to_toml(),
-                values: &a.values,
-                greedy: &a.greedy,
-                summary: &a.summary,
-            }),
+            Self::Fqi(a) => {
+                let p = FqiPayloadRef {
+                    config_toml: a.config.to_toml(),
+                    values: &a.values,
+                    greedy: &a.greedy,
+                    summary: &a.summary,
+                };
+                match &a.learned {
+                    None => Payload::Fqi(p),
+                    Some(tables) => {
+                        version = 3;
+                        Payload::LearnedFqi(p, tables)
+                    }
+                }
+            }
             Self::PointMass(f) => Payload::PointMass(to_toml(f)?),
             Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
         };
         let payload = postcard::to_stdvec(&payload).expect("a policy always serialises");
         let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
         out.extend_from_slice(&MAGIC);
-        out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        out.extend_from_slice(&u32::to_le_bytes(version));
         out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
         out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
         out.extend_from_slice(&payload);
@@ -580,6 +611,7 @@ mod tests {
             config,
             values: Values::F32(vec![1.5; 256]),
             greedy: vec![7; 256],
+            learned: None,
             summary: TrainSummary {
                 sweeps: 3,
                 converged: true,
@@ -627,14 +659,14 @@ mod tests {
         let e = decode(&flipped).unwrap_err();
         assert!(matches!(e, PolicyFileError::Checksum { .. }), "{e}");
 
-        let mut v3 = bytes.clone();
-        v3[8] = 3;
-        let e = decode(&v3).unwrap_err();
+        let mut v4 = bytes.clone();
+        v4[8] = 4;
+        let e = decode(&v4).unwrap_err();
         assert!(
-            matches!(e, PolicyFileError::Version { found: 3, .. }),
+            matches!(e, PolicyFileError::Version { found: 4, .. }),
             "{e}"
         );
-        assert!(e.to_string().contains("versions 1 to 2"), "{e}");
+        assert!(e.to_string().contains("versions 1 to 3"), "{e}");
 
         let mut bad = tiny();
         bad.greedy[0] = 625;

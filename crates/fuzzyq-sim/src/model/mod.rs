@@ -22,6 +22,7 @@
 pub mod arena;
 pub mod classic;
 pub mod khepera;
+pub mod learned;
 pub mod pointmass;
 
 use fuzzyq_core::solver::Precision;
@@ -352,6 +353,34 @@ pub trait F64Model {
     }
     /// The independent dynamics blocks (see [`Model::block`]).
     fn blocks(&self) -> &[BlockSpec];
+    /// Block `b`'s transition table, if the model gives it directly (a learned model, see
+    /// [`Model::block_rows`]); `None` (the default) for a model that steps.
+    fn block_rows(&self, b: usize) -> Option<WideBlockRows<'_>> {
+        let _ = b;
+        None
+    }
+    /// Adds the plant's process noise to a successor `x` drawn from `rng` (the default has
+    /// none). The model's [`step`](Self::step) stays the noise-free transition; plants and
+    /// data collection call this after it.
+    fn add_process_noise(&self, x: &mut [f64], rng: &mut rand_pcg::Pcg64Mcg) {
+        let _ = (x, rng);
+    }
+}
+
+/// A block table in both precisions, as [`F64Model::block_rows`] gives it (see
+/// [`fuzzyq_core::BlockRows`]).
+#[derive(Clone, Copy, Debug)]
+pub struct WideBlockRows<'a> {
+    /// Number of block actions.
+    pub n_actions: usize,
+    /// The action components' values per block action, in `f32` and `f64`.
+    pub actions: (&'a [f32], &'a [f64]),
+    /// Row starts.
+    pub ptr: &'a [u32],
+    /// Block core of each entry.
+    pub col: &'a [u32],
+    /// Expected membership of each entry, in `f32` and `f64`.
+    pub weight: (&'a [f32], &'a [f64]),
 }
 
 /// A dynamics block as a model stores it (see [`fuzzyq_core::Block`]).
@@ -481,6 +510,15 @@ macro_rules! impl_model {
             fn n_blocks(&self) -> usize {
                 $crate::model::F64Model::blocks(self).len()
             }
+            fn block_rows(&self, b: usize) -> Option<::fuzzyq_core::BlockRows<'_, T>> {
+                $crate::model::F64Model::block_rows(self, b).map(|r| ::fuzzyq_core::BlockRows {
+                    n_actions: r.n_actions,
+                    actions: T::pick(r.actions.0, r.actions.1),
+                    ptr: r.ptr,
+                    col: r.col,
+                    weight: T::pick(r.weight.0, r.weight.1),
+                })
+            }
             fn block(&self, b: usize) -> ::fuzzyq_core::Block<'_> {
                 let spec = &$crate::model::F64Model::blocks(self)[b];
                 ::fuzzyq_core::Block {
@@ -598,6 +636,9 @@ impl F64Model for EnvModel {
     }
     fn blocks(&self) -> &[BlockSpec] {
         dispatch!(self, m => F64Model::blocks(m))
+    }
+    fn add_process_noise(&self, x: &mut [f64], rng: &mut rand_pcg::Pcg64Mcg) {
+        dispatch!(self, m => F64Model::add_process_noise(m, x, rng))
     }
 }
 

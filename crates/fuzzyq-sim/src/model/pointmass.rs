@@ -102,6 +102,13 @@ pub struct PointMassConfig {
     pub rk4_substeps: usize,
     /// Friction field.
     pub friction: FrictionConfig,
+    /// Process noise of the plant: the standard deviation (m/s) of the zero-mean Gaussian
+    /// noise added to every velocity after each step (then clamped), independently per agent
+    /// and axis; `>= 0`, default 0 (the paper's deterministic dynamics). The model's
+    /// transition `f` stays noise-free; the model plant (rollouts, comparisons) and data
+    /// collection add it, seeded; the rapier plant does not.
+    #[serde(default)]
+    pub velocity_noise: f64,
 }
 
 impl Default for PointMassConfig {
@@ -119,6 +126,7 @@ impl Default for PointMassConfig {
             integrator: Integrator::Exact,
             rk4_substeps: 10,
             friction: FrictionConfig::Constant { eta: 1.0 },
+            velocity_noise: 0.0,
         }
     }
 }
@@ -142,6 +150,7 @@ impl PointMassConfig {
         positive("env.position_limit", self.position_limit)?;
         positive("env.velocity_limit", self.velocity_limit)?;
         non_negative("env.goal_radius", self.goal_radius)?;
+        non_negative("env.velocity_noise", self.velocity_noise)?;
         require!(
             self.goal_reward.is_finite(),
             "env.goal_reward",
@@ -542,6 +551,20 @@ impl F64Model for PointMass {
 
     fn blocks(&self) -> &[BlockSpec] {
         &self.blocks
+    }
+
+    fn add_process_noise(&self, x: &mut [f64], rng: &mut Pcg64Mcg) {
+        let sigma = self.config.velocity_noise;
+        if sigma == 0.0 {
+            return;
+        }
+        let lim = self.config.velocity_limit;
+        for agent in x.chunks_mut(4) {
+            for v in &mut agent[2..4] {
+                let z: f64 = rng.sample(rand_distr::StandardNormal);
+                *v = (*v + sigma * z).clamp(-lim, lim);
+            }
+        }
     }
 }
 

@@ -43,7 +43,8 @@ pub struct RolloutSpec {
     /// The point masses' plant (the robots always run on their rapier plant, the classic
     /// benchmarks on their model).
     pub plant: PlantChoice,
-    /// Seed of the robot plant's noise.
+    /// Seed of the plant's noise: the robots' wheel and sensor noise, and the point masses'
+    /// process noise on the model plant ([`crate::model::pointmass::PointMassConfig::velocity_noise`]).
     pub seed: u64,
 }
 
@@ -107,7 +108,7 @@ fn run_with(
         EnvModel::PointMass(pm) => {
             let (r, collisions) = match &spec.plant {
                 PlantChoice::Model => {
-                    let mut plant = ModelPlant::new(model);
+                    let mut plant = ModelPlant::seeded(model, spec.seed);
                     (rollout(controller, &mut plant, start, spec.steps)?, None)
                 }
                 PlantChoice::Rapier(config) => {
@@ -182,7 +183,8 @@ pub fn start_for(
     Ok(poses.into_iter().flatten().collect())
 }
 
-/// The point masses from every state of `starts` on the model: each run's metrics.
+/// The point masses from every state of `starts` on the model plant (run `i` with its process
+/// noise, if the task has any, seeded with `i`): each run's metrics.
 pub fn point_mass_starts(
     policy: &Policy,
     starts: &[Vec<f64>],
@@ -201,9 +203,17 @@ pub fn point_mass_starts(
     let mut controller = policy.controller(kind)?;
     starts
         .iter()
-        .map(|s| match run_with(policy, &mut *controller, s, &spec)? {
-            Outcome::PointMass { metrics, .. } => Ok(metrics),
-            _ => unreachable!("a point-mass policy runs the point masses"),
+        .enumerate()
+        .map(|(i, s)| {
+            // Run i's process noise (if the task has any) is seeded with i.
+            let spec = RolloutSpec {
+                seed: i as u64,
+                ..spec.clone()
+            };
+            match run_with(policy, &mut *controller, s, &spec)? {
+                Outcome::PointMass { metrics, .. } => Ok(metrics),
+                _ => unreachable!("a point-mass policy runs the point masses"),
+            }
         })
         .collect()
 }

@@ -11,6 +11,8 @@
 
 use fuzzyq_core::Model;
 use fuzzyq_core::error::check_len;
+use rand::SeedableRng;
+use rand_pcg::Pcg64Mcg;
 
 use crate::error::SimError;
 use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS};
@@ -57,22 +59,30 @@ pub trait Plant {
     fn step(&mut self, u: &[f64]) -> Result<bool, SimError>;
 }
 
-/// A model as the plant: the model's own `f64` transition.
+/// A model as the plant: the model's own `f64` transition, plus its process noise
+/// ([`F64Model::add_process_noise`]) drawn from a seeded generator.
 #[derive(Debug)]
 pub struct ModelPlant<'m, M> {
     model: &'m M,
     x: Vec<f64>,
     next: Vec<f64>,
+    rng: Pcg64Mcg,
 }
 
 impl<'m, M: F64Model + Model<f64>> ModelPlant<'m, M> {
-    /// The plant of `model`.
+    /// The plant of `model`, its noise seeded with 0.
     pub fn new(model: &'m M) -> Self {
+        Self::seeded(model, 0)
+    }
+
+    /// The plant of `model`, its noise seeded with `seed`.
+    pub fn seeded(model: &'m M, seed: u64) -> Self {
         let n = F64Model::state_dim(model);
         Self {
             model,
             x: vec![0.0; n],
             next: vec![0.0; n],
+            rng: Pcg64Mcg::seed_from_u64(seed),
         }
     }
 }
@@ -100,6 +110,7 @@ impl<M: F64Model + Model<f64>> Plant for ModelPlant<'_, M> {
     }
     fn step(&mut self, u: &[f64]) -> Result<bool, SimError> {
         F64Model::step(self.model, &self.x, u, &mut self.next);
+        F64Model::add_process_noise(self.model, &mut self.next, &mut self.rng);
         std::mem::swap(&mut self.x, &mut self.next);
         Ok(F64Model::has_terminal_states(self.model) && F64Model::is_terminal(self.model, &self.x))
     }

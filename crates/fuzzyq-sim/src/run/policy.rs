@@ -28,6 +28,7 @@ use crate::learn::additive::AdditiveQ;
 use crate::learn::tasks::khepera::{self as khepera_task, observation};
 use crate::learn::tasks::pointmass as pointmass_task;
 use crate::model::khepera::KheperaModel;
+use crate::model::learned::{BlockTables, LearnedModel};
 use crate::model::pointmass::PointMass;
 use crate::model::{ActionTable, EnvKind, EnvModel, F64Model, Wide};
 use crate::run::plant::Observation;
@@ -306,6 +307,8 @@ macro_rules! engine {
 
 engine!(EnvEngine32, EnvOp32, f32, EnvModel);
 engine!(EnvEngine64, EnvOp64, f64, EnvModel);
+engine!(LearnedEngine32, LearnedOp32, f32, LearnedModel);
+engine!(LearnedEngine64, LearnedOp64, f64, LearnedModel);
 engine!(TableEngine32, TableOp32, f32, TabulatedModel<f32>);
 engine!(TableEngine64, TableOp64, f64, TabulatedModel<f64>);
 
@@ -331,18 +334,51 @@ impl FqiPolicy {
     /// The policy of a built-in environment: its training configuration (model, grid,
     /// solver settings), `V` per core and the greedy joint action per core (grid order).
     pub fn new(config: TrainConfig, values: Values, greedy: Vec<u32>) -> Result<Self, SimError> {
+        Self::with_model(config, None, values, greedy)
+    }
+
+    /// [`new`](Self::new) for a solution of the learned model with transition tables
+    /// `learned` (`None`: the environment's own model). The policy's one-step lookahead
+    /// uses the model it was solved on; its plant stays the environment's.
+    pub fn with_model(
+        config: TrainConfig,
+        learned: Option<BlockTables>,
+        values: Values,
+        greedy: Vec<u32>,
+    ) -> Result<Self, SimError> {
         let model = Arc::new(config.build_model()?);
         let (gamma, absorbing_goal) = (config.solver.gamma, config.solver.absorbing_goal);
-        let engine: Box<dyn Engine> = match values {
-            Values::F32(v) => {
+        let learned = match learned {
+            Some(tables) => {
+                require!(
+                    tables.cores == config.grid_cores(),
+                    "learned_model",
+                    "its tables are not on the configured grid",
+                );
+                Some(Arc::new(LearnedModel::new((*model).clone(), tables)?))
+            }
+            None => None,
+        };
+        let engine: Box<dyn Engine> = match (values, learned) {
+            (Values::F32(v), None) => {
                 let grid = config.grid::<f32>()?;
                 let parts = parts(model.clone(), grid, v, greedy, gamma, absorbing_goal)?;
                 Box::new(EnvEngine32::new(parts, |_| OnceLock::new()))
             }
-            Values::F64(v) => {
+            (Values::F64(v), None) => {
                 let grid = config.grid::<f64>()?;
                 let parts = parts(model.clone(), grid, v, greedy, gamma, absorbing_goal)?;
                 Box::new(EnvEngine64::new(parts, |_| OnceLock::new()))
+            }
+            (Values::F32(v), Some(l)) => {
+                let grid = config.grid::<f32>()?;
+                let parts = parts(l, grid, v, greedy, gamma, absorbing_goal)?;
+                Box::new(LearnedEngine32::new(parts, |_| OnceLock::new()))
+            }
+            (Values::F64(v), Some(l)) => {
+                let grid = config.grid::<f64>()?;
+                let parts = parts(l, grid, v, greedy, gamma, absorbing_goal)?;
+                Box::new(LearnedEngine64::new(parts, |_| OnceLock::new()))
             }
         };
         Ok(Self {
@@ -355,7 +391,7 @@ impl FqiPolicy {
 
     /// The policy of a trained policy file's content.
     pub fn from_artifact(a: PolicyArtifact) -> Result<Self, SimError> {
-        Self::new(a.config, a.values, a.greedy)
+        Self::with_model(a.config, a.learned.map(|t| *t), a.values, a.greedy)
     }
 
     /// The policy of a tabulated model (a model known only at the grid's cores, such as one

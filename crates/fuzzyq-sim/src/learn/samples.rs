@@ -1,0 +1,198 @@
+//! Transitions `(x, u, x', r)` and their collection by interacting with a plant.
+//!
+//! [`collect`] runs seeded episodes on a model's plant: each starts where `draw_start` says
+//! (for the point masses, the task's random starts at rest) and takes uniformly random joint
+//! actions for a fixed number of steps, with the plant's process noise
+//! ([`F64Model::add_process_noise`]). The learner sees only the recorded transitions; it never
+//! calls the model's transition function. [`Transitions::from_columns`] takes a user's logged
+//! transitions instead.
+
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+
+use crate::error::{ConfigError, require};
+use crate::model::F64Model;
+
+/// Transitions `(x, u, x', r)`, stored column by column.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Transitions {
+    state_dim: usize,
+    action_dim: usize,
+    x: Vec<f64>,
+    u: Vec<f64>,
+    next: Vec<f64>,
+    reward: Vec<f64>,
+}
+
+impl Transitions {
+    /// No transitions of states of length `state_dim` and action vectors of `action_dim`.
+    #[must_use]
+    pub fn new(state_dim: usize, action_dim: usize) -> Self {
+        Self {
+            state_dim,
+            action_dim,
+            ..Self::default()
+        }
+    }
+
+    /// Transitions from flat row-major arrays (`n * state_dim` states and successors,
+    /// `n * action_dim` actions, `n` rewards), all finite; errors name the array.
+    pub fn from_columns(
+        state_dim: usize,
+        action_dim: usize,
+        x: Vec<f64>,
+        u: Vec<f64>,
+        next: Vec<f64>,
+        reward: Vec<f64>,
+    ) -> Result<Self, ConfigError> {
+        let n = reward.len();
+        for (name, v, per) in [
+            ("states", &x, state_dim),
+            ("actions", &u, action_dim),
+            ("next_states", &next, state_dim),
+            ("rewards", &reward, 1),
+        ] {
+            require!(
+                v.len() == n * per,
+                name,
+                format!(
+                    "needs {} values ({n} transitions x {per}), got {}",
+                    n * per,
+                    v.len()
+                ),
+            );
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(ConfigError::invalid(
+                    name,
+                    format!("value {i} of transition {} is not finite", i / per.max(1)),
+                ));
+            }
+        }
+        Ok(Self {
+            state_dim,
+            action_dim,
+            x,
+            u,
+            next,
+            reward,
+        })
+    }
+
+    /// Appends one transition.
+    pub fn push(&mut self, x: &[f64], u: &[f64], next: &[f64], reward: f64) {
+        self.x.extend_from_slice(x);
+        self.u.extend_from_slice(u);
+        self.next.extend_from_slice(next);
+        self.reward.push(reward);
+    }
+
+    /// Number of transitions.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.reward.len()
+    }
+
+    /// Whether there are none.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.reward.is_empty()
+    }
+
+    /// Length of the states.
+    #[must_use]
+    pub fn state_dim(&self) -> usize {
+        self.state_dim
+    }
+
+    /// Length of the action vectors.
+    #[must_use]
+    pub fn action_dim(&self) -> usize {
+        self.action_dim
+    }
+
+    /// Transition `i`: state, action vector, successor, reward.
+    #[must_use]
+    pub fn get(&self, i: usize) -> (&[f64], &[f64], &[f64], f64) {
+        let (e, d) = (self.state_dim, self.action_dim);
+        (
+            &self.x[i * e..(i + 1) * e],
+            &self.u[i * d..(i + 1) * d],
+            &self.next[i * e..(i + 1) * e],
+            self.reward[i],
+        )
+    }
+
+    /// The first `n` transitions (all of them if there are fewer).
+    #[must_use]
+    pub fn truncated(&self, n: usize) -> Self {
+        let n = n.min(self.len());
+        let (e, d) = (self.state_dim, self.action_dim);
+        Self {
+            state_dim: e,
+            action_dim: d,
+            x: self.x[..n * e].to_vec(),
+            u: self.u[..n * d].to_vec(),
+            next: self.next[..n * e].to_vec(),
+            reward: self.reward[..n].to_vec(),
+        }
+    }
+}
+
+/// How [`collect`] interacts with the plant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Collection {
+    /// Transitions to record, `>= 1`.
+    pub samples: usize,
+    /// Steps per episode, `>= 1` (an episode also ends early in a terminal state).
+    pub episode_steps: usize,
+    /// Seed of the starts, the actions and the plant's noise.
+    pub seed: u64,
+}
+
+impl Collection {
+    /// Checks the counts; errors name `samples` and `episode_steps`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        require!(self.samples >= 1, "samples", "must be at least 1");
+        require!(
+            self.episode_steps >= 1,
+            "episode_steps",
+            "must be at least 1"
+        );
+        Ok(())
+    }
+}
+
+/// Records `collection.samples` transitions of `model`'s plant under uniformly random joint
+/// actions (see the [module docs](self)); `draw_start` writes an episode's start.
+pub fn collect<M: F64Model + ?Sized>(
+    model: &M,
+    collection: &Collection,
+    mut draw_start: impl FnMut(&mut Pcg64Mcg, &mut [f64]),
+) -> Result<Transitions, ConfigError> {
+    collection.validate()?;
+    let e = model.state_dim();
+    let actions = model.actions();
+    let (n, per_agent) = (model.n_agents(), actions.dim());
+    let mut out = Transitions::new(e, n * per_agent);
+    let mut rng = Pcg64Mcg::seed_from_u64(collection.seed);
+    let (mut x, mut next, mut u) = (vec![0.0; e], vec![0.0; e], vec![0.0; n * per_agent]);
+    while out.len() < collection.samples {
+        draw_start(&mut rng, &mut x);
+        for _ in 0..collection.episode_steps {
+            for agent in u.chunks_mut(per_agent) {
+                agent.copy_from_slice(actions.action(rng.random_range(0..actions.len())));
+            }
+            model.step(&x, &u, &mut next);
+            model.add_process_noise(&mut next, &mut rng);
+            let r = model.reward(&x, &u, fuzzyq_core::solver::Precision::F64);
+            out.push(&x, &u, &next, r);
+            std::mem::swap(&mut x, &mut next);
+            if out.len() == collection.samples
+                || (model.has_terminal_states() && model.is_terminal(&x))
+            {
+                break;
+            }
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,113 @@
+//! Stochastic block tables given by a model (the learned fuzzy model): the block backup reads
+//! them, reduces to the stepping backup without noise, and stays a gamma-contraction with it.
+
+use fuzzyq_core::Backup;
+use fuzzyq_core::solver::{BackupPath, Operator, SolveError};
+use fuzzyq_sim::learn::fit::{FitConfig, fit};
+use fuzzyq_sim::learn::samples::{Collection, collect};
+use fuzzyq_sim::learn::tasks::pointmass::default_starts;
+use fuzzyq_sim::model::learned::LearnedModel;
+use fuzzyq_sim::model::pointmass::{PointMass, PointMassConfig};
+use fuzzyq_sim::model::{EnvModel, F64Model};
+use fuzzyq_tests::{assert_close, grid};
+
+const POS: [f64; 5] = [-6.0, -1.0, 0.0, 1.0, 6.0];
+const VEL: [f64; 3] = [-3.0, 0.0, 3.0];
+
+/// Two point masses with velocity noise `sigma`, and the model learned from 4000 of their
+/// transitions on the grid of `POS` and `VEL`.
+fn learned(sigma: f64) -> (EnvModel, LearnedModel) {
+    let task = EnvModel::PointMass(
+        PointMass::new(PointMassConfig {
+            velocity_noise: sigma,
+            ..PointMassConfig::default()
+        })
+        .unwrap(),
+    );
+    let starts = default_starts();
+    let collection = Collection {
+        samples: 4000,
+        episode_steps: 50,
+        seed: 11,
+    };
+    let data = collect(&task, &collection, |rng, x| starts.draw(rng, x)).unwrap();
+    let cores: Vec<Vec<f64>> = (0..2)
+        .flat_map(|_| [POS.to_vec(), POS.to_vec(), VEL.to_vec(), VEL.to_vec()])
+        .collect();
+    let blocks = F64Model::blocks(&task).to_vec();
+    let (tables, _) = fit(&task, &cores, &blocks, &data, &FitConfig::default()).unwrap();
+    let model = LearnedModel::new(task.clone(), tables).unwrap();
+    (task, model)
+}
+
+fn values(n: usize, seed: u64) -> Vec<f64> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..n)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            -50.0 + 170.0 * ((s >> 11) as f64 / (1u64 << 53) as f64)
+        })
+        .collect()
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn given_rows_without_noise_reduce_to_the_stepping_backup() {
+    let (task, model) = learned(0.0);
+    let g = grid::<f64>(2, &POS, &VEL);
+    let backup = Backup {
+        gamma: 0.96,
+        absorbing_goal: false,
+    };
+    let stepping = Operator::new(&task, g.view(), backup, BackupPath::Block).unwrap();
+    let given = Operator::new(&model, g.view(), backup, BackupPath::Auto).unwrap();
+    assert_eq!(given.path(), BackupPath::Block);
+    for seed in 0..3 {
+        let v = values(g.n_cores(), seed);
+        assert_close(
+            &given.apply(&v).unwrap(),
+            &stepping.apply(&v).unwrap(),
+            1e-9,
+        );
+    }
+    // Only the block path reads given rows.
+    let e = Operator::new(&model, g.view(), backup, BackupPath::Generic).err();
+    assert!(matches!(e, Some(SolveError::BlockRowsOnly { .. })), "{e:?}");
+}
+
+#[test]
+fn stochastic_backups_are_gamma_contractions() {
+    let (_, model) = learned(0.2);
+    let g = grid::<f64>(2, &POS, &VEL);
+    let gamma = 0.9;
+    let op = Operator::new(
+        &model,
+        g.view(),
+        Backup {
+            gamma,
+            absorbing_goal: false,
+        },
+        BackupPath::Block,
+    )
+    .unwrap();
+    for seed in 0..4 {
+        let (v1, v2) = (values(g.n_cores(), seed), values(g.n_cores(), seed + 100));
+        let (t1, t2) = (op.apply(&v1).unwrap(), op.apply(&v2).unwrap());
+        let (dt, dv) = (max_abs_diff(&t1, &t2), max_abs_diff(&v1, &v2));
+        assert!(dt <= gamma * dv * (1.0 + 1e-9), "{dt} > {gamma} * {dv}");
+        // A constant shift moves the backup by exactly gamma times it (rows sum to 1).
+        let shifted: Vec<f64> = v1.iter().map(|x| x + 10.0).collect();
+        let ts = op.apply(&shifted).unwrap();
+        for (a, b) in ts.iter().zip(&t1) {
+            assert!((a - b - gamma * 10.0).abs() < 1e-6, "{a} - {b}");
+        }
+    }
+}
