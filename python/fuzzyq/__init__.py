@@ -38,6 +38,7 @@ from fuzzyq._fuzzyq import (
     SolverError,
     __version__,
     available_kernels,
+    collect,
     load,
     solve,
 )
@@ -62,6 +63,7 @@ __all__ = [
     "SolverError",
     "__version__",
     "available_kernels",
+    "collect",
     "load",
     "solve",
 ]

@@ -1,6 +1,6 @@
 """Type stubs of the fuzzyq extension module (checked against it with mypy.stubtest)."""
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from os import PathLike
 from typing import Any, final
 
@@ -29,6 +29,7 @@ __all__ = [
     "Policy",
     "solve",
     "load",
+    "collect",
     "available_kernels",
 ]
 
@@ -372,7 +373,15 @@ def solve(
     operator: str = "values",
     threads: int | None = None,
     callback: Callable[[dict[str, Any]], object] | None = None,
+    transitions: Mapping[str, npt.ArrayLike] | None = None,
 ) -> Solution: ...
+def collect(
+    model: PointMass | ClassicModel,
+    samples: int,
+    *,
+    seed: int = 0,
+    episode_steps: int = 50,
+) -> dict[str, npt.NDArray[np.float64]]: ...
 def load(path: str | PathLike[str]) -> Solution | Policy:
     """Reads a policy file of any kind: a Solution (fuzzy Q-iteration) or a Policy (learned
     from samples: fuzzy Q-learning, VQQL)."""

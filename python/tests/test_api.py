@@ -134,6 +134,42 @@ def test_solve_point_mass(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq
     assert s.value(grid.core_state(0)) == pytest.approx(float(s.V[0]))
 
 
+def test_solve_a_model_learned_from_transitions(
+    one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution], tmp_path: Path
+) -> None:
+    model, grid, exact = one_agent
+    data = fuzzyq.collect(model, 3000, seed=1)
+    assert data["states"].shape == (3000, 4) and data["actions"].shape == (3000, 2)
+    assert data["next_states"].shape == (3000, 4) and data["rewards"].shape == (3000,)
+    # Seeded: the same data for the same seed, other data for another.
+    again = fuzzyq.collect(model, 3000, seed=1)
+    assert all(np.array_equal(data[k], again[k]) for k in data)
+    assert not np.array_equal(fuzzyq.collect(model, 3000, seed=2)["states"], data["states"])
+    # Noise-free linear dynamics: the learned tables are the true ones (to rounding), so both
+    # solutions are within their error bounds of the same fixed point.
+    learned = fuzzyq.solve(model, grid, transitions=data)
+    assert learned.converged
+    assert np.max(np.abs(learned.V - exact.V)) <= learned.error_bound + exact.error_bound
+    path = tmp_path / "learned.fzq"
+    learned.save(path)
+    loaded = fuzzyq.load(path)
+    assert isinstance(loaded, fuzzyq.Solution)
+    x = np.array([-4.0, 5.0, 0.0, 0.0])
+    assert np.array_equal(loaded.policy("greedy").act(x), learned.policy("greedy").act(x))
+    # With process noise the rows spread and the solution differs.
+    noisy = fuzzyq.PointMass(agents=1, velocity_noise=0.2)
+    spread = fuzzyq.solve(noisy, grid, transitions=fuzzyq.collect(noisy, 3000, seed=1))
+    assert np.max(np.abs(spread.V - exact.V)) > spread.error_bound + exact.error_bound
+    with pytest.raises(fuzzyq.InputTypeError, match="next_states is missing"):
+        fuzzyq.solve(model, grid, transitions={k: data[k] for k in ("states", "actions", "rewards")})
+    with pytest.raises(fuzzyq.FuzzyqError, match="transitions.actions"):
+        fuzzyq.solve(model, grid, transitions={**data, "actions": data["actions"][:, :1]})
+    with pytest.raises(fuzzyq.ConfigError, match="not one of the task's actions"):
+        fuzzyq.solve(model, grid, transitions={**data, "actions": data["actions"] + 0.5})
+    with pytest.raises(fuzzyq.ConfigError, match="velocity_noise"):
+        fuzzyq.PointMass(velocity_noise=-1.0)
+
+
 def test_policies(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
     model, grid, s = one_agent
     greedy, interp = s.policy("greedy"), s.policy("interpolated")

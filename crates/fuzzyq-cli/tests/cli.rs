@@ -456,6 +456,8 @@ fn compare_writes_the_table_and_figures() {
             "64",
             "--samples",
             "2000",
+            "--curve",
+            "300,3000",
             "--out",
             "cmp",
         ],
@@ -484,6 +486,15 @@ fn compare_writes_the_table_and_figures() {
     }
     let csv = std::fs::read_to_string(out.join("table1.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + learners.len());
+    // The sample-efficiency curve: 2 budgets for each of the 4 learners from samples.
+    let curve = std::fs::read_to_string(out.join("efficiency.csv")).unwrap();
+    assert_eq!(curve.lines().count(), 1 + 2 * 4, "{curve}");
+    assert!(curve.contains("learned-model,3000,"), "{curve}");
+    assert!(out.join("efficiency.png").is_file());
+    assert_eq!(
+        json(&out.join("efficiency.json")).as_array().unwrap().len(),
+        8
+    );
     let j = json(&out.join("table1.json"));
     let reports = j["reports"].as_array().unwrap();
     let names: Vec<&str> = reports
@@ -534,6 +545,14 @@ fn compare_writes_the_table_and_figures() {
             (
                 "compare --config one.toml --out fresh --x0=-4,5,0,0 --samples 0",
                 "samples",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --curve 10,0",
+                "--curve",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --learners fqi --curve 10",
+                "learns from samples",
             ),
             (
                 "compare --config one.toml --out fresh --x0=-4,5,0,0 --start-position 9",
@@ -718,9 +737,70 @@ fn learned_model_trains_from_interaction_and_rolls_out() {
     let (l, e) = (json(&d.join("l.fzq.json")), json(&d.join("e.fzq.json")));
     assert_eq!(l["success_rate"], e["success_rate"]);
     assert!(e["success_rate"].as_f64().unwrap() > 0.5, "{e}");
+    // Logged transitions from a CSV file: the same exact tables.
+    let task = fuzzyq_sim::TrainConfig::from_toml(&one)
+        .unwrap()
+        .build_model()
+        .unwrap();
+    let collection = fuzzyq_sim::learn::samples::Collection {
+        samples: 2000,
+        episode_steps: 50,
+        seed: 9,
+    };
+    let data = fuzzyq_sim::train::collect_from_plant(&task, &collection).unwrap();
+    let mut csv = String::from("s_x,s_y,v_x,v_y,u_x,u_y,s_x',s_y',v_x',v_y',r\n");
+    for i in 0..data.len() {
+        let (x, u, n, r) = data.get(i);
+        let row: Vec<String> = x
+            .iter()
+            .chain(u)
+            .chain(n)
+            .chain([&r])
+            .map(f64::to_string)
+            .collect();
+        csv.push_str(&row.join(","));
+        csv.push('\n');
+    }
+    std::fs::write(d.join("t.csv"), csv).unwrap();
+    std::fs::write(d.join("bad.csv"), "1,2,3\n").unwrap();
+    let args = [
+        "train",
+        "--config",
+        "one.toml",
+        "--learner",
+        "learned-model",
+        "--transitions",
+        "t.csv",
+        "--out",
+        "t.fzq",
+        "--json",
+        "t.json",
+        "-q",
+    ];
+    let o = fuzzyq(&args, d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let l = &json(&d.join("t.json"))["learned_model"];
+    assert_eq!(l["source"], "t.csv");
+    assert_eq!(l["samples"], 2000);
+    assert!(
+        l["table_error"][0]["max_l1"].as_f64().unwrap() < 1e-9,
+        "{l}"
+    );
     assert_all_fail(
         d,
         &[
+            (
+                "train --config one.toml --transitions t.csv --out z.fzq",
+                "--transitions applies",
+            ),
+            (
+                "train --config one.toml --learner learned-model --transitions none.csv --out z.fzq",
+                "cannot read",
+            ),
+            (
+                "train --config one.toml --learner learned-model --transitions bad.csv --out z.fzq",
+                "line 1: 3 values, expected 11",
+            ),
             (
                 "train --config one.toml --samples 100 --out z.fzq",
                 "--samples applies",

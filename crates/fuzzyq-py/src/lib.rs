@@ -33,6 +33,7 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<policy::Policy>()?;
     m.add_function(wrap_pyfunction!(solve::solve, m)?)?;
     m.add_function(wrap_pyfunction!(solve::load, m)?)?;
+    m.add_function(wrap_pyfunction!(solve::collect, m)?)?;
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;
     Ok(())
 }

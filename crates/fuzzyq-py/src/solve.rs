@@ -16,7 +16,10 @@ use fuzzyq_core::solver::{
 use fuzzyq_core::{NamedOption, Real};
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary, Values};
+use fuzzyq_sim::learn::fit::FitConfig;
+use fuzzyq_sim::learn::samples::{Collection, Transitions};
 use fuzzyq_sim::model::learned::BlockTables;
+use fuzzyq_sim::model::{EnvModel, F64Model};
 use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
@@ -24,7 +27,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::classic::ClassicModel;
-use crate::convert::finite_vector;
+use crate::convert::{finite_vector, matrix};
 use crate::errors::{Kind, config_error, error, policy_file_error, sim_error, solve_error};
 use crate::model::{CallableModel, Grid, PointMass};
 use crate::policy::Policy;
@@ -152,6 +155,13 @@ fn observer<'a>(
 /// `callback(info)` is called after every sweep with a dict (`sweep`, `delta_lower`,
 /// `delta_upper`, `extrapolated`, `evaluation`, `seconds`, `bound`, `xi`); an exception it raises stops the
 /// solve and propagates. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
+///
+/// `transitions` (a built-in model only; a dict of `states`, `actions`, `next_states`,
+/// `rewards` arrays as `collect` returns, or a user's logged data) solves a model *learned*
+/// from them instead of the model's own dynamics: every dynamics block's transition table is
+/// estimated from the transitions (as `fuzzyq train --learner learned-model` does) and the
+/// model supplies only the reward, actions and state ranges. The solution can be saved and
+/// acts on the learned model.
 #[pyfunction]
 #[pyo3(signature = (
     model,
@@ -170,6 +180,7 @@ fn observer<'a>(
     operator = "values",
     threads = None,
     callback = None,
+    transitions = None,
 ))]
 #[allow(clippy::too_many_arguments)] // the solver's settings, as keyword arguments
 pub(crate) fn solve(
@@ -189,6 +200,7 @@ pub(crate) fn solve(
     operator: &str,
     threads: Option<usize>,
     callback: Option<Py<PyAny>>,
+    transitions: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Solution> {
     let given = Settings {
         gamma,
@@ -245,11 +257,21 @@ pub(crate) fn solve(
             solver: settings,
         };
         config.validate().map_err(|e| config_error(py, &e))?;
+        let data = transitions
+            .map(|t| transitions_from(t, &config))
+            .transpose()?;
         let cb = callback.as_ref();
         let result = py
             .detach(|| {
-                with_pool(threads, || {
-                    fuzzyq_sim::train::train(&config, observer(cb, &failure))
+                with_pool(threads, || match &data {
+                    None => fuzzyq_sim::train::train(&config, observer(cb, &failure)),
+                    Some(d) => fuzzyq_sim::train::train_on_transitions(
+                        &config,
+                        d,
+                        &FitConfig::default(),
+                        observer(cb, &failure),
+                    )
+                    .map(|r| r.artifact),
                 })
             })
             .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))?;
@@ -261,6 +283,14 @@ pub(crate) fn solve(
         return Solution::from_artifact(py, artifact, Some(grid.clone().unbind()));
     }
 
+    if transitions.is_some() {
+        return Err(error(
+            py,
+            Kind::Config,
+            "transitions: a model learned from transitions takes its reward, actions and blocks \
+             from a built-in model (fuzzyq.PointMass or a classic benchmark)",
+        ));
+    }
     let Ok(cm) = model.cast::<CallableModel>() else {
         return Err(error(
             py,
@@ -316,6 +346,87 @@ pub(crate) fn solve(
         Precision::F32 => run!(f32, Table32),
         Precision::F64 => run!(f64, Table64),
     }
+}
+
+/// The transitions of `obj` (a mapping with `states`, `actions`, `next_states` and
+/// `rewards`, as [`collect`] returns) for the task of `config`.
+fn transitions_from(obj: &Bound<'_, PyAny>, config: &TrainConfig) -> PyResult<Transitions> {
+    let py = obj.py();
+    let task = config.build_model().map_err(|e| sim_error(py, &e))?;
+    let e = F64Model::state_dim(&task);
+    let d = F64Model::actions(&task).dim() * F64Model::n_agents(&task);
+    let field = |name: &str| -> PyResult<Bound<'_, PyAny>> {
+        obj.get_item(name).map_err(|_| {
+            error(
+                py,
+                Kind::InputType,
+                format!(
+                    "transitions: expected a mapping with states, actions, next_states and \
+                     rewards (as fuzzyq.collect returns); {name} is missing"
+                ),
+            )
+        })
+    };
+    let (n, _, x) = matrix(&field("states")?, "transitions.states", None, Some(e))?;
+    let (_, _, u) = matrix(&field("actions")?, "transitions.actions", Some(n), Some(d))?;
+    let (_, _, next) = matrix(
+        &field("next_states")?,
+        "transitions.next_states",
+        Some(n),
+        Some(e),
+    )?;
+    let r = finite_vector(&field("rewards")?, "transitions.rewards", Some(n))?;
+    Transitions::from_columns(e, d, x, u, next, r).map_err(|err| config_error(py, &err))
+}
+
+/// Collects `samples` transitions on the plant of a built-in `model` as
+/// `fuzzyq train --learner learned-model` does: seeded episodes of `episode_steps` random
+/// joint actions from the task's random starts, with the model's process noise (for example
+/// `fuzzyq.PointMass(velocity_noise=0.05)`). Returns a dict of float64 arrays: `states`
+/// `(n, state_dim)`, `actions` `(n, action_dim)`, `next_states` `(n, state_dim)` and
+/// `rewards` `(n,)`, ready for `fuzzyq.solve(model, grid, transitions=...)`.
+#[pyfunction]
+#[pyo3(signature = (model, samples, *, seed = 0, episode_steps = 50))]
+pub(crate) fn collect<'py>(
+    py: Python<'py>,
+    model: &Bound<'py, PyAny>,
+    samples: usize,
+    seed: u64,
+    episode_steps: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let task = if let Ok(pm) = model.cast::<PointMass>() {
+        EnvModel::PointMass((*pm.get().model).clone())
+    } else if let Ok(c) = model.cast::<ClassicModel>() {
+        (*c.get().model).clone()
+    } else {
+        return Err(error(
+            py,
+            Kind::InputType,
+            "model: expected a fuzzyq.PointMass or a classic benchmark (fuzzyq.DcMotor, \
+             fuzzyq.Pendulum, fuzzyq.Arm)",
+        ));
+    };
+    let collection = Collection {
+        samples,
+        episode_steps,
+        seed,
+    };
+    let data = py
+        .detach(|| fuzzyq_sim::train::collect_from_plant(&task, &collection))
+        .map_err(|e| sim_error(py, &e))?;
+    let (e, d, n) = (data.state_dim(), data.action_dim(), data.len());
+    let (x, u, next, r) = data.columns();
+    let out = PyDict::new(py);
+    let array = |v: &[f64], cols: usize| -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let a = Array2::from_shape_vec((n, cols), v.to_vec())
+            .map_err(|err| error(py, Kind::Input, err.to_string()))?;
+        Ok(PyArray2::from_owned_array(py, a))
+    };
+    out.set_item("states", array(x, e)?)?;
+    out.set_item("actions", array(u, d)?)?;
+    out.set_item("next_states", array(next, e)?)?;
+    out.set_item("rewards", PyArray1::from_slice(py, r))?;
+    Ok(out)
 }
 
 /// Reads a policy file written by `fuzzyq train` (any environment, any learner) or by

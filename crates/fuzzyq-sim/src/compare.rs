@@ -25,6 +25,10 @@
 //! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
 //! | [`Learner::LearnedModel`] | joint fuzzy Q-iteration on a fuzzy model learned from transitions collected on the plant ([`crate::train::train_learned`]) | `N * M`; only `V` and the learned tables are stored |
 //!
+//! [`sample_efficiency`] asks the other question of Table 1, at equal samples: each learner
+//! from samples (the learned model, fuzzy Q-learning, VQQL) gets the same numbers of
+//! transitions of interaction ([`with_budget`]) and is measured over the same random starts.
+//!
 //! Everything is seeded: the same configuration gives the same table (bar the seconds).
 
 use std::time::Instant;
@@ -339,6 +343,120 @@ pub fn compare(
     })
 }
 
+/// One point of a sample-efficiency curve ([`sample_efficiency`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EfficiencyPoint {
+    /// The learner.
+    pub learner: Learner,
+    /// Transitions of interaction with the plant it learned from.
+    pub transitions: usize,
+    /// Success over the comparison's random starts.
+    pub success_rate: f64,
+    /// Mean final error over the starts (cm, mean of the agents).
+    pub mean_final_error_cm: f64,
+    /// Training seconds (collection, fitting and solving, or learning episodes).
+    pub train_seconds: f64,
+    /// Why the learner produced no policy (too few transitions to estimate its model: a block
+    /// action never taken); it then succeeds from no start.
+    pub failure: Option<String>,
+}
+
+/// `config` with `learner` (if it learns from samples) given `transitions` of interaction with
+/// the plant:
+/// the learned model collects that many; fuzzy Q-learning runs `transitions / max_steps`
+/// learning episodes (at least 1, no greedy evaluations, epsilon decaying over the first 80%);
+/// VQQL spends half on the exploration its codebook is built from (its cells capped at half
+/// that many states) and half on its learning episodes.
+#[must_use]
+pub fn with_budget(config: &CompareConfig, learner: Learner, transitions: usize) -> CompareConfig {
+    let mut c = config.clone();
+    let mut learn_for = |n: usize| {
+        c.fql.episodes = (n / c.fql.max_steps.max(1)).max(1);
+        c.fql.epsilon_decay_episodes = (c.fql.episodes * 4 / 5).max(1);
+        c.fql.eval_every = 0;
+    };
+    match learner {
+        Learner::Fqi | Learner::Crisp => {}
+        Learner::LearnedModel => c.model_learning.collection.samples = transitions,
+        Learner::Fql | Learner::FqlLiteral => learn_for(transitions),
+        Learner::Vqql => {
+            learn_for(transitions / 2);
+            c.vqql.samples = (transitions / 2).max(1);
+            // Repeated states (episodes start at rest) can leave fewer distinct states than
+            // samples; half of them always suffice for a codebook.
+            c.vqql.cells = c.vqql.cells.min((c.vqql.samples / 2).max(1));
+        }
+    }
+    c
+}
+
+/// Success over the random starts against the number of transitions, for every learner of
+/// `config` that learns from samples (the learned model, fuzzy Q-learning, VQQL), each budget
+/// of `budgets` given as [`with_budget`] says; the model-based learners that use the model
+/// itself are left out (they need no transitions). `progress` sees `(learner, budget)` before
+/// each training.
+pub fn sample_efficiency(
+    config: &CompareConfig,
+    budgets: &[usize],
+    mut progress: impl FnMut(Learner, usize),
+) -> Result<Vec<EfficiencyPoint>, SimError> {
+    config.validate()?;
+    require!(
+        !budgets.is_empty(),
+        "budgets",
+        "name at least one number of transitions"
+    );
+    require!(
+        budgets.iter().all(|&b| b >= 1),
+        "budgets",
+        "must be at least 1 transition each"
+    );
+    let model = config.model()?;
+    let starts =
+        pointmass::random_starts(&model, config.starts, config.seed, config.start_position)?;
+    let mut points = Vec::new();
+    for &learner in config
+        .learners
+        .iter()
+        .filter(|l| !matches!(l, Learner::Fqi | Learner::Crisp))
+    {
+        for &budget in budgets {
+            progress(learner, budget);
+            let c = with_budget(config, learner, budget);
+            let t0 = Instant::now();
+            let policy = match train_one(&c, learner) {
+                Ok((policy, _)) => policy,
+                // Too few transitions for the estimator: no model, no policy.
+                Err(SimError::Config(e)) if learner == Learner::LearnedModel => {
+                    points.push(EfficiencyPoint {
+                        learner,
+                        transitions: budget,
+                        success_rate: 0.0,
+                        mean_final_error_cm: f64::NAN,
+                        train_seconds: t0.elapsed().as_secs_f64(),
+                        failure: Some(e.to_string()),
+                    });
+                    continue;
+                }
+                Err(e) => return Err(e),
+            };
+            let train_seconds = t0.elapsed().as_secs_f64();
+            let runs =
+                evaluate::point_mass_starts(&policy, &starts, config.steps, PolicyKind::Greedy)?;
+            let over = PointMassReport::from_runs(&runs);
+            points.push(EfficiencyPoint {
+                learner,
+                transitions: budget,
+                success_rate: over.success_rate,
+                mean_final_error_cm: over.mean_final_error_cm,
+                train_seconds,
+                failure: None,
+            });
+        }
+    }
+    Ok(points)
+}
+
 /// A report with the training fields filled in and the measurements still empty.
 fn blank(learner: Learner) -> LearnerReport {
     LearnerReport {
@@ -638,6 +756,69 @@ mod tests {
     fn vqql_gets_as_many_cells_as_the_grid_has_own_state_cores() {
         assert_eq!(CompareConfig::default().vqql.cells, 9 * 9 * 5 * 5);
         assert_eq!(tiny().vqql.cells, 7 * 7 * 3 * 3);
+    }
+
+    #[test]
+    fn every_learner_from_samples_gets_the_budget() {
+        let c = tiny();
+        let l = with_budget(&c, Learner::LearnedModel, 1234);
+        assert_eq!(l.model_learning.collection.samples, 1234);
+        let f = with_budget(&c, Learner::Fql, 3000);
+        assert_eq!(f.fql.episodes * f.fql.max_steps, 3000);
+        assert_eq!(
+            f.fql.eval_every, 0,
+            "no evaluation episodes beyond the budget"
+        );
+        let v = with_budget(&c, Learner::Vqql, 3000);
+        assert_eq!(v.vqql.samples + v.fql.episodes * v.fql.max_steps, 3000);
+        assert_eq!(with_budget(&c, Learner::Vqql, 100).vqql.cells, 25);
+        assert_eq!(with_budget(&c, Learner::Fqi, 100), c);
+    }
+
+    #[test]
+    fn sample_efficiency_is_seeded_and_skips_the_learners_of_the_model() {
+        let mut c = tiny();
+        c.learners = vec![Learner::Fqi, Learner::LearnedModel, Learner::Fql];
+        let mut seen = Vec::new();
+        let strip = |mut p: Vec<EfficiencyPoint>| {
+            for q in &mut p {
+                q.train_seconds = 0.0;
+            }
+            p
+        };
+        let a = strip(sample_efficiency(&c, &[300, 3000], |l, n| seen.push((l, n))).unwrap());
+        assert_eq!(
+            seen,
+            [
+                (Learner::LearnedModel, 300),
+                (Learner::LearnedModel, 3000),
+                (Learner::Fql, 300),
+                (Learner::Fql, 3000)
+            ]
+        );
+        assert_eq!(
+            a,
+            strip(sample_efficiency(&c, &[300, 3000], |_, _| {}).unwrap())
+        );
+        // 3,000 transitions pin down the one point mass's model: fuzzy Q-iteration's result.
+        let fqi = compare(
+            &CompareConfig {
+                learners: vec![Learner::Fqi],
+                ..c.clone()
+            },
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(a[1].success_rate, fqi.reports[0].success_rate);
+        assert!(sample_efficiency(&c, &[0], |_, _| {}).is_err());
+        // Two transitions cannot show every block action: no model, reported, not an error.
+        c.learners = vec![Learner::LearnedModel];
+        let few = sample_efficiency(&c, &[2], |_, _| {}).unwrap();
+        assert_eq!(few[0].success_rate, 0.0);
+        assert!(
+            few[0].failure.as_deref().unwrap().contains("collect more"),
+            "{few:?}"
+        );
     }
 
     #[test]

@@ -205,6 +205,15 @@ fn draw_start(model: &EnvModel) -> impl FnMut(&mut rand_pcg::Pcg64Mcg, &mut [f64
     }
 }
 
+/// Transitions of `task`'s plant as the learned-model learner collects them: seeded episodes
+/// of random actions from the task's starts ([`samples::collect`]), with its process noise.
+pub fn collect_from_plant(
+    task: &EnvModel,
+    collection: &Collection,
+) -> Result<Transitions, SimError> {
+    Ok(samples::collect(task, collection, draw_start(task))?)
+}
+
 /// Fuzzy Q-iteration on a model learned from interaction: collects
 /// `learning.collection.samples` transitions on the plant of `config`'s environment (with its
 /// process noise), estimates the block tables on the configured grid ([`fit::fit`]; the
@@ -220,7 +229,7 @@ pub fn train_learned(
     let start = std::time::Instant::now();
     check_learnable(config)?;
     let task = config.build_model()?;
-    let data = samples::collect(&task, &learning.collection, draw_start(&task))?;
+    let data = collect_from_plant(&task, &learning.collection)?;
     let (artifact, fit, table_error, learning_seconds) =
         fit_and_solve(config, &task, &data, &learning.fit, start, observer)?;
     Ok(LearnedModelRun {

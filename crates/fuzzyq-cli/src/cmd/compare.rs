@@ -44,6 +44,12 @@ pub(crate) struct CompareArgs {
     /// Episodes of the learners from samples (fql, fql-literal, vqql) [default: 3000].
     #[arg(long, value_name = "N")]
     episodes: Option<usize>,
+    /// Also a sample-efficiency curve: success over the random starts against these numbers
+    /// of transitions (comma-separated), for every named learner that learns from samples
+    /// (learned-model, fql, fql-literal, vqql), each given that many transitions of
+    /// interaction; writes efficiency.csv, efficiency.json and efficiency.png.
+    #[arg(long, value_name = "N,...", value_delimiter = ',')]
+    curve: Option<Vec<usize>>,
     /// learned-model: transitions collected on the plant [default: 20000].
     #[arg(long, value_name = "N")]
     samples: Option<usize>,
@@ -103,15 +109,33 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
         c.model_learning.collection.samples = n;
     }
     c.validate()?;
+    if let Some(budgets) = &args.curve {
+        if budgets.is_empty() || budgets.contains(&0) {
+            anyhow::bail!("--curve: name numbers of transitions of at least 1");
+        }
+        if c.learners
+            .iter()
+            .all(|l| l.is_model_based() && *l != Learner::LearnedModel)
+        {
+            anyhow::bail!("--curve: none of the learners learns from samples");
+        }
+    }
     Ok(c)
 }
 
 /// The files the comparison writes into the output directory.
-fn outputs(dir: &Path, learners: &[Learner]) -> Vec<PathBuf> {
+fn outputs(dir: &Path, learners: &[Learner], curve: bool) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = ["table1.md", "table1.csv", "table1.json", "paths.png"]
         .iter()
         .map(|f| dir.join(f))
         .collect();
+    if curve {
+        files.extend(
+            ["efficiency.csv", "efficiency.json", "efficiency.png"]
+                .iter()
+                .map(|f| dir.join(f)),
+        );
+    }
     files.extend(
         learners
             .iter()
@@ -127,7 +151,7 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create --out {}", args.out.display()))?;
-    let files = outputs(&args.out, &config.learners);
+    let files = outputs(&args.out, &config.learners, args.curve.is_some());
     for f in &files {
         check_writable(f, "output")?;
     }
@@ -157,6 +181,19 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
     write(&args.out, &comparison)?;
     let table = comparison.to_markdown();
     print_stdout(&table)?;
+    if let Some(budgets) = &args.curve {
+        let points = compare::sample_efficiency(&config, budgets, |l, n| {
+            if !quiet {
+                eprintln!("sample-efficiency curve: {} with {n} transitions", l.name());
+            }
+        })?;
+        let fqi = comparison
+            .reports
+            .iter()
+            .find(|r| r.learner == Learner::Fqi)
+            .map(|r| ("fqi (the true model)", r.success_rate));
+        write_curve(&args.out, &points, fqi, &config)?;
+    }
     if !quiet {
         eprintln!(
             "compared {} learners in {:.1} s; wrote {}",
@@ -170,6 +207,36 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The sample-efficiency curve's files.
+fn write_curve(
+    dir: &Path,
+    points: &[compare::EfficiencyPoint],
+    reference: Option<(&str, f64)>,
+    config: &CompareConfig,
+) -> anyhow::Result<()> {
+    let mut csv = String::from(
+        "learner,transitions,success_rate,mean_final_error_cm,train_seconds,failure\n",
+    );
+    for p in points {
+        csv.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            p.learner.name(),
+            p.transitions,
+            p.success_rate,
+            p.mean_final_error_cm,
+            p.train_seconds,
+            p.failure.as_deref().unwrap_or("").replace([',', '\n'], ";")
+        ));
+    }
+    write_file(&dir.join("efficiency.csv"), csv.as_bytes(), "curve")?;
+    write_json(&dir.join("efficiency.json"), &points)?;
+    let title = format!(
+        "Success over {} random starts (seed {}) against transitions of interaction",
+        config.starts, config.seed
+    );
+    plot::efficiency_figure(&dir.join("efficiency.png"), points, reference, &title)
 }
 
 fn write(dir: &Path, c: &Comparison) -> anyhow::Result<()> {

@@ -14,8 +14,9 @@ use fuzzyq_core::solver::{
 };
 use fuzzyq_sim::io::config::EnvConfig;
 use fuzzyq_sim::io::policy_file::PolicyFile;
+use fuzzyq_sim::io::transitions::read_transitions_csv;
 use fuzzyq_sim::learn::fql::EpisodeRecord;
-use fuzzyq_sim::model::EnvKind;
+use fuzzyq_sim::model::{EnvKind, F64Model};
 use fuzzyq_sim::train::{self, Learner, SampleLearning};
 use fuzzyq_sim::{SimError, TrainConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -89,8 +90,12 @@ pub(crate) struct TrainArgs {
     learner: Learner,
     /// learned-model: transitions to collect on the plant (random actions from seeded starts)
     /// [default: 20000].
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", conflicts_with = "transitions")]
     samples: Option<usize>,
+    /// learned-model: learn from these logged transitions instead of collecting them: CSV, one
+    /// transition per line, `x_1..x_E, u_1..u_D, x'_1..x'_E, r`, an optional header line.
+    #[arg(long, value_name = "FILE.csv")]
+    transitions: Option<PathBuf>,
     /// fql, vqql: number of episodes [default: 3000 for the point masses, 2000 for the
     /// robots].
     #[arg(long, value_name = "N")]
@@ -161,8 +166,11 @@ struct Summary<'a> {
 /// The `--json` part of `--learner learned-model`.
 #[derive(Serialize)]
 struct LearnedSummary<'a> {
+    /// Where the transitions came from: `"plant"` or the `--transitions` file.
+    source: String,
     samples: usize,
-    seed: u64,
+    /// The collection's seed (`None` for logged transitions).
+    seed: Option<u64>,
     learning_seconds: f64,
     fit: &'a fuzzyq_sim::learn::fit::FitReport,
     table_error: &'a [fuzzyq_sim::learn::fit::TableError],
@@ -305,11 +313,16 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.learner != Learner::Fqi && !learned {
         return run_from_samples(&args, &config);
     }
-    refuse(
-        args.samples.is_some() && !learned,
-        "--samples",
-        "applies to --learner learned-model only",
-    )?;
+    for (set, flag) in [
+        (args.samples.is_some(), "--samples"),
+        (args.transitions.is_some(), "--transitions"),
+    ] {
+        refuse(
+            set && !learned,
+            flag,
+            "applies to --learner learned-model only",
+        )?;
+    }
     for (set, flag) in [
         (args.episodes.is_some(), "--episodes"),
         (args.literal, "--literal"),
@@ -325,6 +338,17 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         l.collection.validate()?;
         train::check_learnable(&config)?;
     }
+    let logged = match &args.transitions {
+        Some(path) => {
+            let task = config.build_model()?;
+            let (e, d) = (
+                F64Model::state_dim(&task),
+                F64Model::actions(&task).dim() * F64Model::n_agents(&task),
+            );
+            Some(read_transitions_csv(path, e, d)?)
+        }
+        None => None,
+    };
     check_writable(&args.out, "policy")?;
     check_outputs(&[(&args.json, "summary")])?;
     start_pool(args.threads)?;
@@ -362,12 +386,21 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     bar.set_message("preparing");
     bar.enable_steady_tick(Duration::from_millis(200));
     let plain = !args.quiet && !std::io::stderr().is_terminal();
-    if let (Some(l), false) = (&learning, args.quiet) {
-        eprintln!(
+    match (&learning, &logged, args.quiet) {
+        (_, Some(data), false) => eprintln!(
+            "learned model: {} logged transitions from {}, fitted per dynamics block, then solved",
+            data.len(),
+            args.transitions
+                .as_deref()
+                .unwrap_or(Path::new(""))
+                .display()
+        ),
+        (Some(l), None, false) => eprintln!(
             "learned model: {} transitions from the plant (random actions, episodes of {} \
              steps, seed {}), fitted per dynamics block, then solved",
             l.collection.samples, l.collection.episode_steps, l.collection.seed
-        );
+        ),
+        _ => {}
     }
     let observer = |p: &fuzzyq_core::solver::Progress| {
         bar.set_length(p.bound as u64);
@@ -384,12 +417,13 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         stop_if(&stop)
     };
-    let result = match &learning {
-        Some(l) => train::train_learned(&config, l, observer).map(|r| {
-            let artifact = r.artifact.clone();
-            (artifact, Some(r))
-        }),
-        None => train::train(&config, observer).map(|a| (a, None)),
+    let with_run = |r: train::LearnedModelRun| (r.artifact.clone(), Some(r));
+    let result = match (&learning, &logged) {
+        (Some(l), None) => train::train_learned(&config, l, observer).map(with_run),
+        (Some(l), Some(data)) => {
+            train::train_on_transitions(&config, data, &l.fit, observer).map(with_run)
+        }
+        (None, _) => train::train(&config, observer).map(|a| (a, None)),
     };
     bar.finish_and_clear();
     let (artifact, learned_run) = match result {
@@ -486,8 +520,12 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             deltas: &s.deltas,
             extrapolated: &s.extrapolated,
             learned_model: learned_run.as_ref().map(|r| LearnedSummary {
+                source: args
+                    .transitions
+                    .as_ref()
+                    .map_or_else(|| "plant".into(), |p| p.display().to_string()),
                 samples: r.fit.samples,
-                seed: args.seed,
+                seed: args.transitions.is_none().then_some(args.seed),
                 learning_seconds: r.learning_seconds,
                 fit: &r.fit,
                 table_error: &r.table_error,

@@ -10,7 +10,7 @@ use plotters::prelude::*;
 use super::{chart, draw_origin, err, key, legend_at, range, titled, write_figure};
 
 /// One colour per learner of the comparison.
-const LEARNER_COLORS: [RGBColor; 6] = [
+pub(super) const LEARNER_COLORS: [RGBColor; 6] = [
     RGBColor(0x1f, 0x77, 0xb4),
     RGBColor(0xd6, 0x27, 0x28),
     RGBColor(0x2c, 0xa0, 0x2c),

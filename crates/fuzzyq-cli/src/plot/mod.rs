@@ -8,6 +8,7 @@
 //! - [`learning_curve_figure`]: the learning curve of fuzzy Q-learning.
 //! - [`success_figure`]: success or failure from many random starts, in the arena.
 //! - [`compare_figure`]: the paths of every learner of `fuzzyq compare` from one start.
+//! - [`efficiency_figure`]: success against transitions for the learners from samples.
 //! - [`series_figure`]: the time series of a classic benchmark's run.
 //! - [`heat_maps_figure`]: heat maps over a 2-D state space (value function and policy).
 //!
@@ -28,6 +29,7 @@ use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 mod arena;
 mod compare;
+mod efficiency;
 mod khepera;
 mod learning;
 mod maps;
@@ -38,6 +40,7 @@ mod starts;
 mod tests;
 
 pub(crate) use compare::compare_figure;
+pub(crate) use efficiency::efficiency_figure;
 pub(crate) use khepera::khepera_figure;
 pub(crate) use learning::learning_curve_figure;
 pub(crate) use maps::{HeatMap, heat_maps_figure};

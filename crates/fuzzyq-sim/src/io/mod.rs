@@ -1,8 +1,9 @@
-//! Files: training configurations ([`config`]) and policy files ([`policy_file`]), and the
-//! atomic writing every output of fuzzyq goes through.
+//! Files: training configurations ([`config`]), policy files ([`policy_file`]), logged
+//! transitions ([`transitions`]), and the atomic writing every output of fuzzyq goes through.
 
 pub mod config;
 pub mod policy_file;
+pub mod transitions;
 
 use std::io::Write;
 use std::path::Path;

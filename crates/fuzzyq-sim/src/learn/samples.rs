@@ -110,6 +110,12 @@ impl Transitions {
         self.action_dim
     }
 
+    /// Every transition's state, action vector, successor (row-major) and reward.
+    #[must_use]
+    pub fn columns(&self) -> (&[f64], &[f64], &[f64], &[f64]) {
+        (&self.x, &self.u, &self.next, &self.reward)
+    }
+
     /// Transition `i`: state, action vector, successor, reward.
     #[must_use]
     pub fn get(&self, i: usize) -> (&[f64], &[f64], &[f64], f64) {
