@@ -1,8 +1,8 @@
 //! Stochastic block tables given by a model (the learned fuzzy model): the block backup reads
 //! them, reduces to the stepping backup without noise, and stays a gamma-contraction with it.
 
-use fuzzyq_core::Backup;
 use fuzzyq_core::solver::{BackupPath, Operator, SolveError};
+use fuzzyq_core::{Backup, Membership};
 use fuzzyq_sim::learn::fit::{FitConfig, fit};
 use fuzzyq_sim::learn::samples::{Collection, collect};
 use fuzzyq_sim::learn::tasks::pointmass::default_starts;
@@ -17,6 +17,11 @@ const VEL: [f64; 3] = [-3.0, 0.0, 3.0];
 /// Two point masses with velocity noise `sigma`, and the model learned from 4000 of their
 /// transitions on the grid of `POS` and `VEL`.
 fn learned(sigma: f64) -> (EnvModel, LearnedModel) {
+    learned_with(sigma, Membership::Triangular)
+}
+
+/// [`learned`] with the rows' memberships taken with `membership`.
+fn learned_with(sigma: f64, membership: Membership) -> (EnvModel, LearnedModel) {
     let task = EnvModel::PointMass(
         PointMass::new(PointMassConfig {
             velocity_noise: sigma,
@@ -35,7 +40,11 @@ fn learned(sigma: f64) -> (EnvModel, LearnedModel) {
         .flat_map(|_| [POS.to_vec(), POS.to_vec(), VEL.to_vec(), VEL.to_vec()])
         .collect();
     let blocks = F64Model::blocks(&task).to_vec();
-    let (tables, _) = fit(&task, &cores, &blocks, &data, &FitConfig::default()).unwrap();
+    let config = FitConfig {
+        membership,
+        ..FitConfig::default()
+    };
+    let (tables, _) = fit(&task, &cores, &blocks, &data, &config).unwrap();
     let model = LearnedModel::new(task.clone(), tables).unwrap();
     (task, model)
 }
@@ -110,4 +119,22 @@ fn stochastic_backups_are_gamma_contractions() {
             assert!((a - b - gamma * 10.0).abs() < 1e-6, "{a} - {b}");
         }
     }
+}
+
+#[test]
+fn crisp_rows_reduce_to_the_stepping_backup_on_a_crisp_grid() {
+    let (task, model) = learned_with(0.0, Membership::Crisp);
+    let g = grid::<f64>(2, &POS, &VEL).with_membership(Membership::Crisp);
+    let backup = Backup {
+        gamma: 0.96,
+        absorbing_goal: false,
+    };
+    let stepping = Operator::new(&task, g.view(), backup, BackupPath::Block).unwrap();
+    let given = Operator::new(&model, g.view(), backup, BackupPath::Block).unwrap();
+    let v = values(g.n_cores(), 5);
+    assert_close(
+        &given.apply(&v).unwrap(),
+        &stepping.apply(&v).unwrap(),
+        1e-9,
+    );
 }

@@ -285,7 +285,11 @@ fn fit_and_solve(
     } else {
         declared
     };
-    let (tables, report) = fit::fit(task, &config.grid_cores(), blocks, data, fit_config)?;
+    let fit_config = FitConfig {
+        membership: config.grid.membership,
+        ..*fit_config
+    };
+    let (tables, report) = fit::fit(task, &config.grid_cores(), blocks, data, &fit_config)?;
     let table_error = fit::table_error(&tables, task)?;
     let learned = LearnedModel::new(task.clone(), tables.clone())?;
     let learning_seconds = start.elapsed().as_secs_f64();

@@ -5,7 +5,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 8 | magic tag `\x89FUZZYQ\n` (the high byte catches 7-bit and text-mode mangling) |
-//! | 4 | format version, `u32` (3 for a policy of a learned model, else 2; version 1 files, fuzzy Q-iteration only, are still read) |
+//! | 4 | format version, `u32` (4 for a policy of a learned model, else 2; versions 1 and 3 are still read: version 1 files hold fuzzy Q-iteration only, version 3 learned tables without their membership functions, which were then always triangular) |
 //! | 8 | payload length in bytes, `u64` |
 //! | 4 | CRC-32 of the payload, `u32` |
 //! | n | payload in postcard encoding: which learner, then its content |
@@ -43,10 +43,11 @@ use crate::model::pointmass::{PointMass, PointMassConfig, Starts};
 
 /// The magic tag every policy file starts with.
 pub const MAGIC: [u8; 8] = *b"\x89FUZZYQ\n";
-/// The newest format version this build writes (it reads versions 1 to 3): version 3 adds
-/// the payload of a learned model's policy, the only one written as version 3, so that
-/// every other file stays readable by builds that read version 2.
-pub const FORMAT_VERSION: u32 = 3;
+/// The newest format version this build writes (it reads versions 1 to 4): version 3 added
+/// the payload of a learned model's policy and version 4 the membership functions of its
+/// tables; only such policies are written as version 4, so that every other file stays
+/// readable by builds that read version 2.
+pub const FORMAT_VERSION: u32 = 4;
 const HEADER_LEN: usize = 8 + 4 + 8 + 4;
 
 /// Per-core values in the solver's precision.
@@ -218,8 +219,26 @@ enum Payload<F, L> {
     PointMass(String),
     /// A Khepera policy learned from samples, as TOML text.
     Khepera(String),
-    /// Fuzzy Q-iteration on a learned model, with its tables (version 3).
+    /// Fuzzy Q-iteration on a learned model, with its tables (versions 3 and 4).
     LearnedFqi(F, L),
+}
+
+/// [`BlockTables`] as version 3 encoded them: before crisp grids could be learned, so their
+/// memberships were always triangular.
+#[derive(Deserialize)]
+struct BlockTablesV3 {
+    cores: Vec<Vec<f64>>,
+    blocks: Vec<crate::model::learned::BlockTable>,
+}
+
+impl From<BlockTablesV3> for BlockTables {
+    fn from(v3: BlockTablesV3) -> Self {
+        Self {
+            cores: v3.cores,
+            blocks: v3.blocks,
+            membership: fuzzyq_core::Membership::Triangular,
+        }
+    }
 }
 
 impl PolicyArtifact {
@@ -241,7 +260,9 @@ impl PolicyArtifact {
         }
         if let Some(tables) = &self.learned {
             let task = self.config.build_model().map_err(|e| e.to_string())?;
-            if tables.cores != self.config.grid_cores() {
+            if tables.cores != self.config.grid_cores()
+                || tables.membership != self.config.grid.membership
+            {
                 return Err("the learned tables are not on the configured grid".into());
             }
             LearnedModel::new(task, (**tables).clone()).map_err(|e| e.to_string())?;
@@ -462,10 +483,15 @@ impl PolicyFile {
         if crc32fast::hash(payload) != crc {
             return Err(PolicyFileError::Checksum { path: path_buf });
         }
-        let payload: Payload<FqiPayload, BlockTables> = if version == 1 {
-            postcard::from_bytes(payload).map(Payload::Fqi)
-        } else {
-            postcard::from_bytes(payload)
+        let payload: Payload<FqiPayload, BlockTables> = match version {
+            1 => postcard::from_bytes(payload).map(Payload::Fqi),
+            3 => postcard::from_bytes(payload).map(|p: Payload<_, BlockTablesV3>| match p {
+                Payload::LearnedFqi(f, tables) => Payload::LearnedFqi(f, tables.into()),
+                Payload::Fqi(f) => Payload::Fqi(f),
+                Payload::PointMass(text) => Payload::PointMass(text),
+                Payload::Khepera(text) => Payload::Khepera(text),
+            }),
+            _ => postcard::from_bytes(payload),
         }
         .map_err(|e| malformed(path, e.to_string()))?;
         let fqi = |p: FqiPayload, learned: Option<Box<BlockTables>>| {
@@ -537,7 +563,7 @@ impl PolicyFile {
                 match &a.learned {
                     None => Payload::Fqi(p),
                     Some(tables) => {
-                        version = 3;
+                        version = 4;
                         Payload::LearnedFqi(p, tables)
                     }
                 }
@@ -659,14 +685,14 @@ mod tests {
         let e = decode(&flipped).unwrap_err();
         assert!(matches!(e, PolicyFileError::Checksum { .. }), "{e}");
 
-        let mut v4 = bytes.clone();
-        v4[8] = 4;
-        let e = decode(&v4).unwrap_err();
+        let mut v5 = bytes.clone();
+        v5[8] = 5;
+        let e = decode(&v5).unwrap_err();
         assert!(
-            matches!(e, PolicyFileError::Version { found: 4, .. }),
+            matches!(e, PolicyFileError::Version { found: 5, .. }),
             "{e}"
         );
-        assert!(e.to_string().contains("versions 1 to 3"), "{e}");
+        assert!(e.to_string().contains("versions 1 to 4"), "{e}");
 
         let mut bad = tiny();
         bad.greedy[0] = 625;
@@ -698,6 +724,70 @@ mod tests {
         assert_eq!(v2[8], 2);
         assert_eq!(v2[24], 0, "the payload kind of fuzzy Q-iteration");
         assert_eq!(&v2[25..], &payload[..]);
+    }
+
+    /// Policies of a learned model written as version 3 (tables without their membership
+    /// functions, then always triangular) still load, as triangular tables; version 4 keeps
+    /// a crisp grid's tables crisp.
+    #[test]
+    fn version_3_learned_policies_still_load() {
+        use crate::model::learned::BlockTable;
+        use crate::train::{ModelLearning, train_learned};
+
+        #[derive(Serialize)]
+        struct BlockTablesV3Ref<'a> {
+            cores: &'a [Vec<f64>],
+            blocks: &'a [BlockTable],
+        }
+        let mut config = tiny().config;
+        config.grid.position_cores = vec![-1.0, 0.0, 1.0];
+        let run = train_learned(&config, &ModelLearning::new(500, 1), |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        let a = run.artifact;
+        let tables = a.learned.as_deref().unwrap();
+        assert_eq!(tables.membership, fuzzyq_core::Membership::Triangular);
+        let payload = postcard::to_stdvec(&Payload::LearnedFqi(
+            FqiPayloadRef {
+                config_toml: a.config.to_toml(),
+                values: &a.values,
+                greedy: &a.greedy,
+                summary: &a.summary,
+            },
+            BlockTablesV3Ref {
+                cores: &tables.cores,
+                blocks: &tables.blocks,
+            },
+        ))
+        .unwrap();
+        let mut v3 = Vec::new();
+        v3.extend_from_slice(&MAGIC);
+        v3.extend_from_slice(&3u32.to_le_bytes());
+        v3.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+        v3.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
+        v3.extend_from_slice(&payload);
+        let file = PolicyFile::Fqi(a);
+        assert_eq!(decode(&v3).unwrap(), file);
+        assert_eq!(file.to_bytes().unwrap()[8], 4);
+
+        config.grid.membership = fuzzyq_core::Membership::Crisp;
+        let crisp = train_learned(&config, &ModelLearning::new(500, 1), |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap()
+        .artifact;
+        let tables = crisp.learned.as_deref().unwrap();
+        assert_eq!(tables.membership, fuzzyq_core::Membership::Crisp);
+        let file = PolicyFile::Fqi(crisp);
+        assert_eq!(decode(&file.to_bytes().unwrap()).unwrap(), file);
+        // The tables must match the configured grid's membership functions.
+        let PolicyFile::Fqi(mut swapped) = file else {
+            unreachable!()
+        };
+        swapped.learned.as_mut().unwrap().membership = fuzzyq_core::Membership::Triangular;
+        let e = decode(&PolicyFile::Fqi(swapped).to_bytes().unwrap()).unwrap_err();
+        assert!(e.to_string().contains("not on the configured grid"), "{e}");
     }
 
     #[test]

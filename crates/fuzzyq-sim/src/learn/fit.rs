@@ -35,7 +35,7 @@
 //!   with no sample at all is an error: there is nothing to estimate from.
 
 use fuzzyq_core::model::joint_actions;
-use fuzzyq_core::{Model, Partition, ProductPartition};
+use fuzzyq_core::{Membership, Model, Partition, ProductPartition};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -54,6 +54,9 @@ pub struct FitConfig {
     /// Largest kernel widening (a power of 2); a row that still lacks samples uses the
     /// widest window it has.
     pub max_widening: usize,
+    /// The grid's membership functions, which the rows' expected memberships are taken with
+    /// (the kernel around each core stays triangular).
+    pub membership: Membership,
 }
 
 impl Default for FitConfig {
@@ -61,6 +64,7 @@ impl Default for FitConfig {
         Self {
             min_samples: 6,
             max_widening: 64,
+            membership: Membership::Triangular,
         }
     }
 }
@@ -206,6 +210,7 @@ pub fn fit(
         BlockTables {
             cores: cores.to_vec(),
             blocks: tables,
+            membership: config.membership,
         },
         FitReport {
             samples: data.len(),
@@ -293,7 +298,8 @@ impl BlockFitter<'_> {
             .collect::<Result<_, _>>()
             .map_err(|err| ConfigError::invalid("grid", err.to_string()))?;
         let sub = ProductPartition::from_partitions(&parts)
-            .map_err(|err| ConfigError::invalid("grid", err.to_string()))?;
+            .map_err(|err| ConfigError::invalid("grid", err.to_string()))?
+            .with_membership(self.config.membership);
         let n_cores = sub.n_cores();
         // Rows in parallel over block cores, merged in core order: the same tables for any
         // thread count.
@@ -617,7 +623,8 @@ pub fn table_error(tables: &BlockTables, truth: &EnvModel) -> Result<Vec<TableEr
                 .collect::<Result<_, _>>()
                 .map_err(|err| ConfigError::invalid("grid", err.to_string()))?;
             let sub = ProductPartition::from_partitions(&parts)
-                .map_err(|err| ConfigError::invalid("grid", err.to_string()))?;
+                .map_err(|err| ConfigError::invalid("grid", err.to_string()))?
+                .with_membership(tables.membership);
             let k = t.action_components.len();
             let (mut max_l1, mut sum_l1) = (0.0f64, 0.0);
             let mut core = vec![0.0; t.state_dims.len()];

@@ -14,7 +14,7 @@
 //! block action; any other action vector takes the nearest block action).
 
 use fuzzyq_core::solver::Precision;
-use fuzzyq_core::{Partition, ProductPartition};
+use fuzzyq_core::{Membership, Partition, ProductPartition};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, require};
@@ -62,6 +62,9 @@ pub struct BlockTables {
     pub cores: Vec<Vec<f64>>,
     /// One table per block, in the order of the blocks' declaration.
     pub blocks: Vec<BlockTable>,
+    /// The grid's membership functions the rows' memberships were taken with (a crisp grid
+    /// gives each successor to its nearest core).
+    pub membership: Membership,
 }
 
 impl BlockTables {

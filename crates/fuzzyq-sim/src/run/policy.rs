@@ -351,7 +351,8 @@ impl FqiPolicy {
         let learned = match learned {
             Some(tables) => {
                 require!(
-                    tables.cores == config.grid_cores(),
+                    tables.cores == config.grid_cores()
+                        && tables.membership == config.grid.membership,
                     "learned_model",
                     "its tables are not on the configured grid",
                 );
