@@ -79,12 +79,14 @@ fn given_rows_without_noise_reduce_to_the_stepping_backup() {
     let stepping = Operator::new(&task, g.view(), backup, BackupPath::Block).unwrap();
     let given = Operator::new(&model, g.view(), backup, BackupPath::Auto).unwrap();
     assert_eq!(given.path(), BackupPath::Block);
+    // The learned rows match the model's to about 1e-11 (rows at the ranges' edges are fitted
+    // on wide windows), on values of up to 170.
     for seed in 0..3 {
         let v = values(g.n_cores(), seed);
         assert_close(
             &given.apply(&v).unwrap(),
             &stepping.apply(&v).unwrap(),
-            1e-9,
+            1e-8,
         );
     }
     // Only the block path reads given rows.

@@ -810,15 +810,53 @@ fn learned_model_trains_from_interaction_and_rolls_out() {
                 "samples",
             ),
             (
-                "train --env khepera --learner learned-model --out z.fzq",
-                "khepera",
-            ),
-            (
                 "train --env carhill --learner learned-model --out z.fzq",
                 "terminal",
             ),
         ],
     );
+}
+
+/// A Khepera robot learns its kinematics from interaction with the rapier plant (wheel
+/// noise on), and its policy of the learned model reaches the goal from random starts.
+#[test]
+fn khepera_learns_its_kinematics_on_the_rapier_plant() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = fuzzyq(&["config", "--env", "khepera"], d);
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(text.contains("wheel_std = 0.0 "), "{text}");
+    let one = text
+        .replace("agents = 2 ", "agents = 1 ")
+        .replace("wheel_std = 0.0 ", "wheel_std = 0.05");
+    std::fs::write(d.join("one.toml"), one).unwrap();
+    let train = "train --env khepera --config one.toml --learner learned-model --samples 3000 \
+                 --seed 1 --out l.fzq --json l.json -q";
+    let o = fuzzyq(&train.split_whitespace().collect::<Vec<_>>(), d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let l = json(&d.join("l.json"));
+    let learned = &l["learned_model"];
+    assert_eq!(learned["samples"], 3000);
+    assert_eq!(learned["fit"]["blocks"].as_array().unwrap().len(), 1);
+    let err = learned["table_error"][0]["mean_l1"].as_f64().unwrap();
+    assert!(err < 0.15, "rows close to the kinematic model's: {err}");
+    let rollout = "rollout --policy l.fzq --starts 10 --seed 7 --steps 300 --json r.json";
+    let o = fuzzyq(&rollout.split_whitespace().collect::<Vec<_>>(), d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r = json(&d.join("r.json"));
+    assert!(r["success_rate"].as_f64().unwrap() >= 0.9, "{r}");
+    assert_eq!(r["runs_with_collisions"], 0, "{r}");
+    // The README's noisy example is the default configuration with the plant's noise on.
+    let example =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/khepera-noisy.toml");
+    let example =
+        fuzzyq_sim::TrainConfig::from_toml(&std::fs::read_to_string(example).unwrap()).unwrap();
+    let fuzzyq_sim::io::config::EnvConfig::Khepera(k) = &example.env else {
+        panic!("not khepera")
+    };
+    assert_eq!(k.noise.wheel_std, 0.05);
+    assert_eq!(k.agents, 2);
 }
 
 #[test]

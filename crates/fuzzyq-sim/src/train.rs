@@ -206,20 +206,25 @@ fn draw_start(model: &EnvModel) -> impl FnMut(&mut rand_pcg::Pcg64Mcg, &mut [f64
 }
 
 /// Transitions of `task`'s plant as the learned-model learner collects them: seeded episodes
-/// of random actions from the task's starts ([`samples::collect`]), with its process noise.
+/// of random actions from the task's starts ([`samples::collect`]), with its process noise;
+/// for the Khepera robots, on the rapier plant with its wheel noise
+/// ([`samples::collect_khepera`]).
 pub fn collect_from_plant(
     task: &EnvModel,
     collection: &Collection,
 ) -> Result<Transitions, SimError> {
-    Ok(samples::collect(task, collection, draw_start(task))?)
+    match task {
+        EnvModel::Khepera(robots) => samples::collect_khepera(robots, collection),
+        _ => Ok(samples::collect(task, collection, draw_start(task))?),
+    }
 }
 
 /// Fuzzy Q-iteration on a model learned from interaction: collects
 /// `learning.collection.samples` transitions on the plant of `config`'s environment (with its
 /// process noise), estimates the block tables on the configured grid ([`fit::fit`]; the
 /// blocks are the environment's declared ones, or one block of the whole state), and solves
-/// the learned model as [`train`] solves the true one. The point masses and the classic
-/// benchmarks without terminal states are supported.
+/// the learned model as [`train`] solves the true one. Every built-in environment without
+/// terminal states is supported (the Khepera robots learn on their rapier plant).
 pub fn train_learned(
     config: &TrainConfig,
     learning: &ModelLearning,
@@ -240,17 +245,9 @@ pub fn train_learned(
     })
 }
 
-/// Whether the learned-model learner can learn the environment of `config`: the point
-/// masses and the classic benchmarks without terminal states; the error says why not.
+/// Whether the learned-model learner can learn the environment of `config`: every built-in
+/// environment without terminal states; the error says why not.
 pub fn check_learnable(config: &TrainConfig) -> Result<(), SimError> {
-    if let EnvConfig::Khepera(_) = config.env {
-        return Err(ConfigError::invalid(
-            "learner",
-            "learned-model does not learn the khepera robots yet (point masses and the \
-             classic benchmarks only)",
-        )
-        .into());
-    }
     let task = config.build_model()?;
     if F64Model::has_terminal_states(&task) {
         return Err(ConfigError::invalid(

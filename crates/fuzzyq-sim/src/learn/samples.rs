@@ -4,14 +4,17 @@
 //! (for the point masses, the task's random starts at rest) and takes uniformly random joint
 //! actions for a fixed number of steps, with the plant's process noise
 //! ([`F64Model::add_process_noise`]). The learner sees only the recorded transitions; it never
-//! calls the model's transition function. [`Transitions::from_columns`] takes a user's logged
-//! transitions instead.
+//! calls the model's transition function. [`collect_khepera`] does the same on the Khepera
+//! robots' rapier plant (contacts, and the configured wheel noise), from the task's random
+//! starts. [`Transitions::from_columns`] takes a user's logged transitions instead.
 
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 
-use crate::error::{ConfigError, require};
+use crate::error::{ConfigError, SimError, require};
 use crate::model::F64Model;
+use crate::model::khepera::{self, KheperaModel, MAX_ROBOTS, N_ACTIONS};
+use crate::world::KheperaWorld;
 
 /// Transitions `(x, u, x', r)`, stored column by column.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -197,6 +200,52 @@ pub fn collect<M: F64Model + ?Sized>(
                 || (model.has_terminal_states() && model.is_terminal(&x))
             {
                 break;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Records `collection.samples` transitions of the Khepera robots of `model` on the rapier
+/// plant: episodes from the task's random starts ([`khepera::random_starts`], seeded by
+/// `collection.seed`), each robot taking one of its four actions uniformly at random per
+/// step, the plant adding its configured wheel noise (seeded from `collection.seed` too) and
+/// its contacts. States are the robots' poses as the plant reports them; the reward is the
+/// task's at the state.
+pub fn collect_khepera(
+    model: &KheperaModel,
+    collection: &Collection,
+) -> Result<Transitions, SimError> {
+    collection.validate()?;
+    let config = model.config();
+    let n = config.agents;
+    let episodes = collection.samples.div_ceil(collection.episode_steps);
+    let starts = khepera::random_starts(config, episodes, collection.seed)?;
+    // The plant's noise and the actions draw from distinct streams.
+    let mut world = KheperaWorld::new(config, collection.seed ^ 0x5851_f42d_4c95_7f2d)?;
+    let mut rng = Pcg64Mcg::seed_from_u64(collection.seed);
+    let mut out = Transitions::new(3 * n, 2 * n);
+    let (mut x, mut next, mut u) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 2 * n]);
+    let mut wheels = [[0.0; 2]; MAX_ROBOTS];
+    let flatten = |poses: &[[f64; 3]], out: &mut [f64]| {
+        for (p, o) in poses.iter().zip(out.chunks_exact_mut(3)) {
+            o.copy_from_slice(p);
+        }
+    };
+    for start in &starts {
+        world.reset(start)?;
+        flatten(world.poses(), &mut x);
+        for _ in 0..collection.episode_steps {
+            for (i, w) in wheels[..n].iter_mut().enumerate() {
+                *w = config.wheels(rng.random_range(0..N_ACTIONS));
+                u[2 * i..2 * i + 2].copy_from_slice(w);
+            }
+            world.step(&wheels[..n])?;
+            flatten(world.poses(), &mut next);
+            out.push(&x, &u, &next, model.reward_f64(&x));
+            std::mem::swap(&mut x, &mut next);
+            if out.len() == collection.samples {
+                return Ok(out);
             }
         }
     }

@@ -615,6 +615,10 @@ impl F64Model for KheperaModel {
         }
     }
 
+    fn is_periodic(&self, dim: usize) -> bool {
+        dim % 3 == 2
+    }
+
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
         self.step_f64(x, u, next);
     }

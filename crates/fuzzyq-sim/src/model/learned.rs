@@ -11,7 +11,8 @@
 //!
 //! [`F64Model::step`] of a learned model is its mean successor: per block, the fuzzy
 //! interpolation of the rows' mean successors over the active block cores (for a discrete
-//! block action; any other action vector takes the nearest block action).
+//! block action; any other action vector takes the nearest block action; a periodic
+//! variable takes the circular mean, wrapped into its range).
 
 use fuzzyq_core::solver::Precision;
 use fuzzyq_core::{Membership, Partition, ProductPartition};
@@ -236,6 +237,9 @@ impl F64Model for LearnedModel {
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
         F64Model::state_bounds(&self.task, dim)
     }
+    fn is_periodic(&self, dim: usize) -> bool {
+        F64Model::is_periodic(&self.task, dim)
+    }
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
         for t in &self.tables.blocks {
             let parts: Vec<Partition<'_, f64>> = t
@@ -249,20 +253,45 @@ impl F64Model for LearnedModel {
             let sub = ProductPartition::from_partitions(&parts).expect("checked on construction");
             let xb: Vec<f64> = t.state_dims.iter().map(|&d| x[d]).collect();
             let a = Self::block_action(t, u);
+            // A periodic variable's mean is the circular one: its values as angles over the
+            // period, averaged as unit vectors.
+            let angles: Vec<Option<(f64, f64)>> = t
+                .state_dims
+                .iter()
+                .map(|&d| {
+                    let (lo, hi) = F64Model::state_bounds(&self.task, d);
+                    F64Model::is_periodic(&self.task, d).then_some((lo, hi - lo))
+                })
+                .collect();
             let mut mean = vec![0.0; t.state_dims.len()];
+            let mut sin = vec![0.0; t.state_dims.len()];
             let mut core = vec![0.0; t.state_dims.len()];
             sub.active_unchecked(&xb).for_each(|c, mu| {
                 let (cols, ws) = t.row(c, a);
                 for (&k, &w) in cols.iter().zip(ws) {
                     sub.core_state(k as usize, &mut core)
                         .expect("columns are checked on construction");
-                    for (m, &v) in mean.iter_mut().zip(&core) {
-                        *m += mu * w * v;
+                    for (j, &v) in core.iter().enumerate() {
+                        match angles[j] {
+                            None => mean[j] += mu * w * v,
+                            Some((lo, period)) => {
+                                let theta = std::f64::consts::TAU * (v - lo) / period;
+                                mean[j] += mu * w * theta.cos();
+                                sin[j] += mu * w * theta.sin();
+                            }
+                        }
                     }
                 }
             });
-            for (&d, &m) in t.state_dims.iter().zip(&mean) {
-                next[d] = m;
+            for (j, &d) in t.state_dims.iter().enumerate() {
+                next[d] = match angles[j] {
+                    None => mean[j],
+                    Some((lo, period)) => {
+                        let turns = sin[j].atan2(mean[j]) / std::f64::consts::TAU;
+                        let v = lo + period * turns.rem_euclid(1.0);
+                        if v <= lo { v + period } else { v }
+                    }
+                };
             }
         }
     }

@@ -328,6 +328,13 @@ pub trait F64Model {
     fn sample_time(&self) -> f64;
     /// The range of state variable `dim`.
     fn state_bounds(&self, dim: usize) -> (f64, f64);
+    /// Whether state variable `dim` is periodic over its range (an angle wrapped to
+    /// `(lo, hi]`, such as a robot's heading): its ends are one state, and a step across them
+    /// wraps. Part of the task's description, which a learner of the dynamics is told.
+    fn is_periodic(&self, dim: usize) -> bool {
+        let _ = dim;
+        false
+    }
     /// The successor of `x` under the joint action vector `u`.
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]);
     /// The reward of `u` at `x`. `precision` is the solver's: a model whose reward depends on
@@ -615,6 +622,9 @@ impl F64Model for EnvModel {
     }
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
         dispatch!(self, m => F64Model::state_bounds(m, dim))
+    }
+    fn is_periodic(&self, dim: usize) -> bool {
+        dispatch!(self, m => F64Model::is_periodic(m, dim))
     }
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
         dispatch!(self, m => F64Model::step(m, x, u, next))

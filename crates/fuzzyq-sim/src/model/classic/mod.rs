@@ -206,6 +206,11 @@ pub trait Dynamics: Clone + std::fmt::Debug + Send + Sync + Sized {
     fn sample_time(&self) -> f64;
     /// The range of state variable `dim`.
     fn state_bounds(&self, dim: usize) -> (f64, f64);
+    /// See [`F64Model::is_periodic`].
+    fn is_periodic(&self, dim: usize) -> bool {
+        let _ = dim;
+        false
+    }
     /// The successor of `x` (length [`STATE_DIM`](Self::STATE_DIM)) under `u` (length
     /// [`ACTION_DIM`](Self::ACTION_DIM)).
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]);
@@ -330,6 +335,9 @@ impl<S: Dynamics> F64Model for Classic<S> {
     }
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
         self.dynamics.state_bounds(dim)
+    }
+    fn is_periodic(&self, dim: usize) -> bool {
+        self.dynamics.is_periodic(dim)
     }
     /// The successor (NaN for inputs of the wrong length).
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {

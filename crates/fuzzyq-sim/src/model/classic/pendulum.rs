@@ -277,6 +277,10 @@ impl Dynamics for Pendulum {
         (-lim, lim)
     }
 
+    fn is_periodic(&self, dim: usize) -> bool {
+        dim == 0
+    }
+
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
         next.copy_from_slice(&self.step_f64([x[0], x[1]], u[0]));
     }
