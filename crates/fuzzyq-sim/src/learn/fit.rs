@@ -421,13 +421,16 @@ impl BlockFitter<'_> {
     ) -> RowFit {
         let d = core.len();
         let mut widening = vec![1usize; d];
-        let own = self.window(data, samples, core, &widening).len();
+        // The core's distances to its neighbours below and above, per variable.
+        let sides: Vec<[f64; 2]> = (0..d).map(|j| self.sides(j, core[j])).collect();
+        let mut own = None;
         // The first window whose fit surrounds the core; failing that, the determined fit
         // with the smallest intercept variance (a core at a range's edge is never
         // surrounded).
         let mut best: Option<(f64, Vec<usize>, Window, Fitted)> = None;
         let fitted = loop {
-            let window = self.window(data, samples, core, &widening);
+            let window = self.window(data, samples, core, &sides, &widening);
+            own.get_or_insert(window.len());
             if let Some((mean, residuals, variance)) = self.fit_row(data, &window, core) {
                 if variance <= MAX_INTERCEPT_VARIANCE {
                     break Some((window, (mean, residuals)));
@@ -440,8 +443,7 @@ impl BlockFitter<'_> {
             let narrowest = (0..d)
                 .filter(|&j| widening[j] < self.config.max_widening)
                 .map(|j| {
-                    let width = widening[j] as f64
-                        * (self.spacing(j, core[j], -1.0) + self.spacing(j, core[j], 1.0));
+                    let width = widening[j] as f64 * (sides[j][0] + sides[j][1]);
                     let (lo, hi) = self.bounds[j];
                     (j, width / (hi - lo).max(f64::MIN_POSITIVE))
                 })
@@ -462,7 +464,7 @@ impl BlockFitter<'_> {
         let (window, (mean, residuals)) = fitted.unwrap_or_else(|| {
             // The widest window (every sample of the action if it is empty), with whatever
             // it supports.
-            let mut window = self.window(data, samples, core, &widening);
+            let mut window = self.window(data, samples, core, &sides, &widening);
             if window.is_empty() {
                 window = samples.iter().map(|&i| (i, 1.0)).collect();
             }
@@ -501,7 +503,7 @@ impl BlockFitter<'_> {
         }
         RowFit {
             entries,
-            own,
+            own: own.unwrap_or(0),
             widening,
             fell_back,
             extrapolated,
@@ -510,14 +512,15 @@ impl BlockFitter<'_> {
         }
     }
 
-    /// The samples of `samples` under the triangular kernel around `core` widened by
-    /// `widening[j]` along variable `j` (all 1: the core's membership function), with their
-    /// weights.
+    /// The samples of `samples` under the triangular kernel around `core` (whose neighbours
+    /// lie `sides[j]` below and above it) widened by `widening[j]` along variable `j` (all 1:
+    /// the core's membership function), with their weights.
     fn window(
         &self,
         data: &Transitions,
         samples: &[usize],
         core: &[f64],
+        sides: &[[f64; 2]],
         widening: &[usize],
     ) -> Window {
         let first = self.spec.state_dims[0];
@@ -527,10 +530,7 @@ impl BlockFitter<'_> {
             samples
         } else {
             let h = widening[0] as f64;
-            let (lo, hi) = (
-                core[0] - h * self.spacing(0, core[0], -1.0),
-                core[0] + h * self.spacing(0, core[0], 1.0),
-            );
+            let (lo, hi) = (core[0] - h * sides[0][0], core[0] + h * sides[0][1]);
             let key = |i: usize| data.get(i).0[first];
             let start = samples.partition_point(|&i| key(i) <= lo);
             let end = samples.partition_point(|&i| key(i) < hi);
@@ -542,7 +542,7 @@ impl BlockFitter<'_> {
                 let mut w = 1.0;
                 for (j, &dim) in self.spec.state_dims.iter().enumerate() {
                     let dx = self.offset(j, x[dim], core[j]);
-                    let width = widening[j] as f64 * self.spacing(j, core[j], dx);
+                    let width = widening[j] as f64 * sides[j][usize::from(dx >= 0.0)];
                     w *= (1.0 - dx.abs() / width).max(0.0);
                 }
                 (w > 0.0).then_some((i, w))
@@ -584,21 +584,21 @@ impl BlockFitter<'_> {
         }
     }
 
-    /// The distance from the core at `c` of variable `j` to its neighbour on the side of
-    /// `dx` (the other neighbour at the edges).
-    fn spacing(&self, j: usize, c: f64, dx: f64) -> f64 {
+    /// The distances from the core at `c` of variable `j` to its neighbours below and above
+    /// (the other neighbour's at the edges; the whole range for a single core).
+    fn sides(&self, j: usize, c: f64) -> [f64; 2] {
         let cs = self.cores[j];
         if cs.len() == 1 {
             let (lo, hi) = self.bounds[j];
-            return (hi - lo).max(f64::MIN_POSITIVE);
+            return [(hi - lo).max(f64::MIN_POSITIVE); 2];
         }
         let i = cs.iter().position(|&v| v == c).unwrap_or(0);
         let up = (i + 1 < cs.len()).then(|| cs[i + 1] - c);
         let down = (i > 0).then(|| c - cs[i - 1]);
-        match (dx >= 0.0, up, down) {
-            (true, Some(s), _) | (false, _, Some(s)) => s,
-            (_, Some(s), None) | (_, None, Some(s)) => s,
-            (_, None, None) => 1.0,
+        match (down, up) {
+            (Some(a), Some(b)) => [a, b],
+            (Some(s), None) | (None, Some(s)) => [s, s],
+            (None, None) => [1.0, 1.0],
         }
     }
 
