@@ -4,7 +4,7 @@
 use fuzzyq_core::solver::{BackupPath, Operator, SolveError};
 use fuzzyq_core::{Backup, Membership};
 use fuzzyq_sim::learn::fit::{FitConfig, fit};
-use fuzzyq_sim::learn::samples::{Collection, collect};
+use fuzzyq_sim::learn::samples::{Collection, Exploration, collect};
 use fuzzyq_sim::learn::tasks::pointmass::default_starts;
 use fuzzyq_sim::model::learned::LearnedModel;
 use fuzzyq_sim::model::pointmass::{PointMass, PointMassConfig};
@@ -35,7 +35,13 @@ fn learned_with(sigma: f64, membership: Membership) -> (EnvModel, LearnedModel) 
         episode_steps: 50,
         seed: 11,
     };
-    let data = collect(&task, &collection, |rng, x| starts.draw(rng, x)).unwrap();
+    let data = collect(
+        &task,
+        &collection,
+        |rng, x| starts.draw(rng, x),
+        &mut Exploration::Random,
+    )
+    .unwrap();
     let cores: Vec<Vec<f64>> = (0..2)
         .flat_map(|_| [POS.to_vec(), POS.to_vec(), VEL.to_vec(), VEL.to_vec()])
         .collect();
@@ -139,4 +145,43 @@ fn crisp_rows_reduce_to_the_stepping_backup_on_a_crisp_grid() {
         &stepping.apply(&v).unwrap(),
         1e-9,
     );
+}
+
+/// Rounds of collection: each further round adds as many transitions, collected
+/// epsilon-greedily with the policy so far, refits and solves; the run is deterministic.
+#[test]
+fn further_rounds_refit_on_everything_collected_and_are_reproducible() {
+    use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
+    use fuzzyq_sim::train::{ModelLearning, train_learned};
+    use std::ops::ControlFlow;
+
+    let mut config = TrainConfig::default();
+    if let EnvConfig::Pointmass(p) = &mut config.env {
+        p.agents = 1;
+        p.velocity_noise = 0.05;
+    }
+    config.grid.position_cores = POS.to_vec();
+    config.grid.velocity_cores = VEL.to_vec();
+    let mut learning = ModelLearning::new(300, 4);
+    learning.rounds = 3;
+    learning.epsilon = 0.2;
+    let go = |l: &ModelLearning| train_learned(&config, l, |_| ControlFlow::Continue(())).unwrap();
+    let a = go(&learning);
+    let b = go(&learning);
+    assert_eq!(a.artifact.values, b.artifact.values);
+    assert_eq!(a.artifact.learned, b.artifact.learned);
+    let counts: Vec<usize> = a.rounds.iter().map(|r| r.transitions).collect();
+    assert_eq!(counts, [300, 600, 900]);
+    assert_eq!(a.fit.samples, 900);
+    // The first round is the one-round run; the later ones fit different data.
+    learning.rounds = 1;
+    let one = go(&learning);
+    assert_eq!(one.rounds.len(), 1);
+    assert_eq!(one.rounds[0].transitions, 300);
+    assert_ne!(one.artifact.learned, a.artifact.learned);
+    learning.rounds = 0;
+    let e = train_learned(&config, &learning, |_| ControlFlow::Continue(()))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("rounds"), "{e}");
 }

@@ -476,6 +476,7 @@ fn compare_writes_the_table_and_figures() {
     let learners = [
         "fqi",
         "crisp",
+        "crisp-uniform",
         "fql",
         "fql-literal",
         "vqql",
@@ -510,10 +511,11 @@ fn compare_writes_the_table_and_figures() {
     // 2025 cores x 25 actions for every grid learner; 64 cells x 25 actions for VQQL.
     assert_eq!(fqi["parameters"], 2025 * 25);
     assert_eq!(reports[2]["parameters"], 2025 * 25);
-    assert_eq!(reports[4]["parameters"], 64 * 25);
-    assert_eq!(reports[2]["iterations"], 60);
+    assert_eq!(reports[3]["parameters"], 2025 * 25);
+    assert_eq!(reports[5]["parameters"], 64 * 25);
+    assert_eq!(reports[3]["iterations"], 60);
     // The learned model (2,000 transitions) is the true one here: the same run as fqi's.
-    let learned = &reports[5];
+    let learned = &reports[6];
     assert_eq!(learned["parameters"], 2025 * 25);
     assert_eq!(learned["iteration_unit"], "sweeps");
     assert_eq!(learned["time_to_goal_s"], fqi["time_to_goal_s"]);
@@ -747,7 +749,12 @@ fn learned_model_trains_from_interaction_and_rolls_out() {
         episode_steps: 50,
         seed: 9,
     };
-    let data = fuzzyq_sim::train::collect_from_plant(&task, &collection).unwrap();
+    let data = fuzzyq_sim::train::collect_from_plant(
+        &task,
+        &collection,
+        &mut fuzzyq_sim::learn::samples::Exploration::Random,
+    )
+    .unwrap();
     let mut csv = String::from("s_x,s_y,v_x,v_y,u_x,u_y,s_x',s_y',v_x',v_y',r\n");
     for i in 0..data.len() {
         let (x, u, n, r) = data.get(i);
@@ -813,8 +820,59 @@ fn learned_model_trains_from_interaction_and_rolls_out() {
                 "train --env carhill --learner learned-model --out z.fzq",
                 "terminal",
             ),
+            (
+                "train --config one.toml --learner learned-model --rounds 0 --out z.fzq",
+                "rounds",
+            ),
+            (
+                "train --config one.toml --learner learned-model --rounds 2 --epsilon 1.5 --out z.fzq",
+                "epsilon",
+            ),
+            (
+                "train --config one.toml --learner learned-model --rounds 2 --epsilon nan --out z.fzq",
+                "epsilon",
+            ),
+            (
+                "train --config one.toml --rounds 2 --out z.fzq",
+                "--rounds applies",
+            ),
+            (
+                "train --config one.toml --learner learned-model --epsilon 0.2 --out z.fzq",
+                "--rounds",
+            ),
+            (
+                "train --config one.toml --learner learned-model --rounds 2 --transitions t.csv --out z.fzq",
+                "--transitions",
+            ),
         ],
     );
+}
+
+/// `--rounds`: each further round collects as many transitions epsilon-greedily with the
+/// policy so far and refits on all of them; the JSON lists the rounds.
+#[test]
+fn learned_model_rounds_refit_on_everything_collected() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let train = "train --config one.toml --learner learned-model --samples 500 --rounds 2 \
+                 --epsilon 0.2 --out r.fzq --json r.json";
+    let o = fuzzyq(&train.split_whitespace().collect::<Vec<_>>(), d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("round 2: 1000 transitions"),
+        "{}",
+        stderr(&o)
+    );
+    let l = &json(&d.join("r.json"))["learned_model"];
+    assert_eq!(l["samples"], 1000);
+    assert_eq!(l["epsilon"], 0.2);
+    let rounds = l["rounds"].as_array().unwrap();
+    assert_eq!(rounds.len(), 2);
+    assert_eq!(rounds[0]["transitions"], 500);
+    assert_eq!(rounds[1]["transitions"], 1000);
+    let o = fuzzyq(&["rollout", "--policy", "r.fzq", "--starts", "20"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
 }
 
 /// A Khepera robot learns its kinematics from interaction with the rapier plant (wheel

@@ -17,7 +17,7 @@ use fuzzyq_core::{NamedOption, Real};
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary, Values};
 use fuzzyq_sim::learn::fit::FitConfig;
-use fuzzyq_sim::learn::samples::{Collection, Transitions};
+use fuzzyq_sim::learn::samples::{Collection, Exploration, Transitions};
 use fuzzyq_sim::model::learned::BlockTables;
 use fuzzyq_sim::model::{EnvModel, F64Model};
 use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
@@ -412,7 +412,9 @@ pub(crate) fn collect<'py>(
         seed,
     };
     let data = py
-        .detach(|| fuzzyq_sim::train::collect_from_plant(&task, &collection))
+        .detach(|| {
+            fuzzyq_sim::train::collect_from_plant(&task, &collection, &mut Exploration::Random)
+        })
         .map_err(|e| sim_error(py, &e))?;
     let (e, d, n) = (data.state_dim(), data.action_dim(), data.len());
     let (x, u, next, r) = data.columns();

@@ -20,6 +20,7 @@
 //! |---|---|---|
 //! | [`Learner::Fqi`] | joint fuzzy Q-iteration (the paper's method, [`crate::train`]) | `N * M` (cores x joint actions); only `V` is stored |
 //! | [`Learner::Crisp`] | grid Q-iteration on the same cores as crisp nearest-core boxes ([`fuzzyq_core::Membership::Crisp`]) | `N * M` |
+//! | [`Learner::CrispUniform`] | the same on boxes evenly spaced over each variable's range, as many per variable as the grid has cores ([`uniform_cores`]): boxes a step can leave | `N * M` |
 //! | [`Learner::Fql`] | fuzzy Q-learning, additive layout, corrected update ([`crate::learn::fql`]) | `sum_i N_i * M_i` |
 //! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
 //! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
@@ -40,7 +41,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, require};
 use crate::io::config::{EnvConfig, TrainConfig};
-use crate::io::policy_file::PolicyArtifact;
+use crate::io::policy_file::{PolicyArtifact, Values};
 use crate::learn::fql::FqlConfig;
 use crate::learn::tasks::pointmass as pointmass_task;
 use crate::learn::vqql::VqqlConfig;
@@ -59,6 +60,9 @@ fuzzyq_core::named_option! {
         Fqi = "fqi" => "joint fuzzy Q-iteration (the paper's method)",
         /// Grid Q-iteration on the same cores as crisp nearest-core boxes.
         Crisp = "crisp" => "grid Q-iteration, same cores as crisp boxes",
+        /// Grid Q-iteration on crisp boxes evenly spaced over each variable's range, as many
+        /// per variable as the grid has cores.
+        CrispUniform = "crisp-uniform" => "grid Q-iteration, as many crisp boxes evenly spaced",
         /// Fuzzy Q-learning, additive layout, corrected update.
         Fql = "fql" => "fuzzy Q-learning, additive layout, corrected update",
         /// Fuzzy Q-learning, additive layout, the update as printed in the paper.
@@ -86,7 +90,10 @@ impl Learner {
     /// Whether the learner is model-based (iterates over a grid with the model).
     #[must_use]
     pub fn is_model_based(self) -> bool {
-        matches!(self, Self::Fqi | Self::Crisp | Self::LearnedModel)
+        matches!(
+            self,
+            Self::Fqi | Self::Crisp | Self::CrispUniform | Self::LearnedModel
+        )
     }
 }
 
@@ -376,7 +383,7 @@ pub fn with_budget(config: &CompareConfig, learner: Learner, transitions: usize)
         c.fql.eval_every = 0;
     };
     match learner {
-        Learner::Fqi | Learner::Crisp => {}
+        Learner::Fqi | Learner::Crisp | Learner::CrispUniform => {}
         Learner::LearnedModel => c.model_learning.collection.samples = transitions,
         Learner::Fql | Learner::FqlLiteral => learn_for(transitions),
         Learner::Vqql => {
@@ -418,7 +425,7 @@ pub fn sample_efficiency(
     for &learner in config
         .learners
         .iter()
-        .filter(|l| !matches!(l, Learner::Fqi | Learner::Crisp))
+        .filter(|&&l| l == Learner::LearnedModel || !l.is_model_based())
     {
         for &budget in budgets {
             progress(learner, budget);
@@ -455,6 +462,42 @@ pub fn sample_efficiency(
         }
     }
     Ok(points)
+}
+
+/// As many cores per state variable as `task`'s grid has, evenly spaced over the variable's
+/// range in `model` (ends included): the uniform crisp grid of [`Learner::CrispUniform`].
+#[must_use]
+pub fn uniform_cores(task: &TrainConfig, model: &PointMass) -> Vec<Vec<f64>> {
+    task.grid_cores()
+        .iter()
+        .enumerate()
+        .map(|(d, cores)| {
+            let (lo, hi) = fuzzyq_core::Model::<f64>::state_bounds(model, d);
+            let n = cores.len();
+            (0..n)
+                .map(|i| match i {
+                    0 => lo,
+                    i if i + 1 == n => hi,
+                    i => lo + (hi - lo) * i as f64 / (n - 1) as f64,
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// How many cores hold the lowest value. With a positive goal reward (and 0 elsewhere), so the cores from
+/// which no sequence of the model's transitions reaches a reward all keep one value, the
+/// lowest (the same updates from the same start, extrapolation included).
+fn cores_at_lowest_value(values: &Values) -> u64 {
+    fn count<T: PartialOrd + Copy>(v: &[T]) -> u64 {
+        let Some(&first) = v.first() else { return 0 };
+        let low = v.iter().fold(first, |m, &x| if x < m { x } else { m });
+        v.iter().filter(|&&x| x == low).count() as u64
+    }
+    match values {
+        Values::F32(v) => count(v),
+        Values::F64(v) => count(v),
+    }
 }
 
 /// A report with the training fields filled in and the measurements still empty.
@@ -496,13 +539,16 @@ fn train_one(
 ) -> Result<(Policy, LearnerReport), SimError> {
     let mut report = blank(learner);
     match learner {
-        Learner::Fqi | Learner::Crisp => {
+        Learner::Fqi | Learner::Crisp | Learner::CrispUniform => {
             let mut task = config.task.clone();
-            task.grid.membership = if learner == Learner::Crisp {
-                Membership::Crisp
-            } else {
+            task.grid.membership = if learner == Learner::Fqi {
                 Membership::Triangular
+            } else {
+                Membership::Crisp
             };
+            if learner == Learner::CrispUniform {
+                task.grid.cores = Some(uniform_cores(&task, &config.model()?));
+            }
             let artifact: PolicyArtifact =
                 train::train(&task, |_| std::ops::ControlFlow::Continue(()))?;
             let n = task.n_cores() as u64;
@@ -511,6 +557,16 @@ fn train_one(
             report.converged = artifact.summary.converged;
             report.parameters = n * artifact.n_joint_actions() as u64;
             report.stored_values = n;
+            let stuck = cores_at_lowest_value(&artifact.values);
+            if stuck > 1 && config.model()?.config().goal_reward > 0.0 {
+                report.notes.push(format!(
+                    "V takes its lowest value at {} of {} cores ({:.1}%): from those the model \
+                 never reaches the reward, and every action ties",
+                    fmt_count(stuck),
+                    fmt_count(n),
+                    100.0 * stuck as f64 / n as f64
+                ));
+            }
             Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
         }
         Learner::LearnedModel => {
@@ -753,6 +809,22 @@ mod tests {
     }
 
     #[test]
+    fn the_uniform_crisp_grid_has_as_many_cores_evenly_over_each_range() {
+        let c = tiny();
+        let cores = uniform_cores(&c.task, &c.model().unwrap());
+        let p = [-6.0, -4.0, -2.0, 0.0, 2.0, 4.0, 6.0];
+        assert_eq!(
+            cores,
+            vec![
+                p.to_vec(),
+                p.to_vec(),
+                vec![-3.0, 0.0, 3.0],
+                vec![-3.0, 0.0, 3.0]
+            ]
+        );
+    }
+
+    #[test]
     fn vqql_gets_as_many_cells_as_the_grid_has_own_state_cores() {
         assert_eq!(CompareConfig::default().vqql.cells, 9 * 9 * 5 * 5);
         assert_eq!(tiny().vqql.cells, 7 * 7 * 3 * 3);
@@ -849,9 +921,10 @@ mod tests {
         assert_eq!(fqi.parameters, 441 * 25);
         assert_eq!(crisp.parameters, fqi.parameters);
         assert_eq!(fqi.iteration_unit, "sweeps");
-        assert_eq!(a.reports[2].iteration_unit, "episodes");
-        assert_eq!(a.reports[2].iterations, 40);
-        assert_eq!(a.reports[4].parameters, 441 * 25);
+        assert_eq!(a.reports[2].parameters, fqi.parameters);
+        assert_eq!(a.reports[3].iteration_unit, "episodes");
+        assert_eq!(a.reports[3].iterations, 40);
+        assert_eq!(a.reports[5].parameters, 441 * 25);
         // The table has one column per learner and the paper's two.
         let md = a.to_markdown();
         let header = md.lines().next().unwrap();

@@ -21,12 +21,15 @@ use crate::io::policy_file::{
 };
 use crate::learn::fit::{self, FitConfig, FitReport, TableError};
 use crate::learn::fql::{EpisodeRecord, FqlConfig, FqlOutcome};
-use crate::learn::samples::{self, Collection, Transitions};
+use crate::learn::samples::{self, Collection, Exploration, Transitions};
 use crate::learn::tasks::{khepera as khepera_task, pointmass as pointmass_task};
 use crate::learn::vqql::{self, LloydReport, VqqlConfig};
 use crate::model::learned::LearnedModel;
 use crate::model::pointmass::{PointMass, Starts};
 use crate::model::{BlockSpec, EnvModel, F64Model};
+use crate::run::policy::{FqiPolicy, Scratch};
+use fuzzyq_core::q::PolicyKind;
+use serde::Serialize;
 
 fuzzyq_core::named_option! {
     /// What learns a policy.
@@ -151,16 +154,23 @@ fn artifact<T>(
 }
 
 /// How the learned-model learner gathers its data and fits its model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ModelLearning {
-    /// The interaction with the plant.
+    /// The interaction with the plant (each round's).
     pub collection: Collection,
     /// The estimator's settings.
     pub fit: FitConfig,
+    /// Rounds of collection, `>= 1`: the first with random actions; each further one collects
+    /// `collection.samples` more transitions epsilon-greedily with the policy solved on the
+    /// model fitted so far, then refits on all of them and solves again.
+    pub rounds: usize,
+    /// The further rounds' probability of a random action, per agent and step, in `[0, 1]`.
+    pub epsilon: f64,
 }
 
 impl ModelLearning {
-    /// `samples` transitions in episodes of 50 steps from `seed`, the default fit.
+    /// `samples` transitions in episodes of 50 steps from `seed`, the default fit, one round
+    /// (epsilon 0.1 if more rounds are set).
     #[must_use]
     pub fn new(samples: usize, seed: u64) -> Self {
         Self {
@@ -170,6 +180,55 @@ impl ModelLearning {
                 seed,
             },
             fit: FitConfig::default(),
+            rounds: 1,
+            epsilon: 0.1,
+        }
+    }
+
+    /// Checks the settings; errors name the field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.collection.validate()?;
+        crate::error::require!(self.rounds >= 1, "rounds", "must be at least 1");
+        crate::error::require!(
+            (0.0..=1.0).contains(&self.epsilon),
+            "epsilon",
+            format!("must be in [0, 1], got {}", self.epsilon)
+        );
+        Ok(())
+    }
+
+    /// The seed of round `round`'s collection (round 0's is the configured one).
+    #[must_use]
+    pub fn round_seed(&self, round: usize) -> u64 {
+        self.collection.seed ^ (round as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+    }
+}
+
+/// One round of [`train_learned`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Round {
+    /// Transitions fitted in this round (all rounds' so far).
+    pub transitions: usize,
+    /// Rows of this round's fit that needed a wider kernel than their core's.
+    pub under_sampled_rows: usize,
+    /// Sweeps of this round's solve.
+    pub sweeps: usize,
+    /// Seconds of the round: collection, fit and solve.
+    pub seconds: f64,
+}
+
+impl Round {
+    fn new(
+        data: &Transitions,
+        fit: &FitReport,
+        artifact: &PolicyArtifact,
+        start: std::time::Instant,
+    ) -> Self {
+        Self {
+            transitions: data.len(),
+            under_sampled_rows: fit.under_sampled_rows(),
+            sweeps: artifact.summary.sweeps,
+            seconds: start.elapsed().as_secs_f64(),
         }
     }
 }
@@ -184,8 +243,11 @@ pub struct LearnedModelRun {
     /// The estimated rows' distance to the true noise-free model's (a check the built-in
     /// environments allow; the learner never used the model).
     pub table_error: Vec<TableError>,
-    /// Seconds spent collecting and fitting (the solve's are in the artifact's summary).
+    /// Seconds spent collecting and fitting, over every round (the last solve's are in the
+    /// artifact's summary).
     pub learning_seconds: f64,
+    /// Every round, in order (one unless [`ModelLearning::rounds`] asks for more).
+    pub rounds: Vec<Round>,
 }
 
 /// Where the episodes of the learned-model learner start: the point masses' random starts
@@ -206,16 +268,17 @@ fn draw_start(model: &EnvModel) -> impl FnMut(&mut rand_pcg::Pcg64Mcg, &mut [f64
 }
 
 /// Transitions of `task`'s plant as the learned-model learner collects them: seeded episodes
-/// of random actions from the task's starts ([`samples::collect`]), with its process noise;
+/// from the task's starts, the agents acting as `exploration` says ([`samples::collect`]), with its process noise;
 /// for the Khepera robots, on the rapier plant with its wheel noise
 /// ([`samples::collect_khepera`]).
 pub fn collect_from_plant(
     task: &EnvModel,
     collection: &Collection,
+    exploration: &mut Exploration<'_>,
 ) -> Result<Transitions, SimError> {
     match task {
-        EnvModel::Khepera(robots) => samples::collect_khepera(robots, collection),
-        _ => Ok(samples::collect(task, collection, draw_start(task))?),
+        EnvModel::Khepera(robots) => samples::collect_khepera(robots, collection, exploration),
+        _ => samples::collect(task, collection, draw_start(task), exploration),
     }
 }
 
@@ -225,24 +288,59 @@ pub fn collect_from_plant(
 /// blocks are the environment's declared ones, or one block of the whole state), and solves
 /// the learned model as [`train`] solves the true one. Every built-in environment without
 /// terminal states is supported (the Khepera robots learn on their rapier plant).
+///
+/// With [`ModelLearning::rounds`] above 1, each further round collects as many transitions
+/// again, epsilon-greedily with the policy of the previous round (seeded with
+/// [`ModelLearning::round_seed`]), refits on everything collected so far and solves again;
+/// the run reports the last round's fit and policy.
 pub fn train_learned(
     config: &TrainConfig,
     learning: &ModelLearning,
-    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+    mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<LearnedModelRun, SimError> {
     config.validate()?;
-    let start = std::time::Instant::now();
+    learning.validate()?;
     check_learnable(config)?;
     let task = config.build_model()?;
-    let data = collect_from_plant(&task, &learning.collection)?;
-    let (artifact, fit, table_error, learning_seconds) =
-        fit_and_solve(config, &task, &data, &learning.fit, start, observer)?;
-    Ok(LearnedModelRun {
-        artifact,
-        fit,
-        table_error,
-        learning_seconds,
-    })
+    let mut rounds: Vec<Round> = Vec::with_capacity(learning.rounds);
+    let mut learning_seconds = 0.0;
+    let mut start = std::time::Instant::now();
+    let mut data = collect_from_plant(&task, &learning.collection, &mut Exploration::Random)?;
+    loop {
+        let (artifact, fit, table_error, seconds) =
+            fit_and_solve(config, &task, &data, &learning.fit, start, &mut observer)?;
+        learning_seconds += seconds;
+        rounds.push(Round::new(&data, &fit, &artifact, start));
+        if rounds.len() >= learning.rounds {
+            return Ok(LearnedModelRun {
+                artifact,
+                fit,
+                table_error,
+                learning_seconds,
+                rounds,
+            });
+        }
+        start = std::time::Instant::now();
+        let collection = Collection {
+            seed: learning.round_seed(rounds.len()),
+            ..learning.collection
+        };
+        let policy = FqiPolicy::from_artifact(artifact)?;
+        let mut q = vec![0.0; policy.n_joint_actions()];
+        let mut u = vec![0.0; policy.action_dim()];
+        let mut scratch = Scratch::default();
+        let mut greedy = |x: &[f64], out: &mut [usize]| {
+            let joint = policy
+                .act_with(PolicyKind::Greedy, x, &mut q, &mut u, &mut scratch)?
+                .unwrap_or_default();
+            policy.agent_indices(joint, out)
+        };
+        let mut exploration = Exploration::EpsilonGreedy {
+            epsilon: learning.epsilon,
+            greedy: &mut greedy,
+        };
+        data.append(&collect_from_plant(&task, &collection, &mut exploration)?)?;
+    }
 }
 
 /// Whether the learned-model learner can learn the environment of `config`: every built-in
@@ -308,11 +406,13 @@ pub fn train_on_transitions(
     let task = config.build_model()?;
     let (artifact, fit, table_error, learning_seconds) =
         fit_and_solve(config, &task, data, fit_config, start, observer)?;
+    let rounds = vec![Round::new(data, &fit, &artifact, start)];
     Ok(LearnedModelRun {
         artifact,
         fit,
         table_error,
         learning_seconds,
+        rounds,
     })
 }
 

@@ -92,6 +92,15 @@ pub(crate) struct TrainArgs {
     /// [default: 20000].
     #[arg(long, value_name = "N", conflicts_with = "transitions")]
     samples: Option<usize>,
+    /// learned-model: rounds of collection. After the first (random actions), each round
+    /// collects --samples more transitions epsilon-greedily with the policy solved so far,
+    /// refits on all of them and solves again [default: 1].
+    #[arg(long, value_name = "N", conflicts_with = "transitions")]
+    rounds: Option<usize>,
+    /// learned-model, with --rounds: probability of a random action per robot or agent and
+    /// step in the rounds after the first [default: 0.1].
+    #[arg(long, value_name = "E", requires = "rounds")]
+    epsilon: Option<f64>,
     /// learned-model: learn from these logged transitions instead of collecting them: CSV, one
     /// transition per line, `x_1..x_E, u_1..u_D, x'_1..x'_E, r`, an optional header line.
     #[arg(long, value_name = "FILE.csv")]
@@ -174,6 +183,11 @@ struct LearnedSummary<'a> {
     learning_seconds: f64,
     fit: &'a fuzzyq_sim::learn::fit::FitReport,
     table_error: &'a [fuzzyq_sim::learn::fit::TableError],
+    /// Each round of collection, fit and solve (one without `--rounds`).
+    rounds: &'a [train::Round],
+    /// The rounds' exploration after the first (with `--rounds` above 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    epsilon: Option<f64>,
 }
 
 /// The `--json` summary of a learner from samples.
@@ -316,6 +330,8 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     for (set, flag) in [
         (args.samples.is_some(), "--samples"),
         (args.transitions.is_some(), "--transitions"),
+        (args.rounds.is_some(), "--rounds"),
+        (args.epsilon.is_some(), "--epsilon"),
     ] {
         refuse(
             set && !learned,
@@ -332,10 +348,14 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     ] {
         refuse(set, flag, "applies to --learner fql or vqql only")?;
     }
-    let learning =
-        learned.then(|| train::ModelLearning::new(args.samples.unwrap_or(20_000), args.seed));
+    let learning = learned.then(|| {
+        let mut l = train::ModelLearning::new(args.samples.unwrap_or(20_000), args.seed);
+        l.rounds = args.rounds.unwrap_or(l.rounds);
+        l.epsilon = args.epsilon.unwrap_or(l.epsilon);
+        l
+    });
     if let Some(l) = &learning {
-        l.collection.validate()?;
+        l.validate()?;
         train::check_learnable(&config)?;
     }
     let logged = match &args.transitions {
@@ -397,8 +417,22 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         ),
         (Some(l), None, false) => eprintln!(
             "learned model: {} transitions from the plant (random actions, episodes of {} \
-             steps, seed {}), fitted per dynamics block, then solved",
-            l.collection.samples, l.collection.episode_steps, l.collection.seed
+             steps, seed {}), fitted per dynamics block, then solved{}",
+            l.collection.samples,
+            l.collection.episode_steps,
+            l.collection.seed,
+            if l.rounds > 1 {
+                format!(
+                    "; then {} more round{} of {} transitions, epsilon-greedy (epsilon {}) \
+                     with the policy so far, refitted and solved",
+                    l.rounds - 1,
+                    if l.rounds == 2 { "" } else { "s" },
+                    l.collection.samples,
+                    l.epsilon
+                )
+            } else {
+                String::new()
+            }
         ),
         _ => {}
     }
@@ -460,6 +494,18 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
                 ""
             },
         );
+        if r.rounds.len() > 1 {
+            for (k, round) in r.rounds.iter().enumerate() {
+                eprintln!(
+                    "round {}: {} transitions, {} rows widened, {} sweeps, {:.1} s",
+                    k + 1,
+                    round.transitions,
+                    round.under_sampled_rows,
+                    round.sweeps,
+                    round.seconds
+                );
+            }
+        }
         if r.fit.reward_mismatches > 0 {
             eprintln!(
                 "warning: {} transitions recorded a reward other than the task's",
@@ -529,6 +575,11 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
                 learning_seconds: r.learning_seconds,
                 fit: &r.fit,
                 table_error: &r.table_error,
+                rounds: &r.rounds,
+                epsilon: learning
+                    .as_ref()
+                    .filter(|l| l.rounds > 1)
+                    .map(|l| l.epsilon),
             }),
         };
         write_json(path, &summary)?;

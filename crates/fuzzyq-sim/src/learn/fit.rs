@@ -829,7 +829,7 @@ pub fn table_error(tables: &BlockTables, truth: &EnvModel) -> Result<Vec<TableEr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::learn::samples::{Collection, collect};
+    use crate::learn::samples::{Collection, Exploration, collect};
     use crate::model::pointmass::{PointMass, PointMassConfig};
     use crate::paper;
 
@@ -859,7 +859,13 @@ mod tests {
             episode_steps: 50,
             seed,
         };
-        collect(task, &c, |rng, x| starts.draw(rng, x)).unwrap()
+        collect(
+            task,
+            &c,
+            |rng, x| starts.draw(rng, x),
+            &mut Exploration::Random,
+        )
+        .unwrap()
     }
 
     fn fitted(task: &EnvModel, d: &Transitions) -> (BlockTables, FitReport) {
@@ -986,7 +992,7 @@ mod tests {
             episode_steps: 50,
             seed: 8,
         };
-        let d = collect_khepera(&model, &c).unwrap();
+        let d = collect_khepera(&model, &c, &mut Exploration::Random).unwrap();
         let pi = std::f64::consts::PI;
         let heading: Vec<f64> = (0..=8)
             .map(|i| -pi + 2.0 * pi * f64::from(i) / 8.0)

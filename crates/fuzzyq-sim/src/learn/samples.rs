@@ -1,8 +1,9 @@
 //! Transitions `(x, u, x', r)` and their collection by interacting with a plant.
 //!
 //! [`collect`] runs seeded episodes on a model's plant: each starts where `draw_start` says
-//! (for the point masses, the task's random starts at rest) and takes uniformly random joint
-//! actions for a fixed number of steps, with the plant's process noise
+//! (for the point masses, the task's random starts at rest) and takes actions as its
+//! [`Exploration`] says (uniformly random, or epsilon-greedy with a policy the caller gives)
+//! for a fixed number of steps, with the plant's process noise
 //! ([`F64Model::add_process_noise`]). The learner sees only the recorded transitions; it never
 //! calls the model's transition function. [`collect_khepera`] does the same on the Khepera
 //! robots' rapier plant (contacts, and the configured wheel noise), from the task's random
@@ -15,6 +16,63 @@ use crate::error::{ConfigError, SimError, require};
 use crate::model::F64Model;
 use crate::model::khepera::{self, KheperaModel, MAX_ROBOTS, N_ACTIONS};
 use crate::world::KheperaWorld;
+
+/// A policy for [`Exploration::EpsilonGreedy`]: writes each agent's action index at a state.
+pub type GreedyActions<'a> = dyn FnMut(&[f64], &mut [usize]) -> Result<(), SimError> + 'a;
+
+/// How the agents choose their actions while [`collect`] records them.
+pub enum Exploration<'a> {
+    /// Each agent takes one of its actions uniformly at random.
+    Random,
+    /// Each agent takes the action `greedy` gives it (per-agent action indices at the state)
+    /// with probability `1 - epsilon`, a uniformly random one otherwise.
+    EpsilonGreedy {
+        /// Probability of a random action, per agent and step, in `[0, 1]`.
+        epsilon: f64,
+        /// Writes each agent's action index at a state (a policy's greedy joint action).
+        greedy: &'a mut GreedyActions<'a>,
+    },
+}
+
+impl std::fmt::Debug for Exploration<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Random => f.write_str("Random"),
+            Self::EpsilonGreedy { epsilon, .. } => f
+                .debug_struct("EpsilonGreedy")
+                .field("epsilon", epsilon)
+                .finish_non_exhaustive(),
+        }
+    }
+}
+
+impl Exploration<'_> {
+    /// Writes every agent's action index at `x` (each of `n_actions`), drawing from `rng`.
+    fn choose(
+        &mut self,
+        rng: &mut Pcg64Mcg,
+        x: &[f64],
+        n_actions: usize,
+        out: &mut [usize],
+    ) -> Result<(), SimError> {
+        match self {
+            Self::Random => {
+                for a in out.iter_mut() {
+                    *a = rng.random_range(0..n_actions);
+                }
+            }
+            Self::EpsilonGreedy { epsilon, greedy } => {
+                greedy(x, out)?;
+                for a in out.iter_mut() {
+                    if rng.random::<f64>() < *epsilon {
+                        *a = rng.random_range(0..n_actions);
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
 
 /// Transitions `(x, u, x', r)`, stored column by column.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -131,6 +189,24 @@ impl Transitions {
         )
     }
 
+    /// Appends `other`'s transitions (of the same dimensions).
+    pub fn append(&mut self, other: &Self) -> Result<(), ConfigError> {
+        require!(
+            (other.state_dim, other.action_dim) == (self.state_dim, self.action_dim),
+            "transitions",
+            format!(
+                "cannot append transitions of {} state and {} action variables to ones of {} \
+                 and {}",
+                other.state_dim, other.action_dim, self.state_dim, self.action_dim
+            ),
+        );
+        self.x.extend_from_slice(&other.x);
+        self.u.extend_from_slice(&other.u);
+        self.next.extend_from_slice(&other.next);
+        self.reward.extend_from_slice(&other.reward);
+        Ok(())
+    }
+
     /// The first `n` transitions (all of them if there are fewer).
     #[must_use]
     pub fn truncated(&self, n: usize) -> Self {
@@ -171,13 +247,14 @@ impl Collection {
     }
 }
 
-/// Records `collection.samples` transitions of `model`'s plant under uniformly random joint
-/// actions (see the [module docs](self)); `draw_start` writes an episode's start.
+/// Records `collection.samples` transitions of `model`'s plant, the agents acting as
+/// `exploration` says (see the [module docs](self)); `draw_start` writes an episode's start.
 pub fn collect<M: F64Model + ?Sized>(
     model: &M,
     collection: &Collection,
     mut draw_start: impl FnMut(&mut Pcg64Mcg, &mut [f64]),
-) -> Result<Transitions, ConfigError> {
+    exploration: &mut Exploration<'_>,
+) -> Result<Transitions, SimError> {
     collection.validate()?;
     let e = model.state_dim();
     let actions = model.actions();
@@ -185,11 +262,13 @@ pub fn collect<M: F64Model + ?Sized>(
     let mut out = Transitions::new(e, n * per_agent);
     let mut rng = Pcg64Mcg::seed_from_u64(collection.seed);
     let (mut x, mut next, mut u) = (vec![0.0; e], vec![0.0; e], vec![0.0; n * per_agent]);
+    let mut chosen = vec![0; n];
     while out.len() < collection.samples {
         draw_start(&mut rng, &mut x);
         for _ in 0..collection.episode_steps {
-            for agent in u.chunks_mut(per_agent) {
-                agent.copy_from_slice(actions.action(rng.random_range(0..actions.len())));
+            exploration.choose(&mut rng, &x, actions.len(), &mut chosen)?;
+            for (agent, &a) in u.chunks_mut(per_agent).zip(&chosen) {
+                agent.copy_from_slice(actions.action(a));
             }
             model.step(&x, &u, &mut next);
             model.add_process_noise(&mut next, &mut rng);
@@ -208,13 +287,14 @@ pub fn collect<M: F64Model + ?Sized>(
 
 /// Records `collection.samples` transitions of the Khepera robots of `model` on the rapier
 /// plant: episodes from the task's random starts ([`khepera::random_starts`], seeded by
-/// `collection.seed`), each robot taking one of its four actions uniformly at random per
-/// step, the plant adding its configured wheel noise (seeded from `collection.seed` too) and
+/// `collection.seed`), each robot taking one of its four actions per step as `exploration`
+/// says, the plant adding its configured wheel noise (seeded from `collection.seed` too) and
 /// its contacts. States are the robots' poses as the plant reports them; the reward is the
 /// task's at the state.
 pub fn collect_khepera(
     model: &KheperaModel,
     collection: &Collection,
+    exploration: &mut Exploration<'_>,
 ) -> Result<Transitions, SimError> {
     collection.validate()?;
     let config = model.config();
@@ -227,6 +307,7 @@ pub fn collect_khepera(
     let mut out = Transitions::new(3 * n, 2 * n);
     let (mut x, mut next, mut u) = (vec![0.0; 3 * n], vec![0.0; 3 * n], vec![0.0; 2 * n]);
     let mut wheels = [[0.0; 2]; MAX_ROBOTS];
+    let mut chosen = [0; MAX_ROBOTS];
     let flatten = |poses: &[[f64; 3]], out: &mut [f64]| {
         for (p, o) in poses.iter().zip(out.chunks_exact_mut(3)) {
             o.copy_from_slice(p);
@@ -236,8 +317,9 @@ pub fn collect_khepera(
         world.reset(start)?;
         flatten(world.poses(), &mut x);
         for _ in 0..collection.episode_steps {
+            exploration.choose(&mut rng, &x, N_ACTIONS, &mut chosen[..n])?;
             for (i, w) in wheels[..n].iter_mut().enumerate() {
-                *w = config.wheels(rng.random_range(0..N_ACTIONS));
+                *w = config.wheels(chosen[i]);
                 u[2 * i..2 * i + 2].copy_from_slice(w);
             }
             world.step(&wheels[..n])?;
@@ -250,4 +332,83 @@ pub fn collect_khepera(
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::pointmass::PointMass;
+    use crate::test_support::tiny_model as one_agent;
+
+    fn run(model: &PointMass, exploration: &mut Exploration<'_>) -> Transitions {
+        let c = Collection {
+            samples: 400,
+            episode_steps: 20,
+            seed: 5,
+        };
+        collect(model, &c, |_, x| x.fill(1.0), exploration).unwrap()
+    }
+
+    /// Whether transition `i` took the action of index `a` (9 forces).
+    fn took(model: &PointMass, d: &Transitions, i: usize, a: usize) -> bool {
+        d.get(i).1 == F64Model::actions(model).action(a)
+    }
+
+    #[test]
+    fn epsilon_greedy_follows_the_policy_at_epsilon_0_and_ignores_it_at_1() {
+        let model = one_agent();
+        let mut greedy = |_: &[f64], out: &mut [usize]| {
+            out.fill(7);
+            Ok(())
+        };
+        let mut at = |epsilon: f64| {
+            let d = run(
+                &model,
+                &mut Exploration::EpsilonGreedy {
+                    epsilon,
+                    greedy: &mut greedy,
+                },
+            );
+            (0..d.len()).filter(|&i| took(&model, &d, i, 7)).count()
+        };
+        assert_eq!(at(0.0), 400);
+        // Uniform over 9 actions: about 44 of 400 take action 7 by chance.
+        assert!(at(1.0) < 80);
+        let half = at(0.5);
+        assert!((190..=260).contains(&half), "{half}");
+    }
+
+    #[test]
+    fn the_policy_sees_the_recorded_states() {
+        let model = one_agent();
+        let mut seen = Vec::new();
+        let mut greedy = |x: &[f64], out: &mut [usize]| {
+            seen.push(x.to_vec());
+            out.fill(0);
+            Ok(())
+        };
+        let d = run(
+            &model,
+            &mut Exploration::EpsilonGreedy {
+                epsilon: 0.0,
+                greedy: &mut greedy,
+            },
+        );
+        assert_eq!(seen.len(), d.len());
+        for (i, x) in seen.iter().enumerate() {
+            assert_eq!(d.get(i).0, &x[..]);
+        }
+    }
+
+    #[test]
+    fn appending_needs_the_same_dimensions() {
+        let model = one_agent();
+        let mut a = run(&model, &mut Exploration::Random);
+        let b = a.clone();
+        a.append(&b).unwrap();
+        assert_eq!(a.len(), 800);
+        assert_eq!(a.get(400), b.get(0));
+        let e = a.append(&Transitions::new(3, 2)).unwrap_err().to_string();
+        assert!(e.contains("cannot append"), "{e}");
+    }
 }
