@@ -1,13 +1,14 @@
 //! `fuzzyq`: train fuzzy Q-iteration policies, roll them out, plot them.
 //!
 //! Every error is printed as one line on stderr and exits with code 2 (130 when Ctrl-C stops
-//! a training run). Output files are written atomically: a failure never leaves a
-//! half-written file.
+//! a training run). A command's output files are one transaction (`output::transaction`):
+//! planned before any work (no output over another or over an input), staged in full, and put
+//! in place only when the command has succeeded, so a failure replaces no file.
 //!
 //! - `cmd/`: one file per subcommand (`train`, `rollout`, `compare`, `config`); each parses
 //!   its flags with clap, turns them into the library's validated settings in one place, and
 //!   writes its outputs;
-//! - `output.rs`: what every subcommand shares to read flags and write files;
+//! - `output/`: what every subcommand shares to read flags and write files;
 //! - `plot/`: the figures, one file per figure kind.
 
 mod cmd;
@@ -81,6 +82,16 @@ fn main() -> ExitCode {
         Command::Compare(args) => cmd::compare::run(args),
         Command::Config(args) => cmd::config::run(args),
         Command::Bench(args) => cmd::bench::run(args),
+    };
+    // The outputs go in place only when the whole command has succeeded.
+    // A closed stdout (`fuzzyq ... | head`) is a normal end: what was written stays.
+    let result = match result {
+        Ok(()) => output::commit(),
+        Err(e) if output::is_broken_pipe(&e) => output::commit().and(Err(e)),
+        Err(e) => {
+            output::discard();
+            Err(e)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -672,7 +672,8 @@ impl Solution {
         )
     }
 
-    /// Wall-clock seconds of the solve.
+    /// Wall-clock seconds of the solve (0 for a solution loaded from a file: files keep no
+    /// timings, so that the same problem gives the same file).
     #[getter]
     fn seconds(&self) -> f64 {
         self.summary.seconds

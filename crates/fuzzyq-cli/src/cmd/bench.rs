@@ -17,7 +17,7 @@ use fuzzyq_sim::train;
 use serde::Serialize;
 
 use crate::cmd::train::{load_config, start_pool};
-use crate::output::{self, check_outputs, write_json};
+use crate::output::{self, write_json};
 
 #[derive(Args, Debug)]
 pub(crate) struct BenchArgs {
@@ -93,7 +93,10 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
             args.peak_seconds
         );
     }
-    check_outputs(&[(&args.json, "JSON")])?;
+    output::plan(
+        &[(args.json.as_deref(), "--json")],
+        &[(args.config.as_deref(), "--config")],
+    )?;
     let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
     start_pool(args.threads)?;
     let kernel = args.kernel.unwrap_or_else(Kernel::best);

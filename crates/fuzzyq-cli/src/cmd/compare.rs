@@ -10,7 +10,7 @@ use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::model::pointmass::Starts;
 
 use crate::cmd::train::load_config;
-use crate::output::{self, check_writable, parse_list, print_stdout, write_file, write_json};
+use crate::output::{self, parse_list, print_stdout, write_file, write_json};
 use crate::plot;
 
 #[derive(Args, Debug)]
@@ -152,9 +152,9 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create --out {}", args.out.display()))?;
     let files = outputs(&args.out, &config.learners, args.curve.is_some());
-    for f in &files {
-        check_writable(f, "output")?;
-    }
+    let planned: Vec<(Option<&Path>, &str)> =
+        files.iter().map(|f| (Some(f.as_path()), "--out")).collect();
+    output::plan(&planned, &[(args.config.as_deref(), "--config")])?;
     let t0 = Instant::now();
     let quiet = args.quiet;
     let comparison = compare::compare(&config, |e| {
@@ -230,7 +230,7 @@ fn write_curve(
             p.failure.as_deref().unwrap_or("").replace([',', '\n'], ";")
         ));
     }
-    write_file(&dir.join("efficiency.csv"), csv.as_bytes(), "curve")?;
+    write_file(&dir.join("efficiency.csv"), csv.as_bytes())?;
     write_json(&dir.join("efficiency.json"), &points)?;
     let title = format!(
         "Success over {} random starts (seed {}) against transitions of interaction",
@@ -240,8 +240,8 @@ fn write_curve(
 }
 
 fn write(dir: &Path, c: &Comparison) -> anyhow::Result<()> {
-    write_file(&dir.join("table1.md"), c.to_markdown().as_bytes(), "table")?;
-    write_file(&dir.join("table1.csv"), c.to_csv().as_bytes(), "table")?;
+    write_file(&dir.join("table1.md"), c.to_markdown().as_bytes())?;
+    write_file(&dir.join("table1.csv"), c.to_csv().as_bytes())?;
     write_json(&dir.join("table1.json"), c)?;
     plot::compare_figure(&dir.join("paths.png"), c)?;
     for (r, t) in c.reports.iter().zip(&c.trajectories) {

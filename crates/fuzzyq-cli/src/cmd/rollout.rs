@@ -18,9 +18,7 @@ use fuzzyq_sim::run::policy::Policy;
 use fuzzyq_sim::world::{Collisions, PointMassPlantConfig};
 use serde::Serialize;
 
-use crate::output::{
-    self, check_outputs, parse_list, print_stdout, refuse, write_file, write_json,
-};
+use crate::output::{self, parse_list, print_stdout, refuse, write_file, write_json};
 use crate::plot;
 
 #[derive(Args, Debug)]
@@ -85,12 +83,15 @@ enum PlantArg {
 }
 
 pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
-    check_outputs(&[
-        (&args.csv, "CSV"),
-        (&args.plot, "plot"),
-        (&args.json, "metrics"),
-        (&args.maps, "maps"),
-    ])?;
+    output::plan(
+        &[
+            (args.csv.as_deref(), "--csv"),
+            (args.plot.as_deref(), "--plot"),
+            (args.json.as_deref(), "--json"),
+            (args.maps.as_deref(), "--maps"),
+        ],
+        &[(Some(&args.policy), "--policy")],
+    )?;
     for p in [&args.plot, &args.maps].into_iter().flatten() {
         plot::check_extension(p)?;
     }
@@ -152,7 +153,7 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
             };
             let config = k.config();
             if let Some(p) = &args.csv {
-                write_file(p, csv(&run.trajectory, spec).as_bytes(), "CSV")?;
+                write_file(p, csv(&run.trajectory, spec).as_bytes())?;
             }
             if let Some(p) = &args.plot {
                 let kind = args.policy_kind;
@@ -199,7 +200,7 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
         } => {
             let kind = args.policy_kind;
             if let Some(p) = &args.csv {
-                write_file(p, csv(&trajectory, spec).as_bytes(), "CSV")?;
+                write_file(p, csv(&trajectory, spec).as_bytes())?;
             }
             if let Some(p) = &args.plot {
                 let title = format!("{env} ({} policy, T = {} s)", kind.name(), trajectory.dt);
@@ -380,7 +381,7 @@ fn point_mass_outputs(
     collisions: Option<&Collisions>,
 ) -> anyhow::Result<()> {
     if let Some(p) = &args.csv {
-        write_file(p, csv(trajectory, spec).as_bytes(), "CSV")?;
+        write_file(p, csv(trajectory, spec).as_bytes())?;
     }
     if let Some(p) = &args.plot {
         plot::rollout_figure(p, trajectory, args.policy_kind)?;

@@ -23,7 +23,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
 use crate::Failure;
-use crate::output::{self, check_outputs, check_writable, refuse, write_json};
+use crate::output::{self, refuse, write_json};
 use crate::plot;
 
 #[derive(Args, Debug)]
@@ -369,8 +369,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    check_writable(&args.out, "policy")?;
-    check_outputs(&[(&args.json, "summary")])?;
+    plan_outputs(&args)?;
     start_pool(args.threads)?;
     let threads = rayon::current_num_threads();
     let stop = output::interrupt_flag();
@@ -471,7 +470,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         Err(e) => return Err(e.into()),
     };
     let file = PolicyFile::Fqi(artifact);
-    file.save(&args.out).context("cannot save the policy")?;
+    output::write_file(&args.out, &file.to_bytes()?)?;
     let PolicyFile::Fqi(artifact) = file else {
         unreachable!("just built")
     };
@@ -587,6 +586,23 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Plans the outputs of `train` against its input files ([`output::plan`]).
+fn plan_outputs(args: &TrainArgs) -> anyhow::Result<()> {
+    output::plan(
+        &[
+            (Some(&args.out), "--out"),
+            (args.json.as_deref(), "--json"),
+            (args.curve.as_deref(), "--curve"),
+            (args.plot.as_deref(), "--plot"),
+        ],
+        &[
+            (args.config.as_deref(), "--config"),
+            (args.arena.as_deref(), "--arena"),
+            (args.transitions.as_deref(), "--transitions"),
+        ],
+    )
+}
+
 /// `fuzzyq train --learner fql|vqql`: learning from samples with the additive layout.
 fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
     let mut learning = SampleLearning::defaults(config, args.learner)?;
@@ -595,12 +611,7 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
         "--cells",
         "applies to --learner vqql only",
     )?;
-    check_writable(&args.out, "policy")?;
-    check_outputs(&[
-        (&args.curve, "curve"),
-        (&args.plot, "plot"),
-        (&args.json, "summary"),
-    ])?;
+    plan_outputs(args)?;
     if let Some(p) = &args.plot {
         plot::check_extension(p)?;
     }
@@ -669,11 +680,11 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
         .into());
     }
     let seconds = started.elapsed().as_secs_f64();
-    learned.file.save(&args.out)?;
+    output::write_file(&args.out, &learned.file.to_bytes()?)?;
     if let Some(p) = &args.curve {
         let mut text = Vec::new();
         fuzzyq_sim::learn::fql::write_curve_csv(&outcome.curve, &mut text)?;
-        output::write_file(p, &text, "curve")?;
+        output::write_file(p, &text)?;
     }
     if let Some(p) = &args.plot {
         let title = match &config.env {

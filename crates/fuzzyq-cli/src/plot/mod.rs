@@ -21,7 +21,7 @@
 use std::path::Path;
 use std::sync::Once;
 
-use anyhow::{Context, anyhow};
+use anyhow::anyhow;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
@@ -92,9 +92,9 @@ const PURPLE: RGBColor = RGBColor(0x94, 0x67, 0xbd);
 const GOOD: RGBColor = RGBColor(0x2c, 0xa0, 0x2c);
 const BAD: RGBColor = RGBColor(0xd6, 0x27, 0x28);
 
-/// Renders a figure of `size` pixels into `path` (PNG or SVG by extension), atomically: the
-/// figure is drawn into a temporary file beside `path`, which is then renamed over it. The two
-/// closures are the same drawing for the two backends.
+/// Renders a figure of `size` pixels for the output `path` (PNG or SVG by extension): the
+/// figure is drawn into a staged temporary file that replaces `path` when the command succeeds
+/// ([`crate::output::stage`]). The two closures are the same drawing for the two backends.
 fn write_figure(
     path: &Path,
     size: (u32, u32),
@@ -109,25 +109,19 @@ fn write_figure(
         ));
     }
     register_font();
-    // Render next to the destination (the bitmap encoder picks the format from the
-    // extension), then rename over it.
-    let tmp = fuzzyq_sim::io::temp_file_beside(path, &format!(".{ext}"))
-        .with_context(|| format!("cannot write plot {}", path.display()))?;
-    {
+    // The staged temporary keeps the extension: the bitmap encoder picks the format from it.
+    crate::output::stage(path, |tmp| {
         if ext == "svg" {
-            let root = SVGBackend::new(tmp.path(), size).into_drawing_area();
+            let root = SVGBackend::new(tmp, size).into_drawing_area();
             svg(&root)?;
             root.present().map_err(err)?;
         } else {
-            let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+            let root = BitMapBackend::new(tmp, size).into_drawing_area();
             png(&root)?;
             root.present().map_err(err)?;
         }
-    }
-    tmp.persist(path)
-        .map_err(|e| e.error)
-        .with_context(|| format!("cannot write plot {}", path.display()))?;
-    Ok(())
+        Ok(())
+    })
 }
 
 fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {

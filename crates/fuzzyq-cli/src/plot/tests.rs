@@ -135,6 +135,7 @@ fn renders(draw: impl Fn(&Path) -> anyhow::Result<()>) {
     for ext in ["png", "svg"] {
         let path = dir.path().join(format!("fig.{ext}"));
         draw(&path).unwrap();
+        crate::output::commit().unwrap();
         let bytes = std::fs::read(&path).unwrap();
         assert!(bytes.len() > 10_000, "{ext}: only {} bytes", bytes.len());
         if ext == "png" {
@@ -245,4 +246,5 @@ fn write_examples() {
         "greedy policy: 40 of 60 random starts succeed (seed 1)",
     )
     .unwrap();
+    crate::output::commit().unwrap();
 }

@@ -105,7 +105,7 @@ pub struct TrainSummary {
     pub deltas: Vec<(f64, f64)>,
     /// The sweeps (from 1) that started from an extrapolated `V` (not tested against `xi`).
     pub extrapolated: Vec<usize>,
-    /// Wall-clock seconds of the solve.
+    /// Wall-clock seconds of the solve (0 in a file: files keep no timings).
     pub seconds: f64,
     /// The a-priori sweep bound (eq 37).
     pub sweep_bound: usize,
@@ -117,7 +117,7 @@ pub struct TrainSummary {
     pub kernel: String,
     /// Multiply-adds of one sweep on the block path.
     pub multiply_adds_per_sweep: Option<f64>,
-    /// Seconds spent in sweeps (the solve minus its set-up and the final passes).
+    /// Seconds spent in sweeps (the solve minus its set-up and the final passes; 0 in a file).
     pub sweep_seconds: f64,
     /// The fuzzyq version that trained it.
     pub fuzzyq_version: String,
@@ -552,13 +552,21 @@ impl PolicyFile {
     /// Encodes the file with its header.
     pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
         let mut version = 2;
+        let summary;
         let payload = match self {
             Self::Fqi(a) => {
+                // Timings differ between identical runs: the file keeps none, so the same
+                // configuration gives the same bytes (the `--json` summary has them).
+                summary = TrainSummary {
+                    seconds: 0.0,
+                    sweep_seconds: 0.0,
+                    ..a.summary.clone()
+                };
                 let p = FqiPayloadRef {
                     config_toml: a.config.to_toml(),
                     values: &a.values,
                     greedy: &a.greedy,
-                    summary: &a.summary,
+                    summary: &summary,
                 };
                 match &a.learned {
                     None => Payload::Fqi(p),
@@ -644,13 +652,13 @@ mod tests {
                 final_delta: 0.01,
                 deltas: vec![(5.0, 5.0), (0.1, 0.2), (0.01, 0.01)],
                 extrapolated: vec![2],
-                seconds: 0.5,
+                seconds: 0.0,
                 sweep_bound: 200,
                 reward_bound: 5.0,
                 backup: "block".into(),
                 kernel: "scalar".into(),
                 multiply_adds_per_sweep: Some(1e6),
-                sweep_seconds: 0.4,
+                sweep_seconds: 0.0,
                 fuzzyq_version: "test".into(),
                 evaluation: Vec::new(),
                 evaluation_seconds: 0.0,
@@ -660,6 +668,23 @@ mod tests {
 
     fn decode(bytes: &[u8]) -> Result<PolicyFile, PolicyFileError> {
         PolicyFile::from_bytes(bytes, Path::new("p.fzq"))
+    }
+
+    /// The same run gives the same bytes: the timings, which differ between identical runs,
+    /// are not stored.
+    #[test]
+    fn files_keep_no_timings() {
+        let timed = |seconds: f64| {
+            let mut a = tiny();
+            (a.summary.seconds, a.summary.sweep_seconds) = (seconds, seconds / 2.0);
+            PolicyFile::Fqi(a).to_bytes().unwrap()
+        };
+        assert_eq!(timed(0.5), timed(7.25));
+        let PolicyFile::Fqi(back) = decode(&timed(0.5)).unwrap() else {
+            unreachable!("an fqi file")
+        };
+        assert_eq!(back.summary.seconds, 0.0);
+        assert_eq!(back, tiny());
     }
 
     #[test]
@@ -779,6 +804,8 @@ mod tests {
         .artifact;
         let tables = crisp.learned.as_deref().unwrap();
         assert_eq!(tables.membership, fuzzyq_core::Membership::Crisp);
+        let mut crisp = crisp;
+        (crisp.summary.seconds, crisp.summary.sweep_seconds) = (0.0, 0.0);
         let file = PolicyFile::Fqi(crisp);
         assert_eq!(decode(&file.to_bytes().unwrap()).unwrap(), file);
         // The tables must match the configured grid's membership functions.

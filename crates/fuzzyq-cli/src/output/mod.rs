@@ -1,6 +1,11 @@
-//! What every subcommand shares: flag parsing helpers and atomic output files.
+//! What every subcommand shares: flag parsing helpers and the output files, written as one
+//! transaction ([`transaction`]).
 
-use std::path::{Path, PathBuf};
+mod transaction;
+
+use std::path::Path;
+
+pub(crate) use transaction::{commit, discard, plan, stage};
 
 use anyhow::Context;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
@@ -73,53 +78,17 @@ pub(crate) fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
-/// Checks, before any long work, that `path` can be created: its directory exists and
-/// accepts a new file. Nothing is left behind.
-pub(crate) fn check_writable(path: &Path, what: &str) -> anyhow::Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    if path.is_dir() {
-        anyhow::bail!("{what} {} is a directory", path.display());
-    }
-    if !dir.is_dir() {
-        anyhow::bail!(
-            "{what} {}: directory {} does not exist",
-            path.display(),
-            dir.display()
-        );
-    }
-    probe(&dir).with_context(|| format!("{what} {}: cannot write there", path.display()))
+/// Stages `bytes` as the content of the output `path` (planned with [`plan`]); it is put in
+/// place when the command succeeds.
+pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    transaction::stage_bytes(path, bytes)
 }
 
-fn probe(dir: &Path) -> std::io::Result<()> {
-    let probe = dir.join(format!(".fuzzyq-probe-{}", std::process::id()));
-    std::fs::File::create(&probe)?;
-    std::fs::remove_file(&probe)
-}
-
-/// Checks every output path that is given (`(path, what)` pairs).
-pub(crate) fn check_outputs(outputs: &[(&Option<PathBuf>, &str)]) -> anyhow::Result<()> {
-    for (path, what) in outputs {
-        if let Some(p) = path {
-            check_writable(p, what)?;
-        }
-    }
-    Ok(())
-}
-
-/// Writes a file atomically, naming it in the error.
-pub(crate) fn write_file(path: &Path, bytes: &[u8], what: &str) -> anyhow::Result<()> {
-    fuzzyq_sim::io::write_atomically(path, bytes)
-        .with_context(|| format!("cannot write {what} {}", path.display()))
-}
-
-/// Serialises `value` as pretty JSON into `path`, atomically.
+/// Stages `value` as pretty JSON for the output `path` ([`write_file`]).
 pub(crate) fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
     let mut text = serde_json::to_string_pretty(value)?;
     text.push('\n');
-    write_file(path, text.as_bytes(), "JSON")
+    write_file(path, text.as_bytes())
 }
 
 /// Sets a flag on Ctrl-C; a second Ctrl-C while the first is being honoured ends the process.

@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::SystemTime;
 
+mod outputs;
+
 fn fuzzyq(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fuzzyq"))
         .args(args)
