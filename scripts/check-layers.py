@@ -37,7 +37,8 @@ LAYERS = {
         {"compare"},
     ],
     "fuzzyq-cli": [
-        {"output", "plot"},
+        {"output"},
+        {"plot"},
         {"cmd"},
     ],
 }
