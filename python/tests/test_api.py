@@ -70,6 +70,11 @@ def test_grid_errors() -> None:
         grid.memberships([0, np.nan])
     with pytest.raises(fuzzyq.InputError, match="values"):
         grid.interpolate([1.0], [0, 0])
+    # Grids are solved in single precision by default: cores must be distinct and finite there.
+    with pytest.raises(fuzzyq.ConfigError, match="grid in single precision"):
+        fuzzyq.Grid([[0.0, 1e39]])
+    with pytest.raises(fuzzyq.ConfigError, match="grid in single precision"):
+        fuzzyq.Grid([[1.0, 1.0 + 1e-12]])
 
 
 # --- the point-mass model ----------------------------------------------------------------------
@@ -111,6 +116,11 @@ def test_point_mass_errors() -> None:
         m.joint_action(25)
     with pytest.raises(fuzzyq.InputTypeError):
         m.step(None, None)  # type: ignore[arg-type]
+    # The paper's grid of three agents has 45^6 = 8.3e9 cores: a typed error, not a panic.
+    with pytest.raises(fuzzyq.ConfigError, match="cores"):
+        fuzzyq.PointMass(agents=3).paper_grid()
+    with pytest.raises(fuzzyq.ConfigError, match="single precision"):
+        fuzzyq.PointMass(force_levels=[-1e39, 0.0, 1e39])
 
 
 # --- solving -------------------------------------------------------------------------------------

@@ -34,17 +34,30 @@ impl Grid {
         Self { inner }
     }
 
+    /// A grid of `cores`, checked in both precisions: cores beyond `f32`'s range, or too close
+    /// to stay distinct in it, are refused here rather than when the grid is solved in `f32`.
+    pub(crate) fn checked(py: Python<'_>, cores: Vec<Vec<f64>>) -> PyResult<Self> {
+        let inner = fuzzyq_core::solver::Grid::new(cores)
+            .map_err(|e| error(py, Kind::Config, format!("grid: {e}")))?;
+        let grid = Self { inner };
+        grid.to_precision::<f32>(py)?;
+        Ok(grid)
+    }
+
     /// The grid in precision `T`.
-    pub(crate) fn to_precision<T: fuzzyq_core::Real>(&self) -> fuzzyq_core::solver::Grid<T> {
+    pub(crate) fn to_precision<T: fuzzyq_core::Real>(
+        &self,
+        py: Python<'_>,
+    ) -> PyResult<fuzzyq_core::solver::Grid<T>> {
         let cores = self
             .inner
             .cores()
             .iter()
             .map(|c| c.iter().map(|&v| T::from_f64(v)).collect())
             .collect();
-        fuzzyq_core::solver::Grid::new(cores)
-            .expect("a valid f64 grid is valid in f32")
-            .with_membership(self.inner.membership())
+        Ok(fuzzyq_core::solver::Grid::new(cores)
+            .map_err(|e| error(py, Kind::Config, format!("grid in single precision: {e}")))?
+            .with_membership(self.inner.membership()))
     }
 }
 
@@ -79,9 +92,7 @@ impl Grid {
         for (i, item) in items.enumerate() {
             all.push(vector(&item?, &format!("cores[{i}]"), None)?);
         }
-        let inner = fuzzyq_core::solver::Grid::new(all)
-            .map_err(|e| error(py, Kind::Config, format!("grid: {e}")))?;
-        Ok(Self { inner })
+        Self::checked(py, all)
     }
 
     /// Number of state variables.
@@ -452,14 +463,15 @@ impl PointMass {
 
     /// The paper's grid for this number of agents: position cores
     /// `[-6, -3, -0.3, -0.1, 0, 0.1, 0.3, 3, 6]` and velocity cores `[-3, -1, 0, 1, 3]`.
-    fn paper_grid(&self) -> Grid {
+    fn paper_grid(&self, py: Python<'_>) -> PyResult<Grid> {
         let pos = vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
         let vel = vec![-3.0, -1.0, 0.0, 1.0, 3.0];
         let mut cores = Vec::new();
         for _ in 0..self.n_agents() {
             cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
         }
-        Grid::from_inner(fuzzyq_core::solver::Grid::new(cores).expect("valid cores"))
+        // Three or more agents exceed the 2^32 cores a grid may have: a typed error.
+        Grid::checked(py, cores)
     }
 
     fn __repr__(&self) -> String {

@@ -316,11 +316,15 @@ pub(crate) fn solve(
         ($t:ty, $variant:ident) => {{
             let conv = |v: &[f64]| v.iter().map(|&x| <$t>::from_f64(x)).collect::<Vec<$t>>();
             let actions = cm.actions.iter().map(|(v, d)| (conv(v), *d)).collect();
-            let table =
-                TabulatedModel::new(g.to_precision::<$t>(), actions, conv(&next), conv(&rewards))
-                    .map_err(|e| solve_error(py, &e))?;
+            let table = TabulatedModel::new(
+                g.to_precision::<$t>(py)?,
+                actions,
+                conv(&next),
+                conv(&rewards),
+            )
+            .map_err(|e| solve_error(py, &e))?;
             let table = Arc::new(table);
-            let grid_t = g.to_precision::<$t>();
+            let grid_t = g.to_precision::<$t>(py)?;
             let result = py
                 .detach(|| {
                     with_pool(threads, || {
@@ -572,14 +576,14 @@ impl Solution {
                 })
             }
             (Source::Table32(t), Values::F32(v)) => {
-                let grid = self.grid.get().to_precision::<f32>();
+                let grid = self.grid.get().to_precision::<f32>(py)?;
                 py.detach(|| {
                     FqiPolicy::tabulated(t.clone(), grid, v, greedy, gamma, absorbing)
                         .and_then(prepared)
                 })
             }
             (Source::Table64(t), Values::F64(v)) => {
-                let grid = self.grid.get().to_precision::<f64>();
+                let grid = self.grid.get().to_precision::<f64>(py)?;
                 py.detach(|| {
                     FqiPolicy::tabulated(t.clone(), grid, v, greedy, gamma, absorbing)
                         .and_then(prepared)

@@ -170,6 +170,9 @@ impl CompareConfig {
         if self.steps == 0 {
             return Err(ConfigError::invalid("steps", "must be at least 1").into());
         }
+        if self.starts == 0 {
+            return Err(ConfigError::invalid("starts", "must be at least 1").into());
+        }
         if self.learners.is_empty() {
             return Err(ConfigError::invalid("learners", "name at least one learner").into());
         }

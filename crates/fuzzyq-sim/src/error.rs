@@ -110,9 +110,10 @@ pub enum SimError {
     /// A state, action or buffer was rejected.
     #[error(transparent)]
     Eval(#[from] EvalError),
-    /// The grid is invalid.
+    /// The grid is invalid (the message includes the partition's: it is not also a source,
+    /// which would repeat it in a printed chain).
     #[error("grid: {0}")]
-    Grid(#[from] PartitionError),
+    Grid(PartitionError),
     /// A policy file problem.
     #[error(transparent)]
     PolicyFile(#[from] PolicyFileError),
@@ -131,6 +132,12 @@ macro_rules! require {
 }
 pub(crate) use require;
 
+impl From<PartitionError> for SimError {
+    fn from(e: PartitionError) -> Self {
+        Self::Grid(e)
+    }
+}
+
 /// `Ok` if `v` is a positive finite number, else an error naming `field`.
 pub(crate) fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
     require!(
@@ -138,6 +145,22 @@ pub(crate) fn positive(field: &str, v: f64) -> Result<(), ConfigError> {
         field,
         format!("must be a positive number, got {v}")
     );
+    Ok(())
+}
+
+/// `Ok` if every value is finite in single precision as well (`|v| <= f32::MAX`, about
+/// 3.4e38): the solver runs in `f32` by default, so an action, a bound or a core beyond it
+/// would become infinite there. The error names `field` and the first value out of range.
+pub(crate) fn single_precision(field: &str, values: &[f64]) -> Result<(), ConfigError> {
+    if let Some(v) = values
+        .iter()
+        .find(|v| !(v.is_finite() && v.abs() <= f64::from(f32::MAX)))
+    {
+        return Err(ConfigError::invalid(
+            field,
+            format!("must be finite numbers within single precision (|x| <= 3.4e38), got {v}"),
+        ));
+    }
     Ok(())
 }
 

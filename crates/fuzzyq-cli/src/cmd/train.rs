@@ -239,6 +239,12 @@ pub(crate) fn start_pool(threads: Option<usize>) -> anyhow::Result<()> {
         if n == 0 {
             anyhow::bail!("--threads must be at least 1");
         }
+        // More workers than 8 per core only add memory (a stack each) and contention.
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        let most = (8 * cores).max(64);
+        if n > most {
+            anyhow::bail!("--threads {n}: at most {most} on this machine ({cores} cores)");
+        }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

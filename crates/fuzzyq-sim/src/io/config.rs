@@ -503,6 +503,7 @@ impl TrainConfig {
 pub const DEFAULT_HEADING_DIVISIONS: usize = 16;
 
 fn check_cores(field: &str, cores: &[f64]) -> Result<(), ConfigError> {
+    crate::error::single_precision(field, cores)?;
     Partition::try_from_cores(cores)
         .map(|_| ())
         .map_err(|e| ConfigError::invalid(field, e.to_string()))

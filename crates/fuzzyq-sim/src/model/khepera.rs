@@ -158,6 +158,7 @@ impl KheperaConfig {
         positive("env.radius", self.radius)?;
         positive("env.wheel_base", self.wheel_base)?;
         positive("env.max_wheel_speed", self.max_wheel_speed)?;
+        crate::error::single_precision("env.max_wheel_speed", &[self.max_wheel_speed])?;
         positive("env.forward_speed", self.forward_speed)?;
         positive("env.turn_speed", self.turn_speed)?;
         positive("env.sample_time", self.sample_time)?;

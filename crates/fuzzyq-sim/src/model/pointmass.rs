@@ -156,17 +156,13 @@ impl PointMassConfig {
             "env.goal_reward",
             "must be a finite number",
         );
+        crate::error::single_precision("env.goal_reward", &[self.goal_reward])?;
         require!(
             !self.force_levels.is_empty(),
             "env.force_levels",
             "needs at least one level",
         );
-        if let Some(f) = self.force_levels.iter().find(|f| !f.is_finite()) {
-            return Err(ConfigError::invalid(
-                "env.force_levels",
-                format!("must be finite numbers, got {f}"),
-            ));
-        }
+        crate::error::single_precision("env.force_levels", &self.force_levels)?;
         let joint = (self.force_levels.len() as u64)
             .checked_pow(2 * self.agents as u32)
             .unwrap_or(u64::MAX);

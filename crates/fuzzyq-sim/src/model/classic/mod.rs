@@ -168,13 +168,7 @@ pub(crate) fn validate_actions(field: &str, actions: &[f64]) -> Result<(), Confi
         field,
         format!("needs 1 to 4096 actions, got {}", actions.len()),
     );
-    if let Some(a) = actions.iter().find(|a| !a.is_finite()) {
-        return Err(ConfigError::invalid(
-            field,
-            format!("must be finite numbers, got {a}"),
-        ));
-    }
-    Ok(())
+    crate::error::single_precision(field, actions)
 }
 
 /// The dynamics of a classic benchmark, computed in `f64`: what distinguishes the four.

@@ -1,0 +1,83 @@
+//! Values the default single-precision solver cannot hold, and counts that make no sense, are
+//! refused up front with one line naming the setting (they used to panic or write NaN tables).
+
+use super::{assert_all_fail, fuzzyq, one_agent_config};
+
+#[test]
+fn values_beyond_single_precision_and_empty_counts_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let text = std::fs::read_to_string(d.join("one.toml")).unwrap();
+    let variant = |name: &str, from: &str, to: &str| {
+        assert!(text.contains(from), "{from}");
+        std::fs::write(d.join(name), text.replacen(from, to, 1)).unwrap();
+    };
+    variant(
+        "force.toml",
+        "force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]",
+        "force_levels = [-1e39, 0.0, 1e39]",
+    );
+    variant("reward.toml", "goal_reward = 5.0", "goal_reward = 1e39");
+    variant(
+        "cores.toml",
+        "position_cores = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0]",
+        "position_cores = [-1e39, 0.0, 1e39]",
+    );
+    for env in ["dcmotor", "pendulum", "carhill", "arm"] {
+        let o = fuzzyq(&["config", "--env", env], d);
+        let t = String::from_utf8(o.stdout).unwrap();
+        let line = t.lines().find(|l| l.starts_with("actions = ")).unwrap();
+        let big = t.replacen(line, "actions = [-1e39, 0.0, 1e39]", 1);
+        std::fs::write(d.join(format!("{env}.toml")), big).unwrap();
+    }
+    assert_all_fail(
+        d,
+        &[
+            (
+                "train --config force.toml --out p.fzq",
+                "env.force_levels: must be finite numbers within single precision",
+            ),
+            (
+                "compare --config force.toml --out cmp",
+                "env.force_levels: must be finite numbers within single precision",
+            ),
+            (
+                "train --config reward.toml --out p.fzq",
+                "env.goal_reward: must be finite numbers within single precision",
+            ),
+            (
+                "train --config cores.toml --out p.fzq",
+                "grid.position_cores: must be finite numbers within single precision",
+            ),
+            (
+                "train --env dcmotor --config dcmotor.toml --out p.fzq",
+                "env.actions: must be finite numbers within single precision",
+            ),
+            (
+                "train --env pendulum --config pendulum.toml --out p.fzq",
+                "env.actions",
+            ),
+            (
+                "train --env carhill --config carhill.toml --out p.fzq",
+                "env.actions",
+            ),
+            (
+                "train --env arm --config arm.toml --out p.fzq",
+                "env.actions",
+            ),
+            (
+                "compare --config one.toml --x0=-4,5,0,0 --starts 0 --out cmp",
+                "starts: must be at least 1",
+            ),
+            (
+                "train --config one.toml --threads 100000 --out p.fzq",
+                "--threads 100000: at most",
+            ),
+            (
+                "bench --config one.toml --threads 100000",
+                "--threads 100000: at most",
+            ),
+        ],
+    );
+}
