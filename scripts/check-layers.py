@@ -27,7 +27,7 @@ LAYERS = {
         {"solver"},
     ],
     "fuzzyq-sim": [
-        {"error", "paper"},
+        {"error", "paper", "fs"},
         {"model"},
         {"world"},
         {"learn"},

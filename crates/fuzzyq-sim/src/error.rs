@@ -37,20 +37,21 @@ impl ConfigError {
 #[non_exhaustive]
 pub enum PolicyFileError {
     /// Reading failed.
-    #[error("cannot read {}: {source}", path.display())]
+    #[error("cannot read {}: {error}", path.display())]
     Read {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, and not also a source: a printed chain would
+        /// repeat it).
+        error: std::io::Error,
     },
     /// Writing failed (nothing was left at the destination).
-    #[error("cannot write {}: {source}", path.display())]
+    #[error("cannot write {}: {error}", path.display())]
     Write {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message only, as for `Read`).
+        error: std::io::Error,
     },
     /// The file does not start with the policy magic tag.
     #[error("{} is not a fuzzyq policy file", path.display())]

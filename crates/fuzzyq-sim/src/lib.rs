@@ -10,7 +10,7 @@
 //!
 //! | layer | module | job |
 //! |---|---|---|
-//! | 0 | [`error`], [`paper`] | typed errors; the numbers taken from the paper |
+//! | 0 | [`error`], [`paper`], [`fs`] | typed errors; the numbers taken from the paper; bounded reading of input files |
 //! | 1 | [`model`] | the environment registry ([`model::EnvKind`]) and the models: point masses, Khepera robots, classic benchmarks |
 //! | 2 | [`world`] | rapier2d worlds: colliding point masses, robots with ray-cast sonars |
 //! | 3 | [`learn`] | learning from samples: fuzzy Q-learning, VQQL, the tasks as environments |
@@ -55,6 +55,7 @@
 
 pub mod compare;
 pub mod error;
+pub mod fs;
 pub mod io;
 pub mod learn;
 pub mod model;

@@ -216,7 +216,7 @@ pub(crate) fn load_config(
     let config = match (path, preset) {
         (Some(_), Some(_)) => anyhow::bail!("give either --config or --preset, not both"),
         (Some(path), None) => {
-            let text = std::fs::read_to_string(path)
+            let text = fuzzyq_sim::fs::read_text(path, fuzzyq_sim::fs::MAX_TEXT_BYTES)
                 .with_context(|| format!("cannot read config {}", path.display()))?;
             TrainConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))?
         }

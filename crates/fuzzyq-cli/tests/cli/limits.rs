@@ -78,6 +78,36 @@ fn values_beyond_single_precision_and_empty_counts_are_refused() {
                 "bench --config one.toml --threads 100000",
                 "--threads 100000: at most",
             ),
+            // Endless input is refused after a bounded read, not read until memory runs out.
+            ("rollout --policy /dev/zero", "longer than 16 MiB"),
+            (
+                "train --config /dev/zero --out p.fzq",
+                "line 1 is longer than 1 MiB",
+            ),
+            (
+                "train --env khepera --arena /dev/zero --out p.fzq",
+                "line 1 is longer than 1 MiB",
+            ),
+            (
+                "train --config one.toml --learner learned-model --transitions /dev/zero --out p.fzq",
+                "line 1 is longer than 1 MiB",
+            ),
         ],
     );
+}
+
+/// An operating-system error is said once, not once per layer of the error chain.
+#[test]
+fn os_errors_are_printed_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for line in [
+        "rollout --policy missing.fzq",
+        "train --config missing.toml --out p.fzq",
+    ] {
+        let o = fuzzyq(&line.split_whitespace().collect::<Vec<_>>(), d);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(2), "{line}: {err}");
+        assert_eq!(err.matches("No such file").count(), 1, "{line}: {err}");
+    }
 }

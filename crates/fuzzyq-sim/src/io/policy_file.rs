@@ -427,11 +427,31 @@ pub enum PolicyFile {
 impl PolicyFile {
     /// Reads and checks a policy file of any kind, reading it once (a pipe or a FIFO works):
     /// see [`from_bytes`](Self::from_bytes).
+    ///
+    /// The container's header says how long it is, and no more than that is read; a file
+    /// without the container's tag is read as TOML text of at most
+    /// [`MAX_TEXT_BYTES`](crate::fs::MAX_TEXT_BYTES) (so `/dev/zero` is refused, not read forever).
     pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
-        let bytes = std::fs::read(path).map_err(|source| PolicyFileError::Read {
+        use std::io::Read;
+        let read_error = |error| PolicyFileError::Read {
             path: path.to_path_buf(),
-            source,
-        })?;
+            error,
+        };
+        let mut file = std::fs::File::open(path).map_err(read_error)?;
+        let mut header = Vec::with_capacity(HEADER_LEN);
+        (&mut file)
+            .take(HEADER_LEN as u64)
+            .read_to_end(&mut header)
+            .map_err(read_error)?;
+        let bytes = if header.len() == HEADER_LEN && header[..MAGIC.len()] == MAGIC {
+            let len = u64::from_le_bytes(header[12..20].try_into().expect("8 bytes"));
+            let rest = crate::fs::read_capped(file, len).map_err(read_error)?;
+            header.extend_from_slice(&rest);
+            header
+        } else {
+            crate::fs::read_capped(header.as_slice().chain(file), crate::fs::MAX_TEXT_BYTES)
+                .map_err(read_error)?
+        };
         Self::from_bytes(&bytes, path)
     }
 
@@ -593,10 +613,10 @@ impl PolicyFile {
     /// rename).
     pub fn save(&self, path: &Path) -> Result<(), SimError> {
         let bytes = self.to_bytes()?;
-        write_atomically(path, &bytes).map_err(|source| {
+        write_atomically(path, &bytes).map_err(|error| {
             PolicyFileError::Write {
                 path: path.to_path_buf(),
-                source,
+                error,
             }
             .into()
         })

@@ -15,7 +15,7 @@ pub fn read_transitions_csv(
     state_dim: usize,
     action_dim: usize,
 ) -> Result<Transitions, ConfigError> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
+    let text = crate::fs::read_text(path, crate::fs::MAX_TRANSITIONS_BYTES).map_err(|e| {
         ConfigError::invalid(
             "transitions",
             format!("cannot read {}: {e}", path.display()),

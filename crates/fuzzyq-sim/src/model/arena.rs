@@ -89,7 +89,7 @@ fn finite(field: &str, v: &[f64]) -> Result<(), ConfigError> {
 impl Arena {
     /// Reads and validates an arena file.
     pub fn from_file(path: &Path) -> Result<Self, SimError> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
+        let text = crate::fs::read_text(path, crate::fs::MAX_TEXT_BYTES).map_err(|e| {
             ConfigError::invalid("arena", format!("cannot read {}: {e}", path.display()))
         })?;
         Self::from_toml(&text).map_err(|e| match e {

@@ -1,0 +1,103 @@
+//! Reading input files within bounds: configurations, arenas, policy files and transitions
+//! are read once (a pipe or a FIFO works) and never beyond a cap, so that `/dev/zero` or an
+//! endless pipe ends in a clear error rather than with the memory exhausted.
+
+use std::io::Read;
+use std::path::Path;
+
+/// The most fuzzyq reads of a text file (a configuration, an arena, a policy learned from
+/// samples in the old TOML form): 16 MiB, far beyond any real one.
+pub const MAX_TEXT_BYTES: u64 = 16 << 20;
+
+/// The most fuzzyq reads of a transitions CSV: 4 GiB (about 20 million transitions of the
+/// point masses).
+pub const MAX_TRANSITIONS_BYTES: u64 = 4 << 30;
+
+/// Reads `reader` to its end, refusing more than `cap` bytes (an error of kind `InvalidData`
+/// naming the cap), so that `/dev/zero` or an endless pipe ends with an error, not with the
+/// memory exhausted.
+pub fn read_capped(reader: impl Read, cap: u64) -> std::io::Result<Vec<u8>> {
+    let mut out = Vec::new();
+    reader.take(cap.saturating_add(1)).read_to_end(&mut out)?;
+    if out.len() as u64 > cap {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "longer than {}, the most fuzzyq reads of such a file",
+                bytes_text(cap)
+            ),
+        ));
+    }
+    Ok(out)
+}
+
+/// The longest line fuzzyq reads in a text file: 1 MiB.
+pub const MAX_LINE_BYTES: u64 = 1 << 20;
+
+/// The text of the file at `path`, read once (a pipe or a FIFO works), at most `cap` bytes and
+/// lines of at most [`MAX_LINE_BYTES`]: binary data such as `/dev/zero` is refused after its
+/// first megabyte.
+pub fn read_text(path: &Path, cap: u64) -> std::io::Result<String> {
+    use std::io::BufRead;
+    let invalid = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path)?);
+    let mut out = Vec::new();
+    for line in 1.. {
+        let n = (&mut reader)
+            .take(MAX_LINE_BYTES + 1)
+            .read_until(b'\n', &mut out)?;
+        if n == 0 {
+            break;
+        }
+        if n as u64 > MAX_LINE_BYTES {
+            return Err(invalid(format!(
+                "line {line} is longer than {}: not a text file fuzzyq reads",
+                bytes_text(MAX_LINE_BYTES)
+            )));
+        }
+        if out.len() as u64 > cap {
+            return Err(invalid(format!(
+                "longer than {}, the most fuzzyq reads of such a file",
+                bytes_text(cap)
+            )));
+        }
+    }
+    String::from_utf8(out).map_err(|e| {
+        invalid(format!(
+            "not UTF-8 text (byte {})",
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
+/// `bytes` as `16 MiB`, `4 GiB`.
+fn bytes_text(bytes: u64) -> String {
+    match bytes {
+        b if b >= 1 << 30 => format!("{} GiB", b >> 30),
+        b if b >= 1 << 20 => format!("{} MiB", b >> 20),
+        b => format!("{b} bytes"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_within_the_caps_and_refuses_beyond() {
+        assert_eq!(read_capped(&b"abc"[..], 3).unwrap(), b"abc");
+        let e = read_capped(&b"abcd"[..], 3).unwrap_err().to_string();
+        assert!(e.contains("longer than 3 bytes"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.toml");
+        std::fs::write(&p, "a = 1\nb = 2\n").unwrap();
+        assert_eq!(read_text(&p, 100).unwrap(), "a = 1\nb = 2\n");
+        assert!(read_text(&p, 8).unwrap_err().to_string().contains("longer than 8 bytes"));
+        std::fs::write(&p, [b'x'; (MAX_LINE_BYTES + 1) as usize]).unwrap();
+        let e = read_text(&p, MAX_TEXT_BYTES).unwrap_err().to_string();
+        assert_eq!(e, "line 1 is longer than 1 MiB: not a text file fuzzyq reads");
+        std::fs::write(&p, b"ok\n\xff\n").unwrap();
+        let e = read_text(&p, 100).unwrap_err().to_string();
+        assert_eq!(e, "not UTF-8 text (byte 3)");
+    }
+}
