@@ -92,10 +92,18 @@ mod tests {
         let p = dir.path().join("t.toml");
         std::fs::write(&p, "a = 1\nb = 2\n").unwrap();
         assert_eq!(read_text(&p, 100).unwrap(), "a = 1\nb = 2\n");
-        assert!(read_text(&p, 8).unwrap_err().to_string().contains("longer than 8 bytes"));
+        assert!(
+            read_text(&p, 8)
+                .unwrap_err()
+                .to_string()
+                .contains("longer than 8 bytes")
+        );
         std::fs::write(&p, [b'x'; (MAX_LINE_BYTES + 1) as usize]).unwrap();
         let e = read_text(&p, MAX_TEXT_BYTES).unwrap_err().to_string();
-        assert_eq!(e, "line 1 is longer than 1 MiB: not a text file fuzzyq reads");
+        assert_eq!(
+            e,
+            "line 1 is longer than 1 MiB: not a text file fuzzyq reads"
+        );
         std::fs::write(&p, b"ok\n\xff\n").unwrap();
         let e = read_text(&p, 100).unwrap_err().to_string();
         assert_eq!(e, "not UTF-8 text (byte 3)");
