@@ -1,5 +1,6 @@
-//! Values the default single-precision solver cannot hold, and counts that make no sense, are
-//! refused up front with one line naming the setting (they used to panic or write NaN tables).
+//! Values the default single-precision solver cannot hold, counts that make no sense, settings
+//! that do not apply and endless input are refused up front with one line naming the setting
+//! (they used to panic, write NaN tables, be silently ignored or read until memory ran out).
 
 use super::{assert_all_fail, fuzzyq, one_agent_config};
 
@@ -77,6 +78,15 @@ fn values_beyond_single_precision_and_empty_counts_are_refused() {
             (
                 "bench --config one.toml --threads 100000",
                 "--threads 100000: at most",
+            ),
+            // A kernel only the block backup has.
+            (
+                "train --config one.toml --backup generic --kernel scalar --out p.fzq",
+                "solver.kernel: applies to the block backup",
+            ),
+            (
+                "train --config one.toml --operator q-values --kernel scalar --out p.fzq",
+                "solver.kernel: applies to the block backup",
             ),
             // Endless input is refused after a bounded read, not read until memory runs out.
             ("rollout --policy /dev/zero", "longer than 16 MiB"),

@@ -376,6 +376,16 @@ impl SolverSettings {
             "solver.operator",
             "\"q-values\" runs synchronous sweeps; set sweep = \"sync\"",
         );
+        require!(
+            !(self.kernel.is_some() && self.operator == IterationOperator::QValues),
+            "solver.kernel",
+            "applies to the block backup of operator \"values\"; \"q-values\" has no kernel",
+        );
+        require!(
+            !(self.kernel.is_some() && self.backup == BackupPath::Generic),
+            "solver.kernel",
+            "applies to the block backup; backup = \"generic\" has no kernel",
+        );
         discount("solver.gamma", self.gamma)?;
         positive("solver.xi", self.xi)?;
         require!(
