@@ -46,6 +46,7 @@ use crate::learn::fql::FqlConfig;
 use crate::learn::tasks::pointmass as pointmass_task;
 use crate::learn::vqql::VqqlConfig;
 use crate::model::check_state;
+use crate::model::classic::octave::linspace;
 use crate::model::pointmass::{self, PointMass, Starts};
 use crate::paper;
 use crate::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
@@ -476,21 +477,15 @@ pub fn uniform_cores(task: &TrainConfig, model: &PointMass) -> Vec<Vec<f64>> {
         .enumerate()
         .map(|(d, cores)| {
             let (lo, hi) = fuzzyq_core::Model::<f64>::state_bounds(model, d);
-            let n = cores.len();
-            (0..n)
-                .map(|i| match i {
-                    0 => lo,
-                    i if i + 1 == n => hi,
-                    i => lo + (hi - lo) * i as f64 / (n - 1) as f64,
-                })
-                .collect()
+            linspace(lo, hi, cores.len())
         })
         .collect()
 }
 
-/// How many cores hold the lowest value. With a positive goal reward (and 0 elsewhere), so the cores from
-/// which no sequence of the model's transitions reaches a reward all keep one value, the
-/// lowest (the same updates from the same start, extrapolation included).
+/// How many cores hold the lowest value. With a positive goal reward (and 0 elsewhere), the
+/// cores from which no sequence of the model's transitions reaches a reward all keep one value,
+/// the lowest (the same updates from the same start, extrapolation included), and every other
+/// core holds more.
 fn cores_at_lowest_value(values: &Values) -> u64 {
     fn count<T: PartialOrd + Copy>(v: &[T]) -> u64 {
         let Some(&first) = v.first() else { return 0 };
@@ -788,6 +783,7 @@ impl Comparison {
 mod tests {
     use super::*;
     use crate::io::config::GridConfig;
+    use crate::model::F64Model;
 
     /// One agent on a coarse grid: every learner trains in a fraction of a second.
     fn tiny() -> CompareConfig {
@@ -896,6 +892,50 @@ mod tests {
         );
     }
 
+    /// How many `(position, velocity)` cores of one axis of a one-agent point mass reach the
+    /// origin's core when every successor goes to its nearest core (ties to the upper one).
+    fn reaching_origin(model: &PointMass, pos: &[f64], vel: &[f64]) -> usize {
+        let nearest = |c: &[f64], x: f64| {
+            (0..c.len())
+                .min_by(|&i, &j| {
+                    (c[i] - x)
+                        .abs()
+                        .total_cmp(&(c[j] - x).abs())
+                        .then(j.cmp(&i))
+                })
+                .unwrap()
+        };
+        let forces = &model.config().force_levels;
+        let succ: Vec<Vec<(usize, usize)>> = (0..pos.len() * vel.len())
+            .map(|k| {
+                let (p, v) = (pos[k / vel.len()], vel[k % vel.len()]);
+                forces
+                    .iter()
+                    .map(|&f| {
+                        let mut next = [0.0; 4];
+                        F64Model::step(model, &[p, 0.0, v, 0.0], &[f, 0.0], &mut next);
+                        (nearest(pos, next[0]), nearest(vel, next[2]))
+                    })
+                    .collect()
+            })
+            .collect();
+        let origin = (nearest(pos, 0.0), nearest(vel, 0.0));
+        let mut reach = vec![false; succ.len()];
+        reach[origin.0 * vel.len() + origin.1] = true;
+        loop {
+            let before = reach.iter().filter(|&&r| r).count();
+            for k in 0..succ.len() {
+                if succ[k].iter().any(|&(i, j)| reach[i * vel.len() + j]) {
+                    reach[k] = true;
+                }
+            }
+            let after = reach.iter().filter(|&&r| r).count();
+            if after == before {
+                return after;
+            }
+        }
+    }
+
     #[test]
     fn same_configuration_same_table() {
         let c = tiny();
@@ -925,6 +965,32 @@ mod tests {
         assert_eq!(crisp.parameters, fqi.parameters);
         assert_eq!(fqi.iteration_unit, "sweeps");
         assert_eq!(a.reports[2].parameters, fqi.parameters);
+        // The count of cores that never reach the reward, against an independent count: each
+        // axis of the one agent is a crisp graph on its 21 cores, the reward needs both axes
+        // at the origin's core, and the origin with no force stays there.
+        assert!(
+            fqi.notes.is_empty(),
+            "every fuzzy core reaches it: {:?}",
+            fqi.notes
+        );
+        let model = c.model().unwrap();
+        for (report, learner) in [
+            (crisp, Learner::Crisp),
+            (&a.reports[2], Learner::CrispUniform),
+        ] {
+            let cores = match learner {
+                Learner::Crisp => c.task.grid_cores(),
+                _ => uniform_cores(&c.task, &model),
+            };
+            let r = reaching_origin(&model, &cores[0], &cores[2]);
+            let stuck = 441 - r * r;
+            let note = format!("V takes its lowest value at {stuck} of 441 cores");
+            assert!(
+                report.notes[0].starts_with(&note),
+                "{note}: {:?}",
+                report.notes
+            );
+        }
         assert_eq!(a.reports[3].iteration_unit, "episodes");
         assert_eq!(a.reports[3].iterations, 40);
         assert_eq!(a.reports[5].parameters, 441 * 25);

@@ -20,13 +20,7 @@ pub fn read_capped(reader: impl Read, cap: u64) -> std::io::Result<Vec<u8>> {
     let mut out = Vec::new();
     reader.take(cap.saturating_add(1)).read_to_end(&mut out)?;
     if out.len() as u64 > cap {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!(
-                "longer than {}, the most fuzzyq reads of such a file",
-                bytes_text(cap)
-            ),
-        ));
+        return Err(too_long(cap));
     }
     Ok(out)
 }
@@ -39,7 +33,6 @@ pub const MAX_LINE_BYTES: u64 = 1 << 20;
 /// first megabyte.
 pub fn read_text(path: &Path, cap: u64) -> std::io::Result<String> {
     use std::io::BufRead;
-    let invalid = |m: String| std::io::Error::new(std::io::ErrorKind::InvalidData, m);
     let mut reader = std::io::BufReader::new(std::fs::File::open(path)?);
     let mut out = Vec::new();
     for line in 1.. {
@@ -56,10 +49,7 @@ pub fn read_text(path: &Path, cap: u64) -> std::io::Result<String> {
             )));
         }
         if out.len() as u64 > cap {
-            return Err(invalid(format!(
-                "longer than {}, the most fuzzyq reads of such a file",
-                bytes_text(cap)
-            )));
+            return Err(too_long(cap));
         }
     }
     String::from_utf8(out).map_err(|e| {
@@ -68,6 +58,18 @@ pub fn read_text(path: &Path, cap: u64) -> std::io::Result<String> {
             e.utf8_error().valid_up_to()
         ))
     })
+}
+
+fn invalid(message: String) -> std::io::Error {
+    std::io::Error::new(std::io::ErrorKind::InvalidData, message)
+}
+
+/// The error of a file longer than `cap` bytes.
+fn too_long(cap: u64) -> std::io::Error {
+    invalid(format!(
+        "longer than {}, the most fuzzyq reads of such a file",
+        bytes_text(cap)
+    ))
 }
 
 /// `bytes` as `16 MiB`, `4 GiB`.

@@ -10,9 +10,11 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::Real;
+use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
     self, Delta, IterationOperator, Precision, Progress, Solution, SweepRecord,
 };
+use serde::Serialize;
 
 use crate::error::{ConfigError, SimError};
 use crate::io::config::{EnvConfig, TrainConfig};
@@ -28,8 +30,6 @@ use crate::model::learned::LearnedModel;
 use crate::model::pointmass::{PointMass, Starts};
 use crate::model::{BlockSpec, EnvModel, F64Model};
 use crate::run::policy::{FqiPolicy, Scratch};
-use fuzzyq_core::q::PolicyKind;
-use serde::Serialize;
 
 fuzzyq_core::named_option! {
     /// What learns a policy.
@@ -268,8 +268,8 @@ fn draw_start(model: &EnvModel) -> impl FnMut(&mut rand_pcg::Pcg64Mcg, &mut [f64
 }
 
 /// Transitions of `task`'s plant as the learned-model learner collects them: seeded episodes
-/// from the task's starts, the agents acting as `exploration` says ([`samples::collect`]), with its process noise;
-/// for the Khepera robots, on the rapier plant with its wheel noise
+/// from the task's starts, the agents acting as `exploration` says ([`samples::collect`]),
+/// with its process noise; for the Khepera robots, on the rapier plant with its wheel noise
 /// ([`samples::collect_khepera`]).
 pub fn collect_from_plant(
     task: &EnvModel,

@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
 use anyhow::{Context, bail};
+use fuzzyq_sim::io::dir_of;
 
 /// Temporaries older than this are stale: no run of fuzzyq keeps one open that long.
 const STALE_AFTER: Duration = Duration::from_secs(3600);
@@ -38,6 +39,8 @@ struct Planned {
     given: PathBuf,
     flag: String,
     target: Target,
+    /// The existing file's device and inode.
+    id: Option<FileId>,
 }
 
 #[derive(Debug)]
@@ -86,14 +89,10 @@ fn location(path: &Path) -> std::io::Result<PathBuf> {
     if let Ok(p) = std::fs::canonicalize(path) {
         return Ok(p);
     }
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
     let name = path
         .file_name()
         .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "no file name"))?;
-    Ok(std::fs::canonicalize(dir)?.join(name))
+    Ok(std::fs::canonicalize(dir_of(path))?.join(name))
 }
 
 fn target_of(path: &Path, flag: &str) -> anyhow::Result<Target> {
@@ -112,10 +111,7 @@ fn target_of(path: &Path, flag: &str) -> anyhow::Result<Target> {
             }
         }
         Err(_) => {
-            let dir = match path.parent() {
-                Some(p) if !p.as_os_str().is_empty() => p,
-                _ => Path::new("."),
-            };
+            let dir = dir_of(path);
             if !dir.is_dir() {
                 bail!("{flag} {shown}: directory {} does not exist", dir.display());
             }
@@ -205,6 +201,7 @@ pub(crate) fn plan(
         })
         .collect();
     let mut planned: Vec<Planned> = Vec::new();
+    let mut prepared: Vec<PathBuf> = Vec::new();
     for (path, flag) in outputs {
         let Some(path) = path else { continue };
         let target = target_of(path, flag)?;
@@ -217,7 +214,7 @@ pub(crate) fn plan(
             }
         }
         for other in &planned {
-            let same_id = id.is_some() && id == identity(&other.given);
+            let same_id = id.is_some() && id == other.id;
             if same_id || other.target == target {
                 bail!(
                     "{flag} {shown} and {} {} name the same file; give each output its own",
@@ -227,13 +224,17 @@ pub(crate) fn plan(
             }
         }
         if let Target::Regular(t) = &target {
-            let dir = t.parent().unwrap_or(Path::new("."));
-            prepare_dir(dir, flag, path)?;
+            let dir = dir_of(t);
+            if !prepared.iter().any(|p| p == dir) {
+                prepare_dir(dir, flag, path)?;
+                prepared.push(dir.to_path_buf());
+            }
         }
         planned.push(Planned {
             given: path.to_path_buf(),
             flag: (*flag).to_string(),
             target,
+            id,
         });
     }
     with(|t| t.planned.extend(planned));

@@ -25,6 +25,11 @@ fn values_beyond_single_precision_and_empty_counts_are_refused() {
         "position_cores = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0]",
         "position_cores = [-1e39, 0.0, 1e39]",
     );
+    let o = fuzzyq(&["config", "--env", "khepera"], d);
+    let k = String::from_utf8(o.stdout).unwrap();
+    assert!(k.contains("max_wheel_speed = 0.8 "), "{k}");
+    let k = k.replacen("max_wheel_speed = 0.8 ", "max_wheel_speed = 1e39 ", 1);
+    std::fs::write(d.join("khepera.toml"), k).unwrap();
     for env in ["dcmotor", "pendulum", "carhill", "arm"] {
         let o = fuzzyq(&["config", "--env", env], d);
         let t = String::from_utf8(o.stdout).unwrap();
@@ -66,6 +71,10 @@ fn values_beyond_single_precision_and_empty_counts_are_refused() {
             (
                 "train --env arm --config arm.toml --out p.fzq",
                 "env.actions",
+            ),
+            (
+                "train --env khepera --config khepera.toml --out p.fzq",
+                "env.max_wheel_speed: must be finite numbers within single precision",
             ),
             (
                 "compare --config one.toml --x0=-4,5,0,0 --starts 0 --out cmp",

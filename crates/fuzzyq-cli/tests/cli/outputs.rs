@@ -5,6 +5,13 @@ use std::path::Path;
 
 use super::{assert_all_fail, fuzzyq, one_agent_config, stderr};
 
+/// `fuzzyq rollout` of `p.fzq` (see [`trained`]) from `(-4, 5)` at rest, with `rest`.
+fn rollout(d: &Path, rest: &[&str]) -> std::process::Output {
+    let mut args = vec!["rollout", "--policy", "p.fzq", "--x0=-4,5,0,0"];
+    args.extend_from_slice(rest);
+    fuzzyq(&args, d)
+}
+
 /// A trained one-agent policy `p.fzq` and its config `one.toml` in `d`.
 fn trained(d: &Path) {
     one_agent_config(d);
@@ -143,17 +150,7 @@ fn devices_are_written_in_place_never_replaced() {
         d,
     );
     assert!(o.status.success(), "{}", stderr(&o));
-    let o = fuzzyq(
-        &[
-            "rollout",
-            "--policy",
-            "p.fzq",
-            "--x0=-4,5,0,0",
-            "--json",
-            "/dev/stdout",
-        ],
-        d,
-    );
+    let o = rollout(d, &["--json", "/dev/stdout"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -167,18 +164,7 @@ fn devices_are_written_in_place_never_replaced() {
     );
     // A link to a device is written through, not replaced.
     std::os::unix::fs::symlink("/dev/null", d.join("sink.json")).unwrap();
-    let o = fuzzyq(
-        &[
-            "rollout",
-            "--policy",
-            "p.fzq",
-            "--x0=-4,5,0,0",
-            "--json",
-            "sink.json",
-            "-q",
-        ],
-        d,
-    );
+    let o = rollout(d, &["--json", "sink.json", "-q"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let link = std::fs::symlink_metadata(d.join("sink.json")).unwrap();
     assert!(link.file_type().is_symlink());
@@ -193,18 +179,7 @@ fn a_link_to_an_output_keeps_its_link_and_its_file_is_replaced() {
     std::fs::create_dir(d.join("runs")).unwrap();
     std::fs::write(d.join("runs/m.json"), "old").unwrap();
     std::os::unix::fs::symlink("runs/m.json", d.join("latest.json")).unwrap();
-    let o = fuzzyq(
-        &[
-            "rollout",
-            "--policy",
-            "p.fzq",
-            "--x0=-4,5,0,0",
-            "--json",
-            "latest.json",
-            "-q",
-        ],
-        d,
-    );
+    let o = rollout(d, &["--json", "latest.json", "-q"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         std::fs::symlink_metadata(d.join("latest.json"))
@@ -240,18 +215,7 @@ fn stale_temporaries_of_killed_runs_are_removed_and_nothing_else() {
             f.set_modified(hour_and_more).unwrap();
         }
     }
-    let o = fuzzyq(
-        &[
-            "rollout",
-            "--policy",
-            "p.fzq",
-            "--x0=-4,5,0,0",
-            "--json",
-            "m.json",
-            "-q",
-        ],
-        d,
-    );
+    let o = rollout(d, &["--json", "m.json", "-q"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!d.join(".fuzzyq-old1.tmp").exists());
     assert!(!d.join(".fuzzyq-old2.png").exists());

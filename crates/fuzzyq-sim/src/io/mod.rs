@@ -18,14 +18,20 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     Ok(())
 }
 
+/// The directory `path` is in (`.` for a bare file name).
+#[must_use]
+pub fn dir_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
 /// A temporary file in `path`'s directory (so that a rename onto `path` is atomic), named with
 /// `suffix`, readable like a freshly created file (mode 0644 on Unix rather than the 0600 of
 /// temporary files). Dropped without `persist`, it is removed.
 pub fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
+    let dir = dir_of(path);
     let mut b = tempfile::Builder::new();
     b.prefix(".fuzzyq-").suffix(suffix);
     #[cfg(unix)]

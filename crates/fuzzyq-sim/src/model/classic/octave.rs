@@ -99,8 +99,10 @@ pub fn symequidgrid(b: f64, n: usize) -> Result<Vec<f64>, ConfigError> {
     Ok(grid)
 }
 
-/// Octave's `linspace(x1, x2, n)` (built symmetrically from both ends, as Octave 7 does).
-fn linspace(x1: f64, x2: f64, n: usize) -> Vec<f64> {
+/// Octave's `linspace(x1, x2, n)` (built symmetrically from both ends, as Octave 7 does, so
+/// the middle point of a symmetric range is exactly 0).
+#[must_use]
+pub fn linspace(x1: f64, x2: f64, n: usize) -> Vec<f64> {
     match n {
         0 => return Vec::new(),
         1 => return vec![x2],
