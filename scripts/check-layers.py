@@ -28,11 +28,12 @@ LAYERS = {
     ],
     "fuzzyq-sim": [
         {"error", "paper", "fs"},
+        {"toml_doc"},
         {"model"},
         {"world"},
         {"learn"},
         {"io"},
-        {"run"},
+        {"run", "memory"},
         {"train"},
         {"compare"},
     ],

@@ -16,6 +16,22 @@ of the `fuzzyq` command line tool. `load` reads every policy file the command li
 `Solution` for fuzzy Q-iteration, a `Policy` for a policy learned from samples (fuzzy
 Q-learning, VQQL). `Policy.rollout` runs a policy on its environment as `fuzzyq rollout` does.
 Gymnasium and PettingZoo environments live in `fuzzyq.envs`.
+
+Every error fuzzyq raises for bad input derives from `FuzzyqError`, with a one-line message
+that starts with the argument at fault:
+
+- `InputTypeError` (also a `TypeError`): an argument of the wrong type (a string for a
+  number, a float for a count, a list for a `Grid`);
+- `ConfigError` (also a `ValueError`): a setting, parameter or model definition of the right
+  type with a value it cannot take (a negative count, a non-finite number, an unknown name,
+  repeated actions, `absorbing_goal=True` on a model without goal states);
+- `InputError` (also a `ValueError`): an array of the wrong shape or with bad values, an index
+  out of range;
+- `ModelError` (also a `ValueError`): a `CallableModel`'s function returned unusable data;
+- `PolicyFileError` (also an `OSError`): a policy file that cannot be read or written;
+- `SolverError` (also a `RuntimeError`): a problem the solver refuses, or a run larger than
+  its memory limit (`solve(..., max_memory_gb=...)` raises it deliberately);
+- `InternalError` (also a `RuntimeError`): a bug in fuzzyq (a Rust panic), never bad input.
 """
 
 from fuzzyq._fuzzyq import (
@@ -29,6 +45,7 @@ from fuzzyq._fuzzyq import (
     Grid,
     InputError,
     InputTypeError,
+    InternalError,
     ModelError,
     Pendulum,
     PointMass,
@@ -54,6 +71,7 @@ __all__ = [
     "Grid",
     "InputError",
     "InputTypeError",
+    "InternalError",
     "ModelError",
     "Pendulum",
     "PointMass",

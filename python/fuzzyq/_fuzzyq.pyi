@@ -16,6 +16,7 @@ __all__ = [
     "ModelError",
     "PolicyFileError",
     "SolverError",
+    "InternalError",
     "__version__",
     "Grid",
     "PointMass",
@@ -36,7 +37,11 @@ __all__ = [
 __version__: str
 
 class FuzzyqError(Exception):
-    """Base class of every error fuzzyq raises."""
+    """Base class of every error fuzzyq raises.
+
+    Messages are one line and start with the argument they are about
+    (``max_sweeps: expected an integer >= 0, got int -1``).
+    """
 
 class ConfigError(FuzzyqError, ValueError):
     """An invalid setting, grid or model definition."""
@@ -54,7 +59,10 @@ class PolicyFileError(FuzzyqError, OSError):
     """A policy file that cannot be read or written."""
 
 class SolverError(FuzzyqError, RuntimeError):
-    """A problem the solver refuses to solve."""
+    """A problem the solver refuses to solve, or a run too large for the memory limit."""
+
+class InternalError(FuzzyqError, RuntimeError):
+    """A bug in fuzzyq (a Rust panic), never caused by bad input: please report it."""
 
 @final
 class Grid:
@@ -374,6 +382,7 @@ def solve(
     threads: int | None = None,
     callback: Callable[[dict[str, Any]], object] | None = None,
     transitions: Mapping[str, npt.ArrayLike] | None = None,
+    max_memory_gb: float | None = None,
 ) -> Solution: ...
 def collect(
     model: PointMass | ClassicModel,

@@ -5,7 +5,8 @@ use fuzzyq_core::NamedOption;
 use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{
-    BackupPath, Grid, Kernel, Operator, Solution, SolveError, SolverConfig, Stop, SweepMode, solve,
+    BackupPath, Grid, Kernel, Operator, Solution, SolveError, SolverConfig, SolverState, Stop,
+    SweepMode, solve, solve_from,
 };
 use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
 use fuzzyq_sim::model::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
@@ -1288,5 +1289,148 @@ proptest! {
         let lhs = max_diff(&op.apply(&v1).unwrap(), &op.apply(&v2).unwrap());
         let rhs = gamma * max_diff(&v1, &v2);
         prop_assert!(lhs <= rhs + 1e-9, "{lhs} > {rhs}");
+    }
+}
+
+/// Stops a run after sweep `k`, keeping its state, continues from that state, and checks
+/// that the result is the uninterrupted run's, bit for bit (values, greedy actions, every
+/// sweep's change).
+fn assert_resumes_bit_identically<T: Real, M: Model<T> + Sync>(
+    m: &M,
+    g: &Grid<T>,
+    c: &SolverConfig,
+) -> usize {
+    let whole = run(m, g, c);
+    let n = whole.sweeps.len();
+    assert!(n >= 4, "{n} sweeps: too few to interrupt in between");
+    let changes = |s: &Solution<T>| {
+        s.sweeps
+            .iter()
+            .map(|r| {
+                (
+                    r.sweep,
+                    r.delta,
+                    r.delta_v.to_bits(),
+                    r.extrapolated,
+                    r.evaluation,
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    for k in [1, 2, n / 2, n - 1] {
+        let mut kept = None;
+        let e = solve_from(m, g, c, None, |p, state| {
+            if p.record.sweep == k {
+                kept = state.cloned().map(SolverState::into_owned);
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        })
+        .unwrap_err();
+        assert_eq!(e, SolveError::Interrupted { sweeps: k });
+        let state = kept.expect("a state before the last sweep");
+        assert_eq!(state.sweeps(), k);
+        let resumed = solve_from(m, g, c, Some(state), |_, _| ControlFlow::Continue(())).unwrap();
+        assert!(
+            resumed
+                .v
+                .iter()
+                .zip(&whole.v)
+                .all(|(a, b)| a.to_f64().to_bits() == b.to_f64().to_bits()),
+            "V differs after resuming at sweep {k}"
+        );
+        assert_eq!(resumed.greedy, whole.greedy, "resumed at sweep {k}");
+        assert_eq!(changes(&resumed), changes(&whole), "resumed at sweep {k}");
+        assert_eq!(resumed.final_delta.to_bits(), whole.final_delta.to_bits());
+        assert_eq!(resumed.stop, whole.stop);
+    }
+    n
+}
+
+#[test]
+fn interrupted_runs_resume_bit_identically_in_every_scheme() {
+    let (m, g) = medium_two_agent::<f32>();
+    let sync = config(BackupPath::Block, SweepMode::Synchronous);
+    let cases = [
+        ("synchronous", sync),
+        (
+            "extrapolated",
+            SolverConfig {
+                extrapolate: true,
+                ..sync
+            },
+        ),
+        (
+            "modified policy iteration",
+            SolverConfig {
+                extrapolate: true,
+                evaluation_sweeps: 8,
+                ..sync
+            },
+        ),
+        (
+            "asynchronous",
+            config(BackupPath::Block, SweepMode::Asynchronous),
+        ),
+        (
+            "sweep limit",
+            SolverConfig {
+                max_sweeps: 6,
+                ..sync
+            },
+        ),
+    ];
+    for (name, c) in cases {
+        let n = assert_resumes_bit_identically(&m, &g, &c);
+        eprintln!("{name}: {n} sweeps");
+    }
+    let (m1, g1) = small_one_agent::<f64>();
+    assert_resumes_bit_identically(
+        &m1,
+        &g1,
+        &config(BackupPath::Generic, SweepMode::Synchronous),
+    );
+}
+
+#[test]
+fn a_state_that_does_not_fit_the_run_is_refused() {
+    let (m, g) = medium_two_agent::<f32>();
+    let sync = config(BackupPath::Block, SweepMode::Synchronous);
+    let mut kept = None;
+    let _ = solve_from(&m, &g, &sync, None, |p, s| {
+        kept = s.cloned().map(SolverState::into_owned);
+        if p.record.sweep == 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    });
+    let state = kept.unwrap();
+    let asynchronous = config(BackupPath::Block, SweepMode::Asynchronous);
+    let mpi = SolverConfig {
+        extrapolate: true,
+        evaluation_sweeps: 8,
+        ..sync
+    };
+    let short = SolverConfig {
+        max_sweeps: 3,
+        ..sync
+    };
+    let mut fewer = state.clone();
+    fewer.v.to_mut().pop();
+    let mut infinite = state.clone();
+    infinite.v.to_mut()[0] = f32::INFINITY;
+    for (c, s, needle) in [
+        (&asynchronous, &state, "sweep mode"),
+        (&mpi, &state, "scheme"),
+        (&short, &state, "sweep limit"),
+        (&sync, &fewer, "number of cores"),
+        (&sync, &infinite, "not finite"),
+    ] {
+        let e =
+            solve_from(&m, &g, c, Some(s.clone()), |_, _| ControlFlow::Continue(())).unwrap_err();
+        assert!(matches!(e, SolveError::Resume { .. }), "{e}");
+        assert!(e.to_string().contains(needle), "{e}");
     }
 }

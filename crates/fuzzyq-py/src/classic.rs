@@ -21,8 +21,8 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 use serde_json::{Map, Value};
 
-use crate::convert::{finite_vector, one_or_batch};
-use crate::errors::{Kind, config_error, error, eval_error};
+use crate::convert::{arg, distinct, finite_vector, one_or_batch};
+use crate::errors::{Kind, config_error, error, eval_error, guard};
 use crate::model::Grid;
 
 /// A classic benchmark: the base class of `DcMotor`, `Pendulum`, `CarHill` and `Arm`.
@@ -71,10 +71,21 @@ where
             let mut one = Map::new();
             one.insert(key.clone(), v.clone());
             serde_json::from_value::<S::Config>(Value::Object(one))
-                .map_err(|e| error(py, Kind::Config, format!("{name}.{key}: {e}")))?;
+                .map_err(|e| error(py, serde_kind(&e), format!("{name}.{key}: {e}")))?;
         }
     }
-    serde_json::from_value(value).map_err(|e| error(py, Kind::Config, format!("{name}: {e}")))
+    serde_json::from_value(value).map_err(|e| error(py, serde_kind(&e), format!("{name}: {e}")))
+}
+
+/// The class of a parameter the configuration cannot read: a value of the wrong type (serde's
+/// `invalid type: ...`) is an `InputTypeError`, any other (unknown field, value out of range) a
+/// `ConfigError`.
+fn serde_kind(e: &serde_json::Error) -> Kind {
+    if e.to_string().starts_with("invalid type") {
+        Kind::InputType
+    } else {
+        Kind::Config
+    }
 }
 
 impl ClassicModel {
@@ -95,6 +106,7 @@ impl ClassicModel {
             Some(a) => finite_vector(a, "actions", None)?,
             None => preset.actions.clone(),
         };
+        distinct(py, "actions", "level", &actions, 1)?;
         let env = wrap(ClassicEnv {
             actions,
             model: config,
@@ -178,20 +190,24 @@ impl ClassicModel {
 
     /// The preset's grid.
     fn grid(&self, py: Python<'_>) -> PyResult<Grid> {
-        let g = self
-            .preset
-            .grid::<f64>()
-            .map_err(|e| crate::errors::sim_error(py, &e))?;
-        Ok(Grid::from_inner(g))
+        guard(py, || {
+            let g = self
+                .preset
+                .grid::<f64>()
+                .map_err(|e| crate::errors::sim_error(py, &e))?;
+            Ok(Grid::from_inner(g))
+        })
     }
 
     /// The model's parameters (the configuration's `[env.model]` fields), as a dict.
     #[getter]
     fn params<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let v = self
-            .params_value()
-            .map_err(|e| error(py, Kind::Solver, e.to_string()))?;
-        crate::json::to_python(py, &v)
+        guard(py, || {
+            let v = self
+                .params_value()
+                .map_err(|e| error(py, Kind::Solver, e.to_string()))?;
+            crate::json::to_python(py, &v)
+        })
     }
 
     /// Length of the state vector.
@@ -208,73 +224,88 @@ impl ClassicModel {
 
     /// Length of an action vector.
     #[getter]
-    fn action_dim(&self) -> usize {
-        self.action_dim_()
+    fn action_dim(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.action_dim_()))
     }
 
     /// Number of discrete actions.
     #[getter]
-    fn n_actions(&self) -> usize {
-        F64Model::actions(self.m()).len()
+    fn n_actions(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(F64Model::actions(self.m()).len()))
     }
 
     /// Number of joint actions (the actions: one agent).
     #[getter]
-    fn n_joint_actions(&self) -> usize {
-        F64Model::actions(self.m()).len()
+    fn n_joint_actions(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(F64Model::actions(self.m()).len()))
     }
 
     /// The listed action levels (the configuration's `actions`; for the arm, torque levels as
     /// fractions of each joint's maximum torque, combined per joint).
     #[getter]
-    fn action_levels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, self.levels())
+    fn action_levels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        guard(py, || Ok(PyArray1::from_slice(py, self.levels())))
     }
 
     /// The discrete action vectors, shape `(n_actions, action_dim)`.
     #[getter]
-    fn actions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let table = F64Model::actions(self.m());
-        let a = Array2::from_shape_vec((table.len(), table.dim()), table.values().to_vec())
-            .expect("n x dim values");
-        PyArray2::from_owned_array(py, a)
+    fn actions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(py, || {
+            Ok({
+                let table = F64Model::actions(self.m());
+                let a = Array2::from_shape_vec((table.len(), table.dim()), table.values().to_vec())
+                    .expect("n x dim values");
+                PyArray2::from_owned_array(py, a)
+            })
+        })
     }
 
     /// Sample time (s).
     #[getter]
-    fn sample_time(&self) -> f64 {
-        F64Model::sample_time(self.m())
+    fn sample_time(&self, py: Python<'_>) -> PyResult<f64> {
+        guard(py, || Ok(F64Model::sample_time(self.m())))
     }
 
     /// The range `(low, high)` of every state variable, shape `(state_dim, 2)`.
     #[getter]
-    fn state_bounds<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let e = F64Model::state_dim(self.m());
-        let flat: Vec<f64> = (0..e)
-            .flat_map(|d| {
-                let (lo, hi) = F64Model::state_bounds(self.m(), d);
-                [lo, hi]
+    fn state_bounds<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(py, || {
+            Ok({
+                let e = F64Model::state_dim(self.m());
+                let flat: Vec<f64> = (0..e)
+                    .flat_map(|d| {
+                        let (lo, hi) = F64Model::state_bounds(self.m(), d);
+                        [lo, hi]
+                    })
+                    .collect();
+                PyArray2::from_owned_array(py, Array2::from_shape_vec((e, 2), flat).expect("pairs"))
             })
-            .collect();
-        PyArray2::from_owned_array(py, Array2::from_shape_vec((e, 2), flat).expect("pairs"))
+        })
     }
 
     /// The default start of a rollout (`fuzzyq rollout`'s).
     #[getter]
-    fn default_start<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, self.model.kind().spec().default_start)
+    fn default_start<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        guard(py, || {
+            Ok(PyArray1::from_slice(
+                py,
+                self.model.kind().spec().default_start,
+            ))
+        })
     }
 
     /// The action vector of action `index`.
     fn joint_action<'py>(
         &self,
         py: Python<'py>,
-        index: usize,
+        #[pyo3(from_py_with = crate::convert::index)] index: usize,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let j = joint_actions::<f64, _>(self.m()).map_err(|e| eval_error(py, &e))?;
-        let mut u = vec![0.0; j.dim()];
-        j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, u))
+        guard(py, || {
+            let j = joint_actions::<f64, _>(self.m()).map_err(|e| eval_error(py, &e))?;
+            let mut u = vec![0.0; j.dim()];
+            j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
+            Ok(PyArray1::from_vec(py, u))
+        })
     }
 
     /// The successor of state `x` under action vector `u` and the reward of `u` at `x`:
@@ -286,58 +317,68 @@ impl ClassicModel {
         x: &Bound<'py, PyAny>,
         u: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        let (e, a) = (self.state_dim(), self.action_dim_());
-        let (xs, bx) = one_or_batch(x, "x", e)?;
-        let (us, bu) = one_or_batch(u, "u", a)?;
-        crate::model::same_batch(py, bx, bu)?;
-        let n = bx.unwrap_or(1);
-        let mut next = vec![0.0; n * e];
-        let mut rewards = vec![0.0; n];
-        let m = self.m();
-        for i in 0..n {
-            let (x, u) = (&xs[i * e..(i + 1) * e], &us[i * a..(i + 1) * a]);
-            rewards[i] = Model::<f64>::reward(m, x, u);
-            F64Model::step(m, x, u, &mut next[i * e..(i + 1) * e]);
-        }
-        match bx {
-            None => (PyArray1::from_vec(py, next), rewards[0]).into_pyobject(py),
-            Some(b) => (
-                PyArray2::from_owned_array(
-                    py,
-                    Array2::from_shape_vec((b, e), next).expect("b x e"),
-                ),
-                PyArray1::from_vec(py, rewards),
-            )
-                .into_pyobject(py),
-        }
+        guard(py, || {
+            let (e, a) = (self.state_dim(), self.action_dim_());
+            let (xs, bx) = one_or_batch(x, "x", e)?;
+            let (us, bu) = one_or_batch(u, "u", a)?;
+            crate::model::same_batch(py, bx, bu)?;
+            let n = bx.unwrap_or(1);
+            let mut next = vec![0.0; n * e];
+            let mut rewards = vec![0.0; n];
+            let m = self.m();
+            for i in 0..n {
+                let (x, u) = (&xs[i * e..(i + 1) * e], &us[i * a..(i + 1) * a]);
+                rewards[i] = Model::<f64>::reward(m, x, u);
+                F64Model::step(m, x, u, &mut next[i * e..(i + 1) * e]);
+            }
+            match bx {
+                None => (PyArray1::from_vec(py, next), rewards[0]).into_pyobject(py),
+                Some(b) => (
+                    PyArray2::from_owned_array(
+                        py,
+                        Array2::from_shape_vec((b, e), next).expect("b x e"),
+                    ),
+                    PyArray1::from_vec(py, rewards),
+                )
+                    .into_pyobject(py),
+            }
+        })
     }
 
     /// The reward of action vector `u` at state `x`.
-    fn reward(&self, x: &Bound<'_, PyAny>, u: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let x = finite_vector(x, "x", Some(self.state_dim()))?;
-        let u = finite_vector(u, "u", Some(self.action_dim_()))?;
-        Ok(Model::<f64>::reward(self.m(), &x, &u))
+    fn reward(&self, py: Python<'_>, x: &Bound<'_, PyAny>, u: &Bound<'_, PyAny>) -> PyResult<f64> {
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim()))?;
+            let u = finite_vector(u, "u", Some(self.action_dim_()))?;
+            Ok(Model::<f64>::reward(self.m(), &x, &u))
+        })
     }
 
     /// Whether `x` is a terminal state (the car that left the hill); a rollout stops there.
-    fn is_terminal(&self, x: &Bound<'_, PyAny>) -> PyResult<bool> {
-        let x = finite_vector(x, "x", Some(self.state_dim()))?;
-        Ok(F64Model::has_terminal_states(self.m()) && F64Model::is_terminal(self.m(), &x))
+    fn is_terminal(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<bool> {
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim()))?;
+            Ok(F64Model::has_terminal_states(self.m()) && F64Model::is_terminal(self.m(), &x))
+        })
     }
 
-    fn __repr__(&self) -> String {
-        let class = match self.model.kind() {
-            fuzzyq_sim::model::EnvKind::Dcmotor => "DcMotor",
-            fuzzyq_sim::model::EnvKind::Pendulum => "Pendulum",
-            fuzzyq_sim::model::EnvKind::Carhill => "CarHill",
-            _ => "Arm",
-        };
-        format!(
-            "{class}(preset={:?}, actions={}, sample_time={})",
-            self.preset.name,
-            F64Model::actions(self.m()).len(),
-            F64Model::sample_time(self.m())
-        )
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        guard(py, || {
+            Ok({
+                let class = match self.model.kind() {
+                    fuzzyq_sim::model::EnvKind::Dcmotor => "DcMotor",
+                    fuzzyq_sim::model::EnvKind::Pendulum => "Pendulum",
+                    fuzzyq_sim::model::EnvKind::Carhill => "CarHill",
+                    _ => "Arm",
+                };
+                format!(
+                    "{class}(preset={:?}, actions={}, sample_time={})",
+                    self.preset.name,
+                    F64Model::actions(self.m()).len(),
+                    F64Model::sample_time(self.m())
+                )
+            })
+        })
     }
 }
 
@@ -353,18 +394,20 @@ macro_rules! classic_class {
             #[pyo3(signature = (preset = "fine", *, actions = None, **params))]
             fn new(
                 py: Python<'_>,
-                preset: &str,
+                #[pyo3(from_py_with = arg)] preset: &str,
                 actions: Option<&Bound<'_, PyAny>>,
                 params: Option<&Bound<'_, PyDict>>,
             ) -> PyResult<PyClassInitializer<Self>> {
-                let base = ClassicModel::build::<$dynamics>(
-                    py,
-                    preset,
-                    actions,
-                    params,
-                    EnvConfig::$variant,
-                )?;
-                Ok(PyClassInitializer::from(base).add_subclass(Self {}))
+                guard(py, || {
+                    let base = ClassicModel::build::<$dynamics>(
+                        py,
+                        preset,
+                        actions,
+                        params,
+                        EnvConfig::$variant,
+                    )?;
+                    Ok(PyClassInitializer::from(base).add_subclass(Self {}))
+                })
             }
         }
     };

@@ -3,21 +3,20 @@
 use std::sync::Arc;
 
 use fuzzyq_core::model::joint_actions;
+use fuzzyq_core::solver::Precision;
 use fuzzyq_core::{ActionSet, JointActions, Model};
+use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::pointmass::{FrictionConfig, FrictionPatch, Integrator, PointMassConfig};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
-use crate::convert::{finite_vector, matrix, one_or_batch, vector};
-use crate::errors::{Kind, config_error, error, eval_error};
+use crate::convert::{Patch, arg, distinct, finite_vector, matrix, one_or_batch, vector};
+use crate::errors::{Kind, config_error, error, eval_error, guard};
 
 /// Active core indices and their memberships.
 type Memberships<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<f64>>);
-
-/// A friction patch as given from Python: `((x, y), radius, eta)`.
-type Patch = ((f64, f64), f64, f64);
 
 /// A fuzzy grid: triangular membership functions on each state variable, combined by product.
 ///
@@ -38,7 +37,7 @@ impl Grid {
     /// to stay distinct in it, are refused here rather than when the grid is solved in `f32`.
     pub(crate) fn checked(py: Python<'_>, cores: Vec<Vec<f64>>) -> PyResult<Self> {
         let inner = fuzzyq_core::solver::Grid::new(cores)
-            .map_err(|e| error(py, Kind::Config, format!("grid: {e}")))?;
+            .map_err(|e| error(py, Kind::Config, format!("cores: {e}")))?;
         let grid = Self { inner };
         grid.to_precision::<f32>(py)?;
         Ok(grid)
@@ -56,7 +55,13 @@ impl Grid {
             .map(|c| c.iter().map(|&v| T::from_f64(v)).collect())
             .collect();
         Ok(fuzzyq_core::solver::Grid::new(cores)
-            .map_err(|e| error(py, Kind::Config, format!("grid in single precision: {e}")))?
+            .map_err(|e| {
+                error(
+                    py,
+                    Kind::Config,
+                    format!("cores: the grid in single precision: {e}"),
+                )
+            })?
             .with_membership(self.inner.membership()))
     }
 }
@@ -81,18 +86,20 @@ pub(crate) fn same_batch(py: Python<'_>, bx: Option<usize>, bu: Option<usize>) -
 impl Grid {
     #[new]
     fn new(py: Python<'_>, cores: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let items = cores.try_iter().map_err(|_| {
-            error(
-                py,
-                Kind::InputType,
-                "cores: expected a sequence of 1-D arrays, one per state variable",
-            )
-        })?;
-        let mut all = Vec::new();
-        for (i, item) in items.enumerate() {
-            all.push(vector(&item?, &format!("cores[{i}]"), None)?);
-        }
-        Self::checked(py, all)
+        guard(py, || {
+            let items = cores.try_iter().map_err(|_| {
+                error(
+                    py,
+                    Kind::InputType,
+                    "cores: expected a sequence of 1-D arrays, one per state variable",
+                )
+            })?;
+            let mut all = Vec::new();
+            for (i, item) in items.enumerate() {
+                all.push(vector(&item?, &format!("cores[{i}]"), None)?);
+            }
+            Self::checked(py, all)
+        })
     }
 
     /// Number of state variables.
@@ -129,52 +136,58 @@ impl Grid {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Memberships<'py>> {
-        let x = finite_vector(x, "x", Some(self.inner.n_dims()))?;
-        let active = self
-            .inner
-            .view()
-            .active(&x)
-            .map_err(|e| eval_error(py, &e))?;
-        let (mut idx, mut w) = (Vec::new(), Vec::new());
-        active.for_each(|d, m| {
-            idx.push(d as i64);
-            w.push(m);
-        });
-        Ok((PyArray1::from_vec(py, idx), PyArray1::from_vec(py, w)))
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.inner.n_dims()))?;
+            let active = self
+                .inner
+                .view()
+                .active(&x)
+                .map_err(|e| eval_error(py, &e))?;
+            let (mut idx, mut w) = (Vec::new(), Vec::new());
+            active.for_each(|d, m| {
+                idx.push(d as i64);
+                w.push(m);
+            });
+            Ok((PyArray1::from_vec(py, idx), PyArray1::from_vec(py, w)))
+        })
     }
 
     /// The state at which core `index` has membership 1.
     fn core_state<'py>(
         &self,
         py: Python<'py>,
-        index: usize,
+        #[pyo3(from_py_with = crate::convert::index)] index: usize,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let mut x = vec![0.0; self.inner.n_dims()];
-        self.inner
-            .view()
-            .core_state(index, &mut x)
-            .map_err(|e| eval_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, x))
+        guard(py, || {
+            let mut x = vec![0.0; self.inner.n_dims()];
+            self.inner
+                .view()
+                .core_state(index, &mut x)
+                .map_err(|e| eval_error(py, &e))?;
+            Ok(PyArray1::from_vec(py, x))
+        })
     }
 
     /// Every core's state, shape `(n_cores, n_dims)`.
     fn core_states<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let (n, e) = (self.inner.n_cores(), self.inner.n_dims());
-        if n.saturating_mul(e) > 200_000_000 {
-            return Err(error(
-                py,
-                Kind::Input,
-                format!("core_states: {n} x {e} values are too many to return"),
-            ));
-        }
-        let view = self.inner.view();
-        let mut out = vec![0.0; n * e];
-        for (d, row) in out.chunks_exact_mut(e).enumerate() {
-            view.core_state(d, row)
-                .map_err(|err| eval_error(py, &err))?;
-        }
-        let a = Array2::from_shape_vec((n, e), out).expect("n x e values");
-        Ok(PyArray2::from_owned_array(py, a))
+        guard(py, || {
+            let (n, e) = (self.inner.n_cores(), self.inner.n_dims());
+            if n.saturating_mul(e) > 200_000_000 {
+                return Err(error(
+                    py,
+                    Kind::Input,
+                    format!("core_states: {n} x {e} values are too many to return"),
+                ));
+            }
+            let view = self.inner.view();
+            let mut out = vec![0.0; n * e];
+            for (d, row) in out.chunks_exact_mut(e).enumerate() {
+                view.core_state(d, row)
+                    .map_err(|err| eval_error(py, &err))?;
+            }
+            let a = Array2::from_shape_vec((n, e), out).expect("n x e values");
+            Ok(PyArray2::from_owned_array(py, a))
+        })
     }
 
     /// The fuzzy interpolation `sum_d mu_d(x) values[d]` of per-core values at `x`.
@@ -184,28 +197,34 @@ impl Grid {
         values: &Bound<'_, PyAny>,
         x: &Bound<'_, PyAny>,
     ) -> PyResult<f64> {
-        let v = vector(values, "values", Some(self.inner.n_cores()))?;
-        let x = finite_vector(x, "x", Some(self.inner.n_dims()))?;
-        let active = self
-            .inner
-            .view()
-            .active(&x)
-            .map_err(|e| eval_error(py, &e))?;
-        Ok(active.interpolate(&v))
+        guard(py, || {
+            let v = vector(values, "values", Some(self.inner.n_cores()))?;
+            let x = finite_vector(x, "x", Some(self.inner.n_dims()))?;
+            let active = self
+                .inner
+                .view()
+                .active(&x)
+                .map_err(|e| eval_error(py, &e))?;
+            Ok(active.interpolate(&v))
+        })
     }
 
-    fn __repr__(&self) -> String {
-        let shape: Vec<String> = self
-            .inner
-            .cores()
-            .iter()
-            .map(|c| c.len().to_string())
-            .collect();
-        format!(
-            "Grid(shape=({}), n_cores={})",
-            shape.join(", "),
-            self.inner.n_cores()
-        )
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        guard(py, || {
+            Ok({
+                let shape: Vec<String> = self
+                    .inner
+                    .cores()
+                    .iter()
+                    .map(|c| c.len().to_string())
+                    .collect();
+                format!(
+                    "Grid(shape=({}), n_cores={})",
+                    shape.join(", "),
+                    self.inner.n_cores()
+                )
+            })
+        })
     }
 }
 
@@ -257,66 +276,69 @@ impl PointMass {
     #[allow(clippy::too_many_arguments)] // the model's parameters, as keyword arguments
     fn new(
         py: Python<'_>,
-        agents: usize,
-        mass: f64,
-        sample_time: f64,
-        position_limit: f64,
-        velocity_limit: f64,
+        #[pyo3(from_py_with = arg)] agents: usize,
+        #[pyo3(from_py_with = arg)] mass: f64,
+        #[pyo3(from_py_with = arg)] sample_time: f64,
+        #[pyo3(from_py_with = arg)] position_limit: f64,
+        #[pyo3(from_py_with = arg)] velocity_limit: f64,
         force_levels: Option<&Bound<'_, PyAny>>,
-        goal_radius: f64,
-        goal_reward: f64,
-        integrator: &str,
-        rk4_substeps: usize,
-        friction: f64,
-        friction_patches: Option<Vec<Patch>>,
-        velocity_noise: f64,
+        #[pyo3(from_py_with = arg)] goal_radius: f64,
+        #[pyo3(from_py_with = arg)] goal_reward: f64,
+        #[pyo3(from_py_with = arg)] integrator: &str,
+        #[pyo3(from_py_with = arg)] rk4_substeps: usize,
+        #[pyo3(from_py_with = arg)] friction: f64,
+        #[pyo3(from_py_with = arg)] friction_patches: Option<Vec<Patch>>,
+        #[pyo3(from_py_with = arg)] velocity_noise: f64,
     ) -> PyResult<Self> {
-        let integrator = match integrator {
-            "exact" => Integrator::Exact,
-            "rk4" => Integrator::Rk4,
-            other => {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!("integrator: expected \"exact\" or \"rk4\", got {other:?}"),
-                ));
-            }
-        };
-        let force_levels = match force_levels {
-            Some(f) => finite_vector(f, "force_levels", None)?,
-            None => PointMassConfig::default().force_levels,
-        };
-        let friction = match friction_patches {
-            None => FrictionConfig::Constant { eta: friction },
-            Some(p) => FrictionConfig::Patches {
-                base: friction,
-                patches: p
-                    .into_iter()
-                    .map(|((x, y), radius, eta)| FrictionPatch {
-                        center: [x, y],
-                        radius,
-                        eta,
-                    })
-                    .collect(),
-            },
-        };
-        Self::from_config(
-            py,
-            PointMassConfig {
-                agents,
-                mass,
-                sample_time,
-                position_limit,
-                velocity_limit,
-                force_levels,
-                goal_radius,
-                goal_reward,
-                integrator,
-                rk4_substeps,
-                friction,
-                velocity_noise,
-            },
-        )
+        guard(py, || {
+            let integrator = match integrator {
+                "exact" => Integrator::Exact,
+                "rk4" => Integrator::Rk4,
+                other => {
+                    return Err(error(
+                        py,
+                        Kind::Config,
+                        format!("integrator: expected \"exact\" or \"rk4\", got {other:?}"),
+                    ));
+                }
+            };
+            let force_levels = match force_levels {
+                Some(f) => finite_vector(f, "force_levels", None)?,
+                None => PointMassConfig::default().force_levels,
+            };
+            distinct(py, "force_levels", "level", &force_levels, 1)?;
+            let friction = match friction_patches {
+                None => FrictionConfig::Constant { eta: friction },
+                Some(p) => FrictionConfig::Patches {
+                    base: friction,
+                    patches: p
+                        .into_iter()
+                        .map(|((x, y), radius, eta)| FrictionPatch {
+                            center: [x, y],
+                            radius,
+                            eta,
+                        })
+                        .collect(),
+                },
+            };
+            Self::from_config(
+                py,
+                PointMassConfig {
+                    agents,
+                    mass,
+                    sample_time,
+                    position_limit,
+                    velocity_limit,
+                    force_levels,
+                    goal_radius,
+                    goal_reward,
+                    integrator,
+                    rk4_substeps,
+                    friction,
+                    velocity_noise,
+                },
+            )
+        })
     }
 
     /// Length of the state vector, `4 * agents`.
@@ -339,14 +361,16 @@ impl PointMass {
 
     /// Actions per agent.
     #[getter]
-    fn n_actions(&self) -> usize {
-        Model::<f64>::action_set(&*self.model, 0).n_actions()
+    fn n_actions(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || {
+            Ok(Model::<f64>::action_set(&*self.model, 0).n_actions())
+        })
     }
 
     /// Joint actions, `n_actions ** agents`.
     #[getter]
-    fn n_joint_actions(&self) -> usize {
-        self.joint().n_joint()
+    fn n_joint_actions(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.joint().n_joint()))
     }
 
     /// Sample time (s).
@@ -381,38 +405,57 @@ impl PointMass {
 
     /// Each agent's actions, shape `(n_actions, 2)`: forces `(u_x, u_y)`.
     #[getter]
-    fn actions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let set: ActionSet<'_, f64> = Model::<f64>::action_set(&*self.model, 0);
-        let a = Array2::from_shape_vec((set.n_actions(), 2), set.values().to_vec()).expect("pairs");
-        PyArray2::from_owned_array(py, a)
+    fn actions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(py, || {
+            Ok({
+                let set: ActionSet<'_, f64> = Model::<f64>::action_set(&*self.model, 0);
+                let a = Array2::from_shape_vec((set.n_actions(), 2), set.values().to_vec())
+                    .expect("pairs");
+                PyArray2::from_owned_array(py, a)
+            })
+        })
     }
 
     /// The joint action vector (all agents' forces) of joint action `index`.
     fn joint_action<'py>(
         &self,
         py: Python<'py>,
-        index: usize,
+        #[pyo3(from_py_with = crate::convert::index)] index: usize,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let j = self.joint();
-        let mut u = vec![0.0; j.dim()];
-        j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, u))
+        guard(py, || {
+            let j = self.joint();
+            let mut u = vec![0.0; j.dim()];
+            j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
+            Ok(PyArray1::from_vec(py, u))
+        })
     }
 
     /// The joint action index of per-agent action indices.
-    fn joint_index(&self, py: Python<'_>, per_agent: Vec<usize>) -> PyResult<usize> {
-        self.joint()
-            .compose(&per_agent)
-            .map_err(|e| eval_error(py, &e))
+    fn joint_index(
+        &self,
+        py: Python<'_>,
+        #[pyo3(from_py_with = arg)] per_agent: Vec<usize>,
+    ) -> PyResult<usize> {
+        guard(py, || {
+            self.joint()
+                .compose(&per_agent)
+                .map_err(|e| error(py, Kind::Input, format!("per_agent: {e}")))
+        })
     }
 
     /// The per-agent action indices of joint action `index`.
-    fn agent_indices(&self, py: Python<'_>, index: usize) -> PyResult<Vec<usize>> {
-        let j = self.joint();
-        let mut out = vec![0; j.n_agents()];
-        j.decompose(index, &mut out)
-            .map_err(|e| eval_error(py, &e))?;
-        Ok(out)
+    fn agent_indices(
+        &self,
+        py: Python<'_>,
+        #[pyo3(from_py_with = crate::convert::index)] index: usize,
+    ) -> PyResult<Vec<usize>> {
+        guard(py, || {
+            let j = self.joint();
+            let mut out = vec![0; j.n_agents()];
+            j.decompose(index, &mut out)
+                .map_err(|e| eval_error(py, &e))?;
+            Ok(out)
+        })
     }
 
     /// The successor of state `x` under joint force vector `u`; also batches: `x` of shape
@@ -423,63 +466,76 @@ impl PointMass {
         x: &Bound<'py, PyAny>,
         u: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let (e, a) = (self.state_dim(), self.action_dim());
-        let (xs, bx) = one_or_batch(x, "x", e)?;
-        let (us, bu) = one_or_batch(u, "u", a)?;
-        same_batch(py, bx, bu)?;
-        let n = bx.unwrap_or(1);
-        let mut out = vec![0.0; n * e];
-        for i in 0..n {
-            self.model.step_f64(
-                &xs[i * e..(i + 1) * e],
-                &us[i * a..(i + 1) * a],
-                &mut out[i * e..(i + 1) * e],
-            );
-        }
-        Ok(match bx {
-            None => PyArray1::from_vec(py, out).into_any(),
-            Some(b) => {
-                PyArray2::from_owned_array(py, Array2::from_shape_vec((b, e), out).expect("b x e"))
-                    .into_any()
+        guard(py, || {
+            let (e, a) = (self.state_dim(), self.action_dim());
+            let (xs, bx) = one_or_batch(x, "x", e)?;
+            let (us, bu) = one_or_batch(u, "u", a)?;
+            same_batch(py, bx, bu)?;
+            let n = bx.unwrap_or(1);
+            let mut out = vec![0.0; n * e];
+            for i in 0..n {
+                self.model.step_f64(
+                    &xs[i * e..(i + 1) * e],
+                    &us[i * a..(i + 1) * a],
+                    &mut out[i * e..(i + 1) * e],
+                );
             }
+            Ok(match bx {
+                None => PyArray1::from_vec(py, out).into_any(),
+                Some(b) => PyArray2::from_owned_array(
+                    py,
+                    Array2::from_shape_vec((b, e), out).expect("b x e"),
+                )
+                .into_any(),
+            })
         })
     }
 
     /// The reward at state `x` (it does not depend on the action).
-    fn reward(&self, x: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let x = finite_vector(x, "x", Some(self.state_dim()))?;
-        Ok(if self.model.in_goal_f64(&x) {
-            self.model.config().goal_reward
-        } else {
-            0.0
+    fn reward(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<f64> {
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim()))?;
+            Ok(if self.model.in_goal_f64(&x) {
+                self.model.config().goal_reward
+            } else {
+                0.0
+            })
         })
     }
 
     /// Whether `x` is in the reward region.
-    fn in_goal(&self, x: &Bound<'_, PyAny>) -> PyResult<bool> {
-        let x = finite_vector(x, "x", Some(self.state_dim()))?;
-        Ok(self.model.in_goal_f64(&x))
+    fn in_goal(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<bool> {
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim()))?;
+            Ok(self.model.in_goal_f64(&x))
+        })
     }
 
     /// The paper's grid for this number of agents: position cores
     /// `[-6, -3, -0.3, -0.1, 0, 0.1, 0.3, 3, 6]` and velocity cores `[-3, -1, 0, 1, 3]`.
     fn paper_grid(&self, py: Python<'_>) -> PyResult<Grid> {
-        let pos = vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
-        let vel = vec![-3.0, -1.0, 0.0, 1.0, 3.0];
-        let mut cores = Vec::new();
-        for _ in 0..self.n_agents() {
-            cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
-        }
-        // Three or more agents exceed the 2^32 cores a grid may have: a typed error.
-        Grid::checked(py, cores)
+        guard(py, || {
+            let pos = vec![-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0];
+            let vel = vec![-3.0, -1.0, 0.0, 1.0, 3.0];
+            let mut cores = Vec::new();
+            for _ in 0..self.n_agents() {
+                cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
+            }
+            // Three or more agents exceed the 2^32 cores a grid may have: a typed error.
+            Grid::checked(py, cores)
+        })
     }
 
-    fn __repr__(&self) -> String {
-        let c = self.model.config();
-        format!(
-            "PointMass(agents={}, mass={}, sample_time={}, force_levels={:?})",
-            c.agents, c.mass, c.sample_time, c.force_levels
-        )
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        guard(py, || {
+            Ok({
+                let c = self.model.config();
+                format!(
+                    "PointMass(agents={}, mass={}, sample_time={}, force_levels={:?})",
+                    c.agents, c.mass, c.sample_time, c.force_levels
+                )
+            })
+        })
     }
 }
 
@@ -500,6 +556,31 @@ pub struct CallableModel {
 }
 
 impl CallableModel {
+    /// The peak memory of tabulating and solving `n` cores x `m` joint actions of a state of
+    /// `e` variables in `precision`: first the tables in float64 and their copy in the
+    /// solver's precision, then that copy and the successors' memberships the solver
+    /// precomputes (up to `2^e` active cores per pair, held twice while they are built).
+    pub(crate) fn memory(n: usize, m: usize, e: usize, precision: Precision) -> Estimate {
+        let pairs = n as f64 * m as f64;
+        let s: f64 = match precision {
+            Precision::F32 => 4.0,
+            Precision::F64 => 8.0,
+        };
+        let values = (e + 1) as f64;
+        let active = 2f64.powi(e as i32);
+        // An entry is a core index (4 bytes) and a weight, also as an aligned pair.
+        let entry = 4.0 + s + (4.0 + s).max(2.0 * s);
+        let tabulate = pairs * values * (8.0 + s);
+        let solve = pairs * (values * s + 16.0 + active * entry);
+        Estimate {
+            bytes: tabulate.max(solve),
+            what: format!(
+                "{n} cores x {m} joint actions of a CallableModel (its successors, rewards and \
+                 the successors' memberships)"
+            ),
+        }
+    }
+
     fn joint(&self) -> JointActions<'_, f64> {
         let sets: Vec<ActionSet<'_, f64>> = self
             .actions
@@ -510,11 +591,14 @@ impl CallableModel {
     }
 
     /// Evaluates the transition on every (core, joint action) pair of `grid`, in batches:
-    /// `(next states, rewards)` in core-major, joint-action order.
+    /// `(next states, rewards)` in core-major, joint-action order. A problem whose tables
+    /// would exceed `limit` is refused first ([`Self::memory`]).
     pub(crate) fn tabulate(
         &self,
         py: Python<'_>,
         grid: &fuzzyq_core::solver::Grid<f64>,
+        precision: Precision,
+        limit: &Limit,
     ) -> PyResult<(Vec<f64>, Vec<f64>)> {
         let e = self.state_dim;
         if grid.n_dims() != e {
@@ -529,19 +613,27 @@ impl CallableModel {
         }
         let joint = self.joint();
         let (n, m, a) = (grid.n_cores(), joint.n_joint(), joint.dim());
-        let total = n
-            .checked_mul(m)
-            .filter(|&t| t <= 500_000_000)
-            .ok_or_else(|| {
-                error(
-                    py,
-                    Kind::Config,
-                    format!("{n} cores x {m} joint actions is too many pairs to tabulate"),
-                )
-            })?;
+        limit
+            .check(&Self::memory(n, m, e, precision))
+            .map_err(|err| crate::errors::memory_error(py, "max_memory_gb", &err))?;
+        // Beyond a deliberately raised limit, the tables may still not fit in memory: a typed
+        // error rather than an abort.
+        let too_large = || {
+            error(
+                py,
+                Kind::Solver,
+                format!("{n} cores x {m} joint actions: the tables do not fit in memory"),
+            )
+        };
+        let total = n.checked_mul(m).ok_or_else(too_large)?;
+        let mut next = Vec::new();
+        let mut rewards = Vec::new();
+        total
+            .checked_mul(e)
+            .ok_or_else(too_large)
+            .and_then(|len| next.try_reserve_exact(len).map_err(|_| too_large()))?;
+        rewards.try_reserve_exact(total).map_err(|_| too_large())?;
         let view = grid.view();
-        let mut next = Vec::with_capacity(total * e);
-        let mut rewards = Vec::with_capacity(total);
         let mut start = 0;
         let f = self.transition.bind(py);
         while start < total {
@@ -596,75 +688,78 @@ impl CallableModel {
     fn new(
         py: Python<'_>,
         transition: Bound<'_, PyAny>,
-        state_dim: usize,
+        #[pyo3(from_py_with = arg)] state_dim: usize,
         actions: &Bound<'_, PyAny>,
-        batch_size: usize,
+        #[pyo3(from_py_with = arg)] batch_size: usize,
     ) -> PyResult<Self> {
-        if !transition.is_callable() {
-            return Err(error(
-                py,
-                Kind::InputType,
-                "transition: expected a callable",
-            ));
-        }
-        if state_dim == 0 || state_dim > fuzzyq_core::MAX_DIMS {
-            return Err(error(
-                py,
-                Kind::Config,
-                format!(
-                    "state_dim: expected 1 to {}, got {state_dim}",
-                    fuzzyq_core::MAX_DIMS
-                ),
-            ));
-        }
-        if batch_size == 0 {
-            return Err(error(py, Kind::Config, "batch_size: must be at least 1"));
-        }
-        let items = actions.try_iter().map_err(|_| {
-            error(
-                py,
-                Kind::InputType,
-                "actions: expected a sequence of arrays, one per agent",
-            )
-        })?;
-        let mut sets = Vec::new();
-        for (i, item) in items.enumerate() {
-            let item = item?;
-            let what = format!("actions[{i}]");
-            let (values, dim) = match matrix(&item, &what, None, None) {
-                Ok((_, c, v)) => (v, c),
-                Err(_) => (finite_vector(&item, &what, None)?, 1),
+        guard(py, || {
+            if !transition.is_callable() {
+                return Err(error(
+                    py,
+                    Kind::InputType,
+                    "transition: expected a callable",
+                ));
+            }
+            if state_dim == 0 || state_dim > fuzzyq_core::MAX_DIMS {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    format!(
+                        "state_dim: expected 1 to {}, got {state_dim}",
+                        fuzzyq_core::MAX_DIMS
+                    ),
+                ));
+            }
+            if batch_size == 0 {
+                return Err(error(py, Kind::Config, "batch_size: must be at least 1"));
+            }
+            let items = actions.try_iter().map_err(|_| {
+                error(
+                    py,
+                    Kind::InputType,
+                    "actions: expected a sequence of arrays, one per agent",
+                )
+            })?;
+            let mut sets = Vec::new();
+            for (i, item) in items.enumerate() {
+                let item = item?;
+                let what = format!("actions[{i}]");
+                let (values, dim) = match matrix(&item, &what, None, None) {
+                    Ok((_, c, v)) => (v, c),
+                    Err(_) => (finite_vector(&item, &what, None)?, 1),
+                };
+                crate::convert::check_finite(py, &what, &values)?;
+                ActionSet::try_new(&values, dim)
+                    .map_err(|e| error(py, Kind::Config, format!("{what}: {e}")))?;
+                distinct(py, &what, "action", &values, dim)?;
+                sets.push((values, dim));
+            }
+            if sets.is_empty() || sets.len() > fuzzyq_core::MAX_AGENTS {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    format!(
+                        "actions: expected 1 to {} agents, got {}",
+                        fuzzyq_core::MAX_AGENTS,
+                        sets.len()
+                    ),
+                ));
+            }
+            let model = Self {
+                transition: transition.unbind(),
+                state_dim,
+                actions: sets,
+                batch_size,
             };
-            crate::convert::check_finite(py, &what, &values)?;
-            ActionSet::try_new(&values, dim)
-                .map_err(|e| error(py, Kind::Config, format!("{what}: {e}")))?;
-            sets.push((values, dim));
-        }
-        if sets.is_empty() || sets.len() > fuzzyq_core::MAX_AGENTS {
-            return Err(error(
-                py,
-                Kind::Config,
-                format!(
-                    "actions: expected 1 to {} agents, got {}",
-                    fuzzyq_core::MAX_AGENTS,
-                    sets.len()
-                ),
-            ));
-        }
-        let model = Self {
-            transition: transition.unbind(),
-            state_dim,
-            actions: sets,
-            batch_size,
-        };
-        let n: Option<usize> = model
-            .actions
-            .iter()
-            .try_fold(1usize, |acc, (v, d)| acc.checked_mul(v.len() / d));
-        if n.is_none_or(|n| n > u32::MAX as usize) {
-            return Err(error(py, Kind::Config, "actions: too many joint actions"));
-        }
-        Ok(model)
+            let n: Option<usize> = model
+                .actions
+                .iter()
+                .try_fold(1usize, |acc, (v, d)| acc.checked_mul(v.len() / d));
+            if n.is_none_or(|n| n > u32::MAX as usize) {
+                return Err(error(py, Kind::Config, "actions: too many joint actions"));
+            }
+            Ok(model)
+        })
     }
 
     /// Length of the state vector.
@@ -681,34 +776,48 @@ impl CallableModel {
 
     /// Length of the joint action vector.
     #[getter]
-    fn action_dim(&self) -> usize {
-        self.joint().dim()
+    fn action_dim(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.joint().dim()))
     }
 
     /// Number of joint actions.
     #[getter]
-    fn n_joint_actions(&self) -> usize {
-        self.joint().n_joint()
+    fn n_joint_actions(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.joint().n_joint()))
     }
 
     /// The joint action vector of joint action `index`.
     fn joint_action<'py>(
         &self,
         py: Python<'py>,
-        index: usize,
+        #[pyo3(from_py_with = crate::convert::index)] index: usize,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let j = self.joint();
-        let mut u = vec![0.0; j.dim()];
-        j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, u))
+        guard(py, || {
+            let j = self.joint();
+            let mut u = vec![0.0; j.dim()];
+            j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
+            Ok(PyArray1::from_vec(py, u))
+        })
     }
 
-    fn __repr__(&self) -> String {
-        format!(
-            "CallableModel(state_dim={}, agents={}, joint_actions={})",
-            self.state_dim,
-            self.actions.len(),
-            self.joint().n_joint()
-        )
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        guard(py, || {
+            Ok({
+                format!(
+                    "CallableModel(state_dim={}, agents={}, joint_actions={})",
+                    self.state_dim,
+                    self.actions.len(),
+                    self.joint().n_joint()
+                )
+            })
+        })
+    }
+}
+
+/// A `fuzzyq.Grid` as an argument.
+impl<'a, 'py> crate::convert::Arg<'a, 'py> for &'a Bound<'py, Grid> {
+    fn from_arg(obj: &'a Bound<'py, PyAny>) -> PyResult<Self> {
+        obj.cast::<Grid>()
+            .map_err(|_| crate::convert::wrong_type(obj, "a fuzzyq.Grid"))
     }
 }

@@ -18,8 +18,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde_json::Value;
 
-use crate::convert::{finite_vector, one_or_batch, vector};
-use crate::errors::{Kind, error, sim_error};
+use crate::convert::{arg, finite_vector, one_or_batch, vector};
+use crate::errors::{Kind, error, guard, machine_limit, memory_error, sim_error};
 
 /// Joint Q-values of a policy learned from samples are returned up to this many joint actions.
 const MAX_JOINT_Q: usize = 10_000_000;
@@ -260,38 +260,38 @@ impl Policy {
     /// The environment's name (`"pointmass"`, `"khepera"`, `"dcmotor"`, ...), or `None` for a
     /// `CallableModel`.
     #[getter]
-    fn env(&self) -> Option<&'static str> {
-        self.inner.env().map(|e| e.name())
+    fn env(&self, py: Python<'_>) -> PyResult<Option<&'static str>> {
+        guard(py, || Ok(self.inner.env().map(|e| e.name())))
     }
 
     /// The discount the policy was trained with.
     #[getter]
-    fn gamma(&self) -> f64 {
-        self.inner.gamma()
+    fn gamma(&self, py: Python<'_>) -> PyResult<f64> {
+        guard(py, || Ok(self.inner.gamma()))
     }
 
     /// Length of the state (or joint observation) the policy acts on.
     #[getter]
-    fn state_dim(&self) -> usize {
-        self.state_dim_()
+    fn state_dim(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.state_dim_()))
     }
 
     /// Length of the joint action vector.
     #[getter]
-    fn action_dim(&self) -> usize {
-        self.action_dim_()
+    fn action_dim(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.action_dim_()))
     }
 
     /// Number of joint actions.
     #[getter]
-    fn n_joint_actions(&self) -> usize {
-        self.n_joint_()
+    fn n_joint_actions(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.n_joint_()))
     }
 
     /// Number of agents.
     #[getter]
-    fn n_agents(&self) -> usize {
-        self.n_agents_()
+    fn n_agents(&self, py: Python<'_>) -> PyResult<usize> {
+        guard(py, || Ok(self.n_agents_()))
     }
 
     /// The joint action vector at state `x` (the greedy action's, or the interpolated one).
@@ -300,12 +300,14 @@ impl Policy {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let x = finite_vector(x, "x", Some(self.state_dim_()))?;
-        let mut q = self.scratch();
-        let mut u = vec![0.0; self.action_dim_()];
-        self.decide(&x, &mut q, &mut u)
-            .map_err(|e| sim_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, u))
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
+            let mut q = self.scratch();
+            let mut u = vec![0.0; self.action_dim_()];
+            self.decide(&x, &mut q, &mut u)
+                .map_err(|e| sim_error(py, &e))?;
+            Ok(PyArray1::from_vec(py, u))
+        })
     }
 
     /// The joint action vectors at a batch of states, shape `(n, state_dim)` -> `(n, action_dim)`.
@@ -314,46 +316,52 @@ impl Policy {
         py: Python<'py>,
         states: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let (e, a) = (self.state_dim_(), self.action_dim_());
-        let (xs, b) = one_or_batch(states, "states", e)?;
-        let n = b.unwrap_or(1);
-        let out = py
-            .detach(|| {
-                let mut q = self.scratch();
-                let mut out = vec![0.0; n * a];
-                for (x, u) in xs.chunks_exact(e).zip(out.chunks_exact_mut(a)) {
-                    self.decide(x, &mut q, u)?;
-                }
-                Ok::<_, SimError>(out)
-            })
-            .map_err(|e| sim_error(py, &e))?;
-        Ok(PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((n, a), out).expect("n x a"),
-        ))
+        guard(py, || {
+            let (e, a) = (self.state_dim_(), self.action_dim_());
+            let (xs, b) = one_or_batch(states, "states", e)?;
+            let n = b.unwrap_or(1);
+            let out = py
+                .detach(|| {
+                    let mut q = self.scratch();
+                    let mut out = vec![0.0; n * a];
+                    for (x, u) in xs.chunks_exact(e).zip(out.chunks_exact_mut(a)) {
+                        self.decide(x, &mut q, u)?;
+                    }
+                    Ok::<_, SimError>(out)
+                })
+                .map_err(|e| sim_error(py, &e))?;
+            Ok(PyArray2::from_owned_array(
+                py,
+                Array2::from_shape_vec((n, a), out).expect("n x a"),
+            ))
+        })
     }
 
     /// The greedy joint action index at `x` (lowest index on ties).
     fn act_index(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<usize> {
-        self.require_greedy(py, "act_index")?;
-        let x = finite_vector(x, "x", Some(self.state_dim_()))?;
-        self.greedy_index(py, &x)
+        guard(py, || {
+            self.require_greedy(py, "act_index")?;
+            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
+            self.greedy_index(py, &x)
+        })
     }
 
     /// The greedy action of each agent at `x` (indices into each agent's action set).
     fn agent_actions(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<Vec<usize>> {
-        self.require_greedy(py, "agent_actions")?;
-        let x = finite_vector(x, "x", Some(self.state_dim_()))?;
-        let u = self.greedy_index(py, &x)?;
-        let mut out = vec![0; self.n_agents_()];
-        let r = match &*self.inner {
-            SimPolicy::Fqi(p) => p.agent_indices(u, &mut out),
-            SimPolicy::Additive(p) => joint_actions::<f64, _>(p.model())
-                .and_then(|j| j.decompose(u, &mut out))
-                .map_err(SimError::from),
-        };
-        r.map_err(|e| sim_error(py, &e))?;
-        Ok(out)
+        guard(py, || {
+            self.require_greedy(py, "agent_actions")?;
+            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
+            let u = self.greedy_index(py, &x)?;
+            let mut out = vec![0; self.n_agents_()];
+            let r = match &*self.inner {
+                SimPolicy::Fqi(p) => p.agent_indices(u, &mut out),
+                SimPolicy::Additive(p) => joint_actions::<f64, _>(p.model())
+                    .and_then(|j| j.decompose(u, &mut out))
+                    .map_err(SimError::from),
+            };
+            r.map_err(|e| sim_error(py, &e))?;
+            Ok(out)
+        })
     }
 
     /// `Q(x, .)`, one value per joint action: fuzzy Q-iteration's one-step lookahead on `V`
@@ -363,28 +371,32 @@ impl Policy {
         py: Python<'py>,
         x: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let x = finite_vector(x, "x", Some(self.state_dim_()))?;
-        let m = self.n_joint_();
-        if matches!(&*self.inner, SimPolicy::Additive(_)) && m > MAX_JOINT_Q {
-            return Err(error(
-                py,
-                Kind::Input,
-                format!("q_values: {m} joint actions are too many to return"),
-            ));
-        }
-        let q = self.joint_q(&x).map_err(|e| sim_error(py, &e))?;
-        Ok(PyArray1::from_vec(py, q))
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
+            let m = self.n_joint_();
+            if matches!(&*self.inner, SimPolicy::Additive(_)) && m > MAX_JOINT_Q {
+                return Err(error(
+                    py,
+                    Kind::Input,
+                    format!("q_values: {m} joint actions are too many to return"),
+                ));
+            }
+            let q = self.joint_q(&x).map_err(|e| sim_error(py, &e))?;
+            Ok(PyArray1::from_vec(py, q))
+        })
     }
 
     /// The value the policy predicts at `x`: `V` interpolated (fuzzy Q-iteration) or
     /// `max_u Q(x, u)` (a policy learned from samples).
     fn value(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let x = finite_vector(x, "x", Some(self.state_dim_()))?;
-        let r = match &*self.inner {
-            SimPolicy::Fqi(p) => p.value(&x),
-            SimPolicy::Additive(p) => p.q().value(&split(p, &x)),
-        };
-        r.map_err(|e| sim_error(py, &e))
+        guard(py, || {
+            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
+            let r = match &*self.inner {
+                SimPolicy::Fqi(p) => p.value(&x),
+                SimPolicy::Additive(p) => p.q().value(&split(p, &x)),
+            };
+            r.map_err(|e| sim_error(py, &e))
+        })
     }
 
     /// Runs the policy on its environment, as `fuzzyq rollout` does (the same code).
@@ -410,133 +422,151 @@ impl Policy {
         &self,
         py: Python<'py>,
         x0: Option<&Bound<'py, PyAny>>,
-        steps: Option<usize>,
-        seed: u64,
+        #[pyo3(from_py_with = arg)] steps: Option<usize>,
+        #[pyo3(from_py_with = arg)] seed: u64,
         headings: Option<&Bound<'py, PyAny>>,
-        plant: Option<&str>,
-        radius: Option<f64>,
+        #[pyo3(from_py_with = arg)] plant: Option<&str>,
+        #[pyo3(from_py_with = arg)] radius: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let Some(model) = self.inner.model() else {
-            return Err(error(
-                py,
-                Kind::Config,
-                "rollout: a policy of a CallableModel has no plant to run on; step the model \
+        guard(py, || {
+            let Some(model) = self.inner.model() else {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "rollout: a policy of a CallableModel has no plant to run on; step the model \
                  with act()",
-            ));
-        };
-        let env = model.kind();
-        let spec = env.spec();
-        let rapier = match plant {
-            None => spec.robot_plant,
-            Some("model") if spec.robot_plant => {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    "plant: khepera policies run on the rapier plant only",
                 ));
-            }
-            Some("model") => false,
-            Some("rapier") => true,
-            Some(other) => {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!("plant: expected \"model\" or \"rapier\", got {other:?}"),
-                ));
-            }
-        };
-        if rapier && !(spec.rapier_point_masses || spec.robot_plant) {
-            return Err(error(
-                py,
-                Kind::Config,
-                format!(
-                    "plant: \"rapier\" does not apply to {env} policies (they run on their model)"
-                ),
-            ));
-        }
-        if radius.is_some() && !(rapier && spec.rapier_point_masses) {
-            return Err(error(
-                py,
-                Kind::Config,
-                "radius: applies to point-mass policies on plant=\"rapier\" only",
-            ));
-        }
-        if headings.is_some() && !spec.robot_plant {
-            return Err(error(
-                py,
-                Kind::Config,
-                "headings: applies to khepera policies only",
-            ));
-        }
-        let steps = steps.unwrap_or(spec.default_steps);
-        if steps == 0 {
-            return Err(error(py, Kind::Config, "steps: must be at least 1"));
-        }
-        let x0 = x0.map(|x| vector(x, "x0", None)).transpose()?;
-        let headings = headings.map(|h| vector(h, "headings", None)).transpose()?;
-        let start =
-            evaluate::start_for(model, x0, headings.as_deref()).map_err(|e| sim_error(py, &e))?;
-        let plant = if rapier && spec.rapier_point_masses {
-            let defaults = PointMassPlantConfig::default();
-            PlantChoice::Rapier(PointMassPlantConfig {
-                radius: radius.unwrap_or(defaults.radius),
-                ..defaults
-            })
-        } else {
-            PlantChoice::Model
-        };
-        let rollout = RolloutSpec {
-            kind: self.kind,
-            steps,
-            plant,
-            seed,
-        };
-        let policy = &*self.inner;
-        let outcome = py
-            .detach(|| evaluate::run(policy, &start, &rollout))
-            .map_err(|e| sim_error(py, &e))?;
-        let out = PyDict::new(py);
-        let a = self.action_dim_();
-        let metrics = match &outcome {
-            Outcome::PointMass {
-                trajectory,
-                metrics,
-                collisions,
-            } => {
-                trajectory_into(py, trajectory, a, &out)?;
-                let mut m = to_json(py, metrics)?;
-                if let (Some(c), Value::Object(map)) = (collisions, &mut m) {
-                    map.insert("plant".into(), Value::String("rapier".into()));
-                    map.insert("collisions".into(), to_json(py, c)?);
+            };
+            let env = model.kind();
+            let spec = env.spec();
+            let rapier = match plant {
+                None => spec.robot_plant,
+                Some("model") if spec.robot_plant => {
+                    return Err(error(
+                        py,
+                        Kind::Config,
+                        "plant: khepera policies run on the rapier plant only",
+                    ));
                 }
-                m
+                Some("model") => false,
+                Some("rapier") => true,
+                Some(other) => {
+                    return Err(error(
+                        py,
+                        Kind::Config,
+                        format!("plant: expected \"model\" or \"rapier\", got {other:?}"),
+                    ));
+                }
+            };
+            if rapier && !(spec.rapier_point_masses || spec.robot_plant) {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    format!(
+                        "plant: \"rapier\" does not apply to {env} policies (they run on their model)"
+                    ),
+                ));
             }
-            Outcome::Khepera { run, metrics } => {
-                trajectory_into(py, &run.trajectory, a, &out)?;
-                robot_logs(py, run, &out)?;
-                to_json(py, metrics)?
+            if radius.is_some() && !(rapier && spec.rapier_point_masses) {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "radius: applies to point-mass policies on plant=\"rapier\" only",
+                ));
             }
-            Outcome::Classic {
-                trajectory,
-                summary,
-            } => {
-                trajectory_into(py, trajectory, a, &out)?;
-                to_json(py, summary)?
+            if headings.is_some() && !spec.robot_plant {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "headings: applies to khepera policies only",
+                ));
             }
-        };
-        out.set_item("metrics", crate::json::to_python(py, &metrics)?)?;
-        Ok(out)
+            let steps = steps.unwrap_or(spec.default_steps);
+            if steps == 0 {
+                return Err(error(py, Kind::Config, "steps: must be at least 1"));
+            }
+            // The trajectory (states, actions, rewards) and its copies into numpy arrays, as
+            // `fuzzyq rollout` estimates it.
+            let per_step = 3.0 * 8.0 * (self.state_dim_() + self.action_dim_() + 2) as f64;
+            machine_limit(py)?
+                .check(&fuzzyq_sim::memory::rollouts(
+                    1.0,
+                    steps as f64,
+                    per_step,
+                    0.0,
+                ))
+                .map_err(|err| memory_error(py, "steps", &err))?;
+            let x0 = x0.map(|x| vector(x, "x0", None)).transpose()?;
+            let headings = headings.map(|h| vector(h, "headings", None)).transpose()?;
+            let start = evaluate::start_for(model, x0, headings.as_deref())
+                .map_err(|e| sim_error(py, &e))?;
+            let plant = if rapier && spec.rapier_point_masses {
+                let defaults = PointMassPlantConfig::default();
+                PlantChoice::Rapier(PointMassPlantConfig {
+                    radius: radius.unwrap_or(defaults.radius),
+                    ..defaults
+                })
+            } else {
+                PlantChoice::Model
+            };
+            let rollout = RolloutSpec {
+                kind: self.kind,
+                steps,
+                plant,
+                seed,
+            };
+            let policy = &*self.inner;
+            let outcome = py
+                .detach(|| evaluate::run(policy, &start, &rollout))
+                .map_err(|e| sim_error(py, &e))?;
+            let out = PyDict::new(py);
+            let a = self.action_dim_();
+            let metrics = match &outcome {
+                Outcome::PointMass {
+                    trajectory,
+                    metrics,
+                    collisions,
+                } => {
+                    trajectory_into(py, trajectory, a, &out)?;
+                    let mut m = to_json(py, metrics)?;
+                    if let (Some(c), Value::Object(map)) = (collisions, &mut m) {
+                        map.insert("plant".into(), Value::String("rapier".into()));
+                        map.insert("collisions".into(), to_json(py, c)?);
+                    }
+                    m
+                }
+                Outcome::Khepera { run, metrics } => {
+                    trajectory_into(py, &run.trajectory, a, &out)?;
+                    robot_logs(py, run, &out)?;
+                    to_json(py, metrics)?
+                }
+                Outcome::Classic {
+                    trajectory,
+                    summary,
+                } => {
+                    trajectory_into(py, trajectory, a, &out)?;
+                    to_json(py, summary)?
+                }
+            };
+            out.set_item("metrics", crate::json::to_python(py, &metrics)?)?;
+            Ok(out)
+        })
     }
 
-    fn __repr__(&self) -> String {
-        format!(
-            "Policy(kind={:?}, learner={:?}, env={}, state_dim={}, action_dim={})",
-            self.kind(),
-            self.learner(),
-            self.env()
-                .map_or_else(|| "None".into(), |e| format!("{e:?}")),
-            self.state_dim_(),
-            self.action_dim_()
-        )
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        guard(py, || {
+            Ok({
+                format!(
+                    "Policy(kind={:?}, learner={:?}, env={}, state_dim={}, action_dim={})",
+                    self.kind(),
+                    self.learner(),
+                    self.inner
+                        .env()
+                        .map_or_else(|| "None".into(), |e| format!("{:?}", e.name())),
+                    self.state_dim_(),
+                    self.action_dim_()
+                )
+            })
+        })
     }
 }

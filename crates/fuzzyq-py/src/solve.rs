@@ -18,6 +18,7 @@ use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig}
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary, Values};
 use fuzzyq_sim::learn::fit::FitConfig;
 use fuzzyq_sim::learn::samples::{Collection, Exploration, Transitions};
+use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::learned::BlockTables;
 use fuzzyq_sim::model::{EnvModel, F64Model};
 use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
@@ -27,8 +28,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::classic::ClassicModel;
-use crate::convert::{finite_vector, matrix};
-use crate::errors::{Kind, config_error, error, policy_file_error, sim_error, solve_error};
+use crate::convert::{arg, describe, finite_vector, matrix};
+use crate::errors::{
+    Kind, config_error, error, guard, machine_limit, memory_error, policy_file_error, sim_error,
+    solve_error,
+};
 use crate::model::{CallableModel, Grid, PointMass};
 use crate::policy::Policy;
 
@@ -162,6 +166,15 @@ fn observer<'a>(
 /// estimated from the transitions (as `fuzzyq train --learner learned-model` does) and the
 /// model supplies only the reward, actions and state ranges. The solution can be saved and
 /// acts on the learned model.
+///
+/// `absorbing_goal=True` needs a model with goal states at some core of the grid (the point
+/// masses' reward region; the classic benchmarks have none, the car's hilltop is a terminal
+/// state beyond the grid); elsewhere it is refused. `max_memory_gb` (default:
+/// 90% of the machine's memory, as `fuzzyq train --max-memory`) bounds the memory the solve
+/// needs (a `CallableModel`'s tables of successors and rewards of every core and joint action,
+/// the per-core vectors or `operator="q-values"`'s Q-values of a built-in model): a larger
+/// problem is refused with its estimate before anything is allocated or any callable called;
+/// pass a larger limit to solve it anyway.
 #[pyfunction]
 #[pyo3(signature = (
     model,
@@ -181,26 +194,28 @@ fn observer<'a>(
     threads = None,
     callback = None,
     transitions = None,
+    max_memory_gb = None,
 ))]
 #[allow(clippy::too_many_arguments)] // the solver's settings, as keyword arguments
 pub(crate) fn solve(
     py: Python<'_>,
     model: &Bound<'_, PyAny>,
-    grid: &Bound<'_, Grid>,
-    gamma: Option<f64>,
-    xi: Option<f64>,
-    max_sweeps: usize,
-    sweep: &str,
-    extrapolate: Option<bool>,
-    evaluation_sweeps: Option<usize>,
-    absorbing_goal: bool,
-    precision: Option<&str>,
-    backup: &str,
-    kernel: Option<&str>,
-    operator: &str,
-    threads: Option<usize>,
+    #[pyo3(from_py_with = arg)] grid: &Bound<'_, Grid>,
+    #[pyo3(from_py_with = arg)] gamma: Option<f64>,
+    #[pyo3(from_py_with = arg)] xi: Option<f64>,
+    #[pyo3(from_py_with = arg)] max_sweeps: usize,
+    #[pyo3(from_py_with = arg)] sweep: &str,
+    #[pyo3(from_py_with = arg)] extrapolate: Option<bool>,
+    #[pyo3(from_py_with = arg)] evaluation_sweeps: Option<usize>,
+    #[pyo3(from_py_with = arg)] absorbing_goal: bool,
+    #[pyo3(from_py_with = arg)] precision: Option<&str>,
+    #[pyo3(from_py_with = arg)] backup: &str,
+    #[pyo3(from_py_with = arg)] kernel: Option<&str>,
+    #[pyo3(from_py_with = arg)] operator: &str,
+    #[pyo3(from_py_with = arg)] threads: Option<usize>,
     callback: Option<Py<PyAny>>,
     transitions: Option<&Bound<'_, PyAny>>,
+    #[pyo3(from_py_with = arg)] max_memory_gb: Option<f64>,
 ) -> PyResult<Solution> {
     let given = Settings {
         gamma,
@@ -215,9 +230,34 @@ pub(crate) fn solve(
         kernel,
         operator,
     };
-    if threads == Some(0) {
-        return Err(error(py, Kind::Config, "threads: must be at least 1"));
-    }
+    guard(py, || {
+        solve_(
+            py,
+            model,
+            grid,
+            &given,
+            threads,
+            callback,
+            transitions,
+            max_memory_gb,
+        )
+    })
+}
+
+/// The body of [`solve`].
+#[allow(clippy::too_many_arguments)] // solve's arguments
+fn solve_(
+    py: Python<'_>,
+    model: &Bound<'_, PyAny>,
+    grid: &Bound<'_, Grid>,
+    given: &Settings<'_>,
+    threads: Option<usize>,
+    callback: Option<Py<PyAny>>,
+    transitions: Option<&Bound<'_, PyAny>>,
+    max_memory_gb: Option<f64>,
+) -> PyResult<Solution> {
+    check_threads(py, threads)?;
+    let limit = Limit::new(max_memory_gb).map_err(|e| sim_error(py, &e))?;
     if let Some(cb) = &callback
         && !cb.bind(py).is_callable()
     {
@@ -257,6 +297,23 @@ pub(crate) fn solve(
             solver: settings,
         };
         config.validate().map_err(|e| config_error(py, &e))?;
+        limit
+            .check(&fuzzyq_sim::memory::train(&config))
+            .map_err(|e| memory_error(py, "max_memory_gb", &e))?;
+        if config.solver.absorbing_goal {
+            let task = config.build_model().map_err(|e| sim_error(py, &e))?;
+            let inner = &g.inner;
+            let any_goal = py.detach(|| any_core(inner, |x| F64Model::is_goal(&task, x)));
+            if !any_goal {
+                return Err(no_goal(
+                    py,
+                    &format!(
+                        "no core of the grid is a goal state of the {} model",
+                        task.name()
+                    ),
+                ));
+            }
+        }
         let data = transitions
             .map(|t| transitions_from(t, &config))
             .transpose()?;
@@ -295,8 +352,11 @@ pub(crate) fn solve(
         return Err(error(
             py,
             Kind::InputType,
-            "model: expected a fuzzyq.PointMass, a classic benchmark (fuzzyq.DcMotor, \
-             fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm) or a fuzzyq.CallableModel",
+            format!(
+                "model: expected a fuzzyq.PointMass, a classic benchmark (fuzzyq.DcMotor, \
+                 fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm) or a fuzzyq.CallableModel, got {}",
+                describe(model)
+            ),
         ));
     };
     let settings = given.resolve(py, None)?;
@@ -308,8 +368,11 @@ pub(crate) fn solve(
              \"values\"",
         ));
     }
+    if settings.absorbing_goal {
+        return Err(no_goal(py, "a CallableModel has no goal states"));
+    }
     let cm = cm.get();
-    let (next, rewards) = cm.tabulate(py, &g.inner)?;
+    let (next, rewards) = cm.tabulate(py, &g.inner, settings.precision, &limit)?;
     let config = settings.solver_config();
     let cb = callback.as_ref();
     macro_rules! run {
@@ -323,6 +386,7 @@ pub(crate) fn solve(
                 conv(&rewards),
             )
             .map_err(|e| solve_error(py, &e))?;
+            drop((next, rewards));
             let table = Arc::new(table);
             let grid_t = g.to_precision::<$t>(py)?;
             let result = py
@@ -350,6 +414,53 @@ pub(crate) fn solve(
         Precision::F32 => run!(f32, Table32),
         Precision::F64 => run!(f64, Table64),
     }
+}
+
+/// Checks `threads` as `fuzzyq train --threads` does: at least 1, and at most 8 per core (at
+/// least 64): more workers only add memory (a stack each) and contention, and a huge count
+/// would exhaust the memory starting them.
+fn check_threads(py: Python<'_>, threads: Option<usize>) -> PyResult<()> {
+    let Some(n) = threads else {
+        return Ok(());
+    };
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let most = (8 * cores).max(64);
+    if (1..=most).contains(&n) {
+        Ok(())
+    } else {
+        Err(error(
+            py,
+            Kind::Config,
+            format!("threads: expected 1 to {most} on this machine ({cores} cores), got {n}"),
+        ))
+    }
+}
+
+/// Whether `is_goal` holds at any core of `grid` (in parallel; stops at the first).
+fn any_core(
+    grid: &fuzzyq_core::solver::Grid<f64>,
+    is_goal: impl Fn(&[f64]) -> bool + Sync,
+) -> bool {
+    use rayon::prelude::*;
+    let view = grid.view();
+    (0..grid.n_cores()).into_par_iter().any(|d| {
+        let mut x = [0.0; fuzzyq_core::MAX_DIMS];
+        let x = &mut x[..grid.n_dims()];
+        view.core_state(d, x).is_ok() && is_goal(x)
+    })
+}
+
+/// The error of `absorbing_goal=True` on a model without goal states (`why`): the option would
+/// change nothing but the iteration scheme, hence silently the result.
+fn no_goal(py: Python<'_>, why: &str) -> PyErr {
+    error(
+        py,
+        Kind::Config,
+        format!(
+            "absorbing_goal: {why}, so there is nothing to absorb (the option would only change \
+             the iteration scheme); leave absorbing_goal=False"
+        ),
+    )
 }
 
 /// The transitions of `obj` (a mapping with `states`, `actions`, `next_states` and
@@ -394,45 +505,59 @@ fn transitions_from(obj: &Bound<'_, PyAny>, config: &TrainConfig) -> PyResult<Tr
 pub(crate) fn collect<'py>(
     py: Python<'py>,
     model: &Bound<'py, PyAny>,
-    samples: usize,
-    seed: u64,
-    episode_steps: usize,
+    #[pyo3(from_py_with = arg)] samples: usize,
+    #[pyo3(from_py_with = arg)] seed: u64,
+    #[pyo3(from_py_with = arg)] episode_steps: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let task = if let Ok(pm) = model.cast::<PointMass>() {
-        EnvModel::PointMass((*pm.get().model).clone())
-    } else if let Ok(c) = model.cast::<ClassicModel>() {
-        (*c.get().model).clone()
-    } else {
-        return Err(error(
-            py,
-            Kind::InputType,
-            "model: expected a fuzzyq.PointMass or a classic benchmark (fuzzyq.DcMotor, \
-             fuzzyq.Pendulum, fuzzyq.Arm)",
-        ));
-    };
-    let collection = Collection {
-        samples,
-        episode_steps,
-        seed,
-    };
-    let data = py
-        .detach(|| {
-            fuzzyq_sim::train::collect_from_plant(&task, &collection, &mut Exploration::Random)
-        })
-        .map_err(|e| sim_error(py, &e))?;
-    let (e, d, n) = (data.state_dim(), data.action_dim(), data.len());
-    let (x, u, next, r) = data.columns();
-    let out = PyDict::new(py);
-    let array = |v: &[f64], cols: usize| -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let a = Array2::from_shape_vec((n, cols), v.to_vec())
-            .map_err(|err| error(py, Kind::Input, err.to_string()))?;
-        Ok(PyArray2::from_owned_array(py, a))
-    };
-    out.set_item("states", array(x, e)?)?;
-    out.set_item("actions", array(u, d)?)?;
-    out.set_item("next_states", array(next, e)?)?;
-    out.set_item("rewards", PyArray1::from_slice(py, r))?;
-    Ok(out)
+    guard(py, || {
+        let task = if let Ok(pm) = model.cast::<PointMass>() {
+            EnvModel::PointMass((*pm.get().model).clone())
+        } else if let Ok(c) = model.cast::<ClassicModel>() {
+            (*c.get().model).clone()
+        } else {
+            return Err(error(
+                py,
+                Kind::InputType,
+                format!(
+                    "model: expected a fuzzyq.PointMass or a classic benchmark (fuzzyq.DcMotor, \
+                 fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm), got {}",
+                    describe(model)
+                ),
+            ));
+        };
+        // States, actions, successors and rewards of every sample.
+        let (e, d) = (F64Model::state_dim(&task), F64Model::actions(&task).dim());
+        let per_sample = 8.0 * (2 * e + d * F64Model::n_agents(&task) + 1) as f64;
+        machine_limit(py)?
+            .check(&Estimate {
+                bytes: 2.0 * per_sample * samples as f64,
+                what: format!("{samples} transitions"),
+            })
+            .map_err(|err| memory_error(py, "samples", &err))?;
+        let collection = Collection {
+            samples,
+            episode_steps,
+            seed,
+        };
+        let data = py
+            .detach(|| {
+                fuzzyq_sim::train::collect_from_plant(&task, &collection, &mut Exploration::Random)
+            })
+            .map_err(|e| sim_error(py, &e))?;
+        let (e, d, n) = (data.state_dim(), data.action_dim(), data.len());
+        let (x, u, next, r) = data.columns();
+        let out = PyDict::new(py);
+        let array = |v: &[f64], cols: usize| -> PyResult<Bound<'py, PyArray2<f64>>> {
+            let a = Array2::from_shape_vec((n, cols), v.to_vec())
+                .map_err(|err| error(py, Kind::Input, err.to_string()))?;
+            Ok(PyArray2::from_owned_array(py, a))
+        };
+        out.set_item("states", array(x, e)?)?;
+        out.set_item("actions", array(u, d)?)?;
+        out.set_item("next_states", array(next, e)?)?;
+        out.set_item("rewards", PyArray1::from_slice(py, r))?;
+        Ok(out)
+    })
 }
 
 /// Reads a policy file written by `fuzzyq train` (any environment, any learner) or by
@@ -442,20 +567,27 @@ pub(crate) fn collect<'py>(
 /// record, `.policy(kind)`), and a `Policy` for a policy learned from samples (fuzzy
 /// Q-learning, VQQL: greedy and decentralised, each agent acting on its own observation).
 #[pyfunction]
-pub(crate) fn load(py: Python<'_>, path: PathBuf) -> PyResult<Py<PyAny>> {
-    let file = py
-        .detach(|| PolicyFile::load(&path))
-        .map_err(|e| policy_file_error(py, &e))?;
-    match file {
-        PolicyFile::Fqi(a) => Ok(Py::new(py, Solution::from_artifact(py, a, None)?)?.into_any()),
-        learned => {
-            let policy = py
-                .detach(|| SimPolicy::from_file(learned))
-                .map_err(|e| sim_error(py, &e))?;
-            let policy = Policy::new(Arc::new(policy), PolicyKind::Greedy);
-            Ok(Py::new(py, policy)?.into_any())
+pub(crate) fn load(
+    py: Python<'_>,
+    #[pyo3(from_py_with = arg)] path: PathBuf,
+) -> PyResult<Py<PyAny>> {
+    guard(py, || {
+        let file = py
+            .detach(|| PolicyFile::load(&path))
+            .map_err(|e| policy_file_error(py, &e))?;
+        match file {
+            PolicyFile::Fqi(a) => {
+                Ok(Py::new(py, Solution::from_artifact(py, a, None)?)?.into_any())
+            }
+            learned => {
+                let policy = py
+                    .detach(|| SimPolicy::from_file(learned))
+                    .map_err(|e| sim_error(py, &e))?;
+                let policy = Policy::new(Arc::new(policy), PolicyKind::Greedy);
+                Ok(Py::new(py, policy)?.into_any())
+            }
         }
-    }
+    })
 }
 
 /// The kernel instances this CPU runs, fastest first (`"avx512"`, `"avx2"`, `"portable"`, `"scalar"`).
@@ -663,17 +795,21 @@ impl Solution {
 
     /// `(lower, upper)` bounds of every sweep's change, shape `(sweeps, 2)`.
     #[getter]
-    fn deltas<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let flat: Vec<f64> = self
-            .summary
-            .deltas
-            .iter()
-            .flat_map(|&(a, b)| [a, b])
-            .collect();
-        PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((self.summary.deltas.len(), 2), flat).expect("pairs"),
-        )
+    fn deltas<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        guard(py, || {
+            Ok({
+                let flat: Vec<f64> = self
+                    .summary
+                    .deltas
+                    .iter()
+                    .flat_map(|&(a, b)| [a, b])
+                    .collect();
+                PyArray2::from_owned_array(
+                    py,
+                    Array2::from_shape_vec((self.summary.deltas.len(), 2), flat).expect("pairs"),
+                )
+            })
+        })
     }
 
     /// Wall-clock seconds of the solve (0 for a solution loaded from a file: files keep no
@@ -705,79 +841,91 @@ impl Solution {
     /// `theta[d, u]` for every core and joint action, shape `(n_cores, n_joint_actions)`.
     /// Only for problems with at most 5e7 Q-values (the paper's has 2.56e9).
     fn theta<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let policy = self.sim_policy(py)?;
-        let p = fqi(&policy);
-        let (n, m) = (p.n_cores(), p.n_joint_actions());
-        if n.saturating_mul(m) > 50_000_000 {
-            return Err(error(
+        guard(py, || {
+            let policy = self.sim_policy(py)?;
+            let p = fqi(&policy);
+            let (n, m) = (p.n_cores(), p.n_joint_actions());
+            if n.saturating_mul(m) > 50_000_000 {
+                return Err(error(
+                    py,
+                    Kind::Input,
+                    format!(
+                        "theta: {n} cores x {m} joint actions is more than 5e7 Q-values; use V and policies"
+                    ),
+                ));
+            }
+            let t = py.detach(|| p.theta()).map_err(|e| sim_error(py, &e))?;
+            Ok(PyArray2::from_owned_array(
                 py,
-                Kind::Input,
-                format!(
-                    "theta: {n} cores x {m} joint actions is more than 5e7 Q-values; use V and policies"
-                ),
-            ));
-        }
-        let t = py.detach(|| p.theta()).map_err(|e| sim_error(py, &e))?;
-        Ok(PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((n, m), t).expect("n x m"),
-        ))
+                Array2::from_shape_vec((n, m), t).expect("n x m"),
+            ))
+        })
     }
 
     /// `V` interpolated at state `x`.
     fn value(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<f64> {
-        let policy = self.sim_policy(py)?;
-        let p = fqi(&policy);
-        let x = finite_vector(x, "x", Some(p.state_dim()))?;
-        p.value(&x).map_err(|e| sim_error(py, &e))
+        guard(py, || {
+            let policy = self.sim_policy(py)?;
+            let p = fqi(&policy);
+            let x = finite_vector(x, "x", Some(p.state_dim()))?;
+            p.value(&x).map_err(|e| sim_error(py, &e))
+        })
     }
 
     /// A policy: `"greedy"` (eq 7, the maximiser of `Q(x, .)`) or `"interpolated"` (eq 22).
     #[pyo3(signature = (kind = "greedy"))]
-    fn policy(&self, py: Python<'_>, kind: &str) -> PyResult<Policy> {
-        let kind = parse_option::<PolicyKind>(py, "kind", kind)?;
-        Ok(Policy::new(self.sim_policy(py)?, kind))
+    fn policy(&self, py: Python<'_>, #[pyo3(from_py_with = arg)] kind: &str) -> PyResult<Policy> {
+        guard(py, || {
+            let kind = parse_option::<PolicyKind>(py, "kind", kind)?;
+            Ok(Policy::new(self.sim_policy(py)?, kind))
+        })
     }
 
     /// Writes the policy file (the format `fuzzyq rollout` reads), atomically. Only solutions
     /// of built-in models can be saved.
-    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
-        let Source::Env(config, learned) = &self.source else {
-            return Err(error(
-                py,
-                Kind::Config,
-                "save: only solutions of built-in models (PointMass, DcMotor, Pendulum, CarHill, \
+    fn save(&self, py: Python<'_>, #[pyo3(from_py_with = arg)] path: PathBuf) -> PyResult<()> {
+        guard(py, || {
+            let Source::Env(config, learned) = &self.source else {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "save: only solutions of built-in models (PointMass, DcMotor, Pendulum, CarHill, \
                  Arm) can be written to a policy file",
-            ));
-        };
-        let artifact = PolicyArtifact {
-            config: (**config).clone(),
-            values: self.values(py)?,
-            greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
-            summary: self.summary.clone(),
-            learned: learned.clone(),
-        };
-        artifact
-            .check()
-            .map_err(|e| error(py, Kind::Input, format!("save: {e}")))?;
-        py.detach(|| PolicyFile::Fqi(artifact).save(&path))
-            .map_err(|e| sim_error(py, &e))
+                ));
+            };
+            let artifact = PolicyArtifact {
+                config: (**config).clone(),
+                values: self.values(py)?,
+                greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
+                summary: self.summary.clone(),
+                learned: learned.clone(),
+            };
+            artifact
+                .check()
+                .map_err(|e| error(py, Kind::Input, format!("save: {e}")))?;
+            py.detach(|| PolicyFile::Fqi(artifact).save(&path))
+                .map_err(|e| sim_error(py, &e))
+        })
     }
 
-    fn __repr__(&self) -> String {
-        format!(
-            "Solution(env={}, sweeps={}, converged={}, final_delta={:.4}, seconds={:.2}, kernel={:?})",
-            self.env()
-                .map_or_else(|| "None".into(), |e| format!("{e:?}")),
-            self.summary.sweeps,
-            if self.summary.converged {
-                "True"
-            } else {
-                "False"
-            },
-            self.summary.final_delta,
-            self.summary.seconds,
-            self.summary.kernel
-        )
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        guard(py, || {
+            Ok({
+                format!(
+                    "Solution(env={}, sweeps={}, converged={}, final_delta={:.4}, seconds={:.2}, kernel={:?})",
+                    self.env()
+                        .map_or_else(|| "None".into(), |e| format!("{e:?}")),
+                    self.summary.sweeps,
+                    if self.summary.converged {
+                        "True"
+                    } else {
+                        "False"
+                    },
+                    self.summary.final_delta,
+                    self.summary.seconds,
+                    self.summary.kernel
+                )
+            })
+        })
     }
 }

@@ -616,9 +616,11 @@ fn train_one(
                 starts: config.fql_starts.clone(),
                 vqql: vqql.then(|| config.vqql.clone()),
             };
-            let learned = train::learn_from_samples(&config.task, &learning, |_| {
-                std::ops::ControlFlow::Continue(())
-            })?;
+            let learned = train::learn_from_samples(
+                &config.task,
+                &learning,
+                |_: &crate::learn::fql::EpisodeRecord| std::ops::ControlFlow::Continue(()),
+            )?;
             let outcome = &learned.outcome;
             if let Some(lloyd) = &learned.lloyd {
                 report.notes.push(format!(

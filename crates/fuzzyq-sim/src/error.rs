@@ -118,6 +118,24 @@ pub enum SimError {
     /// A policy file problem.
     #[error(transparent)]
     PolicyFile(#[from] PolicyFileError),
+    /// A run would need more memory than its limit.
+    #[error(
+        "this run needs about {needed_gb:.2} GB of memory for {what}, more than the limit of \
+         {limit_gb:.2} GB ({limit_source})"
+    )]
+    Memory {
+        /// The estimate.
+        needed_gb: f64,
+        /// The limit.
+        limit_gb: f64,
+        /// What needs the memory.
+        what: String,
+        /// Where the limit comes from.
+        limit_source: String,
+    },
+    /// A checkpoint problem.
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
 }
 
 /// Returns `Err(ConfigError::invalid(field, reason).into())` from the enclosing function
@@ -183,4 +201,53 @@ pub(crate) fn discount(field: &str, v: f64) -> Result<(), ConfigError> {
         format!("must be in [0, 1), got {v}")
     );
     Ok(())
+}
+
+/// Why a checkpoint cannot be read, written or continued.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// Reading failed.
+    #[error("cannot read checkpoint {}: {error}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        error: std::io::Error,
+    },
+    /// Writing failed (the previous checkpoint, if any, is intact).
+    #[error("cannot write checkpoint {}: {error}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        error: std::io::Error,
+    },
+    /// The file is not a checkpoint.
+    #[error("{} is not a fuzzyq checkpoint{}", path.display(), if *policy { " (it is a policy file)" } else { "" })]
+    NotACheckpoint {
+        /// The file.
+        path: PathBuf,
+        /// It is a policy file.
+        policy: bool,
+    },
+    /// The file is damaged or of another format version.
+    #[error("checkpoint {} {reason}", path.display())]
+    Damaged {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The checkpoint was written by a run of other settings.
+    #[error(
+        "checkpoint {} was written by a run with other settings: {difference}; run the same \
+         command that wrote it",
+        path.display()
+    )]
+    Settings {
+        /// The file.
+        path: PathBuf,
+        /// The first difference.
+        difference: String,
+    },
 }

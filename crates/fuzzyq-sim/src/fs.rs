@@ -25,6 +25,48 @@ pub fn read_capped(reader: impl Read, cap: u64) -> std::io::Result<Vec<u8>> {
     Ok(out)
 }
 
+/// How long [`open`] waits for a process to open a FIFO for writing.
+pub const FIFO_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Opens the input file at `path` for reading. A FIFO (named pipe) is opened without blocking
+/// and given [`FIFO_WAIT`] for a writer to appear, so that a FIFO nobody writes to ends in an
+/// error instead of waiting forever; other files open as usual.
+pub fn open(path: &Path) -> std::io::Result<std::fs::File> {
+    #[cfg(unix)]
+    {
+        use rustix::event::{PollFd, PollFlags, Timespec};
+        use rustix::fs::OFlags;
+        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+        if std::fs::metadata(path)?.file_type().is_fifo() {
+            let file = std::fs::OpenOptions::new()
+                .read(true)
+                .custom_flags(OFlags::NONBLOCK.bits() as i32)
+                .open(path)?;
+            // A FIFO with no writer since it was opened reports no event (not even a hang-up)
+            // until one opens it: wait for that, or give up.
+            let mut fds = [PollFd::new(&file, PollFlags::IN)];
+            let wait = Timespec {
+                tv_sec: FIFO_WAIT.as_secs() as _,
+                tv_nsec: 0,
+            };
+            if rustix::event::poll(&mut fds, Some(&wait))? == 0 {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::TimedOut,
+                    format!(
+                        "a FIFO that no process opened for writing within {} s",
+                        FIFO_WAIT.as_secs()
+                    ),
+                ));
+            }
+            // Blocking reads from here on: the writer is there.
+            let flags = rustix::fs::fcntl_getfl(&file)?;
+            rustix::fs::fcntl_setfl(&file, flags - OFlags::NONBLOCK)?;
+            return Ok(file);
+        }
+    }
+    std::fs::File::open(path)
+}
+
 /// The longest line fuzzyq reads in a text file: 1 MiB.
 pub const MAX_LINE_BYTES: u64 = 1 << 20;
 
@@ -33,7 +75,7 @@ pub const MAX_LINE_BYTES: u64 = 1 << 20;
 /// first megabyte.
 pub fn read_text(path: &Path, cap: u64) -> std::io::Result<String> {
     use std::io::BufRead;
-    let mut reader = std::io::BufReader::new(std::fs::File::open(path)?);
+    let mut reader = std::io::BufReader::new(open(path)?);
     let mut out = Vec::new();
     for line in 1.. {
         let n = (&mut reader)

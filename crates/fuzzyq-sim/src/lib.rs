@@ -58,11 +58,13 @@ pub mod error;
 pub mod fs;
 pub mod io;
 pub mod learn;
+pub mod memory;
 pub mod model;
 pub mod paper;
 pub mod run;
 #[cfg(test)]
 mod test_support;
+mod toml_doc;
 pub mod train;
 pub mod world;
 

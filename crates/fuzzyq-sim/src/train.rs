@@ -12,17 +12,18 @@ use std::ops::ControlFlow;
 use fuzzyq_core::Real;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, Delta, IterationOperator, Precision, Progress, Solution, SweepRecord,
+    self, Delta, IterationOperator, Precision, Progress, Solution, SolverState, SweepRecord,
 };
 use serde::Serialize;
 
 use crate::error::{ConfigError, SimError};
+use crate::io::checkpoint::FqiState;
 use crate::io::config::{EnvConfig, TrainConfig};
 use crate::io::policy_file::{
     KheperaPolicyFile, PointMassPolicyFile, PolicyArtifact, PolicyFile, TrainSummary, Values,
 };
 use crate::learn::fit::{self, FitConfig, FitReport, TableError};
-use crate::learn::fql::{EpisodeRecord, FqlConfig, FqlOutcome};
+use crate::learn::fql::{FqlConfig, FqlOutcome};
 use crate::learn::samples::{self, Collection, Exploration, Transitions};
 use crate::learn::tasks::{khepera as khepera_task, pointmass as pointmass_task};
 use crate::learn::vqql::{self, LloydReport, VqqlConfig};
@@ -51,45 +52,94 @@ fuzzyq_core::named_option! {
 /// ([`SolveError::Interrupted`](fuzzyq_core::solver::SolveError::Interrupted)).
 pub fn train(
     config: &TrainConfig,
-    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+    mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, SimError> {
+    train_from(config, None, |p, _| observer(p))
+}
+
+/// [`train`], continued from the state of an earlier run of the same configuration
+/// (`resume`) or started afresh; the observer also sees the run's state after every sweep
+/// that does not end it (to [checkpoint](crate::io::checkpoint) it). A continued run gives
+/// the policy of the uninterrupted one, bit for bit. Continuing needs the values operator:
+/// Busoniu's (`solver.operator = "q-values"`) is refused with a state.
+pub fn train_from(
+    config: &TrainConfig,
+    resume: Option<FqiState<'static>>,
+    observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
 ) -> Result<PolicyArtifact, SimError> {
     config.validate()?;
     let model = config.build_model()?;
-    solve_and_pack(&model, config, observer)
+    solve_and_pack(&model, config, resume, observer)
 }
 
-/// Solves `model` with the grid and solver settings of `config` in its precision.
+/// Solves `model` with the grid and solver settings of `config` in its precision, from
+/// `resume` if given.
 fn solve_and_pack<M>(
     model: &M,
     config: &TrainConfig,
-    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+    resume: Option<FqiState<'static>>,
+    mut observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
 ) -> Result<PolicyArtifact, SimError>
 where
     M: fuzzyq_core::Model<f32> + fuzzyq_core::Model<f64> + Sync,
 {
-    match config.solver.precision {
-        Precision::F32 => Ok(artifact(
-            config,
-            solve::<f32, M>(model, config, observer)?,
-            Values::F32,
-        )),
-        Precision::F64 => Ok(artifact(
-            config,
-            solve::<f64, M>(model, config, observer)?,
-            Values::F64,
-        )),
+    let precision_error = || {
+        ConfigError::invalid(
+            "checkpoint",
+            format!(
+                "holds values in the other precision than solver.precision = \"{}\"",
+                config.solver.precision.name()
+            ),
+        )
+    };
+    match (config.solver.precision, resume) {
+        (Precision::F32, resume @ (None | Some(FqiState::F32(_)))) => {
+            let resume = resume.and_then(|s| match s {
+                FqiState::F32(s) => Some(s),
+                FqiState::F64(_) => None,
+            });
+            let s = solve::<f32, M>(model, config, resume, |p, s| {
+                observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref())
+            })?;
+            Ok(artifact(config, s, Values::F32))
+        }
+        (Precision::F64, resume @ (None | Some(FqiState::F64(_)))) => {
+            let resume = resume.and_then(|s| match s {
+                FqiState::F64(s) => Some(s),
+                FqiState::F32(_) => None,
+            });
+            let s = solve::<f64, M>(model, config, resume, |p, s| {
+                observer(p, s.map(|s| FqiState::F64(s.clone())).as_ref())
+            })?;
+            Ok(artifact(config, s, Values::F64))
+        }
+        _ => Err(precision_error().into()),
     }
 }
 
 fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(
     model: &M,
     config: &TrainConfig,
-    mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
+    resume: Option<SolverState<'static, T>>,
+    mut observer: impl FnMut(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()>,
 ) -> Result<Solution<T>, SimError> {
     let grid = config.grid::<T>()?;
     let solver_config = config.solver.solver_config();
     if config.solver.operator == IterationOperator::Values {
-        return Ok(solver::solve(model, &grid, &solver_config, observer)?);
+        return Ok(solver::solve_from(
+            model,
+            &grid,
+            &solver_config,
+            resume,
+            observer,
+        )?);
+    }
+    if resume.is_some() {
+        return Err(ConfigError::invalid(
+            "checkpoint",
+            "runs of solver.operator = \"q-values\" cannot be continued (use \"values\")",
+        )
+        .into());
     }
     // Busoniu's operator: theta stored; reported in the solver's terms (exact deltas).
     let start = std::time::Instant::now();
@@ -112,11 +162,14 @@ fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(
             evaluation: false,
         };
         records.push(record);
-        observer(&Progress {
-            record,
-            bound,
-            xi: solver_config.xi,
-        })
+        observer(
+            &Progress {
+                record,
+                bound,
+                xi: solver_config.xi,
+            },
+            None,
+        )
     })?;
     for (r, &dv) in records.iter_mut().zip(&q.v_deltas) {
         r.delta_v = dv;
@@ -368,7 +421,7 @@ fn fit_and_solve(
     data: &Transitions,
     fit_config: &FitConfig,
     start: std::time::Instant,
-    observer: impl FnMut(&Progress) -> ControlFlow<()>,
+    mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
 ) -> Result<(PolicyArtifact, FitReport, Vec<TableError>, f64), SimError> {
     let declared = F64Model::blocks(task);
     let whole = [BlockSpec {
@@ -388,7 +441,7 @@ fn fit_and_solve(
     let table_error = fit::table_error(&tables, task)?;
     let learned = LearnedModel::new(task.clone(), tables.clone())?;
     let learning_seconds = start.elapsed().as_secs_f64();
-    let mut artifact = solve_and_pack(&learned, config, observer)?;
+    let mut artifact = solve_and_pack(&learned, config, None, |p, _| observer(p))?;
     artifact.learned = Some(Box::new(tables));
     Ok((artifact, report, table_error, learning_seconds))
 }
@@ -496,7 +549,7 @@ pub struct Learned {
 pub fn learn_from_samples(
     config: &TrainConfig,
     learning: &SampleLearning,
-    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl crate::learn::fql::Observer,
 ) -> Result<Learned, SimError> {
     config.validate()?;
     check_available(&config.env, learning.learner)?;

@@ -6,8 +6,8 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use fuzzyq_sim::compare::{self, CompareConfig, Comparison, Event, Learner};
-use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::model::pointmass::Starts;
+use fuzzyq_sim::model::{EnvKind, F64Model};
 
 use crate::cmd::train::load_config;
 use crate::output::{self, parse_list, print_stdout, write_file, write_json};
@@ -65,6 +65,10 @@ pub(crate) struct CompareArgs {
     /// paths.png and one rollout figure per learner.
     #[arg(long, value_name = "DIR", default_value = "compare")]
     out: PathBuf,
+    /// Refuse runs estimated to need more memory than GB gigabytes [default: 90% of this
+    /// machine's memory].
+    #[arg(long, value_name = "GB", allow_hyphen_values = true)]
+    max_memory: Option<f64>,
     /// No progress output.
     #[arg(long, short)]
     quiet: bool,
@@ -109,6 +113,16 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
         c.model_learning.collection.samples = n;
     }
     c.validate()?;
+    let task = c.task.build_model()?;
+    let mut estimate = output::rollout_estimate(
+        c.starts,
+        c.steps,
+        rayon::current_num_threads(),
+        F64Model::state_dim(&task),
+        F64Model::actions(&task).dim() * F64Model::n_agents(&task),
+    );
+    estimate.bytes += fuzzyq_sim::memory::train(&c.task).bytes;
+    output::check_memory(args.max_memory, &estimate)?;
     if let Some(budgets) = &args.curve {
         if budgets.is_empty() || budgets.contains(&0) {
             anyhow::bail!("--curve: name numbers of transitions of at least 1");

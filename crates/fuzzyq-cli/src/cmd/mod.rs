@@ -1,6 +1,7 @@
 //! The subcommands, one file each.
 
 pub(crate) mod bench;
+mod checkpoints;
 pub(crate) mod compare;
 pub(crate) mod config;
 pub(crate) mod rollout;

@@ -69,6 +69,10 @@ pub(crate) struct RolloutArgs {
     /// Write the metrics as JSON.
     #[arg(long, value_name = "METRICS.json")]
     json: Option<PathBuf>,
+    /// Refuse runs estimated to need more memory than GB gigabytes [default: 90% of this
+    /// machine's memory].
+    #[arg(long, value_name = "GB", allow_hyphen_values = true)]
+    max_memory: Option<f64>,
     /// Print nothing on success.
     #[arg(long, short)]
     quiet: bool,
@@ -92,8 +96,10 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
         ],
         &[(Some(&args.policy), "--policy")],
     )?;
-    for p in [&args.plot, &args.maps].into_iter().flatten() {
-        plot::check_extension(p)?;
+    for (p, flag) in [(&args.plot, "--plot"), (&args.maps, "--maps")] {
+        if let Some(p) = p {
+            plot::check_extension(p, flag)?;
+        }
     }
     if args.steps == Some(0) {
         anyhow::bail!("--steps must be at least 1");
@@ -109,6 +115,16 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     drop(policy.controller(args.policy_kind)?);
     let steps = args.steps.unwrap_or(spec.default_steps);
     let seed = args.seed.unwrap_or(0);
+    output::check_memory(
+        args.max_memory,
+        &output::rollout_estimate(
+            args.starts.unwrap_or(1),
+            steps,
+            rayon::current_num_threads(),
+            F64Model::state_dim(model),
+            F64Model::actions(model).dim() * F64Model::n_agents(model),
+        ),
+    )?;
     if let Some(p) = &args.maps {
         maps(&policy, model, p, args.policy_kind)?;
     }

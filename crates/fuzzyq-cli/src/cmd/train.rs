@@ -12,6 +12,7 @@ use fuzzyq_core::additive::Update;
 use fuzzyq_core::solver::{
     BackupPath, IterationOperator, Kernel, Precision, Progress, SolveError, SweepMode,
 };
+use fuzzyq_sim::io::checkpoint::{FqiState, RunState};
 use fuzzyq_sim::io::config::EnvConfig;
 use fuzzyq_sim::io::policy_file::PolicyFile;
 use fuzzyq_sim::io::transitions::read_transitions_csv;
@@ -22,6 +23,7 @@ use fuzzyq_sim::{SimError, TrainConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
+use super::checkpoints::{Checkpoints, Episodes};
 use crate::Failure;
 use crate::output::{self, refuse, write_json};
 use crate::plot;
@@ -124,12 +126,28 @@ pub(crate) struct TrainArgs {
     /// fql, vqql: draw the learning curve (PNG or SVG).
     #[arg(long, value_name = "FILE.png|FILE.svg")]
     plot: Option<PathBuf>,
+    /// fqi, fql, vqql: write the run's state to FILE (atomically) every --checkpoint-every
+    /// sweeps or episodes and when Ctrl-C stops it; --resume FILE continues from it.
+    #[arg(long, value_name = "FILE")]
+    checkpoint: Option<PathBuf>,
+    /// With --checkpoint: sweeps (fqi) or episodes (fql, vqql) between checkpoints
+    /// [default: 10 sweeps, 100 episodes].
+    #[arg(long, value_name = "N", requires = "checkpoint")]
+    checkpoint_every: Option<usize>,
+    /// Continue the run whose state --checkpoint wrote to FILE: give the command that wrote
+    /// it, plus --resume FILE. The policy is the uninterrupted run's, byte for byte.
+    #[arg(long, value_name = "FILE")]
+    resume: Option<PathBuf>,
     /// Where to write the policy file.
     #[arg(long, value_name = "POLICY")]
     out: PathBuf,
     /// Also write a JSON summary of the run.
     #[arg(long, value_name = "SUMMARY.json")]
     json: Option<PathBuf>,
+    /// Refuse runs estimated to need more memory than GB gigabytes [default: 90% of this
+    /// machine's memory].
+    #[arg(long, value_name = "GB", allow_hyphen_values = true)]
+    max_memory: Option<f64>,
     /// No progress output.
     #[arg(long, short)]
     quiet: bool,
@@ -329,9 +347,33 @@ fn stop_if(stop: &AtomicBool) -> ControlFlow<()> {
 
 pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let config = build_config(&args)?;
+    if matches!(args.learner, Learner::Fqi | Learner::LearnedModel) {
+        output::check_memory(args.max_memory, &fuzzyq_sim::memory::train(&config))?;
+    }
     let learned = args.learner == Learner::LearnedModel;
     if args.learner != Learner::Fqi && !learned {
+        for (set, flag) in solver_flags(&args) {
+            refuse(
+                set,
+                flag,
+                "sets the solver of fuzzy Q-iteration; it does not apply to --learner fql or vqql",
+            )?;
+        }
         return run_from_samples(&args, &config);
+    }
+    if config.solver.operator == IterationOperator::QValues {
+        for (set, flag) in [
+            (args.asynchronous, "--async"),
+            (args.backup.is_some(), "--backup"),
+            (args.extrapolate, "--extrapolate"),
+            (args.evaluation_sweeps.is_some(), "--evaluation-sweeps"),
+        ] {
+            refuse(
+                set,
+                flag,
+                "does not apply to --operator q-values (synchronous sweeps over every stored Q-value)",
+            )?;
+        }
     }
     for (set, flag) in [
         (args.samples.is_some(), "--samples"),
@@ -353,6 +395,21 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         (args.plot.is_some(), "--plot"),
     ] {
         refuse(set, flag, "applies to --learner fql or vqql only")?;
+    }
+    for (set, flag) in [
+        (args.checkpoint.is_some(), "--checkpoint"),
+        (args.resume.is_some(), "--resume"),
+    ] {
+        refuse(
+            set && learned,
+            flag,
+            "applies to --learner fqi, fql and vqql (a learned model's run is not resumable)",
+        )?;
+        refuse(
+            set && config.solver.operator == IterationOperator::QValues,
+            flag,
+            "needs --operator values (runs of the q-values operator cannot be continued)",
+        )?;
     }
     let learning = learned.then(|| {
         let mut l = train::ModelLearning::new(args.samples.unwrap_or(20_000), args.seed);
@@ -376,6 +433,16 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         None => None,
     };
     plan_outputs(&args)?;
+    let mut checkpoints = Checkpoints::new(
+        args.checkpoint.as_deref(),
+        args.checkpoint_every,
+        10,
+        config.to_toml(),
+    )?;
+    let resume = match checkpoints.resume(args.resume.as_deref(), true, "fqi")? {
+        Some(RunState::Fqi(state)) => Some(state),
+        _ => None,
+    };
     start_pool(args.threads)?;
     let threads = rayon::current_num_threads();
     let stop = output::interrupt_flag();
@@ -441,7 +508,14 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         ),
         _ => {}
     }
-    let observer = |p: &fuzzyq_core::solver::Progress| {
+    if let (Some(state), false, Some(path)) = (&resume, args.quiet, &args.resume) {
+        eprintln!(
+            "continuing from checkpoint {} after sweep {}",
+            path.display(),
+            state.sweeps()
+        );
+    }
+    let mut observer = |p: &fuzzyq_core::solver::Progress, state: Option<&FqiState<'_>>| {
         bar.set_length(p.bound as u64);
         bar.set_position(p.record.sweep as u64);
         bar.set_message(fmt_delta(p));
@@ -454,24 +528,29 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
                 p.record.seconds
             );
         }
-        stop_if(&stop)
+        let interrupted = stop_if(&stop).is_break();
+        checkpoints.after(p.record.sweep, interrupted, || {
+            state.map(|s| RunState::Fqi(s.clone()))
+        })
     };
     let with_run = |r: train::LearnedModelRun| (r.artifact.clone(), Some(r));
     let result = match (&learning, &logged) {
-        (Some(l), None) => train::train_learned(&config, l, observer).map(with_run),
+        (Some(l), None) => train::train_learned(&config, l, |p| observer(p, None)).map(with_run),
         (Some(l), Some(data)) => {
-            train::train_on_transitions(&config, data, &l.fit, observer).map(with_run)
+            train::train_on_transitions(&config, data, &l.fit, |p| observer(p, None)).map(with_run)
         }
-        (None, _) => train::train(&config, observer).map(|a| (a, None)),
+        (None, _) => train::train_from(&config, resume, observer).map(|a| (a, None)),
     };
     bar.finish_and_clear();
+    if let Some(e) = checkpoints.failure() {
+        return Err(e);
+    }
     let (artifact, learned_run) = match result {
         Ok(a) => a,
         Err(SimError::Solve(SolveError::Interrupted { sweeps })) => {
-            return Err(Failure::Interrupted(format!(
-                "interrupted after {sweeps} sweeps; no policy was written"
-            ))
-            .into());
+            return Err(
+                Failure::Interrupted(checkpoints.interrupted(&format!("{sweeps} sweeps"))).into(),
+            );
         }
         Err(e) => return Err(e.into()),
     };
@@ -592,19 +671,51 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The flags of the fuzzy Q-iteration solver, and whether each was given.
+fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 11] {
+    [
+        (args.xi.is_some(), "--xi"),
+        (args.max_sweeps.is_some(), "--max-sweeps"),
+        (args.operator.is_some(), "--operator"),
+        (args.asynchronous, "--async"),
+        (args.absorbing_goal, "--absorbing-goal"),
+        (args.extrapolate, "--extrapolate"),
+        (args.no_extrapolate, "--no-extrapolate"),
+        (args.evaluation_sweeps.is_some(), "--evaluation-sweeps"),
+        (args.backup.is_some(), "--backup"),
+        (args.precision.is_some(), "--precision"),
+        (args.kernel.is_some(), "--kernel"),
+    ]
+}
+
 /// Plans the outputs of `train` against its input files ([`output::plan`]).
 fn plan_outputs(args: &TrainArgs) -> anyhow::Result<()> {
+    // A run usually continues into the checkpoint it resumes from: then that file is the
+    // checkpoint output only (it is read whole before the first write).
+    let same = |a: &Path, b: &Path| {
+        a == b
+            || std::fs::canonicalize(a)
+                .ok()
+                .zip(std::fs::canonicalize(b).ok())
+                .is_some_and(|(x, y)| x == y)
+    };
+    let resume = args
+        .resume
+        .as_deref()
+        .filter(|r| !args.checkpoint.as_deref().is_some_and(|c| same(c, r)));
     output::plan(
         &[
             (Some(&args.out), "--out"),
             (args.json.as_deref(), "--json"),
             (args.curve.as_deref(), "--curve"),
             (args.plot.as_deref(), "--plot"),
+            (args.checkpoint.as_deref(), "--checkpoint"),
         ],
         &[
             (args.config.as_deref(), "--config"),
             (args.arena.as_deref(), "--arena"),
             (args.transitions.as_deref(), "--transitions"),
+            (resume, "--resume"),
         ],
     )
 }
@@ -619,7 +730,7 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
     )?;
     plan_outputs(args)?;
     if let Some(p) = &args.plot {
-        plot::check_extension(p)?;
+        plot::check_extension(p, "--plot")?;
     }
     learning.fql.seed = args.seed;
     if let Some(n) = args.episodes {
@@ -635,6 +746,16 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
     }
     learning.fql.validate()?;
     let fql = learning.fql.clone();
+    let mut checkpoints = Checkpoints::new(
+        args.checkpoint.as_deref(),
+        args.checkpoint_every,
+        100,
+        format!("{}\n# learning\n{learning:#?}\n", config.to_toml()),
+    )?;
+    let resume = match checkpoints.resume(args.resume.as_deref(), false, args.learner.name())? {
+        Some(RunState::Fql(state)) => Some(state),
+        _ => None,
+    };
     let stop = output::interrupt_flag();
     let bar = progress_bar(
         args.quiet,
@@ -661,6 +782,13 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
     }
     let plain = !args.quiet && !std::io::stderr().is_terminal();
     let started = std::time::Instant::now();
+    if let (Some(state), false, Some(path)) = (&resume, args.quiet, &args.resume) {
+        eprintln!(
+            "continuing from checkpoint {} after episode {}",
+            path.display(),
+            state.episodes()
+        );
+    }
     let progress = |r: &EpisodeRecord| {
         bar.set_position(r.episode as u64 + 1);
         if let Some(s) = r.eval_success_rate {
@@ -673,17 +801,23 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
                 );
             }
         }
-        stop_if(&stop)
     };
-    let learned = train::learn_from_samples(config, &learning, progress)?;
+    let observer = Episodes {
+        progress,
+        checkpoints: &mut checkpoints,
+        resume,
+        stop: &stop,
+    };
+    let learned = train::learn_from_samples(config, &learning, observer);
     bar.finish_and_clear();
+    if let Some(e) = checkpoints.failure() {
+        return Err(e);
+    }
+    let learned = learned?;
     let outcome = &learned.outcome;
     if stop.load(Ordering::SeqCst) {
-        return Err(Failure::Interrupted(format!(
-            "interrupted after {} episodes; no policy was written",
-            outcome.curve.len()
-        ))
-        .into());
+        let done = format!("{} episodes", outcome.curve.len());
+        return Err(Failure::Interrupted(checkpoints.interrupted(&done)).into());
     }
     let seconds = started.elapsed().as_secs_f64();
     output::write_file(&args.out, &learned.file.to_bytes()?)?;

@@ -48,6 +48,36 @@ pub(crate) fn parse_list(text: &str, flag: &str) -> anyhow::Result<Vec<f64>> {
         .collect()
 }
 
+/// Refuses a run whose memory `estimate` exceeds the limit: `--max-memory GB` if given
+/// (`max_memory_gb`), else 90% of the machine's memory; the message names the flag.
+pub(crate) fn check_memory(
+    max_memory_gb: Option<f64>,
+    estimate: &fuzzyq_sim::memory::Estimate,
+) -> anyhow::Result<()> {
+    let limit = fuzzyq_sim::memory::Limit::new(max_memory_gb)
+        .map_err(|_| anyhow::anyhow!("--max-memory must be a positive number of GB"))?;
+    limit
+        .check(estimate)
+        .map_err(|e| anyhow::anyhow!("{e}; --max-memory GB raises the limit"))
+}
+
+/// The memory of rolling out `runs` runs of `steps` steps with `threads` threads on a task
+/// with `state_dim` state variables and `action_dim` action components: each thread keeps one
+/// trajectory (state, action, reward and the written rows per step), each run its metrics.
+pub(crate) fn rollout_estimate(
+    runs: usize,
+    steps: usize,
+    threads: usize,
+    state_dim: usize,
+    action_dim: usize,
+) -> fuzzyq_sim::memory::Estimate {
+    let per_step = 3.0 * 8.0 * (state_dim + action_dim + 2) as f64;
+    let per_run = 64.0 * (state_dim + 8) as f64;
+    let mut e = fuzzyq_sim::memory::rollouts(runs as f64, steps as f64, 0.0, per_run);
+    e.bytes += (threads.min(runs.max(1))) as f64 * steps as f64 * per_step;
+    e
+}
+
 /// Fails naming `flag` if it was given (`set`) where it does not apply (`why`).
 pub(crate) fn refuse(set: bool, flag: &str, why: &str) -> anyhow::Result<()> {
     if set {

@@ -59,11 +59,11 @@ fn register_font() {
 }
 
 /// Refuses extensions other than `.png` and `.svg` before any work is done.
-pub(crate) fn check_extension(path: &Path) -> anyhow::Result<()> {
+pub(crate) fn check_extension(path: &Path, flag: &str) -> anyhow::Result<()> {
     match extension(path).as_deref() {
         Some("png" | "svg") => Ok(()),
         _ => Err(anyhow!(
-            "--plot {}: the file name must end in .png or .svg",
+            "{flag} {}: the file name must end in .png or .svg",
             path.display()
         )),
     }

@@ -130,3 +130,147 @@ fn os_errors_are_printed_once() {
         assert_eq!(err.matches("No such file").count(), 1, "{line}: {err}");
     }
 }
+
+#[test]
+fn runs_beyond_the_memory_limit_and_flags_that_do_not_apply_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let o = fuzzyq(
+        &["train", "--config", "one.toml", "--out", "p.fzq", "--quiet"],
+        d,
+    );
+    assert!(o.status.success());
+    let text = std::fs::read_to_string(d.join("one.toml")).unwrap();
+    // 161^4 cores x 3 agents' 25 actions: 6.7e8 cores, tens of GB.
+    let many: Vec<String> = (0..161)
+        .map(|i| format!("{:.1}", -8.0 + 0.1 * i as f64))
+        .collect();
+    let huge = text
+        .replacen(
+            "position_cores = [-6.0, -3.0, -0.3, -0.1, 0.0, 0.1, 0.3, 3.0, 6.0]",
+            &format!("position_cores = [{}]", many.join(", ")),
+            1,
+        )
+        .replacen(
+            "velocity_cores = [",
+            &format!("velocity_cores = [{}] #", many.join(", ")),
+            1,
+        );
+    std::fs::write(d.join("huge.toml"), huge).unwrap();
+    assert_all_fail(
+        d,
+        &[
+            (
+                "train --config huge.toml --out h.fzq",
+                "GB of memory for 6.719e8 cores",
+            ),
+            (
+                "train --config huge.toml --out h.fzq",
+                "--max-memory GB raises the limit",
+            ),
+            (
+                "train --config one.toml --out h.fzq --operator q-values --max-memory 0.000001",
+                "Q-values",
+            ),
+            (
+                "train --config one.toml --out h.fzq --max-memory 0",
+                "--max-memory must be a positive",
+            ),
+            (
+                "train --config one.toml --out h.fzq --max-memory nan",
+                "--max-memory must be a positive",
+            ),
+            (
+                "train --config one.toml --out h.fzq --max-memory -3",
+                "--max-memory",
+            ),
+            (
+                "compare --config huge.toml --out cmp --x0 -4,5,0,0 --learners fqi",
+                "GB of memory",
+            ),
+            (
+                "compare --config one.toml --out cmp --x0 -4,5,0,0 --starts 1000000000000",
+                "1.000e12 runs",
+            ),
+            (
+                "rollout --policy p.fzq --steps 4294967296",
+                "GB of memory for a run of 4.295e9 steps",
+            ),
+            (
+                "rollout --policy p.fzq --starts 1000000000000",
+                "GB of memory for 1.000e12 runs",
+            ),
+            (
+                "rollout --policy p.fzq --steps 100000 --max-memory 0.001",
+                "more than the limit of 0.00 GB (as set)",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner fql --operator values",
+                "--operator sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner fql --backup block",
+                "--backup sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner vqql --xi 0.1",
+                "--xi sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner fql --async",
+                "--async sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner fql --precision f64",
+                "--precision sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner fql --max-sweeps 3",
+                "--max-sweeps sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --learner fql --no-extrapolate",
+                "--no-extrapolate sets the solver",
+            ),
+            (
+                "train --config one.toml --out h.fzq --operator q-values --backup generic",
+                "--backup does not apply to --operator q-values",
+            ),
+            (
+                "train --config one.toml --out h.fzq --operator q-values --async",
+                "runs synchronous sweeps",
+            ),
+            (
+                "train --config one.toml --out h.fzq --operator q-values --evaluation-sweeps 3",
+                "--evaluation-sweeps does not apply",
+            ),
+            (
+                "rollout --policy p.fzq --maps m.bmp",
+                "--maps m.bmp: the file name must end in .png or .svg",
+            ),
+            ("rollout --policy p.fzq --plot m.gif", "--plot m.gif"),
+        ],
+    );
+}
+
+#[test]
+fn a_fifo_nobody_writes_to_is_refused_after_a_wait() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let made = std::process::Command::new("mkfifo")
+        .arg(d.join("fifo.toml"))
+        .status();
+    if !made.is_ok_and(|s| s.success()) {
+        eprintln!("skipped: mkfifo is not available");
+        return;
+    }
+    let o = fuzzyq(&["train", "--config", "fifo.toml", "--out", "p.fzq"], d);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("cannot read config fifo.toml: a FIFO that no process opened for writing"),
+        "{err}"
+    );
+    assert!(!d.join("p.fzq").exists());
+}

@@ -9,6 +9,7 @@ use std::time::SystemTime;
 
 mod limits;
 mod outputs;
+mod resume;
 
 fn fuzzyq(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_fuzzyq"))

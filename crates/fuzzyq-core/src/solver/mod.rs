@@ -89,10 +89,12 @@ mod iterate;
 mod par;
 mod qiter;
 pub(crate) mod simd;
+mod state;
 mod table;
 
-pub use iterate::solve;
+pub use iterate::{solve, solve_from};
 pub use qiter::{QSolution, solve_q};
+pub use state::SolverState;
 pub use table::TabulatedModel;
 
 use std::time::Instant;
@@ -456,6 +458,11 @@ pub enum SolveError {
     KernelUnavailable(Kernel),
     /// [`Operator::evaluate_policy`] on an operator that cannot evaluate a policy.
     PolicyEvaluation,
+    /// A state to continue from ([`solve_from`]) does not fit the run.
+    Resume {
+        /// What does not fit.
+        reason: &'static str,
+    },
     /// The observer asked to stop.
     Interrupted {
         /// Sweeps completed before the stop.
@@ -503,6 +510,7 @@ impl core::fmt::Display for SolveError {
                 "policy evaluation needs the block backup with several blocks, a state-only \
                  reward, no absorbing goal and no terminal states",
             ),
+            Self::Resume { reason } => write!(f, "cannot continue the solve: {reason}"),
             Self::Interrupted { sweeps } => write!(f, "interrupted after {sweeps} sweeps"),
         }
     }
@@ -522,6 +530,7 @@ impl From<EvalError> for SolveError {
 /// precision, so they hold up to its rounding (in `f32`, about `1e-7` relative to `max |V|`).
 /// For asynchronous sweeps both equal the change of `V` (see the [module docs](self)).
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Delta {
     /// Lower bound.
     pub lower: f64,
@@ -543,6 +552,7 @@ impl Delta {
 
 /// One sweep's record.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct SweepRecord {
     /// Sweep number, from 1.
     pub sweep: usize,
@@ -581,6 +591,7 @@ pub enum Stop {
 
 /// How [`solve`] iterated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub enum Scheme {
     /// Value iteration: every sweep is a full backup `V <- max_u (rho + gamma P_u V)` (the
     /// paper's fuzzy Q-iteration), stopped by the paper's rule on `||theta_{k+1} - theta_k||`.

@@ -7,6 +7,10 @@ use fuzzyq_core::solver::{
 };
 use fuzzyq_core::{Membership, Partition, Real};
 use serde::{Deserialize, Serialize};
+use toml::Spanned;
+use toml::de::DeValue;
+
+pub(crate) use crate::toml_doc::{TomlDoc, TomlError, line_at};
 
 use crate::error::{ConfigError, SimError, discount, positive, require};
 use crate::model::classic::arm::{Arm, ArmConfig};
@@ -520,21 +524,23 @@ fn check_cores(field: &str, cores: &[f64]) -> Result<(), ConfigError> {
 }
 
 impl TrainConfig {
-    /// Parses and validates a TOML document.
+    /// Parses and validates a TOML document. Errors are one line naming the field and, where
+    /// the document has it, its line: `env.mass: invalid type: string "a", expected f64 (line
+    /// 7)`, `env.mass: must be a positive number, got -1 (line 7)`.
     pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
-        let c: Self = toml::from_str(text).map_err(|e| {
-            // toml's messages span several lines (with a source excerpt); keep the first.
-            let msg = e.message().trim().to_string();
-            let at = e
-                .span()
-                .map(|s| {
-                    let line = text[..s.start.min(text.len())].lines().count().max(1);
-                    format!(" (line {line})")
-                })
-                .unwrap_or_default();
-            ConfigError::Parse(format!("{msg}{at}"))
+        let doc = TomlDoc::parse(text)?;
+        let c: Self = doc.deserialize().map_err(|e| {
+            // `[env]` is an internally tagged enum, which serde reads from a copy without
+            // positions: its errors point at the section. Read the section again as its
+            // kind's own type, with positions, to point at the field.
+            if e.within("env") {
+                env_error(&doc).unwrap_or(e)
+            } else {
+                e
+            }
         })?;
-        c.validate()?;
+        c.validate()
+            .map_err(|e| doc.locate(e, &["", "env.", "grid.", "solver."]))?;
         Ok(c)
     }
 
@@ -667,6 +673,41 @@ impl TrainConfig {
     }
 }
 
+/// The error of an `[env]` section read as its kind's own type (with positions), if that
+/// type refuses it.
+fn env_error(doc: &TomlDoc<'_>) -> Option<TomlError> {
+    let env = doc.root.get_ref().get("env")?;
+    let DeValue::Table(table) = env.get_ref() else {
+        return None;
+    };
+    let kind = table.get("kind")?.get_ref().as_str()?.to_string();
+    let mut table = table.clone();
+    table.remove("kind");
+    let table = Spanned::new(env.span(), table);
+    let probe = |r: Result<(), TomlError>| r.err();
+    match kind.as_str() {
+        "pointmass" => probe(doc.deserialize_table::<PointMassConfig>(table).map(drop)),
+        "khepera" => probe(doc.deserialize_table::<KheperaConfig>(table).map(drop)),
+        "dcmotor" => probe(
+            doc.deserialize_table::<ClassicEnv<DcMotorConfig>>(table)
+                .map(drop),
+        ),
+        "pendulum" => probe(
+            doc.deserialize_table::<ClassicEnv<PendulumConfig>>(table)
+                .map(drop),
+        ),
+        "carhill" => probe(
+            doc.deserialize_table::<ClassicEnv<CarHillConfig>>(table)
+                .map(drop),
+        ),
+        "arm" => probe(
+            doc.deserialize_table::<ClassicEnv<ArmConfig>>(table)
+                .map(drop),
+        ),
+        _ => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -704,7 +745,10 @@ mod tests {
     fn errors_name_the_field() {
         let e = TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replace("mass = 0.5", "mass = -1"))
             .unwrap_err();
-        assert_eq!(e.to_string(), "env.mass: must be a positive number, got -1");
+        assert_eq!(
+            e.to_string(),
+            "env.mass: must be a positive number, got -1 (line 7)"
+        );
         let e =
             TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replace("gamma = 0.96", "gamma = 1"))
                 .unwrap_err();
@@ -719,5 +763,115 @@ mod tests {
         ))
         .unwrap_err();
         assert!(e.to_string().starts_with("grid.velocity_cores"), "{e}");
+    }
+
+    /// Errors inside `[env...]` sections name the field and its line, not the section's
+    /// first line (serde reads `[env]`, an internally tagged enum, from a copy without
+    /// positions).
+    #[test]
+    fn errors_in_env_sections_point_at_the_field() {
+        let pm = |from: &str, to: &str| {
+            assert!(DEFAULT_POINTMASS_TOML.contains(from), "{from}");
+            TrainConfig::from_toml(&DEFAULT_POINTMASS_TOML.replacen(from, to, 1))
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            pm("mass = 0.5", "mass = \"heavy\""),
+            "env.mass: invalid type: string \"heavy\", expected f64 (line 7)"
+        );
+        let e = pm("mass = 0.5", "masss = 0.5");
+        assert!(
+            e.starts_with("env.masss: unknown field `masss`") && e.ends_with("(line 7)"),
+            "{e}"
+        );
+        let e = pm("agents = 2 ", "agents = -2 ");
+        assert!(
+            e.starts_with("env.agents: ") && e.ends_with("(line 6)"),
+            "{e}"
+        );
+        let e = pm("rk4_substeps = 10", "rk4_substeps = true");
+        assert!(
+            e.contains("env.rk4_substeps") && e.ends_with("(line 15)"),
+            "{e}"
+        );
+        // [env.friction] is itself an internally tagged enum.
+        let e = pm("eta = 1.0", "eta = \"x\"");
+        assert!(
+            e.contains("env.friction.eta") && e.ends_with("(line 20)"),
+            "{e}"
+        );
+        let e = pm("eta = 1.0", "etaa = 1.0");
+        assert!(e.contains("etaa") && e.ends_with("(line 20)"), "{e}");
+        // Outside [env], as before.
+        let e = pm("xi = 0.05", "xi = \"small\"");
+        assert!(
+            e.starts_with("solver.xi: invalid type") && e.ends_with("(line 30)"),
+            "{e}"
+        );
+        // Validation errors name the line too.
+        let e = pm("sample_time = 0.4", "sample_time = -0.4");
+        assert_eq!(
+            e,
+            "env.sample_time: must be a positive number, got -0.4 (line 8)"
+        );
+        // Syntax errors name the line and the key.
+        let e = pm("mass = 0.5", "mass = 0.5.1");
+        assert!(e.starts_with("mass: ") && e.ends_with("(line 7)"), "{e}");
+        let k = |from: &str, to: &str| {
+            assert!(DEFAULT_KHEPERA_TOML.contains(from), "{from}");
+            TrainConfig::from_toml(&DEFAULT_KHEPERA_TOML.replacen(from, to, 1))
+                .unwrap_err()
+                .to_string()
+        };
+        let e = k("sonar_std = 0.0", "sonar_std = \"loud\"");
+        assert!(
+            e.contains("env.noise.sonar_std") && e.ends_with("(line 35)"),
+            "{e}"
+        );
+        let e = k("rays_per_sonar = 3", "rays_per_sonar = 3.5");
+        assert!(
+            e.contains("env.rays_per_sonar") && e.ends_with("(line 19)"),
+            "{e}"
+        );
+    }
+
+    /// An array longer than the field takes is refused (toml would read `[-6, 0, 6]` as
+    /// `[-6, 0]`), naming the field, the values and the line.
+    #[test]
+    fn extra_values_are_refused() {
+        let e = TrainConfig::from_toml(&DEFAULT_KHEPERA_TOML.replacen(
+            "x = [-6.0, 6.0]",
+            "x = [-6, 0, 6]",
+            1,
+        ))
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            e,
+            "env.arena.x: has 3 values ([-6, 0, 6]), expected 2 (line 26)"
+        );
+        let e = TrainConfig::from_toml(&DEFAULT_KHEPERA_TOML.replacen(
+            "sonar_levels = [0.5, 1.0]",
+            "sonar_levels = [0.5, 1.0, 1.5]",
+            1,
+        ))
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("env.sonar_levels: has 3 values"), "{e}");
+    }
+
+    #[test]
+    fn toml_errors_are_one_line() {
+        for text in [
+            "\"a\nb\" = 1",
+            "[env]\nkind = \"pointmass\"\n\"x\\ny\" = 1",
+            "[env]\nkind = \"x\\ny\"",
+            "a = \"\u{7}\"\n",
+            &format!("[env]\nkind = \"{}\"", "z".repeat(10_000)),
+        ] {
+            let e = TrainConfig::from_toml(text).unwrap_err().to_string();
+            assert!(!e.contains('\n') && e.len() < 600, "{e:?}");
+        }
     }
 }

@@ -1,7 +1,10 @@
-//! Files: training configurations ([`config`]), policy files ([`policy_file`]), logged
-//! transitions ([`transitions`]), and the atomic writing every output of fuzzyq goes through.
+//! Files: training configurations ([`config`]), policy files ([`policy_file`]), checkpoints
+//! of training runs ([`checkpoint`]), logged transitions ([`transitions`]), and the atomic
+//! writing every output of fuzzyq goes through.
 
+pub mod checkpoint;
 pub mod config;
+mod container;
 pub mod policy_file;
 pub mod transitions;
 

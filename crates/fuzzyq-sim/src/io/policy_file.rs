@@ -30,7 +30,7 @@ use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, PolicyFileError, SimError, require};
-use crate::io::config::TrainConfig;
+use crate::io::config::{TomlDoc, TrainConfig};
 use crate::io::write_atomically;
 use crate::learn::additive::AdditiveQ;
 use crate::learn::fql::{FqlConfig, FqlOutcome};
@@ -437,16 +437,21 @@ impl PolicyFile {
             path: path.to_path_buf(),
             error,
         };
-        let mut file = std::fs::File::open(path).map_err(read_error)?;
+        let mut file = crate::fs::open(path).map_err(read_error)?;
         let mut header = Vec::with_capacity(HEADER_LEN);
         (&mut file)
             .take(HEADER_LEN as u64)
             .read_to_end(&mut header)
             .map_err(read_error)?;
         let bytes = if header.len() == HEADER_LEN && header[..MAGIC.len()] == MAGIC {
+            // No more than the header's length (and one byte to see whether more follow) is
+            // read, and nothing is allocated ahead: a length of 2^64 in a short file is
+            // found truncated, not reserved.
             let len = u64::from_le_bytes(header[12..20].try_into().expect("8 bytes"));
-            let rest = crate::fs::read_capped(file, len).map_err(read_error)?;
-            header.extend_from_slice(&rest);
+            (&mut file)
+                .take(len.saturating_add(1))
+                .read_to_end(&mut header)
+                .map_err(read_error)?;
             header
         } else {
             crate::fs::read_capped(header.as_slice().chain(file), crate::fs::MAX_TEXT_BYTES)
@@ -485,7 +490,12 @@ impl PolicyFile {
         }
         let len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
         let crc = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes"));
-        let expected = HEADER_LEN as u64 + len;
+        let Some(expected) = len.checked_add(HEADER_LEN as u64) else {
+            return Err(malformed(
+                path,
+                format!("its header claims an impossible payload length ({len} bytes)"),
+            ));
+        };
         if (bytes.len() as u64) < expected {
             return Err(PolicyFileError::Truncated {
                 path: path_buf,
@@ -496,7 +506,7 @@ impl PolicyFile {
         if (bytes.len() as u64) > expected {
             return Err(malformed(
                 path,
-                format!("{} bytes after the payload", bytes.len() as u64 - expected),
+                format!("data after the end its header gives ({len}-byte payload)"),
             ));
         }
         let payload = &bytes[HEADER_LEN..];
@@ -535,22 +545,40 @@ impl PolicyFile {
         Ok(file)
     }
 
-    /// A learned policy in the plain TOML files written before version 2.
+    /// A learned policy in the plain TOML files written before version 2. A text whose
+    /// top-level keys are a policy's is a policy: if it does not read, it is a damaged one
+    /// ([`PolicyFileError::Malformed`], naming the line and the field), not something else
+    /// ([`PolicyFileError::NotAPolicy`]).
     fn from_legacy_toml(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
         let not_a_policy = || PolicyFileError::NotAPolicy {
             path: path.to_path_buf(),
         };
-        let text = std::str::from_utf8(bytes).map_err(|_| not_a_policy())?;
-        let Ok(table) = text.parse::<toml::Table>() else {
-            return Err(not_a_policy());
+        let (text, bad_utf8) = match std::str::from_utf8(bytes) {
+            Ok(text) => (text, None),
+            Err(e) => {
+                let valid = &bytes[..e.valid_up_to()];
+                (
+                    std::str::from_utf8(valid).expect("valid up to here"),
+                    Some(e.valid_up_to()),
+                )
+            }
         };
-        if !(table.contains_key("q") && table.contains_key("fql")) {
+        if !looks_like_a_policy(text) {
             return Err(not_a_policy());
         }
-        let robots = table
-            .get("config")
-            .and_then(toml::Value::as_table)
-            .is_some_and(|c| c.contains_key("radius"));
+        if let Some(at) = bad_utf8 {
+            return Err(malformed(
+                path,
+                format!(
+                    "not UTF-8 text at byte {at} (line {})",
+                    crate::io::config::line_at(text, at)
+                ),
+            ));
+        }
+        let robots = TomlDoc::parse(text).is_ok_and(|doc| {
+            doc.table("config")
+                .is_some_and(|c| c.contains_key("radius"))
+        });
         let file = if robots {
             Self::Khepera(from_toml(text, path)?)
         } else {
@@ -630,11 +658,46 @@ fn malformed(path: &Path, reason: String) -> PolicyFileError {
     }
 }
 
-fn from_toml<T: serde::de::DeserializeOwned>(
+/// The top-level keys of a policy learned from samples ([`PointMassPolicyFile`],
+/// [`KheperaPolicyFile`]).
+const POLICY_KEYS: [&str; 7] = [
+    "config",
+    "starts",
+    "fql",
+    "vqql",
+    "q",
+    "converged_at",
+    "episodes",
+];
+
+/// Whether `text` is (what is left of) the TOML of a policy learned from samples: its
+/// top-level keys, as far as it reads, are a policy's and include the learning settings or
+/// the Q-function, or the task with its episodes or starts.
+fn looks_like_a_policy(text: &str) -> bool {
+    let (root, _) = toml::de::DeTable::parse_recoverable(text);
+    let keys: Vec<&str> = root
+        .get_ref()
+        .keys()
+        .map(|k| k.get_ref().as_ref())
+        .collect();
+    let has = |k: &str| keys.contains(&k);
+    !keys.is_empty()
+        && keys.iter().all(|k| POLICY_KEYS.contains(k))
+        && (has("fql") || has("q") || (has("config") && (has("episodes") || has("starts"))))
+}
+
+/// Reads the TOML of a policy learned from samples: a damaged one is named by its line and
+/// field (`q.phi[0]: value is NaN (line 40)`, `... at the end of the text (truncated?)`).
+fn from_toml<T: serde::de::DeserializeOwned + Serialize>(
     text: &str,
     path: &Path,
 ) -> Result<T, PolicyFileError> {
-    toml::from_str(text).map_err(|e| malformed(path, e.message().trim_end().to_string()))
+    let damaged = |e: crate::io::config::TomlError| malformed(path, e.to_string());
+    let doc = TomlDoc::parse(text).map_err(damaged)?;
+    if let Some(e) = doc.find_nan() {
+        return Err(damaged(e));
+    }
+    doc.deserialize().map_err(damaged)
 }
 
 fn to_toml<T: Serialize>(value: &T) -> Result<String, SimError> {
@@ -870,7 +933,7 @@ mod tests {
 
     #[test]
     fn point_mass_policy_files_round_trip_and_are_checked() {
-        let go = |_: &_| ControlFlow::Continue(());
+        let go = |_: &crate::learn::fql::EpisodeRecord| ControlFlow::Continue(());
         let point_mass = |path: &Path| -> Result<PointMassPolicyFile, PolicyFileError> {
             match PolicyFile::load(path)? {
                 PolicyFile::PointMass(f) => Ok(f),
@@ -972,7 +1035,10 @@ mod tests {
             eval_every: 0,
             ..kt::default_fql_config()
         };
-        let out = kt::train_fql(&config, &fql, |_| ControlFlow::Continue(())).unwrap();
+        let out = kt::train_fql(&config, &fql, |_: &crate::learn::fql::EpisodeRecord| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("fql.fzq");
         let file = KheperaPolicyFile::from_outcome(&config, &fql, &out);
@@ -1003,5 +1069,103 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(err.contains("feature space"), "{err}");
+    }
+
+    /// A damaged policy learned from samples says what is wrong (line, field, value), and is
+    /// told apart from a file that is no policy at all.
+    #[test]
+    fn damaged_toml_policies_say_what_is_wrong() {
+        let model = crate::test_support::tiny_model();
+        let starts = crate::test_support::tiny_starts();
+        let fql = FqlConfig {
+            episodes: 3,
+            max_steps: 5,
+            eval_every: 0,
+            ..crate::test_support::tiny_fql()
+        };
+        let features = pt::feature_space(&model, &[-6.0, 0.0, 6.0], &[-3.0, 0.0, 3.0]).unwrap();
+        let out = pt::train_fql(&model, &features, &starts, &fql, |_: &_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        let file = PointMassPolicyFile::from_outcome(model.config(), &starts, &fql, None, &out);
+        let text = toml::to_string(&file).unwrap();
+        let read = |text: &str| PolicyFile::from_bytes(text.as_bytes(), Path::new("p.toml"));
+        assert_eq!(read(&text).unwrap(), PolicyFile::PointMass(file));
+        let line_of = |needle: &str| text[..text.find(needle).unwrap()].lines().count() + 1;
+        let damaged = |text: &str| {
+            let e = read(text).unwrap_err();
+            assert!(matches!(e, PolicyFileError::Malformed { .. }), "{e}");
+            let m = e.to_string();
+            assert!(m.starts_with("p.toml is malformed: "), "{m}");
+            assert!(!m.contains('\n'), "{m}");
+            m
+        };
+
+        // Cut in the middle of the parameters, or at the end of a line.
+        let phi = text.find("phi = [").unwrap();
+        let m = damaged(&text[..phi + 20]);
+        assert!(m.contains("truncated"), "{m}");
+        assert!(
+            m.ends_with(&format!("(line {})", line_of("phi = ["))),
+            "{m}"
+        );
+        let m = damaged(&text[..phi]);
+        assert!(m.contains("missing field `phi`"), "{m}");
+
+        // A NaN names the field and its line; NaN (not TOML) is a syntax error on its line.
+        let number = phi + text[phi..].find(|c: char| c.is_ascii_digit()).unwrap();
+        let end = number + text[number..].find([',', ']']).unwrap();
+        let with = |value: &str| format!("{}{value}{}", &text[..number], &text[end..]);
+        let m = damaged(&with("nan"));
+        assert!(
+            m.contains("q.phi[0][0]: value is NaN")
+                && m.ends_with(&format!("(line {})", line_of("phi = ["))),
+            "{m}"
+        );
+        let m = damaged(&with("NaN"));
+        assert!(m.contains("phi: ") && m.contains("(line "), "{m}");
+        let m = damaged(&with("inf"));
+        assert!(m.contains("finite"), "{m}");
+        let m = damaged(&text.replace("episodes = ", "episodes = -"));
+        assert!(m.contains("episodes") && m.contains("(line "), "{m}");
+
+        // Not a policy at all.
+        for other in [
+            "",
+            "hello",
+            "not = [toml",
+            "[env]\nkind = 1\n",
+            crate::io::config::DEFAULT_POINTMASS_TOML,
+        ] {
+            let e = read(other).unwrap_err();
+            assert!(
+                matches!(e, PolicyFileError::NotAPolicy { .. }),
+                "{other:?}: {e}"
+            );
+        }
+        // Damaged beyond UTF-8.
+        let mut bytes = text.clone().into_bytes();
+        bytes[phi + 3] = 0xff;
+        let e = PolicyFile::from_bytes(&bytes, Path::new("p.toml")).unwrap_err();
+        assert!(e.to_string().contains("not UTF-8"), "{e}");
+    }
+
+    /// Header lengths near 2^64 do not overflow.
+    #[test]
+    fn impossible_lengths_are_refused() {
+        let bytes = PolicyFile::Fqi(tiny()).to_bytes().unwrap();
+        for len in [u64::MAX, u64::MAX - 23, u64::MAX - 24] {
+            let mut b = bytes.clone();
+            b[12..20].copy_from_slice(&len.to_le_bytes());
+            let e = decode(&b).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    PolicyFileError::Malformed { .. } | PolicyFileError::Truncated { .. }
+                ),
+                "{e}"
+            );
+        }
     }
 }

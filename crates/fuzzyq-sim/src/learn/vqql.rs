@@ -44,8 +44,6 @@
 //! paper's fuzzy grid (`9 * 9 * 5 * 5`), so that the table has exactly as many parameters as
 //! the additive fuzzy layout: 2 agents x 2025 cells x 25 actions = 101,250.
 
-use std::ops::ControlFlow;
-
 use fuzzyq_core::MAX_DIMS;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
@@ -53,7 +51,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, require};
 use crate::learn::codebook::{Codebook, sq_dist};
-use crate::learn::fql::{Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome};
+use crate::learn::fql::{Environment, FeatureSpace, FqlConfig, FqlOutcome};
 use crate::learn::tasks::pointmass::{PointMassEnv, train_fql};
 use crate::model::pointmass::{PointMass, Starts};
 
@@ -565,7 +563,7 @@ pub fn train_vqql(
     starts: &Starts,
     vqql: &VqqlConfig,
     fql: &FqlConfig,
-    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl crate::learn::fql::Observer,
 ) -> Result<(FqlOutcome, LloydReport), SimError> {
     fql.validate()?;
     let (features, report) = build_codebook(model, starts, vqql)?;

@@ -28,9 +28,10 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, require};
+use crate::toml_doc::TomlDoc;
 
 /// One obstacle.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Obstacle {
     /// A rectangle of half extents `half_extents`, rotated by `angle_deg` counter-clockwise.
@@ -50,6 +51,70 @@ pub enum Obstacle {
         /// Radius (m).
         radius: f64,
     },
+}
+
+/// An obstacle as written: its fields are read in place (not through serde's buffer of an
+/// internally tagged enum, which forgets where they are), so that an error names the field's
+/// line.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObstacle {
+    shape: Shape,
+    center: [f64; 2],
+    half_extents: Option<[f64; 2]>,
+    angle_deg: Option<f64>,
+    radius: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum Shape {
+    Box,
+    Disc,
+}
+
+impl<'de> Deserialize<'de> for Obstacle {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let raw = RawObstacle::deserialize(d)?;
+        match raw.shape {
+            Shape::Box => {
+                if raw.radius.is_some() {
+                    return Err(D::Error::custom(
+                        "unknown field `radius` for a box (a disc has it), expected `center`, \
+                         `half_extents` or `angle_deg`",
+                    ));
+                }
+                Ok(Self::Box {
+                    center: raw.center,
+                    half_extents: raw
+                        .half_extents
+                        .ok_or_else(|| D::Error::missing_field("half_extents"))?,
+                    angle_deg: raw.angle_deg.unwrap_or(0.0),
+                })
+            }
+            Shape::Disc => {
+                if let Some(field) = [
+                    ("half_extents", raw.half_extents.is_some()),
+                    ("angle_deg", raw.angle_deg.is_some()),
+                ]
+                .iter()
+                .find_map(|&(f, given)| given.then_some(f))
+                {
+                    return Err(D::Error::custom(format!(
+                        "unknown field `{field}` for a disc (a box has it), expected `center` or \
+                         `radius`"
+                    )));
+                }
+                Ok(Self::Disc {
+                    center: raw.center,
+                    radius: raw
+                        .radius
+                        .ok_or_else(|| D::Error::missing_field("radius"))?,
+                })
+            }
+        }
+    }
 }
 
 /// A rectangular walled arena with obstacles.
@@ -87,24 +152,38 @@ fn finite(field: &str, v: &[f64]) -> Result<(), ConfigError> {
 }
 
 impl Arena {
-    /// Reads and validates an arena file.
+    /// Reads and validates an arena file. Errors are one line naming the file, the field and
+    /// its line: `arena.toml: x: has 3 values ([-6, 0, 6]), expected 2 (line 1)`.
     pub fn from_file(path: &Path) -> Result<Self, SimError> {
         let text = crate::fs::read_text(path, crate::fs::MAX_TEXT_BYTES).map_err(|e| {
             ConfigError::invalid("arena", format!("cannot read {}: {e}", path.display()))
         })?;
         Self::from_toml(&text).map_err(|e| match e {
-            SimError::Config(ConfigError::Parse(m)) => {
-                ConfigError::Parse(format!("{}: {m}", path.display())).into()
-            }
+            SimError::Config(e) => ConfigError::Parse(format!("{}: {e}", path.display())).into(),
             other => other,
         })
     }
 
-    /// Parses and validates an arena from TOML text.
+    /// Parses and validates an arena from TOML text (errors name the field and its line).
     pub fn from_toml(text: &str) -> Result<Self, SimError> {
-        let arena: Self = toml::from_str(text)
-            .map_err(|e| ConfigError::Parse(format!("arena: {}", e.message().trim_end())))?;
-        arena.validate()?;
+        let doc = TomlDoc::parse(text).map_err(|e| ConfigError::Parse(format!("arena: {e}")))?;
+        let arena: Self = doc
+            .deserialize()
+            .map_err(|e| ConfigError::Parse(format!("arena: {e}")))?;
+        // Validation names fields `arena.x`, `arena.obstacle[1]`: in the file, `x`.
+        arena.validate().map_err(|e| match e {
+            ConfigError::Invalid { field, reason } => {
+                let line = doc.line_of(field.strip_prefix("arena.").unwrap_or(&field));
+                ConfigError::Invalid {
+                    field,
+                    reason: match line {
+                        Some(line) => format!("{reason} (line {line})"),
+                        None => reason,
+                    },
+                }
+            }
+            other => other,
+        })?;
         Ok(arena)
     }
 
@@ -153,8 +232,68 @@ impl Arena {
                     );
                 }
             }
+            let walls = || format!("the walls x = {:?}, y = {:?}", self.x, self.y);
+            require!(
+                self.overlaps_inside(o),
+                &field,
+                format!("{} lies entirely outside {}", describe(o), walls()),
+            );
+            require!(
+                !self
+                    .corners()
+                    .iter()
+                    .all(|&c| obstacle_distance(o, c) == 0.0),
+                &field,
+                format!("{} covers the whole arena within {}", describe(o), walls()),
+            );
         }
         Ok(())
+    }
+
+    /// The four corners of the walls' rectangle.
+    fn corners(&self) -> [[f64; 2]; 4] {
+        let ([x0, x1], [y0, y1]) = (self.x, self.y);
+        [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    }
+
+    /// Whether obstacle `o` covers some of the inside of the walls (more than a touch).
+    fn overlaps_inside(&self, o: &Obstacle) -> bool {
+        let ([x0, x1], [y0, y1]) = (self.x, self.y);
+        match o {
+            Obstacle::Disc { center, radius } => {
+                let near = [center[0].clamp(x0, x1), center[1].clamp(y0, y1)];
+                (near[0] - center[0]).hypot(near[1] - center[1]) < *radius
+            }
+            Obstacle::Box {
+                center,
+                half_extents: [hx, hy],
+                angle_deg,
+            } => {
+                // Separating axes: the rectangle's two and the box's two.
+                let (s, c) = angle_deg.to_radians().sin_cos();
+                let corners = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]].map(|[a, b]| {
+                    [
+                        center[0] + c * a * hx - s * b * hy,
+                        center[1] + s * a * hx + c * b * hy,
+                    ]
+                });
+                let span = |pts: &[[f64; 2]], axis: [f64; 2]| {
+                    pts.iter()
+                        .map(|p| p[0] * axis[0] + p[1] * axis[1])
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                            (lo.min(v), hi.max(v))
+                        })
+                };
+                let walls = self.corners();
+                [[1.0, 0.0], [0.0, 1.0], [c, s], [-s, c]]
+                    .iter()
+                    .all(|&axis| {
+                        let (a0, a1) = span(&corners, axis);
+                        let (b0, b1) = span(&walls, axis);
+                        a0 < b1 && b0 < a1
+                    })
+            }
+        }
     }
 
     /// Whether a disc of radius `r` centred at `c` touches a wall or an obstacle.
@@ -192,6 +331,23 @@ impl Arena {
             }
         }
         (best <= max_range).then_some(best.max(0.0))
+    }
+}
+
+/// An obstacle in words: `disc at (2, 0) of radius 0.5`.
+fn describe(o: &Obstacle) -> String {
+    match o {
+        Obstacle::Box {
+            center,
+            half_extents,
+            angle_deg,
+        } => format!(
+            "box at ({}, {}) of half extents ({}, {}) at {angle_deg} degrees",
+            center[0], center[1], half_extents[0], half_extents[1]
+        ),
+        Obstacle::Disc { center, radius } => {
+            format!("disc at ({}, {}) of radius {radius}", center[0], center[1])
+        }
     }
 }
 
@@ -327,5 +483,123 @@ radius = 0.5
         assert!(e.to_string().contains("obstacle[0]"), "{e}");
         let e = Arena::from_toml("x = [-1.0, 1.0]\ny = [-1.0, 1.0]\nwall = 3").unwrap_err();
         assert!(e.to_string().contains("wall"), "{e}");
+    }
+
+    /// `x = [-6, 0, 6]` is refused as the configuration refuses it under `[env.arena]` (toml
+    /// alone would read `[-6, 0]`).
+    #[test]
+    fn extra_numbers_are_refused() {
+        let e = Arena::from_toml("x = [-6, 0, 6]\ny = [-6.0, 6.0]").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "arena: x: has 3 values ([-6, 0, 6]), expected 2 (line 1)"
+        );
+        let e = Arena::from_toml(
+            "x = [-6, 6]\ny = [-6, 6]\n[[obstacle]]\nshape = \"disc\"\ncenter = [1, 2, 3]\nradius = 1",
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "arena: obstacle[0].center: has 3 values ([1, 2, 3]), expected 2 (line 5)"
+        );
+    }
+
+    /// Errors inside an obstacle name the field's line, not the `[[obstacle]]` line.
+    #[test]
+    fn obstacle_errors_name_the_field_line() {
+        let text = DOC.replace("radius = 0.5", "radius = \"big\"");
+        let e = Arena::from_toml(&text).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "arena: obstacle[1].radius: invalid type: string \"big\", expected f64 (line 13)"
+        );
+        let e = Arena::from_toml(&DOC.replace("radius = 0.5", "radius = 0.5\nangle_deg = 3"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("unknown field `angle_deg` for a disc") && e.ends_with("(line 14)"),
+            "{e}"
+        );
+        let e = Arena::from_toml(&DOC.replace("shape = \"disc\"", "shape = \"blob\""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("blob") && e.ends_with("(line 11)"), "{e}");
+        let e = Arena::from_toml(&DOC.replace("half_extents = [1.0, 0.5]\n", ""))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing field `half_extents`"), "{e}");
+    }
+
+    /// Obstacles entirely outside the walls, or covering the whole arena, are refused, naming
+    /// the obstacle, the walls and the line.
+    #[test]
+    fn obstacles_outside_or_covering_everything_are_refused() {
+        let with = |obstacle: &str| {
+            Arena::from_toml(&format!("{DOC}\n[[obstacle]]\n{obstacle}\n"))
+                .map_err(|e| e.to_string())
+        };
+        let e = with("shape = \"disc\"\ncenter = [20.0, 0.0]\nradius = 1.0").unwrap_err();
+        assert_eq!(
+            e,
+            "arena.obstacle[2]: disc at (20, 0) of radius 1 lies entirely outside the walls \
+             x = [-6.0, 6.0], y = [-6.0, 6.0] (line 15)"
+        );
+        let e =
+            with("shape = \"box\"\ncenter = [0.0, 0.0]\nhalf_extents = [7.0, 6.0]").unwrap_err();
+        assert!(
+            e.contains("obstacle[2]: box") && e.contains("covers the whole arena"),
+            "{e}"
+        );
+        let e = with("shape = \"disc\"\ncenter = [0.0, 0.0]\nradius = 9.0").unwrap_err();
+        assert!(e.contains("covers the whole arena"), "{e}");
+        // A thin box beyond the corner: its bounding box overlaps the arena, the box does not.
+        let e = with(
+            "shape = \"box\"\ncenter = [6.4, 6.4]\nhalf_extents = [2.0, 0.05]\nangle_deg = -45.0",
+        )
+        .unwrap_err();
+        assert!(e.contains("entirely outside"), "{e}");
+        // Only touching a wall from outside is outside too.
+        let e = with("shape = \"disc\"\ncenter = [7.0, 0.0]\nradius = 1.0").unwrap_err();
+        assert!(e.contains("entirely outside"), "{e}");
+        // Through a wall, across a corner, and the same box turned into the arena: accepted.
+        with("shape = \"disc\"\ncenter = [6.5, 0.0]\nradius = 1.0").unwrap();
+        with("shape = \"box\"\ncenter = [6.0, 6.0]\nhalf_extents = [0.5, 0.5]\nangle_deg = 30.0")
+            .unwrap();
+        with("shape = \"box\"\ncenter = [6.4, 6.4]\nhalf_extents = [2.0, 0.05]\nangle_deg = 45.0")
+            .unwrap();
+        // A wall-to-wall box leaves room beside it.
+        with("shape = \"box\"\ncenter = [0.0, 0.0]\nhalf_extents = [7.0, 1.0]").unwrap();
+        // The same check guards arenas built in code (and configurations).
+        let a = Arena {
+            obstacles: vec![Obstacle::Disc {
+                center: [0.0, 100.0],
+                radius: 1.0,
+            }],
+            ..Arena::default()
+        };
+        assert!(
+            a.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("obstacle[0]")
+        );
+    }
+
+    #[test]
+    fn file_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.toml");
+        std::fs::write(&path, "x = [-6, 0, 6]\ny = [-6.0, 6.0]").unwrap();
+        let e = Arena::from_file(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("{}: arena: x: has 3", path.display())),
+            "{e}"
+        );
+        std::fs::write(&path, "x = [6.0, -6.0]\ny = [-6.0, 6.0]").unwrap();
+        let e = Arena::from_file(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("{}: arena: walls", path.display())),
+            "{e}"
+        );
     }
 }

@@ -126,7 +126,7 @@
 //!     epsilon_decay_episodes: 100,
 //!     ..FqlConfig::default()
 //! };
-//! let outcome = fql::learn(&mut Line(0.0), &features, &config, |_| {
+//! let outcome = fql::learn(&mut Line(0.0), &features, &config, |_: &fql::EpisodeRecord| {
 //!     std::ops::ControlFlow::Continue(())
 //! })?;
 //! assert_eq!(outcome.q.greedy(0, &[0.5])?, 2); // right
@@ -137,7 +137,6 @@
 use std::collections::VecDeque;
 use std::fmt;
 use std::io::Write;
-use std::ops::ControlFlow;
 
 use fuzzyq_core::additive;
 use fuzzyq_core::partition::ActiveCores;
@@ -154,6 +153,10 @@ pub use crate::learn::env::{Environment, Transition};
 pub use crate::learn::features::FeatureSpace;
 use crate::learn::features::{FeatureKind, Lookup};
 
+mod resume;
+
+pub use resume::{FqlState, Observer, Snapshot};
+
 /// Why a [`learn`] run stopped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -163,7 +166,7 @@ pub enum StopReason {
     /// The convergence test passed and [`stop_at_convergence`](FqlConfig::stop_at_convergence)
     /// is set.
     Converged,
-    /// The progress callback returned [`ControlFlow::Break`].
+    /// The progress callback returned [`ControlFlow::Break`](std::ops::ControlFlow::Break).
     Callback,
     /// An update would have made a parameter non-finite; it was not applied and the run ended
     /// with the last finite parameters.
@@ -320,7 +323,7 @@ pub fn eval_seed(seed: u64) -> u64 {
 }
 
 /// One learning episode of a [`learn`] run.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeRecord {
     /// Episode index (0-based).
     pub episode: usize,
@@ -638,15 +641,17 @@ pub fn evaluate<E: Environment>(
 /// Learns an [`AdditiveQ`] on `env` by fuzzy Q-learning (see the [module docs](self)).
 ///
 /// `progress` sees every episode's record (after its evaluation, if any) and may stop the run
-/// with [`ControlFlow::Break`]; the outcome then holds what was learned so far with
-/// [`StopReason::Callback`]. Errors: an invalid configuration, a feature space that does not
+/// with [`ControlFlow::Break`](std::ops::ControlFlow::Break); the outcome then holds what was learned so far with
+/// [`StopReason::Callback`]. An [`Observer`] that is not a closure also sees the run's state
+/// after every episode and may continue an earlier run from its state
+/// ([`Observer::resume`]): the run then learns exactly what the uninterrupted one learns. Errors: an invalid configuration, a feature space that does not
 /// match the environment (agent count, observation lengths), an agent without actions, a
 /// non-finite observation (naming the agent) or reward.
 pub fn learn<E: Environment>(
     env: &mut E,
     features: &FeatureSpace,
     config: &FqlConfig,
-    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl Observer,
 ) -> Result<FqlOutcome, SimError> {
     config.validate()?;
     let m = check_env(env, features)?;
@@ -667,7 +672,7 @@ fn learn_with<E: Environment, L: Lookup>(
     mut q: AdditiveQ,
     m: Vec<usize>,
     config: &FqlConfig,
-    mut progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    mut progress: impl Observer,
 ) -> Result<FqlOutcome, SimError> {
     let mut bufs = Buffers::new(grids, &m);
     let mut log = WindowLog::new(config.window, &q.phi);
@@ -680,8 +685,20 @@ fn learn_with<E: Environment, L: Lookup>(
     let mut steps_total = 0usize;
     let mut moved = false;
     let mut stop = StopReason::EpisodeLimit;
+    if let Some(state) = progress.resume() {
+        state.check(&q.phi, config)?;
+        state.restore(&mut resume::Restored {
+            phi: &mut q.phi,
+            rng: &mut rng,
+            log: &mut log,
+            curve: &mut curve,
+            converged_at: &mut converged_at,
+            steps_total: &mut steps_total,
+            moved: &mut moved,
+        });
+    }
 
-    for episode in 0..config.episodes {
+    for episode in curve.len()..config.episodes {
         let epsilon = config.epsilon_at(episode);
         let alpha = config.alpha_at(episode);
         env.reset(&mut rng);
@@ -804,8 +821,18 @@ fn learn_with<E: Environment, L: Lookup>(
             eval_mean_return: evaluation.map(|e| e.mean_return),
             eval_success_rate: evaluation.map(|e| e.success_rate),
         };
-        let flow = progress(&record);
         curve.push(record);
+        let snapshot = (!last).then(|| Snapshot {
+            phi: &q.phi,
+            rng: &rng,
+            window: &log.entries,
+            window_episodes: &log.per_episode,
+            curve: &curve,
+            converged_at,
+            steps_total,
+            moved,
+        });
+        let flow = progress.episode(&curve[curve.len() - 1], snapshot.as_ref());
         if last {
             break;
         }

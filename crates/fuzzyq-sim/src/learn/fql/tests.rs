@@ -1,5 +1,7 @@
 //! Tests of the parent module.
 
+use std::ops::ControlFlow;
+
 use super::*;
 
 fn close(a: f64, b: f64) -> bool {
@@ -343,14 +345,19 @@ fn callback_stops_early_and_csv_has_one_row_per_episode() {
         ..line_config()
     };
     let mut seen = 0;
-    let out = learn(&mut Lines::new(1), &features, &config, |r| {
-        seen += 1;
-        if r.episode == 3 {
-            ControlFlow::Break(())
-        } else {
-            ControlFlow::Continue(())
-        }
-    })
+    let out = learn(
+        &mut Lines::new(1),
+        &features,
+        &config,
+        |r: &EpisodeRecord| {
+            seen += 1;
+            if r.episode == 3 {
+                ControlFlow::Break(())
+            } else {
+                ControlFlow::Continue(())
+            }
+        },
+    )
     .unwrap();
     assert_eq!(seen, 4);
     assert_eq!(out.stop, StopReason::Callback);

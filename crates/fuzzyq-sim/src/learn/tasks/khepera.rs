@@ -58,18 +58,18 @@
 //! Unlike a learning episode, a rollout does not stop at the region.
 //!
 //! ```no_run
+//! //! use fuzzyq_sim::learn::fql::EpisodeRecord;
 //! use fuzzyq_sim::learn::tasks::khepera::{default_fql_config, train_fql};
 //! use fuzzyq_sim::model::khepera::KheperaConfig;
 //!
 //! let config = KheperaConfig::default();
 //! let fql = default_fql_config();
-//! let outcome = train_fql(&config, &fql, |_| std::ops::ControlFlow::Continue(()))?;
+//! let outcome = train_fql(&config, &fql, |_: &EpisodeRecord| ControlFlow::Continue(()))?;
 //! println!("{} episodes", outcome.curve.len());
 //! # Ok::<(), fuzzyq_sim::SimError>(())
 //! ```
 
 use std::f64::consts::PI;
-use std::ops::ControlFlow;
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
@@ -77,7 +77,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, require};
 use crate::learn::fql::{
-    self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
+    self, AdditiveQ, Environment, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
 use crate::model::khepera::random_starts;
 use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS, goal_polar};
@@ -438,7 +438,7 @@ pub fn default_fql_config() -> FqlConfig {
 pub fn train_fql(
     config: &KheperaConfig,
     fql: &FqlConfig,
-    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl crate::learn::fql::Observer,
 ) -> Result<FqlOutcome, SimError> {
     let mut env = KheperaEnv::new(config)?;
     train_fql_on(&mut env, fql, progress)
@@ -448,7 +448,7 @@ pub fn train_fql(
 pub fn train_fql_on(
     env: &mut KheperaEnv,
     fql: &FqlConfig,
-    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl crate::learn::fql::Observer,
 ) -> Result<FqlOutcome, SimError> {
     let features = feature_space(env.config())?;
     let result = fql::learn(env, &features, fql, progress);
@@ -480,7 +480,10 @@ pub fn check_q(q: &AdditiveQ, config: &KheperaConfig) -> Result<(), SimError> {
 
 #[cfg(test)]
 mod tests {
+    use std::ops::ControlFlow;
+
     use super::*;
+    use crate::learn::fql::EpisodeRecord;
     use crate::model::khepera::{angle_level, distance_level, sonar_level};
 
     /// `t` lies strictly between two neighbouring cores.
@@ -688,7 +691,7 @@ mod tests {
         let config = KheperaConfig::default();
         let fql = smoke_config();
         let mut seen = 0;
-        let out = train_fql(&config, &fql, |_| {
+        let out = train_fql(&config, &fql, |_: &EpisodeRecord| {
             seen += 1;
             ControlFlow::Continue(())
         })
@@ -701,7 +704,8 @@ mod tests {
         assert!(out.q.params().iter().flatten().all(|v| v.is_finite()));
         assert_eq!(out.q.params()[0].len(), 19683 * 4);
         // Deterministic: the same seed learns the same parameters.
-        let again = train_fql(&config, &fql, |_| ControlFlow::Continue(())).unwrap();
+        let again =
+            train_fql(&config, &fql, |_: &EpisodeRecord| ControlFlow::Continue(())).unwrap();
         assert_eq!(again.q, out.q);
         // (Debug text: `param_change` is NaN before a full window, and NaN != NaN.)
         assert_eq!(format!("{:?}", again.curve), format!("{:?}", out.curve));
@@ -713,7 +717,12 @@ mod tests {
             gamma: 1.0,
         }))
         .unwrap();
-        let shaped = train_fql_on(&mut env, &fql, |_| ControlFlow::Continue(())).unwrap();
+        let shaped = train_fql_on(
+            &mut env,
+            &fql,
+            |_: &EpisodeRecord| ControlFlow::Continue(()),
+        )
+        .unwrap();
         assert_eq!(shaped.curve.len(), 20);
         assert!(shaped.q.params().iter().flatten().all(|v| v.is_finite()));
         assert!(shaped.q.params().iter().flatten().any(|v| *v != 0.0));

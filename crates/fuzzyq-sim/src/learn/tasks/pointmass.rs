@@ -38,14 +38,12 @@
 //! let model = PointMass::paper();
 //! let features = task::feature_space(&model, &paper::POSITION_CORES, &paper::VELOCITY_CORES)?;
 //! let fql = task::default_fql_config();
-//! let outcome = task::train_fql(&model, &features, &task::default_starts(), &fql, |_| {
+//! let outcome = task::train_fql(&model, &features, &task::default_starts(), &fql, |_: &fuzzyq_sim::learn::fql::EpisodeRecord| {
 //!     std::ops::ControlFlow::Continue(())
 //! })?;
 //! println!("{} episodes", outcome.curve.len());
 //! # Ok::<(), fuzzyq_sim::SimError>(())
 //! ```
-
-use std::ops::ControlFlow;
 
 use fuzzyq_core::Model;
 use fuzzyq_core::partition::Partition;
@@ -53,7 +51,7 @@ use rand_pcg::Pcg64Mcg;
 
 use crate::error::{ConfigError, SimError, require};
 use crate::learn::fql::{
-    self, AdditiveQ, Environment, EpisodeRecord, FeatureSpace, FqlConfig, FqlOutcome, Transition,
+    self, AdditiveQ, Environment, FeatureSpace, FqlConfig, FqlOutcome, Transition,
 };
 use crate::model::pointmass::{PointMass, Starts};
 
@@ -312,7 +310,7 @@ pub fn train_fql(
     features: &FeatureSpace,
     starts: &Starts,
     fql: &FqlConfig,
-    progress: impl FnMut(&EpisodeRecord) -> ControlFlow<()>,
+    progress: impl crate::learn::fql::Observer,
 ) -> Result<FqlOutcome, SimError> {
     let mut env = PointMassEnv::new(model, starts.clone())?;
     let result = fql::learn(&mut env, features, fql, progress);
@@ -327,7 +325,10 @@ mod tests {
     use rand::SeedableRng;
     use serde::{Deserialize, Serialize};
 
+    use std::ops::ControlFlow;
+
     use super::*;
+    use crate::learn::fql::EpisodeRecord;
     use crate::learn::vqql::{self, VqqlConfig};
     use crate::model::pointmass::random_starts;
     use crate::paper::{POSITION_CORES, TABLE1_X0, VELOCITY_CORES};

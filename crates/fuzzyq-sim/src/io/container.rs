@@ -1,0 +1,130 @@
+//! The binary container of fuzzyq's files: a magic tag naming the kind of file, a format
+//! version, the payload's length and CRC-32, then the payload.
+//!
+//! | bytes | content |
+//! |---|---|
+//! | 8 | magic tag (its first byte `0x89` catches 7-bit and text-mode mangling) |
+//! | 4 | format version, `u32` little-endian |
+//! | 8 | payload length in bytes, `u64` little-endian |
+//! | 4 | CRC-32 of the payload, `u32` little-endian |
+//! | n | payload |
+
+use std::io::Read as _;
+use std::path::Path;
+
+/// Bytes before the payload.
+pub(crate) const HEADER_LEN: usize = 8 + 4 + 8 + 4;
+
+/// The container of `payload`.
+pub(crate) fn encode(magic: &[u8; 8], version: u32, payload: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
+    out.extend_from_slice(magic);
+    out.extend_from_slice(&version.to_le_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&crc32fast::hash(payload).to_le_bytes());
+    out.extend_from_slice(payload);
+    out
+}
+
+/// What is wrong with a container's bytes.
+#[derive(Debug, PartialEq, Eq)]
+pub(crate) enum Damage {
+    /// Shorter than its header says (or than a header).
+    Truncated {
+        /// Bytes present.
+        found: u64,
+        /// Bytes expected.
+        expected: u64,
+    },
+    /// Bytes after the payload.
+    Trailing(u64),
+    /// The payload does not match its CRC-32.
+    Checksum,
+}
+
+/// Splits a container (whose tag the caller has checked) into its version and its payload,
+/// checking length and checksum.
+pub(crate) fn split(bytes: &[u8]) -> Result<(u32, &[u8]), Damage> {
+    let found = bytes.len() as u64;
+    let header = bytes.get(..HEADER_LEN).ok_or(Damage::Truncated {
+        found,
+        expected: HEADER_LEN as u64,
+    })?;
+    let field = |r: std::ops::Range<usize>| {
+        header[r]
+            .iter()
+            .rev()
+            .fold(0u64, |acc, &b| (acc << 8) | u64::from(b))
+    };
+    let (version, len, crc) = (field(8..12) as u32, field(12..20), field(20..24) as u32);
+    let expected = (HEADER_LEN as u64).saturating_add(len);
+    if found < expected {
+        return Err(Damage::Truncated { found, expected });
+    }
+    if found > expected {
+        return Err(Damage::Trailing(found - expected));
+    }
+    let payload = &bytes[HEADER_LEN..];
+    if crc32fast::hash(payload) != crc {
+        return Err(Damage::Checksum);
+    }
+    Ok((version, payload))
+}
+
+/// What [`read`] found.
+pub(crate) enum Read {
+    /// A container with the expected tag: the header and at most one byte more than the
+    /// payload it announces.
+    Container(Vec<u8>),
+    /// Something else: its first bytes (at most a header's length).
+    Other(Vec<u8>),
+}
+
+/// Reads the file at `path` once (a pipe works): if it starts with `magic`, the header and as
+/// many bytes as its header announces and one more (so [`split`] sees trailing bytes; a lying
+/// header cannot make it read forever), else only its first bytes.
+pub(crate) fn read(path: &Path, magic: &[u8; 8]) -> std::io::Result<Read> {
+    let mut file = crate::fs::open(path)?;
+    let mut bytes = Vec::with_capacity(HEADER_LEN);
+    (&mut file)
+        .take(HEADER_LEN as u64)
+        .read_to_end(&mut bytes)?;
+    if bytes.len() < magic.len() || bytes[..magic.len()] != magic[..] {
+        return Ok(Read::Other(bytes));
+    }
+    if bytes.len() == HEADER_LEN {
+        let len = u64::from_le_bytes(bytes[12..20].try_into().unwrap_or_default());
+        // At most one byte beyond the announced payload: enough to see trailing bytes.
+        file.take(len.saturating_add(1)).read_to_end(&mut bytes)?;
+    }
+    Ok(Read::Container(bytes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trips_and_names_the_damage() {
+        let magic = *b"\x89TESTFQ\n";
+        let bytes = encode(&magic, 7, b"payload");
+        assert_eq!(split(&bytes), Ok((7, &b"payload"[..])));
+        assert_eq!(
+            split(&bytes[..bytes.len() - 2]),
+            Err(Damage::Truncated {
+                found: bytes.len() as u64 - 2,
+                expected: bytes.len() as u64
+            })
+        );
+        assert!(matches!(split(&bytes[..5]), Err(Damage::Truncated { .. })));
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(split(&longer), Err(Damage::Trailing(1)));
+        let mut flipped = bytes.clone();
+        *flipped.last_mut().unwrap() ^= 1;
+        assert_eq!(split(&flipped), Err(Damage::Checksum));
+        let mut lying = bytes;
+        lying[12..20].copy_from_slice(&u64::MAX.to_le_bytes());
+        assert!(matches!(split(&lying), Err(Damage::Truncated { .. })));
+    }
+}
