@@ -58,7 +58,9 @@
 //! Unlike a learning episode, a rollout does not stop at the region.
 //!
 //! ```no_run
-//! //! use fuzzyq_sim::learn::fql::EpisodeRecord;
+//! use std::ops::ControlFlow;
+//!
+//! use fuzzyq_sim::learn::fql::EpisodeRecord;
 //! use fuzzyq_sim::learn::tasks::khepera::{default_fql_config, train_fql};
 //! use fuzzyq_sim::model::khepera::KheperaConfig;
 //!
