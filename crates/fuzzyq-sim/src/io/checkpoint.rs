@@ -136,7 +136,7 @@ impl Checkpoint<'static> {
         };
         match container::read(path, &MAGIC).map_err(read)? {
             container::Read::Container(bytes) => Self::from_bytes(&bytes, path),
-            container::Read::Other(head) => Err(CheckpointError::NotACheckpoint {
+            container::Read::Other(head, _) => Err(CheckpointError::NotACheckpoint {
                 path: path.to_path_buf(),
                 policy: head.starts_with(&super::policy_file::MAGIC),
             }),

@@ -76,13 +76,13 @@ pub(crate) enum Read {
     /// A container with the expected tag: the header and at most one byte more than the
     /// payload it announces.
     Container(Vec<u8>),
-    /// Something else: its first bytes (at most a header's length).
-    Other(Vec<u8>),
+    /// Something else: its first bytes (at most a header's length) and the rest, unread.
+    Other(Vec<u8>, std::fs::File),
 }
 
 /// Reads the file at `path` once (a pipe works): if it starts with `magic`, the header and as
 /// many bytes as its header announces and one more (so [`split`] sees trailing bytes; a lying
-/// header cannot make it read forever), else only its first bytes.
+/// header cannot make it read forever), else only its first bytes (the rest is the caller's).
 pub(crate) fn read(path: &Path, magic: &[u8; 8]) -> std::io::Result<Read> {
     let mut file = crate::fs::open(path)?;
     let mut bytes = Vec::with_capacity(HEADER_LEN);
@@ -90,7 +90,7 @@ pub(crate) fn read(path: &Path, magic: &[u8; 8]) -> std::io::Result<Read> {
         .take(HEADER_LEN as u64)
         .read_to_end(&mut bytes)?;
     if bytes.len() < magic.len() || bytes[..magic.len()] != magic[..] {
-        return Ok(Read::Other(bytes));
+        return Ok(Read::Other(bytes, file));
     }
     if bytes.len() == HEADER_LEN {
         let len = u64::from_le_bytes(bytes[12..20].try_into().unwrap_or_default());

@@ -437,25 +437,15 @@ impl PolicyFile {
             path: path.to_path_buf(),
             error,
         };
-        let mut file = crate::fs::open(path).map_err(read_error)?;
-        let mut header = Vec::with_capacity(HEADER_LEN);
-        (&mut file)
-            .take(HEADER_LEN as u64)
-            .read_to_end(&mut header)
-            .map_err(read_error)?;
-        let bytes = if header.len() == HEADER_LEN && header[..MAGIC.len()] == MAGIC {
-            // No more than the header's length (and one byte to see whether more follow) is
-            // read, and nothing is allocated ahead: a length of 2^64 in a short file is
-            // found truncated, not reserved.
-            let len = u64::from_le_bytes(header[12..20].try_into().expect("8 bytes"));
-            (&mut file)
-                .take(len.saturating_add(1))
-                .read_to_end(&mut header)
-                .map_err(read_error)?;
-            header
-        } else {
-            crate::fs::read_capped(header.as_slice().chain(file), crate::fs::MAX_TEXT_BYTES)
-                .map_err(read_error)?
+        // A container is read no further than its header's length (and one byte to see
+        // whether more follow), nothing allocated ahead: a length of 2^64 in a short file is
+        // found truncated, not reserved.
+        let bytes = match super::container::read(path, &MAGIC).map_err(read_error)? {
+            super::container::Read::Container(bytes) => bytes,
+            super::container::Read::Other(head, rest) => {
+                crate::fs::read_capped(head.as_slice().chain(rest), crate::fs::MAX_TEXT_BYTES)
+                    .map_err(read_error)?
+            }
         };
         Self::from_bytes(&bytes, path)
     }
@@ -628,12 +618,7 @@ impl PolicyFile {
             Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
         };
         let payload = postcard::to_stdvec(&payload).expect("a policy always serialises");
-        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
-        out.extend_from_slice(&MAGIC);
-        out.extend_from_slice(&u32::to_le_bytes(version));
-        out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-        out.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
-        out.extend_from_slice(&payload);
+        let out = super::container::encode(&MAGIC, version, &payload);
         Ok(out)
     }
 
