@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Literal
 
 import numpy as np
 
@@ -53,7 +54,8 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.5), sharex=True, sharey=True)
-    for ax, kind in zip(axes, ["greedy", "interpolated"]):
+    kinds: list[Literal["greedy", "interpolated"]] = ["greedy", "interpolated"]
+    for ax, kind in zip(axes, kinds):
         states = rollout(model, solution.policy(kind), x0, args.steps)
         for i in range(model.n_agents):
             path = states[:, 4 * i : 4 * i + 2]

@@ -4,6 +4,8 @@
 # builds without std and without an allocator; and the Python package's tests (pytest,
 # hypothesis, the Gymnasium and PettingZoo checkers, stubtest) against a wheel built from this
 # checkout and installed into a fresh virtual environment.
+# Also: mypy --strict on the README's examples, the package's doctests, and the strict build of
+# the documentation site (mkdocs.yml).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,5 +22,10 @@ rm -rf "$venv"
 # Python-CLI tests use the binary `cargo test` just built from this checkout.
 export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"
 (cd target && "$OLDPWD/$venv/bin/python" -m pytest "$OLDPWD/python/tests" -q -p no:cacheprovider)
+# (The pytest run above includes `mypy --strict` on every README python block and
+# examples/*.py, python/tests/test_readme.py, and the package's doctests, test_docs.py.)
+# The documentation site (mkdocs.yml): the pinned tools, then a strict build (any warning fails).
+"$venv/bin/pip" install --quiet -r docs/requirements.txt
+NO_MKDOCS_2_WARNING=1 "$venv/bin/mkdocs" build --strict --quiet --site-dir target/site
 (cd target && "$OLDPWD/$venv/bin/python" -m mypy.stubtest fuzzyq._fuzzyq)
 echo "all tests passed"

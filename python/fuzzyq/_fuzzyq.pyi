@@ -1,8 +1,14 @@
-"""Type stubs of the fuzzyq extension module (checked against it with mypy.stubtest)."""
+"""Type stubs of the fuzzyq extension module (checked against it with mypy.stubtest).
+
+The extension module ``fuzzyq._fuzzyq`` is written in Rust (pyo3); the package ``fuzzyq``
+re-exports everything here. Every string option is typed as a ``Literal`` of the names the
+extension accepts, so that a misspelt option (``policy("gredy")``) fails type checking
+instead of raising `ConfigError` at run time.
+"""
 
 from collections.abc import Callable, Mapping, Sequence
 from os import PathLike
-from typing import Any, final
+from typing import Any, Literal, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -20,6 +26,7 @@ __all__ = [
     "__version__",
     "Grid",
     "PointMass",
+    "Khepera",
     "CallableModel",
     "ClassicModel",
     "DcMotor",
@@ -32,9 +39,11 @@ __all__ = [
     "load",
     "collect",
     "available_kernels",
+    "_restore",
 ]
 
 __version__: str
+"""The version of the fuzzyq package (the Rust crates' version)."""
 
 class FuzzyqError(Exception):
     """Base class of every error fuzzyq raises.
@@ -44,49 +53,191 @@ class FuzzyqError(Exception):
     """
 
 class ConfigError(FuzzyqError, ValueError):
-    """An invalid setting, grid or model definition."""
+    """An invalid setting, grid or model definition.
+
+    A setting, parameter or model definition of the right type with a value it cannot take:
+    a negative count, a non-finite number, an unknown option name, repeated actions,
+    ``absorbing_goal=True`` on a model without goal states.
+    """
 
 class InputError(FuzzyqError, ValueError):
-    """An array of the wrong shape, or with values out of range."""
+    """An array of the wrong shape, or with values out of range.
+
+    The message names the expected shape; an index out of range raises it too.
+    """
 
 class InputTypeError(FuzzyqError, TypeError):
-    """An argument of the wrong type or dtype."""
+    """An argument of the wrong type or dtype.
+
+    For example a string for a number, a float for a count, a list for a `Grid`.
+    """
 
 class ModelError(FuzzyqError, ValueError):
-    """A model returned data of the wrong shape or non-finite values."""
+    """A model returned data of the wrong shape or non-finite values.
+
+    Raised when a `CallableModel`'s transition function returns unusable data.
+    """
 
 class PolicyFileError(FuzzyqError, OSError):
-    """A policy file that cannot be read or written."""
+    """A policy file that cannot be read or written.
+
+    Truncated, corrupted or foreign files are refused with this error.
+    """
 
 class SolverError(FuzzyqError, RuntimeError):
-    """A problem the solver refuses to solve, or a run too large for the memory limit."""
+    """A problem the solver refuses to solve, or a run too large for the memory limit.
+
+    ``solve(..., max_memory_gb=...)`` raises it deliberately, with the estimate, before
+    anything is allocated.
+    """
 
 class InternalError(FuzzyqError, RuntimeError):
     """A bug in fuzzyq (a Rust panic), never caused by bad input: please report it."""
 
 @final
 class Grid:
-    """A fuzzy grid: triangular memberships per state variable, combined by product."""
+    """A fuzzy grid: triangular memberships per state variable, combined by product.
 
-    def __new__(cls, cores: Sequence[npt.ArrayLike]) -> Grid: ...
+    Each state variable has an increasing sequence of cores; the membership of a core is 1 at
+    the core and falls linearly to 0 at its neighbours, and a joint core's membership is the
+    product over the variables (the memberships of a state sum to 1). Joint cores are numbered
+    in row-major (C) order: ``values.reshape(grid.shape)`` views per-core values (such as
+    `Solution.V`) as an array over the grid.
+
+    Grids pickle (``pickle.dumps(grid)``).
+
+    Args:
+        cores: one increasing 1-D sequence of cores per state variable.
+
+    Raises:
+        InputTypeError: `cores` is not a sequence of 1-D arrays.
+        ConfigError: cores not strictly increasing, non-finite, beyond single precision's
+            range or too close to stay distinct in it, or too many joint cores.
+
+    Example:
+        ```python
+        grid = fuzzyq.Grid([np.linspace(-1, 1, 21), np.linspace(-1, 1, 21)])
+        grid.shape  # (21, 21)
+        ```
+    """
+
+    def __new__(cls, cores: Sequence[npt.ArrayLike]) -> Grid:
+        """Creates the grid of `cores` (see the class docstring)."""
+
     @property
-    def n_dims(self) -> int: ...
+    def n_dims(self) -> int:
+        """Number of state variables."""
+
     @property
-    def n_cores(self) -> int: ...
+    def n_cores(self) -> int:
+        """Number of joint cores: the product of the per-variable counts."""
+
     @property
-    def shape(self) -> tuple[int, ...]: ...
+    def shape(self) -> tuple[int, ...]:
+        """Number of cores per state variable, as a tuple."""
+
     @property
-    def cores(self) -> list[npt.NDArray[np.float64]]: ...
+    def cores(self) -> list[npt.NDArray[np.float64]]:
+        """The cores of each state variable (copies)."""
+
     def memberships(
         self, x: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]: ...
-    def core_state(self, index: int) -> npt.NDArray[np.float64]: ...
-    def core_states(self) -> npt.NDArray[np.float64]: ...
-    def interpolate(self, values: npt.ArrayLike, x: npt.ArrayLike) -> float: ...
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """The active cores of state `x` and their memberships.
+
+        Args:
+            x: a state, shape ``(n_dims,)``, finite.
+
+        Returns:
+            ``(indices, memberships)``: the joint indices of the cores whose membership at
+            `x` is not zero, and those memberships, which sum to 1.
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def core_state(self, index: int) -> npt.NDArray[np.float64]:
+        """The state at which joint core `index` has membership 1.
+
+        Args:
+            index: a joint core index, ``0 <= index < n_cores``.
+
+        Returns:
+            The core's state, shape ``(n_dims,)``.
+
+        Raises:
+            InputError: `index` is out of range.
+        """
+
+    def core_states(self) -> npt.NDArray[np.float64]:
+        """Every core's state, in joint-core order.
+
+        Returns:
+            An array of shape ``(n_cores, n_dims)``.
+
+        Raises:
+            InputError: the grid has more than 2e8 values to return.
+        """
+
+    def interpolate(self, values: npt.ArrayLike, x: npt.ArrayLike) -> float:
+        """The fuzzy interpolation ``sum_d mu_d(x) values[d]`` of per-core values at `x`.
+
+        Args:
+            values: one value per joint core, shape ``(n_cores,)`` (for example
+                `Solution.V`).
+            x: a state, shape ``(n_dims,)``.
+
+        Returns:
+            The interpolated value.
+
+        Raises:
+            InputError: `values` or `x` has the wrong shape, or `x` non-finite values.
+        """
 
 @final
 class PointMass:
-    """The point-mass task of the paper's section 3.1."""
+    """The point-mass task of the paper's section 3.1, for `agents` agents.
+
+    Each agent is a point mass on the plane with friction, ``m s'' = -eta s' + u``; forces
+    are held over each sample time, positions and velocities are clamped to their limits
+    after each step. The state is ``[s1x, s1y, v1x, v1y, s2x, ...]`` (4 variables per agent);
+    each agent's actions are the square of `force_levels` (``u_x`` slowest); the shared reward
+    is `goal_reward` while the whole state is within `goal_radius` of the origin (evaluated at
+    the current state). The defaults are the paper's task: ``m = 0.5 kg``, ``eta = 1 kg/s``,
+    ``T = 0.4 s``, forces ``{-2, -0.2, 0, 0.2, 2}`` per axis (25 actions per agent), reward 5
+    within 0.1 of the origin. With constant friction the dynamics separate into one
+    ``(position, velocity)`` block per agent and axis, which the solver's block backup uses.
+
+    Point masses pickle (``pickle.dumps(model)``).
+
+    Args:
+        agents: number of agents (point masses), at least 1.
+        mass: mass of each point mass (kg), ``m``.
+        sample_time: sample time ``T`` (s): each force is held this long.
+        position_limit: positions are clamped to ``[-position_limit, position_limit]`` (m).
+        velocity_limit: velocities are clamped to ``[-velocity_limit, velocity_limit]``
+            (m/s).
+        force_levels: the force levels of one axis (N), distinct; each agent's actions are
+            every pair ``(u_x, u_y)`` of levels. None: the paper's ``[-2, -0.2, 0, 0.2, 2]``.
+        goal_radius: radius of the reward region around the origin, over the whole state.
+        goal_reward: the reward inside the region (0 elsewhere).
+        integrator: ``"exact"`` (the exact zero-order-hold solution, for constant friction)
+            or ``"rk4"`` (classical Runge-Kutta with `rk4_substeps` steps per sample time).
+        rk4_substeps: RK4 steps per sample time (with ``integrator="rk4"`` or friction
+            patches).
+        friction: the viscous friction coefficient ``eta`` (kg/s); with `friction_patches`,
+            the friction outside the patches.
+        friction_patches: discs of other friction, each ``((x, y), radius, eta)``; the
+            dynamics then depend on the position, are integrated with RK4 and no longer form
+            blocks.
+        velocity_noise: standard deviation (m/s) of the plant's zero-mean Gaussian process
+            noise on every velocity per step (used by `collect` and rollouts); the model that
+            is solved stays noise-free.
+
+    Raises:
+        ConfigError: a parameter out of range, or repeated force levels.
+        InputTypeError: a parameter of the wrong type.
+    """
 
     def __new__(
         cls,
@@ -99,120 +250,503 @@ class PointMass:
         force_levels: npt.ArrayLike | None = None,
         goal_radius: float = 0.1,
         goal_reward: float = 5.0,
-        integrator: str = "exact",
+        integrator: Literal["exact", "rk4"] = "exact",
         rk4_substeps: int = 10,
         friction: float = 1.0,
         friction_patches: Sequence[tuple[tuple[float, float], float, float]] | None = None,
         velocity_noise: float = 0.0,
-    ) -> PointMass: ...
+    ) -> PointMass:
+        """Creates the task (see the class docstring for the arguments)."""
+
     @property
-    def state_dim(self) -> int: ...
+    def state_dim(self) -> int:
+        """Length of the state vector, ``4 * agents``."""
+
     @property
-    def n_agents(self) -> int: ...
+    def n_agents(self) -> int:
+        """Number of agents."""
+
     @property
-    def action_dim(self) -> int: ...
+    def action_dim(self) -> int:
+        """Length of the joint action vector, ``2 * agents``."""
+
     @property
-    def n_actions(self) -> int: ...
+    def n_actions(self) -> int:
+        """Actions per agent: ``len(force_levels) ** 2``."""
+
     @property
-    def n_joint_actions(self) -> int: ...
+    def n_joint_actions(self) -> int:
+        """Joint actions, ``n_actions ** agents``."""
+
     @property
-    def sample_time(self) -> float: ...
+    def sample_time(self) -> float:
+        """Sample time (s)."""
+
     @property
-    def position_limit(self) -> float: ...
+    def position_limit(self) -> float:
+        """Positions are clamped to ``[-position_limit, position_limit]`` (m)."""
+
     @property
-    def velocity_limit(self) -> float: ...
+    def velocity_limit(self) -> float:
+        """Velocities are clamped to ``[-velocity_limit, velocity_limit]`` (m/s)."""
+
     @property
-    def goal_radius(self) -> float: ...
+    def goal_radius(self) -> float:
+        """The reward region's radius."""
+
     @property
-    def goal_reward(self) -> float: ...
+    def goal_reward(self) -> float:
+        """The reward inside the region."""
+
     @property
-    def actions(self) -> npt.NDArray[np.float64]: ...
-    def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
-    def joint_index(self, per_agent: Sequence[int]) -> int: ...
-    def agent_indices(self, index: int) -> list[int]: ...
-    def step(self, x: npt.ArrayLike, u: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
-    def reward(self, x: npt.ArrayLike) -> float: ...
-    def in_goal(self, x: npt.ArrayLike) -> bool: ...
-    def paper_grid(self) -> Grid: ...
+    def actions(self) -> npt.NDArray[np.float64]:
+        """Each agent's actions, shape ``(n_actions, 2)``: forces ``(u_x, u_y)``."""
+
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]:
+        """The joint action vector (all agents' forces) of joint action `index`.
+
+        Args:
+            index: a joint action index, ``0 <= index < n_joint_actions``.
+
+        Returns:
+            The forces ``[u1x, u1y, u2x, u2y, ...]``, shape ``(action_dim,)``.
+
+        Raises:
+            InputError: `index` is out of range.
+        """
+
+    def joint_index(self, per_agent: Sequence[int]) -> int:
+        """The joint action index of per-agent action indices (agent 0 most significant).
+
+        Args:
+            per_agent: one action index per agent, each ``< n_actions``.
+
+        Returns:
+            The joint action index.
+
+        Raises:
+            InputError: wrong number of agents or an index out of range.
+        """
+
+    def agent_indices(self, index: int) -> list[int]:
+        """The per-agent action indices of joint action `index` (the inverse of `joint_index`).
+
+        Args:
+            index: a joint action index, ``0 <= index < n_joint_actions``.
+
+        Returns:
+            One action index per agent.
+
+        Raises:
+            InputError: `index` is out of range.
+        """
+
+    def step(self, x: npt.ArrayLike, u: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """The successor of state `x` under joint force vector `u` (noise-free).
+
+        Args:
+            x: a state, shape ``(state_dim,)``, or a batch, shape ``(n, state_dim)``.
+            u: a joint force vector, shape ``(action_dim,)``, or a batch ``(n, action_dim)``
+                with a batch of states.
+
+        Returns:
+            The next state, shape ``(state_dim,)``, or the batch ``(n, state_dim)``.
+
+        Raises:
+            InputError: wrong shapes, different batch sizes, or non-finite values.
+        """
+
+    def reward(self, x: npt.ArrayLike) -> float:
+        """The reward at state `x` (it does not depend on the action).
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            `goal_reward` if `x` is in the reward region, else 0.
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def in_goal(self, x: npt.ArrayLike) -> bool:
+        """Whether `x` is in the reward region (``||x||_2 < goal_radius``).
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            True inside the region.
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def paper_grid(self) -> Grid:
+        """The paper's grid for this number of agents.
+
+        Position cores ``[-6, -3, -0.3, -0.1, 0, 0.1, 0.3, 3, 6]`` and velocity cores
+        ``[-3, -1, 0, 1, 3]`` on every agent and axis: 2,025 cores for one agent, 4,100,625
+        for two.
+
+        Returns:
+            The grid.
+
+        Raises:
+            ConfigError: three or more agents (more than the 2^32 cores a grid may have).
+        """
 
 @final
 class CallableModel:
-    """A model defined by a vectorised Python function `transition(states, actions)`."""
+    """A model defined by a vectorised Python function `transition(states, actions)`.
+
+    The solver calls `transition` once per batch of `batch_size` (core, joint action) pairs
+    of the grid, on every pair, and then solves on the resulting table with the GIL
+    released. `transition` receives a batch of states, shape ``(n, state_dim)``, and of joint
+    action vectors, shape ``(n, action_dim)`` (float64), and returns
+    ``(next_states, rewards)`` of shapes ``(n, state_dim)`` and ``(n,)``, or
+    ``(next_states, rewards, terminal)`` with `terminal` a bool array of shape ``(n,)``: a
+    terminal successor is worth its reward and nothing after it.
+
+    Joint actions are numbered with agent 0 most significant: joint action ``j`` of two
+    agents with ``m1`` actions for the second is ``(j // m1, j % m1)``.
+
+    A `CallableModel` pickles with its function pickled by reference: the function must be
+    importable by its qualified name (a module-level function, not a lambda or a closure).
+
+    Args:
+        transition: the vectorised transition and reward function (see above).
+        state_dim: length of the state vector.
+        actions: each agent's discrete actions: one array per agent, of shape
+            ``(n_actions, components)``, or ``(n_actions,)`` for one component. The joint
+            action vector concatenates the agents' components.
+        blocks: optional independent dynamics blocks, a sequence of
+            ``(state_indices, action_components)`` pairs: a partition of the state variables
+            in which each group's next value depends only on the group itself and on those
+            components of the joint action vector (a point mass's position and velocity on
+            one axis, driven by its force on that axis). The solver then keeps per block only
+            its successors at its own cores and runs the fast block backup
+            (``backup="auto"`` or ``"block"``): a solve needs about the memory of the rewards,
+            one value per (core, joint action) pair. The declaration is checked on every
+            pair when the model is tabulated: a successor that differs from the blocks' is
+            refused with a `ConfigError`. None: no blocks, the generic backup.
+        batch_size: at most this many pairs per call of `transition`.
+
+    Raises:
+        InputTypeError: `transition` is not callable, or `actions` or `blocks` is not a
+            sequence of the expected items.
+        ConfigError: a bad `state_dim` (1 to the maximum number of dimensions),
+            ``batch_size=0``, repeated or non-finite actions, no agent or too many agents or
+            joint actions, or `blocks` that do not partition the state.
+
+    Example:
+        ```python
+        def transition(x, u):
+            pos = np.clip(x[:, 0] + 0.1 * x[:, 1], -1, 1)
+            vel = np.clip(x[:, 1] + 0.1 * u[:, 0], -1, 1)
+            return np.stack([pos, vel], axis=1), -x[:, 0] ** 2
+
+        model = fuzzyq.CallableModel(transition, state_dim=2, actions=[[-1.0, 0.0, 1.0]])
+        ```
+    """
 
     def __new__(
         cls,
         transition: Callable[
             [npt.NDArray[np.float64], npt.NDArray[np.float64]],
-            tuple[npt.ArrayLike, npt.ArrayLike],
+            tuple[npt.ArrayLike, npt.ArrayLike]
+            | tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike],
         ],
         *,
         state_dim: int,
         actions: Sequence[npt.ArrayLike],
+        blocks: Sequence[tuple[Sequence[int], Sequence[int]]] | None = None,
         batch_size: int = 65536,
-    ) -> CallableModel: ...
+    ) -> CallableModel:
+        """Creates the model (see the class docstring for the arguments)."""
+
     @property
-    def state_dim(self) -> int: ...
+    def state_dim(self) -> int:
+        """Length of the state vector."""
+
     @property
-    def n_agents(self) -> int: ...
+    def n_agents(self) -> int:
+        """Number of agents (one per entry of `actions`)."""
+
     @property
-    def action_dim(self) -> int: ...
+    def action_dim(self) -> int:
+        """Length of the joint action vector (the agents' components, concatenated)."""
+
     @property
-    def n_joint_actions(self) -> int: ...
-    def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
+    def n_joint_actions(self) -> int:
+        """Number of joint actions: the product of the agents' action counts."""
+
+    @property
+    def actions(self) -> list[npt.NDArray[np.float64]]:
+        """Each agent's actions, one array of shape ``(n_actions, components)`` per agent."""
+
+    @property
+    def transition(
+        self,
+    ) -> Callable[
+        [npt.NDArray[np.float64], npt.NDArray[np.float64]],
+        tuple[npt.ArrayLike, npt.ArrayLike] | tuple[npt.ArrayLike, npt.ArrayLike, npt.ArrayLike],
+    ]:
+        """The transition function."""
+
+    @property
+    def blocks(self) -> list[tuple[list[int], list[int]]]:
+        """The declared blocks, ``(state_indices, action_components)`` pairs (empty: none)."""
+
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]:
+        """The joint action vector of joint action `index`.
+
+        Args:
+            index: a joint action index, ``0 <= index < n_joint_actions``.
+
+        Returns:
+            The joint action vector, shape ``(action_dim,)``.
+
+        Raises:
+            InputError: `index` is out of range.
+        """
+
+    def joint_index(self, per_agent: Sequence[int]) -> int:
+        """The joint action index of per-agent action indices (agent 0 most significant).
+
+        Args:
+            per_agent: one action index per agent.
+
+        Returns:
+            The joint action index.
+
+        Raises:
+            InputError: wrong number of agents or an index out of range.
+        """
+
+    def agent_indices(self, index: int) -> list[int]:
+        """The per-agent action indices of joint action `index` (the inverse of `joint_index`).
+
+        Args:
+            index: a joint action index, ``0 <= index < n_joint_actions``.
+
+        Returns:
+            One action index per agent.
+
+        Raises:
+            InputError: `index` is out of range.
+        """
+
+    def __getnewargs_ex__(self) -> tuple[tuple[Any, ...], dict[str, Any]]:
+        """Pickling support: the constructor's arguments.
+
+        Returns:
+            ``((transition,), kwargs)``: the function (pickled by reference, so a
+            module-level function), and the state length, the actions, the blocks and the
+            batch size as keyword arguments.
+        """
+
+    def step(
+        self, x: npt.ArrayLike, u: npt.ArrayLike
+    ) -> tuple[npt.NDArray[np.float64], float, bool]:
+        """One transition: calls `transition` on a batch of one.
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+            u: a joint action vector, shape ``(action_dim,)``.
+
+        Returns:
+            ``(next_state, reward, terminal)``; `terminal` is False when `transition`
+            returns no terminal flags.
+
+        Raises:
+            InputError: `x` or `u` has the wrong shape or non-finite values.
+            ModelError: `transition` returned unusable data.
+        """
 
 @disjoint_base
 class ClassicModel:
-    """A classic benchmark (Busoniu et al. 2010): the base of DcMotor, Pendulum, CarHill, Arm."""
+    """A classic benchmark (Busoniu et al. 2010): the base of DcMotor, Pendulum, CarHill, Arm.
+
+    One agent; the model computes in float64. The preset names the grid, actions, `gamma` and
+    `xi` of a toolbox run (`grid()`, `gamma`, `xi`): ``fuzzyq.solve(model, model.grid())``
+    solves it as ``fuzzyq train --env ENV --preset PRESET`` does. The model is one dynamics
+    block (the whole state and action), so the solver tabulates its transitions once.
+
+    Classic models pickle (``pickle.dumps(model)``).
+    """
 
     @property
-    def env(self) -> str: ...
+    def env(self) -> Literal["dcmotor", "pendulum", "carhill", "arm"]:
+        """The environment's name."""
+
     @property
-    def preset(self) -> str: ...
+    def preset(self) -> Literal["toolbox-demo", "fine", "coarse"]:
+        """The preset's name."""
+
     @property
-    def gamma(self) -> float: ...
+    def gamma(self) -> float:
+        """The preset's discount factor (the default of `solve` for this model)."""
+
     @property
-    def xi(self) -> float: ...
-    def grid(self) -> Grid: ...
+    def xi(self) -> float:
+        """The preset's stopping threshold (the default of `solve` for this model)."""
+
+    def grid(self) -> Grid:
+        """The preset's grid.
+
+        Returns:
+            The grid of the preset's cores.
+        """
+
     @property
-    def params(self) -> dict[str, Any]: ...
+    def params(self) -> dict[str, Any]:
+        """The model's parameters (a configuration file's ``[env.model]`` fields), as a dict."""
+
     @property
-    def state_dim(self) -> int: ...
+    def state_dim(self) -> int:
+        """Length of the state vector."""
+
     @property
-    def n_agents(self) -> int: ...
+    def n_agents(self) -> int:
+        """Number of agents (1)."""
+
     @property
-    def action_dim(self) -> int: ...
+    def action_dim(self) -> int:
+        """Length of an action vector (2 for the arm, 1 for the others)."""
+
     @property
-    def n_actions(self) -> int: ...
+    def n_actions(self) -> int:
+        """Number of discrete actions."""
+
     @property
-    def n_joint_actions(self) -> int: ...
+    def n_joint_actions(self) -> int:
+        """Number of joint actions (the actions: one agent)."""
+
     @property
-    def action_levels(self) -> npt.NDArray[np.float64]: ...
+    def action_levels(self) -> npt.NDArray[np.float64]:
+        """The listed action levels (the configuration's ``actions``).
+
+        For the arm, torque levels as fractions of each joint's maximum torque, combined per
+        joint into the action vectors.
+        """
+
     @property
-    def actions(self) -> npt.NDArray[np.float64]: ...
+    def actions(self) -> npt.NDArray[np.float64]:
+        """The discrete action vectors, shape ``(n_actions, action_dim)``."""
+
     @property
-    def sample_time(self) -> float: ...
+    def sample_time(self) -> float:
+        """Sample time (s)."""
+
     @property
-    def state_bounds(self) -> npt.NDArray[np.float64]: ...
+    def state_bounds(self) -> npt.NDArray[np.float64]:
+        """The range ``(low, high)`` of every state variable, shape ``(state_dim, 2)``."""
+
     @property
-    def default_start(self) -> npt.NDArray[np.float64]: ...
-    def joint_action(self, index: int) -> npt.NDArray[np.float64]: ...
+    def default_start(self) -> npt.NDArray[np.float64]:
+        """The default start of a rollout (``fuzzyq rollout``'s)."""
+
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]:
+        """The action vector of action `index`.
+
+        Args:
+            index: an action index, ``0 <= index < n_actions``.
+
+        Returns:
+            The action vector, shape ``(action_dim,)``.
+
+        Raises:
+            InputError: `index` is out of range.
+        """
+
     def step(
         self, x: npt.ArrayLike, u: npt.ArrayLike
-    ) -> tuple[npt.NDArray[np.float64], float | npt.NDArray[np.float64]]: ...
-    def reward(self, x: npt.ArrayLike, u: npt.ArrayLike) -> float: ...
-    def is_terminal(self, x: npt.ArrayLike) -> bool: ...
+    ) -> tuple[npt.NDArray[np.float64], float | npt.NDArray[np.float64]]:
+        """The successor of state `x` under action vector `u`, and the reward of `u` at `x`.
 
-# An integrator: "zoh", "rk4" (the model's default substeps; 1 for the DC motor, whose default
-# is "zoh") or {"rk4": {"substeps": n}}.
-_Integrator = str | dict[str, dict[str, int]]
+        Args:
+            x: a state, shape ``(state_dim,)``, or a batch ``(n, state_dim)``.
+            u: an action vector, shape ``(action_dim,)``, or a batch ``(n, action_dim)`` with
+                a batch of states.
+
+        Returns:
+            ``(next_state, reward)``, or for batches ``(next_states (n, state_dim),
+            rewards (n,))``.
+
+        Raises:
+            InputError: wrong shapes, different batch sizes, or non-finite values.
+        """
+
+    def reward(self, x: npt.ArrayLike, u: npt.ArrayLike) -> float:
+        """The reward of action vector `u` at state `x`.
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+            u: an action vector, shape ``(action_dim,)``.
+
+        Returns:
+            The reward.
+
+        Raises:
+            InputError: wrong shapes or non-finite values.
+        """
+
+    def is_terminal(self, x: npt.ArrayLike) -> bool:
+        """Whether `x` is a terminal state (the car that left the hill); a rollout stops there.
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            True for a terminal state (only the car on the hill has them).
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def __getnewargs_ex__(self) -> tuple[tuple[Any, ...], dict[str, Any]]:
+        """Pickling support: the constructor's arguments.
+
+        Returns:
+            ``((preset,), kwargs)``: the preset's name, and the actions and every parameter
+            as keyword arguments of the class.
+        """
 
 @final
 class DcMotor(ClassicModel):
-    """The DC motor: state [angle, angular velocity], voltage actions."""
+    """The DC motor (Busoniu et al. 2010, section 4.5.3): state ``[angle, angular velocity]``.
+
+    ``alpha'' = -(b/J + K^2/(Re J)) alpha' + K/(Re J) u`` driven by a voltage `u`; the state
+    is saturated (not wrapped) to the angle and velocity limits, and the reward is
+    ``-x' Q x - r u^2`` at the current state. Every parameter is a keyword argument; left out,
+    it keeps the toolbox's value (`params` lists them).
+
+    Args:
+        preset: ``"toolbox-demo"`` (the toolbox demo's 21 x 21 grid, 5 actions) or
+            ``"fine"`` (its default fine grid, 73 x 193, 9 actions).
+        actions: the voltage levels (V), distinct; None: the preset's.
+        inertia: rotor and load inertia ``J`` (kg m^2).
+        damping: viscous damping ``b`` (N m s/rad).
+        torque_constant: torque constant ``K`` (N m/A).
+        resistance: rotor resistance ``Re`` (Ohm).
+        sample_time: sample time ``Ts`` (s).
+        max_angle: the angle is saturated to ``[-max_angle, max_angle]`` (rad).
+        max_velocity: the angular velocity is saturated to ``[-max_velocity, max_velocity]``
+            (rad/s).
+        q: the diagonal of the state weight ``Q`` of the reward.
+        r: the action weight of the reward.
+        integrator: ``"zoh"`` (exact zero-order hold, the default), ``"rk4"`` (RK4, one step
+            per sample time) or ``{"rk4": {"substeps": n}}``.
+
+    Raises:
+        ConfigError: an unknown preset, a parameter out of range or repeated actions.
+        InputTypeError: a parameter of the wrong type.
+    """
 
     def __new__(
         cls,
-        preset: str = "fine",
+        preset: Literal["toolbox-demo", "fine"] = "fine",
         *,
         actions: npt.ArrayLike | None = None,
         inertia: float = ...,
@@ -224,16 +758,50 @@ class DcMotor(ClassicModel):
         max_velocity: float = ...,
         q: Sequence[float] = ...,
         r: float = ...,
-        integrator: _Integrator = ...,
-    ) -> DcMotor: ...
+        integrator: (
+            Literal["zoh", "rk4"] | Mapping[Literal["rk4"], Mapping[Literal["substeps"], int]]
+        ) = ...,
+    ) -> DcMotor:
+        """Creates the motor (see the class docstring for the arguments)."""
 
 @final
 class Pendulum(ClassicModel):
-    """The inverted pendulum swing-up: state [angle (0 = up), angular velocity]."""
+    """The inverted pendulum swing-up: state ``[angle (0 = up), angular velocity]``.
+
+    A weight on a DC motor's disc, driven by a voltage too weak to lift it in one go
+    (Busoniu et al. 2010, section 4.5.4): the voltage is limited to `max_voltage`, the angle
+    wrapped into ``[-pi, pi)``, the velocity saturated, and the reward is
+    ``-x' Q x - r u^2`` at the current state. Every parameter is a keyword argument; left out,
+    it keeps the toolbox's value (`params` lists them).
+
+    Args:
+        preset: ``"toolbox-demo"`` (the toolbox demo's 41 x 21 grid, 5 actions) or
+            ``"fine"`` (its default fine grid, 73 x 91, 15 actions).
+        actions: the voltage levels (V), distinct; None: the preset's.
+        disc_inertia: inertia of the rotor and disc without the weight, ``J0`` (kg m^2).
+        mass: mass of the weight ``m`` (kg).
+        length: distance ``l`` of the weight from the axis (m).
+        gravity: gravitational acceleration ``g`` (m/s^2).
+        damping: viscous damping ``b`` (N m s/rad).
+        torque_constant: torque constant ``K`` (N m/A).
+        resistance: rotor resistance ``R`` (Ohm).
+        sample_time: sample time ``Ts`` (s).
+        max_velocity: the angular velocity is saturated to ``[-max_velocity, max_velocity]``
+            (rad/s).
+        max_voltage: the voltage is limited to ``[-max_voltage, max_voltage]`` (V).
+        q: the diagonal of the state weight ``Q`` of the reward.
+        r: the action weight of the reward.
+        integrator: ``"rk4"`` (the default, RK4 with one step per sample time) or
+            ``{"rk4": {"substeps": n}}``; ``"zoh"`` is refused (the model is nonlinear).
+
+    Raises:
+        ConfigError: an unknown preset, a parameter out of range or repeated actions.
+        InputTypeError: a parameter of the wrong type.
+    """
 
     def __new__(
         cls,
-        preset: str = "fine",
+        preset: Literal["toolbox-demo", "fine"] = "fine",
         *,
         actions: npt.ArrayLike | None = None,
         disc_inertia: float = ...,
@@ -248,16 +816,42 @@ class Pendulum(ClassicModel):
         max_voltage: float = ...,
         q: Sequence[float] = ...,
         r: float = ...,
-        integrator: _Integrator = ...,
-    ) -> Pendulum: ...
+        integrator: (
+            Literal["zoh", "rk4"] | Mapping[Literal["rk4"], Mapping[Literal["substeps"], int]]
+        ) = ...,
+    ) -> Pendulum:
+        """Creates the pendulum (see the class docstring for the arguments)."""
 
 @final
 class CarHill(ClassicModel):
-    """The car on the hill: state [position, velocity], force actions."""
+    """The car on the hill: state ``[position, velocity]``, force actions.
+
+    A car on the hill of Ernst et al. 2005 under a horizontal force. Successors that leave
+    the box ``|p| <= 1``, ``|p'| <= 3`` are terminal: +1 at the top of the hill (``p > 1``,
+    slowly enough), -1 otherwise, 0 for every regular step; terminal successors contribute no
+    future value, and a rollout ends there. Every parameter is a keyword argument; left out,
+    it keeps the toolbox's value (`params` lists them).
+
+    Args:
+        preset: ``"fine"`` (the toolbox's 41 x 31 grid) or ``"coarse"`` (17 x 17, for quick
+            runs); both with the forces ``{-4, 4}``.
+        actions: the force levels (N), distinct; None: the preset's.
+        mass: mass of the car (kg).
+        gravity: gravitational acceleration (m/s^2).
+        sample_time: sample time (s).
+        position_limit: the episode ends when ``|p|`` exceeds this (m).
+        velocity_limit: the episode ends when ``|p'|`` exceeds this (m/s).
+        integrator: ``"rk4"`` (RK4 with 10 steps per sample time, the default) or
+            ``{"rk4": {"substeps": n}}``; ``"zoh"`` is refused (the model is nonlinear).
+
+    Raises:
+        ConfigError: an unknown preset, a parameter out of range or repeated actions.
+        InputTypeError: a parameter of the wrong type.
+    """
 
     def __new__(
         cls,
-        preset: str = "fine",
+        preset: Literal["fine", "coarse"] = "fine",
         *,
         actions: npt.ArrayLike | None = None,
         mass: float = ...,
@@ -265,16 +859,51 @@ class CarHill(ClassicModel):
         sample_time: float = ...,
         position_limit: float = ...,
         velocity_limit: float = ...,
-        integrator: _Integrator = ...,
-    ) -> CarHill: ...
+        integrator: (
+            Literal["zoh", "rk4"] | Mapping[Literal["rk4"], Mapping[Literal["substeps"], int]]
+        ) = ...,
+    ) -> CarHill:
+        """Creates the car (see the class docstring for the arguments)."""
 
 @final
 class Arm(ClassicModel):
-    """The two-link robot arm: state [angle 1, velocity 1, angle 2, velocity 2], torques."""
+    """The two-link robot arm: state ``[angle 1, velocity 1, angle 2, velocity 2]``, torques.
+
+    Two links in a horizontal plane (no gravity) under joint torques ``[tau_1, tau_2]``
+    (Busoniu et al. 2010, section 4.5.2); the angles are wrapped into ``[-pi, pi)`` and the
+    velocities saturated; the reward is ``-x' Q x - tau' R tau`` at the current state, so the
+    goal is the stretched-out arm at rest. The action levels are fractions of each joint's
+    maximum torque, combined per joint (``tau_1`` slowest). Every parameter is a keyword
+    argument; left out, it keeps the toolbox's value (`params` lists them).
+
+    Args:
+        preset: ``"fine"`` (the toolbox's 13 x 7 x 13 x 7 grid) or ``"coarse"``
+            (9 x 7 x 9 x 7, for quick runs); both with the levels ``[-1, 0, 1]``.
+        actions: the torque levels, fractions of the maximum torques in ``[-1, 1]``,
+            distinct; None: the preset's.
+        link_lengths: the links' lengths (m), one per link.
+        masses: the links' masses (kg).
+        inertias: the links' inertias about their centres of mass (kg m^2).
+        centres_of_mass: the distances of the centres of mass from the joints (m).
+        damping: the joints' viscous dampings.
+        max_velocity: the joints' velocity limits (rad/s).
+        max_torque: the joints' torque limits (N m).
+        q: the diagonal of the state weight ``Q`` of the reward.
+        r: the diagonal of the torque weight ``R`` of the reward.
+        sample_time: sample time (s).
+        wrap: wrap the angles into ``[-pi, pi)`` (True, the default) or saturate them to
+            ``[-pi, pi]``.
+        integrator: ``"rk4"`` (RK4 with 5 steps per sample time, the default) or
+            ``{"rk4": {"substeps": n}}``.
+
+    Raises:
+        ConfigError: an unknown preset, a parameter out of range or repeated actions.
+        InputTypeError: a parameter of the wrong type.
+    """
 
     def __new__(
         cls,
-        preset: str = "fine",
+        preset: Literal["fine", "coarse"] = "fine",
         *,
         actions: npt.ArrayLike | None = None,
         link_lengths: Sequence[float] = ...,
@@ -288,71 +917,319 @@ class Arm(ClassicModel):
         r: Sequence[float] = ...,
         sample_time: float = ...,
         wrap: bool = ...,
-        integrator: _Integrator = ...,
-    ) -> Arm: ...
+        integrator: (
+            Literal["zoh", "rk4"] | Mapping[Literal["rk4"], Mapping[Literal["substeps"], int]]
+        ) = ...,
+    ) -> Arm:
+        """Creates the arm (see the class docstring for the arguments)."""
+
+_EnvName = Literal["pointmass", "khepera", "dcmotor", "pendulum", "carhill", "arm"]
 
 @final
 class Solution:
-    """The result of `solve` or `load`."""
+    """The result of `solve` or `load`: `V`, the greedy actions, the run's record, policies.
+
+    Solutions pickle (``pickle.dumps(solution)``; a solution of a `CallableModel` pickles its
+    model's function by reference).
+    """
 
     @property
-    def V(self) -> npt.NDArray[np.float32] | npt.NDArray[np.float64]: ...
+    def V(self) -> npt.NDArray[np.float32] | npt.NDArray[np.float64]:
+        """``V[d] = max_u theta[d, u]`` per core (row-major grid order), in the solver's
+        precision: float32 or float64."""
+
     @property
-    def greedy(self) -> npt.NDArray[np.uint32]: ...
+    def greedy(self) -> npt.NDArray[np.uint32]:
+        """The greedy joint action of every core (the lowest index among the maximisers)."""
+
     @property
-    def grid(self) -> Grid: ...
+    def grid(self) -> Grid:
+        """The grid."""
+
     @property
-    def env(self) -> str | None: ...
+    def env(self) -> _EnvName | None:
+        """The environment's name, or None for a `CallableModel`."""
+
     @property
-    def sweeps(self) -> int: ...
+    def sweeps(self) -> int:
+        """Sweeps performed (full backups and evaluation sweeps)."""
+
     @property
-    def converged(self) -> bool: ...
+    def converged(self) -> bool:
+        """Whether the stopping rule was met."""
+
     @property
-    def final_delta(self) -> float: ...
+    def stopped(self) -> bool:
+        """Whether the `solve` callback stopped the run by returning False.
+
+        The solution is then that of the run limited to the sweeps done, with its error bound.
+        """
+
     @property
-    def error_bound(self) -> float: ...
+    def final_delta(self) -> float:
+        """The exact change ``||theta_K - theta_{K-1}||_inf`` of the last sweep."""
+
     @property
-    def deltas(self) -> npt.NDArray[np.float64]: ...
+    def error_bound(self) -> float:
+        """``gamma / (1 - gamma) * final_delta``: a bound on the distance to the fixed point."""
+
     @property
-    def seconds(self) -> float: ...
+    def deltas(self) -> npt.NDArray[np.float64]:
+        """``(lower, upper)`` bounds of every sweep's change, shape ``(sweeps, 2)``."""
+
     @property
-    def kernel(self) -> str: ...
+    def seconds(self) -> float:
+        """Wall-clock seconds of the solve.
+
+        0 for a solution loaded from a file: files keep no timings, so that the same problem
+        gives the same file.
+        """
+
     @property
-    def gamma(self) -> float: ...
+    def kernel(self) -> Literal["avx512", "avx2", "portable", "scalar", "generic", "q-values"]:
+        """The kernel instance used.
+
+        A SIMD kernel of the block backup, ``"generic"`` for the generic backup, or
+        ``"q-values"`` for that operator.
+        """
+
     @property
-    def xi(self) -> float: ...
-    def theta(self) -> npt.NDArray[np.float64]: ...
-    def value(self, x: npt.ArrayLike) -> float: ...
-    def policy(self, kind: str = "greedy") -> Policy: ...
-    def save(self, path: str | PathLike[str]) -> None: ...
+    def gamma(self) -> float:
+        """The discount factor."""
+
+    @property
+    def xi(self) -> float:
+        """The stopping threshold."""
+
+    def theta(self) -> npt.NDArray[np.float64]:
+        """The Q-value parameters ``theta[d, u]`` for every core and joint action.
+
+        Returns:
+            An array of shape ``(n_cores, n_joint_actions)``.
+
+        Raises:
+            InputError: the problem has more than 5e7 Q-values (the paper's has 2.56e9);
+                use `V` and policies instead.
+        """
+
+    def value(self, x: npt.ArrayLike) -> float:
+        """`V` interpolated at state `x`.
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            The interpolated value.
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def policy(self, kind: Literal["greedy", "interpolated"] = "greedy") -> Policy:
+        """A policy of this solution.
+
+        Args:
+            kind: ``"greedy"`` (eq 7: the maximiser of ``Q(x, .)``, lowest joint index on
+                ties) or ``"interpolated"`` (eq 22: the membership-weighted average of the
+                active cores' greedy actions).
+
+        Returns:
+            The policy.
+
+        Raises:
+            ConfigError: an unknown `kind`.
+        """
+
+    def save(self, path: str | PathLike[str]) -> None:
+        """Writes the policy file (the format ``fuzzyq rollout`` reads), atomically.
+
+        Solutions of built-in models and of `CallableModel` can be saved; `load` reads them
+        back (a `CallableModel`'s with ``load(path, model=...)``).
+
+        Args:
+            path: the file to write.
+
+        Raises:
+            PolicyFileError: the file cannot be written.
+        """
 
 @final
 class Policy:
-    """A policy of any learner: fuzzy Q-iteration (greedy, eq 7, or interpolated, eq 22) or
-    learned from samples (fuzzy Q-learning, VQQL: greedy, decentralised)."""
+    """A policy of any learner, ready to act.
+
+    From `Solution.policy` (fuzzy Q-iteration: greedy, eq 7, or interpolated, eq 22) or from
+    `load` of a policy learned from samples (fuzzy Q-learning, VQQL: greedy, each agent
+    acting on its own observation). A state `x` is what the policy acts on: the model's
+    state; for fuzzy Q-iteration on the robots their poses ``[x, y, heading]`` per robot; for
+    a policy learned on the robots each robot's observation
+    ``[sonar_1, ..., sonar_S, goal distance, goal angle]``, concatenated.
+
+    Policies pickle (``pickle.dumps(policy)``).
+    """
 
     @property
-    def kind(self) -> str: ...
+    def kind(self) -> Literal["greedy", "interpolated"]:
+        """``"greedy"`` or ``"interpolated"`` (a policy learned from samples is greedy)."""
+
     @property
-    def learner(self) -> str: ...
+    def learner(self) -> Literal["fqi", "fql", "vqql"]:
+        """What learned it: ``"fqi"`` (fuzzy Q-iteration), ``"fql"`` (fuzzy Q-learning) or
+        ``"vqql"``."""
+
     @property
-    def env(self) -> str | None: ...
+    def env(self) -> _EnvName | None:
+        """The environment's name, or None for a `CallableModel`."""
+
     @property
-    def gamma(self) -> float: ...
+    def gamma(self) -> float:
+        """The discount the policy was trained with."""
+
     @property
-    def state_dim(self) -> int: ...
+    def state_dim(self) -> int:
+        """Length of the state (or joint observation) the policy acts on."""
+
     @property
-    def action_dim(self) -> int: ...
+    def action_dim(self) -> int:
+        """Length of the joint action vector."""
+
     @property
-    def n_joint_actions(self) -> int: ...
+    def n_joint_actions(self) -> int:
+        """Number of joint actions."""
+
     @property
-    def n_agents(self) -> int: ...
-    def act(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
-    def act_batch(self, states: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
-    def act_index(self, x: npt.ArrayLike) -> int: ...
-    def agent_actions(self, x: npt.ArrayLike) -> list[int]: ...
-    def q_values(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
-    def value(self, x: npt.ArrayLike) -> float: ...
+    def n_agents(self) -> int:
+        """Number of agents."""
+
+    def act(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """The joint action vector at state `x`.
+
+        The greedy joint action's vector, or the interpolated one (clamped into the action
+        bounds).
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            The joint action vector, shape ``(action_dim,)``.
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def act_batch(self, states: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """The joint action vectors at a batch of states, decided in parallel in Rust.
+
+        The GIL is released; the result is identical to `act` state by state.
+
+        Args:
+            states: states, shape ``(n, state_dim)`` (one state ``(state_dim,)`` is a batch
+                of one).
+
+        Returns:
+            The joint action vectors, shape ``(n, action_dim)``.
+
+        Raises:
+            InputError: `states` has the wrong shape or non-finite values.
+        """
+
+    @overload
+    def act_index(self, x: Sequence[float]) -> int:
+        """The greedy joint action index at state `x` (the lowest index on ties).
+
+        Also batches: a batch of states gives an int64 array of indices, decided in parallel
+        as by `act_batch`. The overloads type a
+        list of numbers as one state (an `int`) and a list of lists as a batch (an array);
+        for a numpy array, whose shape the type does not tell, the result is typed `Any`.
+
+        Args:
+            x: a state, shape ``(state_dim,)``, or a batch, shape ``(n, state_dim)``.
+
+        Returns:
+            The joint action index, or for a batch the indices, shape ``(n,)``.
+
+        Raises:
+            ConfigError: the policy is not greedy (the interpolated policy has no discrete
+                actions).
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    @overload
+    def act_index(self, x: Sequence[Sequence[float]]) -> npt.NDArray[np.int64]: ...
+    @overload
+    def act_index(self, x: npt.NDArray[Any]) -> Any: ...
+
+    def agent_actions(self, x: npt.ArrayLike) -> list[int]:
+        """The greedy action of each agent at `x` (indices into each agent's action set).
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            One action index per agent.
+
+        Raises:
+            ConfigError: the policy is not greedy.
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def q_values(self, x: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """``Q(x, .)``, one value per joint action.
+
+        Fuzzy Q-iteration's one-step lookahead on `V` (eq 7), or the sum of the agents'
+        terms of a policy learned from samples.
+
+        Args:
+            x: a state, shape ``(state_dim,)``, or a batch, shape ``(n, state_dim)``.
+
+        Returns:
+            Shape ``(n_joint_actions,)``, or ``(n, n_joint_actions)`` for a batch.
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values, or a policy learned
+                from samples has too many joint actions to return.
+        """
+
+    def value(self, x: npt.ArrayLike) -> float:
+        """The value the policy predicts at `x`.
+
+        Args:
+            x: a state, shape ``(state_dim,)``.
+
+        Returns:
+            `V` interpolated (fuzzy Q-iteration) or ``max_u Q(x, u)`` (a policy learned from
+            samples).
+
+        Raises:
+            InputError: `x` has the wrong shape or non-finite values.
+        """
+
+    def predict(
+        self,
+        observation: npt.ArrayLike,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> tuple[npt.NDArray[Any], None]:
+        """Acts with the Stable-Baselines3 convention, so that SB3-style evaluation code runs it.
+
+        Args:
+            observation: one observation, shape ``(state_dim,)``, or a batch
+                ``(n, state_dim)``.
+            state: a recurrent policy's state in SB3; ignored (the policy has none).
+            episode_start: SB3's episode-start flags; ignored.
+            deterministic: SB3's flag; the policies are deterministic either way.
+
+        Returns:
+            ``(actions, None)``: for a greedy policy joint action indices (int64, shape
+            ``()`` for one observation, ``(n,)`` for a batch: the actions of a ``Discrete``
+            joint action space such as `fuzzyq.envs.PointMassEnv`'s); for the interpolated
+            policy joint action vectors (``(action_dim,)`` or ``(n, action_dim)``, for a
+            ``Box`` space).
+
+        Raises:
+            InputError: `observation` has the wrong shape or non-finite values.
+        """
+
     def rollout(
         self,
         x0: npt.ArrayLike | None = None,
@@ -360,39 +1237,330 @@ class Policy:
         *,
         seed: int = 0,
         headings: npt.ArrayLike | None = None,
-        plant: str | None = None,
+        plant: Literal["model", "rapier"] | None = None,
         radius: float | None = None,
-    ) -> dict[str, Any]: ...
+    ) -> dict[str, Any]:
+        """Runs the policy on its environment, as ``fuzzyq rollout`` does (the same code).
+
+        Args:
+            x0: the start in the state the environment reports (default: the environment's,
+                as ``fuzzyq rollout``'s): the model's state; for the robots the paper's 8-D
+                state ``[s_x, s_y, v_x, v_y]`` per robot at rest (with `headings`), or their
+                poses ``[x, y, heading (rad)]`` per robot.
+            steps: number of steps (default: the environment's; 75 for the point masses,
+                250 for the robots).
+            seed: seed of the plant's noise (the robots' sensors and wheels, the point
+                masses' `velocity_noise`).
+            headings: the robots' initial headings in degrees (default 0); robots only.
+            plant: None (the environment's own), ``"model"`` (the point masses on their
+                model) or ``"rapier"`` (the point masses as colliding discs on rapier2d
+                physics). The robots always run on their rapier plant, the classic benchmarks
+                on their model (a run may end early at a terminal state).
+            radius: the discs' radius (m) with ``plant="rapier"`` for the point masses.
+
+        Returns:
+            A dict of numpy arrays: ``states`` (K+1, E) as ``fuzzyq rollout --csv`` writes
+            them (the robots' paper state), ``actions`` (K, A), ``rewards`` (K,), ``times``
+            (K+1,); for the robots also ``poses`` (K+1, n, 3), ``sonar`` (K+1, n, S),
+            ``observations`` (K+1, n, S+2) and ``action_indices`` (K, n); and ``metrics``, a
+            dict with the fields of ``fuzzyq rollout --json``.
+
+        Raises:
+            ConfigError: a policy of a `CallableModel` (no plant to run on), an option that
+                does not apply to the environment, or ``steps=0``.
+            InputError: `x0` or `headings` of the wrong shape.
+            SolverError: the trajectory would exceed the memory limit.
+        """
+
+    def evaluate(
+        self,
+        starts: npt.ArrayLike | None = None,
+        steps: int | None = None,
+        *,
+        count: int = 100,
+        seed: int = 0,
+    ) -> dict[str, Any]:
+        """Monte-Carlo evaluation on the policy's environment, as ``fuzzyq compare`` evaluates
+        policies: runs from many starts, each as `rollout` runs one.
+
+        Args:
+            starts: model states, shape ``(n, state_dim)`` (the point masses and the classic
+                benchmarks); default: `count` states drawn uniformly within the model's state
+                bounds with `seed`. The robots always start from `count` random
+                collision-free poses of `seed` (run ``k`` on the plant seeded with
+                ``seed + k``).
+            steps: steps per run; default: the environment's.
+            count: number of random starts when `starts` is not given.
+            seed: seed of the random starts.
+
+        Returns:
+            A dict: ``"runs"``, every run's metrics as columns (a numpy array per numeric
+            field, one entry per run, named as in ``fuzzyq rollout --json``), and
+            ``"summary"``: the robots' success report, the classic benchmarks' mean, minimum
+            and maximum discounted return, or None for the point masses.
+
+        Raises:
+            ConfigError: a policy of a `CallableModel`, ``steps`` or ``count`` of 0, or
+                `starts` given for the robots.
+            InputError: `starts` of the wrong shape or with non-finite values.
+        """
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickling support.
+
+        Returns:
+            ``(_restore, ("policy", (origin, kind)))``: the solution it was made from and
+            its kind, or the bytes of a learned policy's file.
+        """
+
+@final
+class Khepera:
+    """The paper's Khepera IV robots (sections 3.2-3.3), solved on their kinematic model.
+
+    Every field of ``[env]`` in ``fuzzyq config --env khepera`` (``radius``,
+    ``forward_speed``, ``turn_speed``, ``sample_time``, ``goal_radius``, ``goal_reward``,
+    ``collision_penalty``, the sonars, ``arena`` as a dict with ``x``, ``y`` and
+    ``obstacle``, ``noise``, ...) is a keyword argument. The state fuzzy Q-iteration solves is
+    each robot's pose ``[x, y, heading]``; the four actions are forward, turn clockwise, turn
+    counter-clockwise and stop. ``solve(robots, robots.grid())`` trains as
+    ``fuzzyq train --env khepera`` does, and the solution's policies roll out on the rapier
+    plant with sonars (`Policy.rollout`, `Policy.evaluate`).
+
+    Args:
+        agents: number of robots (1 to 4).
+        params: keyword arguments, the fields of the configuration's ``[env]`` table.
+
+    Raises:
+        ConfigError: an unknown parameter or a value out of range.
+        InputTypeError: a parameter of the wrong type.
+    """
+
+    def __new__(cls, agents: int = 2, **params: Any) -> Khepera:
+        """Creates the robots (see the class docstring for the arguments)."""
+
+    @property
+    def state_dim(self) -> int:
+        """Length of the state: 3 per robot (``x``, ``y``, heading)."""
+
+    @property
+    def n_agents(self) -> int:
+        """Number of robots."""
+
+    @property
+    def action_dim(self) -> int:
+        """Length of the joint action vector (two wheel speeds per robot)."""
+
+    @property
+    def n_joint_actions(self) -> int:
+        """Number of joint actions (``4 ** agents``)."""
+
+    @property
+    def sample_time(self) -> float:
+        """The control period, seconds."""
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """Every parameter, as the configuration's ``[env]`` table."""
+
+    def joint_action(self, index: int) -> npt.NDArray[np.float64]:
+        """The joint action vector (wheel speeds) of joint action `index`.
+
+        Args:
+            index: a joint action index.
+
+        Returns:
+            The wheel speeds of every robot, shape ``(action_dim,)``.
+
+        Raises:
+            InputError: `index` out of range.
+        """
+
+    def step(self, x: npt.ArrayLike, u: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """The kinematic model's successor of poses `x` under wheel speeds `u`.
+
+        Args:
+            x: the poses, shape ``(state_dim,)``.
+            u: the wheel speeds, shape ``(action_dim,)``.
+
+        Returns:
+            The poses one sample time later, shape ``(state_dim,)``.
+        """
+
+    def reward(self, x: npt.ArrayLike, u: npt.ArrayLike) -> float:
+        """The reward ``rho(x, u)`` (eq 42: the goal reward near the origin, the collision
+        penalty where robots overlap).
+
+        Args:
+            x: the poses, shape ``(state_dim,)``.
+            u: the wheel speeds, shape ``(action_dim,)``.
+
+        Returns:
+            The reward.
+        """
+
+    def grid(self) -> Grid:
+        """The default grid of these robots.
+
+        Returns:
+            The grid of ``fuzzyq train --env khepera``: per robot the position cores on ``x``
+            and ``y`` and 17 heading cores over ``[-pi, pi]``.
+        """
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        """Pickling support.
+
+        Returns:
+            ``(_restore, ("khepera", json))``: the configuration as JSON.
+        """
 
 def solve(
-    model: PointMass | ClassicModel | CallableModel,
+    model: PointMass | Khepera | ClassicModel | CallableModel,
     grid: Grid,
     *,
     gamma: float | None = None,
     xi: float | None = None,
     max_sweeps: int = 1000,
-    sweep: str = "sync",
+    sweep: Literal["sync", "async"] = "sync",
     extrapolate: bool | None = None,
     evaluation_sweeps: int | None = None,
     absorbing_goal: bool = False,
-    precision: str | None = None,
-    backup: str = "auto",
-    kernel: str | None = None,
-    operator: str = "values",
+    precision: Literal["f32", "f64", "float32", "float64"] | None = None,
+    backup: Literal["auto", "block", "generic"] = "auto",
+    kernel: Literal["avx512", "avx2", "portable", "scalar"] | None = None,
+    operator: Literal["values", "q-values"] = "values",
     threads: int | None = None,
-    callback: Callable[[dict[str, Any]], object] | None = None,
+    callback: Callable[[dict[str, Any]], bool | None] | None = None,
     transitions: Mapping[str, npt.ArrayLike] | None = None,
     max_memory_gb: float | None = None,
-) -> Solution: ...
+    progress: bool = False,
+) -> Solution:
+    """Solves a model on a grid by fuzzy Q-iteration (the paper's eq 20), with the GIL released.
+
+    A built-in model (`PointMass`, `DcMotor`, `Pendulum`, `CarHill`, `Arm`) is solved through
+    the same code as ``fuzzyq train``; a `CallableModel` is tabulated on the grid first.
+    Settings left at None take the model's defaults: for a classic benchmark its preset's
+    `gamma` and `xi`, plain sweeps (``extrapolate=False``, ``evaluation_sweeps=0``) in
+    ``"f64"``, as ``fuzzyq train --preset`` runs it; otherwise ``gamma=0.96``, ``xi=0.05``,
+    ``extrapolate=True``, ``evaluation_sweeps=5`` (modified policy iteration where it
+    applies), ``"f32"``. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
+
+    Args:
+        model: the model to solve.
+        grid: the fuzzy grid, with as many state variables as the model.
+        gamma: the discount factor, in ``[0, 1)``.
+        xi: the stopping threshold: the run stops when the sweep's change
+            ``||theta_{k+1} - theta_k||_inf`` is at most `xi` (the paper's rule).
+        max_sweeps: the most sweeps to run; the solution then has ``converged=False``.
+        sweep: ``"sync"`` (every core reads the previous sweep's values: Jacobi, the paper's
+            eq 20) or ``"async"`` (slabs update in place, later ones read the new values:
+            Gauss-Seidel).
+        extrapolate: move `V` to the midpoint of MacQueen's bounds every other sweep.
+        evaluation_sweeps: evaluation sweeps under the greedy actions after each full backup
+            (modified policy iteration); 0 for value iteration.
+        absorbing_goal: the goal pays once, then nothing; needs a model with goal states at
+            some core of the grid (the point masses), else `ConfigError`.
+        precision: the solver's floating-point type: ``"f32"`` (half the memory, twice the
+            SIMD width) or ``"f64"``; ``"float32"`` and ``"float64"`` are synonyms.
+        backup: ``"auto"`` (the block backup when the model declares blocks, else the
+            generic one), ``"block"`` (the model must declare blocks) or ``"generic"`` (step
+            the model and interpolate over every active successor core).
+        kernel: the SIMD kernel of the block backup (`available_kernels` lists this CPU's);
+            None: the fastest available. All give bit-identical results.
+        operator: ``"values"`` (interpolate the per-core maxima, only `V` stored: any grid
+            size) or ``"q-values"`` (Busoniu's fuzzy Q-iteration with theta stored, as the
+            ApproxRL toolbox runs it; built-in models only).
+        threads: the number of threads (a dedicated pool); None: all cores. Results are
+            bit-identical for any count.
+        callback: called after every sweep with a dict: ``sweep`` (from 1),
+            ``delta_lower`` and ``delta_upper`` (bounds of the sweep's change),
+            ``extrapolated``, ``evaluation``, ``seconds``, ``bound`` (the a-priori sweep
+            bound of eq 37) and ``xi``. Returning False stops the solve after that sweep:
+            `solve` then returns the solution of the run limited to the sweeps done, with its
+            error bound and ``stopped=True``. Any other return value continues. An exception
+            it raises stops the solve and propagates.
+        transitions: solve a model *learned* from transitions instead of the model's own
+            dynamics (built-in models only): a mapping with ``states`` ``(n, state_dim)``,
+            ``actions`` ``(n, action_dim)``, ``next_states`` and ``rewards`` ``(n,)``, as
+            `collect` returns, or logged data. Every dynamics block's transition table is
+            estimated from them; the model supplies only the reward, actions and state
+            ranges.
+        max_memory_gb: the memory the solve may need (default: 90% of the machine's); a
+            larger problem is refused with its estimate before anything is allocated or a
+            `CallableModel`'s function is called.
+        progress: show a tqdm progress bar of the sweeps. tqdm is an optional dependency
+            (``pip install tqdm``); without it ``progress=True`` raises `ConfigError`.
+
+    Returns:
+        The solution.
+
+    Raises:
+        InputTypeError: a model of another type, or an argument of the wrong type.
+        ConfigError: an invalid setting, a grid that does not fit the model, an option the
+            model does not support, or ``progress=True`` without tqdm.
+        ModelError: a `CallableModel`'s function returned unusable data.
+        SolverError: the problem exceeds `max_memory_gb`.
+    """
+
 def collect(
     model: PointMass | ClassicModel,
     samples: int,
     *,
     seed: int = 0,
     episode_steps: int = 50,
-) -> dict[str, npt.NDArray[np.float64]]: ...
-def load(path: str | PathLike[str]) -> Solution | Policy:
-    """Reads a policy file of any kind: a Solution (fuzzy Q-iteration) or a Policy (learned
-    from samples: fuzzy Q-learning, VQQL)."""
+) -> dict[str, npt.NDArray[np.float64]]:
+    """Collects transitions on the plant of a built-in model, with random actions.
 
-def available_kernels() -> list[str]: ...
+    As ``fuzzyq train --learner learned-model`` does: seeded episodes of random joint
+    actions from the task's random starts, with the model's process noise (for example
+    ``PointMass(velocity_noise=0.05)``).
+
+    Args:
+        model: a `PointMass` or a classic benchmark.
+        samples: the number of transitions.
+        seed: the seed of the starts, actions and noise.
+        episode_steps: steps per episode.
+
+    Returns:
+        A dict of float64 arrays: ``states`` ``(n, state_dim)``, ``actions``
+        ``(n, action_dim)``, ``next_states`` ``(n, state_dim)`` and ``rewards`` ``(n,)``,
+        ready for ``solve(model, grid, transitions=...)``.
+
+    Raises:
+        InputTypeError: `model` is not a built-in model.
+        SolverError: the samples would exceed the memory limit.
+    """
+
+def load(path: str | PathLike[str], model: CallableModel | None = None) -> Solution | Policy:
+    """Reads a policy file of any kind: written by ``fuzzyq train`` or by `Solution.save`.
+
+    Args:
+        path: the policy file.
+        model: for a file saved from a solution of a `CallableModel`, that model (the file
+            does not hold its function); leave None for the files of built-in models.
+
+    Returns:
+        A `Solution` for a fuzzy Q-iteration policy (`V`, `greedy`, `grid`, the run's record,
+        ``.policy(kind)``), a `Policy` for a policy learned from samples (fuzzy Q-learning,
+        VQQL: greedy and decentralised, each agent acting on its own observation).
+
+    Raises:
+        PolicyFileError: the file cannot be read, or is truncated, corrupted or foreign.
+    """
+
+def available_kernels() -> list[Literal["avx512", "avx2", "portable", "scalar"]]:
+    """The kernel instances this CPU runs, fastest first.
+
+    Returns:
+        A list of kernel names, for `solve`'s `kernel`.
+    """
+
+def _restore(kind: str, data: Any) -> Any:
+    """Rebuilds a pickled object (the inverse of the classes' ``__reduce__``; not for direct use).
+
+    Args:
+        kind: which class the payload is of.
+        data: the pickled payload.
+
+    Returns:
+        The object.
+    """

@@ -426,7 +426,9 @@ def point_mass_transition(model: fuzzyq.PointMass):  # type: ignore[no-untyped-d
     return transition
 
 
-def test_callable_model_matches_the_built_in_model(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
+def test_callable_model_matches_the_built_in_model(
+    one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution], tmp_path: Path
+) -> None:
     model, grid, s = one_agent
     calls: list[int] = []
 
@@ -443,8 +445,11 @@ def test_callable_model_matches_the_built_in_model(one_agent: tuple[fuzzyq.Point
     assert sum(calls) == grid.n_cores * 25 and max(calls) <= 10_000
     x = np.array([-4.0, 3.0, 0.5, -0.5])
     np.testing.assert_allclose(c.policy().q_values(x), ref.policy().q_values(x), rtol=1e-9)
-    with pytest.raises(fuzzyq.ConfigError, match="built-in"):
-        c.save("never.fzq")
+    # Saved without its function, read back with it.
+    c.save(tmp_path / "callable.fzq")
+    again = fuzzyq.load(tmp_path / "callable.fzq", model=custom)
+    assert isinstance(again, fuzzyq.Solution)
+    np.testing.assert_array_equal(again.policy().q_values(x), c.policy().q_values(x))
 
 
 def test_a_ten_line_custom_system() -> None:
@@ -481,7 +486,7 @@ def test_callable_model_errors() -> None:
     with pytest.raises(fuzzyq.ConfigError, match="state variables"):
         fuzzyq.solve(fuzzyq.CallableModel(ok, state_dim=2, actions=[[0.0]]), grid)
     for bad, match in [
-        (lambda x, u: x, "pair"),
+        (lambda x, u: x, "a tuple \\(next_states, rewards\\)"),
         (lambda x, u: (x[:, :0], np.zeros(len(x))), r"expected shape \(3, 1\)"),
         (lambda x, u: (x, np.zeros(2)), r"rewards: expected shape \(3,\)"),
         (lambda x, u: (x * np.nan, np.zeros(len(x))), "non-finite next state"),

@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import pickle
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -180,6 +181,10 @@ def test_loaded_policy_acts_as_the_cli_rollout(work: Path, case: Case, kind: str
         assert isinstance(loaded, fuzzyq.Policy)
         policy = loaded
     assert (policy.kind, policy.env, policy.learner) == (kind, case.env, case.learner)
+    # Every policy pickles (a solution's by the solution and kind, a learned one by its
+    # file's bytes): the checks below run on the unpickled copy.
+    policy = pickle.loads(pickle.dumps(policy))
+    assert (policy.kind, policy.env, policy.learner) == (kind, case.env, case.learner)
 
     args: list[object] = ["--steps", case.steps, "--policy-kind", kind]
     if case.x0 is not None:
@@ -325,3 +330,17 @@ def test_python_and_cli_policies_act_alike(tmp_path: Path) -> None:
     for row in rows:
         np.testing.assert_array_equal(loaded.act(row[1:5]), row[5:7])
     assert json.loads((tmp_path / "m.json").read_text())["final_error_m"][0] < 0.08
+
+
+def test_the_cli_refuses_a_callable_models_solution_by_name(tmp_path: Path) -> None:
+    def transition(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.clip(x + 0.1 * u, -1, 1), -(x[:, 0] ** 2)
+
+    model = fuzzyq.CallableModel(transition, state_dim=1, actions=[[-1.0, 0.0, 1.0]])
+    fuzzyq.solve(model, fuzzyq.Grid([np.linspace(-1, 1, 11)])).save(tmp_path / "custom.fzq")
+    assert CLI is not None
+    run = subprocess.run(
+        [CLI, "rollout", "--policy", tmp_path / "custom.fzq", "-q"], capture_output=True, text=True
+    )
+    assert run.returncode == 2
+    assert "fuzzyq.load(path, model=...)" in run.stderr and run.stderr.count("\n") == 1

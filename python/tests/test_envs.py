@@ -1,8 +1,11 @@
-"""Tests of the Gymnasium and PettingZoo point-mass environments in `fuzzyq.envs`."""
+"""Tests of the Gymnasium and PettingZoo environments in `fuzzyq.envs`: the point-mass task,
+its registration and rendering, and `ModelEnv` / `ModelParallelEnv` over every model kind."""
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import subprocess
 import sys
 import warnings
 from collections.abc import Callable, Iterator
@@ -29,6 +32,12 @@ from pettingzoo.test import (  # type: ignore[import-untyped, unused-ignore]  # 
 from pettingzoo.utils.conversions import (  # type: ignore[import-untyped, unused-ignore]  # noqa: E402
     parallel_to_aec,
 )
+
+if importlib.util.find_spec("matplotlib") is not None:
+    import matplotlib
+
+    matplotlib.use("Agg")  # "human" rendering draws off screen in the tests
+HAS_MATPLOTLIB = importlib.util.find_spec("matplotlib") is not None
 
 ENV_ID = "FuzzyQ/PointMass-v0"
 X0 = [-4.0, 3.0, 0.0, 0.0]
@@ -60,8 +69,12 @@ def test_gymnasium_check_env(agents: int) -> None:
         # A directly constructed env has no spec, so check_env could only warn that it cannot
         # try the other render modes: skip that part here; the made envs below cover it.
         check_env(fenvs.PointMassEnv(agents=agents), skip_render_check=True)
-        check_env(gymnasium.make(ENV_ID, agents=agents).unwrapped)
-        check_env(gymnasium.make(ENV_ID, agents=agents, render_mode="ansi").unwrapped)
+        # The made envs' render check makes one env per render mode ("human" needs matplotlib).
+        skip = not HAS_MATPLOTLIB
+        check_env(gymnasium.make(ENV_ID, agents=agents).unwrapped, skip_render_check=skip)
+        for mode in ["ansi", "rgb_array"]:
+            made = gymnasium.make(ENV_ID, agents=agents, render_mode=mode).unwrapped
+            check_env(made, skip_render_check=skip)
 
 
 def test_gymnasium_check_env_with_odd_limits() -> None:
@@ -437,7 +450,7 @@ def test_bad_options_and_constructor_arguments() -> None:
         fenvs.PointMassEnv(agents=1).step(0)
     for make in (fenvs.PointMassEnv, fenvs.parallel_env):
         with pytest.raises(ValueError, match="render_mode"):
-            make(render_mode="human")
+            make(render_mode="rgb_array_list")
         with pytest.raises(ValueError, match="max_steps"):
             make(max_steps=0)
         with pytest.raises(TypeError, match="max_steps"):
@@ -521,3 +534,543 @@ def test_missing_optional_dependency_gives_install_hint(
     monkeypatch.setitem(sys.modules, missing, None)  # makes `import missing` fail
     with pytest.raises(ImportError, match=r"pip install fuzzyq\[envs\]"):
         importlib.import_module("fuzzyq.envs")
+
+
+# --- registration on `import fuzzyq`, episode length through the spec ---------------------------
+
+
+def run_python(code: str) -> subprocess.CompletedProcess[str]:
+    """Runs `code` in a fresh interpreter (this one's, so the same installed fuzzyq)."""
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+    )
+
+
+def test_plain_import_registers_the_gymnasium_id() -> None:
+    result = run_python(
+        "import sys\n"
+        "import fuzzyq, gymnasium\n"
+        "assert 'FuzzyQ/PointMass-v0' in gymnasium.registry\n"
+        "assert not any(m in sys.modules for m in ('fuzzyq.envs', 'pettingzoo', 'matplotlib'))\n"
+        "env = gymnasium.make('FuzzyQ/PointMass-v0', agents=1)\n"
+        "assert env.spec.max_episode_steps == 75 and env.action_space.n == 25\n"
+        "print('ok')\n"
+    )
+    assert result.returncode == 0 and result.stdout == "ok\n", result.stderr
+
+
+def test_plain_import_without_gymnasium_does_not_try_to_import_it() -> None:
+    # `sys.modules[name] = None` is how an uninstalled module looks to `find_spec` (None) and
+    # to `import` (ImportError): `import fuzzyq` must still work and import nothing of it.
+    result = run_python(
+        "import sys\n"
+        "sys.modules['gymnasium'] = None\n"
+        "import fuzzyq\n"
+        "assert not any(m.startswith(('gymnasium.', 'fuzzyq.envs')) for m in sys.modules)\n"
+        "assert fuzzyq.PointMass(agents=1).n_joint_actions == 25\n"
+        "print('ok')\n"
+    )
+    assert result.returncode == 0 and result.stdout == "ok\n", result.stderr
+
+
+def test_spec_sets_max_episode_steps() -> None:
+    spec = gymnasium.spec(ENV_ID)
+    assert spec.max_episode_steps == 75
+    assert spec.kwargs == {"max_steps": None}  # the TimeLimit truncates, not the env
+
+
+def truncation_step(env: Any, limit: int) -> int:
+    """The step at which `env` truncates (at most `limit` + 1 steps)."""
+    env.reset(seed=0)
+    for k in range(1, limit + 2):
+        _, _, terminated, truncated, info = env.step(12)
+        assert terminated is False
+        if truncated:
+            assert info["steps"] == k
+            return k
+    return -1
+
+
+def test_make_honours_max_episode_steps() -> None:
+    with warnings_as_errors():
+        longer = gymnasium.make(ENV_ID, agents=1, max_episode_steps=200)
+        assert longer.spec is not None and longer.spec.max_episode_steps == 200
+        assert longer.unwrapped.max_steps is None  # type: ignore[attr-defined]
+        assert truncation_step(longer, 200) == 200
+        assert truncation_step(gymnasium.make(ENV_ID, agents=1), 75) == 75
+        assert truncation_step(gymnasium.make(ENV_ID, agents=1, max_episode_steps=3), 3) == 3
+    # Built directly, the env truncates on its own (default 75, the paper's 30 s).
+    assert truncation_step(fenvs.PointMassEnv(agents=1), 75) == 75
+    assert truncation_step(fenvs.PointMassEnv(agents=1, max_steps=10), 10) == 10
+    # The text picture shows the env's own episode length (none when made: TimeLimit's).
+    env = gymnasium.make(ENV_ID, agents=1, render_mode="ansi")
+    env.reset(seed=0)
+    assert str(env.render()).startswith("step 0  in_goal=")
+    direct = fenvs.PointMassEnv(agents=1, max_steps=10, render_mode="ansi")
+    direct.reset(seed=0)
+    assert str(direct.render()).startswith("step 0/10  in_goal=")
+
+
+# --- rendering ---------------------------------------------------------------------------------
+
+
+def colour_mask(img: np.ndarray, colour: tuple[int, int, int]) -> np.ndarray:
+    return np.all(img == np.asarray(colour, dtype=np.uint8), axis=-1)
+
+
+def centroid(mask: np.ndarray) -> tuple[float, float]:
+    rows, cols = np.nonzero(mask)
+    assert rows.size > 0, "no pixel of that colour"
+    return float(rows.mean()), float(cols.mean())
+
+
+def test_rgb_array_draws_arena_goal_and_agents_where_they_are() -> None:
+    from fuzzyq.envs import _render
+
+    env = fenvs.PointMassEnv(agents=3, render_mode="rgb_array")
+    x0 = [-3.0, 3.0, 0.0, 0.0, 3.0, -1.5, 0.0, 0.0, 6.0, 6.0, 0.0, 0.0]
+    env.reset(options={"x0": x0})
+    img = env.render()
+    assert isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.shape == (400, 400, 3)
+    colours = fenvs.AGENT_COLOURS[:3]
+    assert len(set(colours)) == 3  # distinct colours
+    size = img.shape[0]
+    for i, (sx, sy) in enumerate([(-3.0, 3.0), (3.0, -1.5), (6.0, 6.0)]):
+        row, col = centroid(colour_mask(img, colours[i]))
+        # The arena [-6, 6]^2 spans the picture but for a 20-pixel margin, y pointing up.
+        expected_col = 20 + (sx + 6.0) / 12.0 * (size - 41)
+        expected_row = 20 + (6.0 - sy) / 12.0 * (size - 41)
+        tolerance = 3.5 if i == 2 else 1.0  # the corner disc is cut by the arena's border
+        assert abs(col - expected_col) < tolerance and abs(row - expected_row) < tolerance
+        assert (row, col) == pytest.approx(_render.arena_to_pixel(sx, sy, 6.0), abs=tolerance)
+        assert colour_mask(img, colours[i]).sum() > 50  # a disc, not a dot
+        assert not colour_mask(img, _render.tick_colour(i)).any()  # at rest: no velocity tick
+    # Agent 0 is up and to the left of the centre, agent 1 down and to the right.
+    (row0, col0), (row1, col1) = (centroid(colour_mask(img, c)) for c in colours[:2])
+    assert col0 < size / 2 < col1 and row0 < size / 2 < row1
+    # The goal region at the centre, the arena's border at its edge, white outside.
+    goal = colour_mask(img, _render.GOAL) | colour_mask(img, _render.GOAL_BORDER)
+    assert centroid(goal) == pytest.approx((size / 2 - 0.5, size / 2 - 0.5), abs=1.0)
+    assert colour_mask(img, _render.ARENA_BORDER)[size // 2, 18]
+    assert np.all(img[:10] == 255)
+
+
+def test_rgb_array_velocity_tick_points_along_the_velocity() -> None:
+    from fuzzyq.envs import _render
+
+    env = fenvs.PointMassEnv(agents=2, render_mode="rgb_array")
+    env.reset(options={"x0": [-3.0, 0.0, 3.0, 0.0, 3.0, 0.0, 0.0, 1.5]})
+    img = env.render()
+    assert isinstance(img, np.ndarray)
+    for i, (d_row, d_col) in enumerate([(0.0, 1.0), (-1.0, 0.0)]):  # +x: right; +y: up
+        disc_row, disc_col = centroid(colour_mask(img, fenvs.AGENT_COLOURS[i]))
+        tick_row, tick_col = centroid(colour_mask(img, _render.tick_colour(i)))
+        direction = np.array([tick_row - disc_row, tick_col - disc_col])
+        assert np.linalg.norm(direction) > _render.AGENT_RADIUS
+        assert direction / np.linalg.norm(direction) == pytest.approx([d_row, d_col], abs=0.05)
+    # Full speed draws a longer tick than half speed.
+    full = colour_mask(img, _render.tick_colour(0)).sum()
+    half = colour_mask(img, _render.tick_colour(1)).sum()
+    assert full > half > 0
+
+
+def test_rgb_array_frames_follow_the_state_and_are_fresh() -> None:
+    env = fenvs.PointMassEnv(agents=1, render_mode="rgb_array")
+    env.reset(options={"x0": [-4.0, 0.0, 0.0, 0.0]})
+    first = env.render()
+    again = env.render()
+    assert isinstance(first, np.ndarray) and isinstance(again, np.ndarray)
+    assert first is not again and np.array_equal(first, again)
+    env.step(env.model.joint_index([24]))  # push up and right
+    moved = env.render()
+    assert isinstance(moved, np.ndarray) and not np.array_equal(first, moved)
+    with pytest.raises(gymnasium.error.ResetNeeded):
+        fenvs.PointMassEnv(agents=1, render_mode="rgb_array").render()
+
+
+def test_rgb_array_of_the_parallel_env_matches_the_gymnasium_env() -> None:
+    x0 = [1.0, -2.0, 0.5, 0.0, -5.0, 5.0, 0.0, -3.0]
+    gym_env = fenvs.PointMassEnv(agents=2, render_mode="rgb_array")
+    par_env = fenvs.parallel_env(agents=2, render_mode="rgb_array")
+    gym_env.reset(options={"x0": x0})
+    par_env.reset(options={"x0": x0})
+    assert_same(gym_env.render(), par_env.render(), "frames")
+    assert par_env.metadata["render_modes"] == ["human", "rgb_array", "ansi"]
+
+
+def test_pettingzoo_render_test() -> None:
+    from pettingzoo.test import render_test  # type: ignore[import-untyped, unused-ignore]
+
+    modes = ["rgb_array", "ansi"] + (["human"] if HAS_MATPLOTLIB else [])
+    for mode in modes:
+        render_test(
+            lambda render_mode=mode: parallel_to_aec(
+                fenvs.parallel_env(agents=2, render_mode=render_mode)
+            )
+        )
+
+
+@pytest.mark.skipif(not HAS_MATPLOTLIB, reason="render_mode='human' needs matplotlib")
+@pytest.mark.parametrize("kind", ["gym", "parallel", "model"])
+def test_human_mode_draws_into_a_matplotlib_figure(kind: str) -> None:
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+    env: Any
+    if kind == "gym":
+        env = gymnasium.make(ENV_ID, agents=1, render_mode="human")
+        env.reset(seed=0)
+        assert env.render() is None
+        env.step(3)
+    elif kind == "parallel":
+        env = fenvs.parallel_env(agents=2, render_mode="human")
+        env.reset(seed=0)
+        assert env.render() is None
+        env.step({"agent_0": 3, "agent_1": 4})
+    else:
+        env = fenvs.ModelEnv(fuzzyq.CarHill(), render_mode="human")
+        env.reset(seed=0)
+        assert env.render() is None
+        env.step(1)
+    figures = plt.get_fignums()
+    assert len(figures) == 1  # one window, reused by every step
+    image = plt.figure(figures[0]).axes[0].images[0].get_array()
+    assert image is not None and image.shape[2] == 3
+    env.close()
+    assert plt.get_fignums() == []
+
+
+@pytest.mark.parametrize("make", ["gym", "parallel", "model"])
+def test_human_mode_without_matplotlib_names_the_extra(
+    make: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if not installed
+    with pytest.raises(ImportError, match=r"pip install fuzzyq\[plot\]"):
+        if make == "gym":
+            fenvs.PointMassEnv(render_mode="human")
+        elif make == "parallel":
+            fenvs.parallel_env(render_mode="human")
+        else:
+            fenvs.ModelParallelEnv(fuzzyq.DcMotor(), render_mode="human")
+    fenvs.PointMassEnv(render_mode="rgb_array")  # the other modes need nothing
+
+
+# --- ModelEnv / ModelParallelEnv ------------------------------------------------------------------
+
+
+def callable_model() -> fuzzyq.CallableModel:
+    """Two agents on a line: agent 0 moves x0 by -0.5, 0 or +0.5, agent 1 moves x1 by -0.5 or
+    +0.5; the reward is -|x|^2 and x0 reaching 1 is terminal."""
+
+    def transition(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        nxt = np.clip(x + 0.5 * u, -1.0, 1.0)
+        return nxt, -np.sum(x**2, axis=1), nxt[:, 0] >= 1.0
+
+    return fuzzyq.CallableModel(
+        transition, state_dim=2, actions=[[[-1.0], [0.0], [1.0]], [[-1.0], [1.0]]]
+    )
+
+
+CALLABLE_BOUNDS = [[-1.0, 1.0], [-1.0, 1.0]]
+
+MODELS: dict[str, Callable[[], Any]] = {
+    "pointmass": lambda: fuzzyq.PointMass(agents=1),
+    "pointmass2": lambda: fuzzyq.PointMass(agents=2),
+    "dcmotor": fuzzyq.DcMotor,
+    "pendulum": fuzzyq.Pendulum,
+    "carhill": fuzzyq.CarHill,
+    "arm": fuzzyq.Arm,
+    "callable": callable_model,
+}
+
+
+def model_kwargs(name: str) -> dict[str, Any]:
+    return {"bounds": CALLABLE_BOUNDS} if name == "callable" else {}
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_model_env_passes_the_checkers(name: str) -> None:
+    from gymnasium.utils.passive_env_checker import env_render_passive_checker
+
+    with warnings_as_errors():
+        model = MODELS[name]()
+        check_env(fenvs.ModelEnv(model, **model_kwargs(name)), skip_render_check=True)
+        for mode in ["rgb_array", "ansi"]:
+            env = fenvs.ModelEnv(model, render_mode=mode, **model_kwargs(name))
+            env.reset(seed=0)
+            env_render_passive_checker(env)
+        parallel_api_test(fenvs.ModelParallelEnv(model, **model_kwargs(name)), num_cycles=50)
+        parallel_seed_test(lambda: fenvs.ModelParallelEnv(model, **model_kwargs(name)))
+
+
+@pytest.mark.parametrize("name", [n for n in MODELS if n != "callable"])
+def test_model_env_spaces_of_the_built_in_models(name: str) -> None:
+    model = MODELS[name]()
+    env = fenvs.ModelEnv(model)
+    par = fenvs.ModelParallelEnv(model)
+    assert env.model is model and par.model is model
+    assert env.action_space == gymnasium.spaces.Discrete(model.n_joint_actions)
+    if isinstance(model, fuzzyq.PointMass):
+        limits = np.tile([6.0, 6.0, 3.0, 3.0], model.n_agents)
+        low, high = -limits, limits
+        assert [par.action_space(a).n for a in par.possible_agents] == [25] * model.n_agents
+    else:
+        low, high = model.state_bounds[:, 0], model.state_bounds[:, 1]  # (state_dim, 2)
+        assert par.possible_agents == ["agent_0"]
+        assert par.action_space("agent_0").n == model.n_joint_actions
+    space = env.observation_space
+    assert isinstance(space, gymnasium.spaces.Box) and space.dtype == np.float32
+    assert_same(space.low, low.astype(np.float32), "low")
+    assert_same(space.high, high.astype(np.float32), "high")
+    assert par.observation_space("agent_0") == space == par.state_space
+    assert env.metadata["render_fps"] == pytest.approx(1.0 / model.sample_time)
+
+
+def test_model_env_default_episode_lengths_are_those_of_rollout() -> None:
+    for name in ["dcmotor", "pendulum", "carhill", "arm", "pointmass"]:
+        model = MODELS[name]()
+        bounds = (
+            model.state_bounds
+            if name != "pointmass"
+            else np.array([[-6.0, 6.0], [-6.0, 6.0], [-3.0, 3.0], [-3.0, 3.0]])
+        )
+        grid = fuzzyq.Grid([np.linspace(lo, hi, 3) for lo, hi in bounds])
+        policy = fuzzyq.solve(model, grid).policy("greedy")
+        x0 = None if name != "pointmass" else X0  # from a start that does not end early
+        steps = len(policy.rollout(x0)["states"]) - 1
+        assert fenvs.default_episode_steps(model) == steps, name
+        assert fenvs.ModelEnv(model).max_steps == steps
+
+
+def test_model_env_of_a_point_mass_is_the_point_mass_env() -> None:
+    """Same seed, same actions: the same trajectory as PointMassEnv, and in parallel form."""
+    model = fuzzyq.PointMass(agents=2)
+    envs: list[Any] = [fenvs.ModelEnv(model), fenvs.PointMassEnv(agents=2)]
+    pars: list[Any] = [fenvs.ModelParallelEnv(model), fenvs.parallel_env(agents=2)]
+    first = [env.reset(seed=5) for env in envs]
+    assert_same(first[0], first[1], "reset")
+    assert_same(pars[0].reset(seed=5), pars[1].reset(seed=5), "parallel reset")
+    rng = np.random.default_rng(1)
+    for _ in range(75):
+        per_agent = rng.integers(25, size=2).tolist()
+        a, b = (env.step(model.joint_index(per_agent)) for env in envs)
+        assert_same(a, b, "transition")
+        actions = dict(zip(pars[0].agents, per_agent, strict=True))
+        assert_same(pars[0].step(actions), pars[1].step(actions), "parallel transition")
+    assert a[3] is True and pars[0].agents == []
+
+
+def test_model_env_follows_the_model_and_terminates_like_rollout() -> None:
+    model = fuzzyq.CarHill()
+    policy = fuzzyq.solve(model, model.grid()).policy("greedy")
+    run = policy.rollout()  # from the default start; reaches the hilltop early
+    env = fenvs.ModelEnv(model)
+    par = fenvs.ModelParallelEnv(model)
+    obs, info = env.reset(seed=0)
+    par.reset(seed=0)
+    assert_same(info["state"], model.default_start, "default start")
+    states, rewards = [info["state"]], []
+    terminated = truncated = False
+    while not (terminated or truncated):
+        action = policy.act_index(info["state"])
+        obs, reward, terminated, truncated, info = env.step(action)
+        _, prewards, pterms, _, pinfos = par.step({"agent_0": action})
+        assert_same(pinfos["agent_0"], info, "parallel info")
+        assert prewards == {"agent_0": reward} and pterms == {"agent_0": terminated}
+        states.append(info["state"])
+        rewards.append(reward)
+    assert terminated and not truncated and par.agents == []
+    assert_same(np.array(states), run["states"], "states of ModelEnv and Policy.rollout")
+    assert_same(np.array(rewards), run["rewards"], "rewards of ModelEnv and Policy.rollout")
+    assert model.is_terminal(info["state"])
+    assert obs in env.observation_space  # clipped, though the car left the hill
+    assert info["state"][0] > 1.0 and obs[0] == 1.0
+    with pytest.raises(gymnasium.error.ResetNeeded, match="terminal"):
+        env.step(0)
+    with pytest.raises(gymnasium.error.ResetNeeded):
+        par.step({"agent_0": 0})
+
+
+def test_model_env_start_options() -> None:
+    model = fuzzyq.Pendulum()
+    fixed = fenvs.ModelEnv(model, start=[0.5, -1.0])
+    assert_same(fixed.reset(seed=0)[1]["state"], np.array([0.5, -1.0]), "fixed start")
+    assert_same(fixed.reset(options={"x0": [0.0, 2.0]})[1]["state"], np.array([0.0, 2.0]), "x0")
+
+    def draw(rng: np.random.Generator) -> np.ndarray:
+        return rng.uniform([-1.0, -1.0], [1.0, 1.0])
+
+    drawn = fenvs.ModelEnv(model, start=draw)
+    a = drawn.reset(seed=3)[1]["state"]
+    assert_same(drawn.reset(seed=3)[1]["state"], a, "seeded start(rng)")
+    assert not np.array_equal(drawn.reset(seed=4)[1]["state"], a)
+
+
+# The CallableModel tests need its step(), actions and joint_index (fuzzyq > 0.1.0's wheel).
+
+
+def test_callable_model_env_bounds_and_default_start() -> None:
+    assert fenvs.default_episode_steps(callable_model()) is None
+    assert fenvs.ModelEnv(callable_model(), bounds=CALLABLE_BOUNDS).max_steps is None
+    # The default start of a CallableModel with bounds: uniform within them.
+    env = fenvs.ModelEnv(callable_model(), bounds=CALLABLE_BOUNDS)
+    starts = np.array([env.reset(seed=s)[1]["state"] for s in range(100)])
+    assert np.all(np.abs(starts) <= 1.0) and starts.min() < -0.8 and starts.max() > 0.8
+    # A Grid gives the bounds: its first and last cores.
+    grid = fuzzyq.Grid([[-2.0, 0.0, 2.0], [-1.0, 1.0]])
+    space = fenvs.ModelEnv(callable_model(), bounds=grid).observation_space
+    assert isinstance(space, gymnasium.spaces.Box)
+    assert space.low.tolist() == [-2.0, -1.0] and space.high.tolist() == [2.0, 1.0]
+
+
+def test_callable_model_env_steps_the_function() -> None:
+    model = callable_model()
+    env = fenvs.ModelEnv(model, start=[0.0, 0.5], max_steps=10)
+    assert env.action_space == gymnasium.spaces.Discrete(6)
+    env.reset(seed=0)
+    joint = model.joint_index([2, 0])  # x0 + 0.5, x1 - 0.5
+    assert model.agent_indices(joint) == [2, 0]
+    _, reward, terminated, truncated, info = env.step(joint)
+    assert_same(info["state"], np.array([0.5, 0.0]), "state")
+    assert reward == -0.25 and not terminated and not truncated
+    _, reward, terminated, truncated, info = env.step(joint)
+    assert_same(info["state"], np.array([1.0, -0.5]), "state")
+    assert reward == -0.25 and terminated and not truncated
+    # The parallel env: each agent its own action set.
+    par = fenvs.ModelParallelEnv(model, start=[0.0, 0.5])
+    assert par.possible_agents == ["agent_0", "agent_1"]
+    assert [par.action_space(a).n for a in par.possible_agents] == [3, 2]
+    assert par.observation_space("agent_0").shape == (2,)
+    assert not np.isfinite(par.observation_space("agent_0").high).any()  # no bounds given
+    par.reset(seed=0)
+    _, _, terms, _, infos = par.step({"agent_0": 2, "agent_1": 0})
+    assert_same(infos["agent_1"]["state"], np.array([0.5, 0.0]), "parallel state")
+    _, rewards, terms, _, _ = par.step({"agent_0": 2, "agent_1": 0})
+    assert terms == {"agent_0": True, "agent_1": True} and par.agents == []
+    assert rewards == {"agent_0": -0.25, "agent_1": -0.25}
+    with pytest.raises(ValueError, match="agent_1"):
+        par.reset(seed=0)
+        par.step({"agent_0": 0, "agent_1": 2})  # agent 1 has two actions
+
+
+def test_model_env_rgb_array_of_other_models() -> None:
+    from fuzzyq.envs import _render
+
+    env = fenvs.ModelEnv(fuzzyq.Arm(), render_mode="rgb_array")
+    env.reset(seed=0)
+    img = env.render()
+    assert isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.shape == (180, 400, 3)
+    low, high = fuzzyq.Arm().state_bounds.T
+    for d, value in enumerate(fuzzyq.Arm().default_start):
+        row, col = centroid(colour_mask(img, fenvs.AGENT_COLOURS[d]))
+        assert row == pytest.approx(30 + 40 * d, abs=0.5)  # one gauge per state variable
+        expected = 20 + (value - low[d]) / (high[d] - low[d]) * 359
+        assert col == pytest.approx(expected, abs=1.0)
+    assert not colour_mask(img, _render.TERMINAL_BORDER).any()
+    # A terminal state turns the border red; an unbounded variable sits at (1 + tanh x) / 2.
+    car = fenvs.ModelEnv(fuzzyq.CarHill(), start=[0.95, 2.5], render_mode="rgb_array")
+    car.reset()
+    _, _, terminated, _, _ = car.step(1)
+    frame = car.render()
+    assert terminated and isinstance(frame, np.ndarray)
+    assert colour_mask(frame, _render.TERMINAL_BORDER)[0].all()
+    text = fenvs.ModelParallelEnv(fuzzyq.DcMotor(), render_mode="ansi")
+    text.reset()
+    assert text.render() == "step 0/400  terminal=False\n  x = [-3.142, +0]\n"
+
+
+def test_callable_model_env_rgb_array_of_unbounded_states() -> None:
+    free = fenvs.ModelEnv(callable_model(), start=[0.0, 1.0], render_mode="rgb_array")
+    free.reset()
+    frame = free.render()
+    assert isinstance(frame, np.ndarray)
+    assert centroid(colour_mask(frame, fenvs.AGENT_COLOURS[0]))[1] == pytest.approx(199.5, abs=1)
+    expected = 20 + (1 + np.tanh(1.0)) / 2 * 359
+    assert centroid(colour_mask(frame, fenvs.AGENT_COLOURS[1]))[1] == pytest.approx(expected, abs=1)
+    text = fenvs.ModelEnv(callable_model(), start=[0.0, 1.0], render_mode="ansi")
+    text.reset()
+    assert text.render() == "step 0  terminal=False\n  x = [+0, +1]\n"
+
+
+def test_model_env_bad_arguments() -> None:
+    with pytest.raises(TypeError, match="model must be a fuzzyq.PointMass"):
+        fenvs.ModelEnv(object())  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="model must be"):
+        fenvs.ModelParallelEnv("dcmotor")  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="bounds"):
+        fenvs.ModelEnv(fuzzyq.DcMotor(), bounds=[[0.0, 1.0], [0.0, 1.0]])
+    with pytest.raises(ValueError, match=r"start must be .* shape \(2,\)"):
+        fenvs.ModelEnv(fuzzyq.DcMotor(), start=[0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="start must be"):
+        fenvs.ModelEnv(fuzzyq.CarHill(), start=[2.0, 0.0])  # beyond the bounds
+    with pytest.raises(TypeError, match="start must be"):
+        fenvs.ModelEnv(fuzzyq.CarHill(), start="abc")
+    env = fenvs.ModelEnv(fuzzyq.CarHill(), start=lambda rng: [5.0, 0.0])
+    with pytest.raises(ValueError, match=r"the state returned by start\(rng\)"):
+        env.reset()
+    for bad, error in [(0, ValueError), (1.5, TypeError), ("long", TypeError)]:
+        with pytest.raises(error, match="max_steps"):
+            fenvs.ModelEnv(fuzzyq.CarHill(), max_steps=bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="render_mode"):
+        fenvs.ModelEnv(fuzzyq.CarHill(), render_mode="rgb")
+    env = fenvs.ModelEnv(fuzzyq.CarHill(), max_steps=None)
+    with pytest.raises(gymnasium.error.ResetNeeded):
+        env.step(0)
+    env.reset()
+    with pytest.raises(ValueError, match=r"Discrete\(2\)"):
+        env.step(2)
+    with pytest.raises(TypeError, match=r"Discrete\(2\)"):
+        env.step(0.5)
+
+
+def test_callable_model_env_bad_arguments() -> None:
+    with pytest.raises(fuzzyq.ConfigError, match=r"start: a CallableModel has no default start"):
+        fenvs.ModelEnv(callable_model())
+    with pytest.raises(fuzzyq.InputError, match=r"bounds must be .* shape \(2, 2\)"):
+        fenvs.ModelEnv(callable_model(), bounds=[[0.0, 1.0]])
+    with pytest.raises(fuzzyq.InputError, match="low < high"):
+        fenvs.ModelEnv(callable_model(), bounds=[[1.0, 0.0], [0.0, 1.0]])
+    with pytest.raises(fuzzyq.ConfigError, match="Grid of 1 dimensions"):
+        fenvs.ModelEnv(callable_model(), bounds=fuzzyq.Grid([[0.0, 1.0]]))
+    with pytest.raises(fuzzyq.InputTypeError, match="bounds must be"):
+        fenvs.ModelEnv(callable_model(), bounds="wide")
+
+
+def test_make_without_pettingzoo_gives_install_hint(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The id is registered whenever gymnasium is installed; making it needs fuzzyq.envs.
+    for name in [m for m in sys.modules if m == "fuzzyq.envs" or m.startswith("fuzzyq.envs.")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "pettingzoo", None)
+    with pytest.raises(ImportError, match=r"pip install fuzzyq\[envs\]"):
+        gymnasium.make(ENV_ID, agents=1)
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: fenvs.PointMassEnv(agents=1),
+        lambda: fenvs.parallel_env(agents=1),
+        lambda: fenvs.ModelEnv(fuzzyq.DcMotor()),
+        lambda: fenvs.ModelParallelEnv(fuzzyq.Arm()),
+    ],
+)
+def test_metadata_declares_render_modes_and_fps(make: Callable[[], Any]) -> None:
+    env = make()
+    assert env.metadata["render_modes"] == ["human", "rgb_array", "ansi"]
+    assert env.metadata["render_fps"] == pytest.approx(1.0 / env.model.sample_time)
+    assert type(env).metadata["render_fps"] > 0  # the class's, for tools that read it
+    assert env.render_mode is None and env.render() is None
+
+
+def test_callable_model_without_terminal_flags_never_terminates() -> None:
+    def transition(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.clip(x + u, -1.0, 1.0), -np.abs(x[:, 0])
+
+    model = fuzzyq.CallableModel(transition, state_dim=1, actions=[[[-1.0], [1.0]]])
+    env = fenvs.ModelEnv(model, start=[0.0], max_steps=3)
+    env.reset()
+    results = [env.step(1) for _ in range(3)]
+    assert [r[2] for r in results] == [False] * 3  # never terminated
+    assert [r[3] for r in results] == [False, False, True]  # truncated by max_steps
+    assert [r[1] for r in results] == [0.0, -1.0, -1.0]
+    assert results[-1][4]["state"].tolist() == [1.0]

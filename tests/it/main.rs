@@ -6,4 +6,5 @@ mod khepera;
 mod learned;
 mod memberships;
 mod solver;
+mod table;
 mod train_rollout;

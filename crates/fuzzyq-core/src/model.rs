@@ -165,6 +165,16 @@ pub trait Model<T: Real> {
         None
     }
 
+    /// Rewards precomputed at every (core, joint action) pair of the grid being solved
+    /// (`n_cores * M` values, core-major in row-major grid order, then joint action), for a
+    /// model known only at the cores that declares blocks (a Python callable with independent
+    /// dynamics). The solver reads them instead of calling [`reward`](Self::reward) once per
+    /// core and joint action in every sweep. `None` (the default) for every other model; a
+    /// [`tabulated`](Self::tabulated) model's rewards are read from its table.
+    fn reward_table(&self) -> Option<&[T]> {
+        None
+    }
+
     /// Block `b`'s transition table on the grid being solved, if the model gives it directly
     /// (a learned or stochastic model; see the [module docs](self)). The default, `None`,
     /// makes the solver build it by stepping the model from each block core.

@@ -92,6 +92,10 @@ pub fn greedy_action<T: Real>(
 /// The interpolated policy of eq 22: `out = sum_d mu_d(x) u(greedy[d])`, where `greedy[d]` is
 /// the greedy joint action index of core `d` and `u(.)` its joint action vector
 /// (`out.len() == joint.dim()`).
+///
+/// Each component is then clamped into the range of that component over its agent's actions:
+/// the memberships sum to 1 only up to rounding, so the weighted average of actions at a bound
+/// could otherwise leave it (for example `2.0000014` for levels in `[-2, 2]` in `f32`).
 pub fn interpolated_action<T: Real>(
     grid: &ProductPartition<'_, T>,
     joint: &JointActions<'_, T>,
@@ -128,6 +132,23 @@ pub fn interpolated_action<T: Real>(
             }
         }
     });
+    for i in 0..joint.n_agents() {
+        let set = joint.agent(i);
+        let off = joint.agent_offset(i);
+        for (k, o) in out[off..off + set.dim()].iter_mut().enumerate() {
+            let (mut lo, mut hi) = (set.action(0)[k], set.action(0)[k]);
+            for j in 1..set.n_actions() {
+                let c = set.action(j)[k];
+                lo = if c < lo { c } else { lo };
+                hi = if c > hi { c } else { hi };
+            }
+            if *o > hi {
+                *o = hi;
+            } else if *o < lo {
+                *o = lo;
+            }
+        }
+    }
     Ok(())
 }
 

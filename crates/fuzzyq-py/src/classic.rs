@@ -362,6 +362,29 @@ impl ClassicModel {
         })
     }
 
+    /// Pickling: the preset's name, the actions and every parameter, as keyword arguments of
+    /// the class.
+    fn __getnewargs_ex__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyTuple>, Bound<'py, PyDict>)> {
+        let value = serde_json::to_value(&self.env)
+            .map_err(|e| error(py, Kind::Internal, e.to_string()))?;
+        let json = py.import("json")?;
+        let kwargs = PyDict::new(py);
+        if let Some(model) = value.get("model") {
+            let params = json.call_method1("loads", (model.to_string(),))?;
+            kwargs.update(params.cast::<pyo3::types::PyMapping>()?)?;
+        }
+        if let Some(actions) = value.get("actions") {
+            kwargs.set_item(
+                "actions",
+                json.call_method1("loads", (actions.to_string(),))?,
+            )?;
+        }
+        Ok((PyTuple::new(py, [self.preset.name.as_str()])?, kwargs))
+    }
+
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
         guard(py, || {
             Ok({

@@ -6,11 +6,14 @@
 //! and results come back as numpy arrays. The Python package `fuzzyq` (`python/fuzzyq`)
 //! re-exports this module and adds the Gymnasium/PettingZoo environments.
 
+mod callable;
 mod classic;
 mod convert;
 mod errors;
 mod json;
+mod khepera;
 mod model;
+mod pickle;
 mod policy;
 mod solve;
 
@@ -23,7 +26,8 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<model::Grid>()?;
     m.add_class::<model::PointMass>()?;
-    m.add_class::<model::CallableModel>()?;
+    m.add_class::<khepera::Khepera>()?;
+    m.add_class::<callable::CallableModel>()?;
     m.add_class::<classic::ClassicModel>()?;
     m.add_class::<classic::DcMotor>()?;
     m.add_class::<classic::Pendulum>()?;
@@ -35,5 +39,24 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(solve::load, m)?)?;
     m.add_function(wrap_pyfunction!(solve::collect, m)?)?;
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;
+    m.add_function(wrap_pyfunction!(restore, m)?)?;
     Ok(())
+}
+
+/// Rebuilds a pickled object (the inverse of the classes' `__reduce__`; not for direct use).
+#[pyfunction]
+#[pyo3(name = "_restore")]
+fn restore(py: Python<'_>, kind: &str, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+    errors::guard(py, || match kind {
+        "grid" => model::Grid::restore(py, data),
+        "pointmass" => model::PointMass::restore(py, data),
+        "khepera" => khepera::Khepera::restore(py, data),
+        "solution" => solve::Solution::restore(py, data),
+        "policy" => policy::Policy::restore(py, data),
+        other => Err(errors::error(
+            py,
+            errors::Kind::Input,
+            format!("_restore: unknown kind {other:?} (a pickle of another fuzzyq version?)"),
+        )),
+    })
 }

@@ -1,18 +1,16 @@
-//! `Grid`, `PointMass` and `CallableModel`.
+//! `Grid` and `PointMass`.
 
 use std::sync::Arc;
 
 use fuzzyq_core::model::joint_actions;
-use fuzzyq_core::solver::Precision;
 use fuzzyq_core::{ActionSet, JointActions, Model};
-use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::pointmass::{FrictionConfig, FrictionPatch, Integrator, PointMassConfig};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
-use crate::convert::{Patch, arg, distinct, finite_vector, matrix, one_or_batch, vector};
+use crate::convert::{Patch, arg, distinct, finite_vector, one_or_batch, vector};
 use crate::errors::{Kind, config_error, error, eval_error, guard};
 
 /// Active core indices and their memberships.
@@ -29,6 +27,17 @@ pub struct Grid {
 }
 
 impl Grid {
+    /// Rebuilds a pickled grid: `(cores, membership name)`.
+    pub(crate) fn restore(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+        let (cores, membership): (Vec<Vec<f64>>, String) = data.extract()?;
+        let membership: fuzzyq_core::Membership = membership
+            .parse()
+            .map_err(|e| error(py, Kind::Input, format!("_restore: membership: {e}")))?;
+        let mut grid = Self::checked(py, cores)?;
+        grid.inner = grid.inner.with_membership(membership);
+        Ok(Py::new(py, grid)?.into_any())
+    }
+
     pub(crate) fn from_inner(inner: fuzzyq_core::solver::Grid<f64>) -> Self {
         Self { inner }
     }
@@ -209,6 +218,17 @@ impl Grid {
         })
     }
 
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let data = (
+            self.inner.cores().to_vec(),
+            fuzzyq_core::NamedOption::name(self.inner.membership()),
+        );
+        crate::pickle::reduce(py, "grid", data.into_pyobject(py)?.into_any())
+    }
+
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
         guard(py, || {
             Ok({
@@ -242,6 +262,14 @@ pub struct PointMass {
 }
 
 impl PointMass {
+    /// Rebuilds a pickled point-mass model: its configuration as JSON.
+    pub(crate) fn restore(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+        let json: String = data.extract()?;
+        let config: PointMassConfig = serde_json::from_str(&json)
+            .map_err(|e| error(py, Kind::Input, format!("_restore: {e}")))?;
+        Ok(Py::new(py, Self::from_config(py, config)?)?.into_any())
+    }
+
     pub(crate) fn from_config(py: Python<'_>, config: PointMassConfig) -> PyResult<Self> {
         let model = fuzzyq_sim::PointMass::new(config).map_err(|e| config_error(py, &e))?;
         Ok(Self {
@@ -526,6 +554,15 @@ impl PointMass {
         })
     }
 
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let json = serde_json::to_string(self.model.config())
+            .map_err(|e| error(py, Kind::Internal, e.to_string()))?;
+        crate::pickle::reduce(py, "pointmass", json.into_pyobject(py)?.into_any())
+    }
+
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
         guard(py, || {
             Ok({
@@ -533,281 +570,6 @@ impl PointMass {
                 format!(
                     "PointMass(agents={}, mass={}, sample_time={}, force_levels={:?})",
                     c.agents, c.mass, c.sample_time, c.force_levels
-                )
-            })
-        })
-    }
-}
-
-/// A model defined by a vectorised Python function.
-///
-/// `transition(states, actions)` receives a batch of states, shape `(n, state_dim)`, and of
-/// joint action vectors, shape `(n, action_dim)` (float64), and returns
-/// `(next_states, rewards)` of shapes `(n, state_dim)` and `(n,)`. The solver calls it in
-/// batches of `batch_size` on every (core, joint action) pair of the grid, once, and solves on
-/// the resulting table. `actions` holds each agent's discrete actions, an array of shape
-/// `(n_actions, components)` (or `(n_actions,)` for one component).
-#[pyclass(module = "fuzzyq", frozen)]
-pub struct CallableModel {
-    transition: Py<PyAny>,
-    state_dim: usize,
-    pub(crate) actions: Vec<(Vec<f64>, usize)>,
-    batch_size: usize,
-}
-
-impl CallableModel {
-    /// The peak memory of tabulating and solving `n` cores x `m` joint actions of a state of
-    /// `e` variables in `precision`: first the tables in float64 and their copy in the
-    /// solver's precision, then that copy and the successors' memberships the solver
-    /// precomputes (up to `2^e` active cores per pair, held twice while they are built).
-    pub(crate) fn memory(n: usize, m: usize, e: usize, precision: Precision) -> Estimate {
-        let pairs = n as f64 * m as f64;
-        let s: f64 = match precision {
-            Precision::F32 => 4.0,
-            Precision::F64 => 8.0,
-        };
-        let values = (e + 1) as f64;
-        let active = 2f64.powi(e as i32);
-        // An entry is a core index (4 bytes) and a weight, also as an aligned pair.
-        let entry = 4.0 + s + (4.0 + s).max(2.0 * s);
-        let tabulate = pairs * values * (8.0 + s);
-        let solve = pairs * (values * s + 16.0 + active * entry);
-        Estimate {
-            bytes: tabulate.max(solve),
-            what: format!(
-                "{n} cores x {m} joint actions of a CallableModel (its successors, rewards and \
-                 the successors' memberships)"
-            ),
-        }
-    }
-
-    fn joint(&self) -> JointActions<'_, f64> {
-        let sets: Vec<ActionSet<'_, f64>> = self
-            .actions
-            .iter()
-            .map(|(v, d)| ActionSet::try_new(v, *d).expect("validated"))
-            .collect();
-        JointActions::try_new(&sets).expect("validated")
-    }
-
-    /// Evaluates the transition on every (core, joint action) pair of `grid`, in batches:
-    /// `(next states, rewards)` in core-major, joint-action order. A problem whose tables
-    /// would exceed `limit` is refused first ([`Self::memory`]).
-    pub(crate) fn tabulate(
-        &self,
-        py: Python<'_>,
-        grid: &fuzzyq_core::solver::Grid<f64>,
-        precision: Precision,
-        limit: &Limit,
-    ) -> PyResult<(Vec<f64>, Vec<f64>)> {
-        let e = self.state_dim;
-        if grid.n_dims() != e {
-            return Err(error(
-                py,
-                Kind::Config,
-                format!(
-                    "the grid has {} state variables but the model's state has {e}",
-                    grid.n_dims()
-                ),
-            ));
-        }
-        let joint = self.joint();
-        let (n, m, a) = (grid.n_cores(), joint.n_joint(), joint.dim());
-        limit
-            .check(&Self::memory(n, m, e, precision))
-            .map_err(|err| crate::errors::memory_error(py, "max_memory_gb", &err))?;
-        // Beyond a deliberately raised limit, the tables may still not fit in memory: a typed
-        // error rather than an abort.
-        let too_large = || {
-            error(
-                py,
-                Kind::Solver,
-                format!("{n} cores x {m} joint actions: the tables do not fit in memory"),
-            )
-        };
-        let total = n.checked_mul(m).ok_or_else(too_large)?;
-        let mut next = Vec::new();
-        let mut rewards = Vec::new();
-        total
-            .checked_mul(e)
-            .ok_or_else(too_large)
-            .and_then(|len| next.try_reserve_exact(len).map_err(|_| too_large()))?;
-        rewards.try_reserve_exact(total).map_err(|_| too_large())?;
-        let view = grid.view();
-        let mut start = 0;
-        let f = self.transition.bind(py);
-        while start < total {
-            let b = self.batch_size.min(total - start);
-            let mut xs = vec![0.0; b * e];
-            let mut us = vec![0.0; b * a];
-            for i in 0..b {
-                let (d, u) = ((start + i) / m, (start + i) % m);
-                view.core_state(d, &mut xs[i * e..(i + 1) * e])
-                    .expect("core in range");
-                joint.vector_unchecked(u, &mut us[i * a..(i + 1) * a]);
-            }
-            let xs =
-                PyArray2::from_owned_array(py, Array2::from_shape_vec((b, e), xs).expect("b x e"));
-            let us =
-                PyArray2::from_owned_array(py, Array2::from_shape_vec((b, a), us).expect("b x a"));
-            let out = f.call1((xs, us))?;
-            let model_error =
-                |msg: String| error(py, Kind::Model, format!("transition returned {msg}"));
-            let (xn, r): (Bound<'_, PyAny>, Bound<'_, PyAny>) = out.extract().map_err(|_| {
-                model_error("something other than a pair (next_states, rewards)".into())
-            })?;
-            let (_, _, xn) = matrix(&xn, "next_states", Some(b), Some(e))
-                .map_err(|err| model_error(err.value(py).to_string()))?;
-            let r = vector(&r, "rewards", Some(b))
-                .map_err(|err| model_error(err.value(py).to_string()))?;
-            if let Some(i) = xn.iter().position(|v| !v.is_finite()) {
-                return Err(model_error(format!(
-                    "a non-finite next state (pair {})",
-                    start + i / e
-                )));
-            }
-            if let Some(i) = r.iter().position(|v| !v.is_finite()) {
-                return Err(model_error(format!(
-                    "a non-finite reward (pair {})",
-                    start + i
-                )));
-            }
-            next.extend_from_slice(&xn);
-            rewards.extend_from_slice(&r);
-            start += b;
-            py.check_signals()?;
-        }
-        Ok((next, rewards))
-    }
-}
-
-#[pymethods]
-impl CallableModel {
-    #[new]
-    #[pyo3(signature = (transition, *, state_dim, actions, batch_size = 65536))]
-    fn new(
-        py: Python<'_>,
-        transition: Bound<'_, PyAny>,
-        #[pyo3(from_py_with = arg)] state_dim: usize,
-        actions: &Bound<'_, PyAny>,
-        #[pyo3(from_py_with = arg)] batch_size: usize,
-    ) -> PyResult<Self> {
-        guard(py, || {
-            if !transition.is_callable() {
-                return Err(error(
-                    py,
-                    Kind::InputType,
-                    "transition: expected a callable",
-                ));
-            }
-            if state_dim == 0 || state_dim > fuzzyq_core::MAX_DIMS {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!(
-                        "state_dim: expected 1 to {}, got {state_dim}",
-                        fuzzyq_core::MAX_DIMS
-                    ),
-                ));
-            }
-            if batch_size == 0 {
-                return Err(error(py, Kind::Config, "batch_size: must be at least 1"));
-            }
-            let items = actions.try_iter().map_err(|_| {
-                error(
-                    py,
-                    Kind::InputType,
-                    "actions: expected a sequence of arrays, one per agent",
-                )
-            })?;
-            let mut sets = Vec::new();
-            for (i, item) in items.enumerate() {
-                let item = item?;
-                let what = format!("actions[{i}]");
-                let (values, dim) = match matrix(&item, &what, None, None) {
-                    Ok((_, c, v)) => (v, c),
-                    Err(_) => (finite_vector(&item, &what, None)?, 1),
-                };
-                crate::convert::check_finite(py, &what, &values)?;
-                ActionSet::try_new(&values, dim)
-                    .map_err(|e| error(py, Kind::Config, format!("{what}: {e}")))?;
-                distinct(py, &what, "action", &values, dim)?;
-                sets.push((values, dim));
-            }
-            if sets.is_empty() || sets.len() > fuzzyq_core::MAX_AGENTS {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!(
-                        "actions: expected 1 to {} agents, got {}",
-                        fuzzyq_core::MAX_AGENTS,
-                        sets.len()
-                    ),
-                ));
-            }
-            let model = Self {
-                transition: transition.unbind(),
-                state_dim,
-                actions: sets,
-                batch_size,
-            };
-            let n: Option<usize> = model
-                .actions
-                .iter()
-                .try_fold(1usize, |acc, (v, d)| acc.checked_mul(v.len() / d));
-            if n.is_none_or(|n| n > u32::MAX as usize) {
-                return Err(error(py, Kind::Config, "actions: too many joint actions"));
-            }
-            Ok(model)
-        })
-    }
-
-    /// Length of the state vector.
-    #[getter]
-    fn state_dim(&self) -> usize {
-        self.state_dim
-    }
-
-    /// Number of agents.
-    #[getter]
-    fn n_agents(&self) -> usize {
-        self.actions.len()
-    }
-
-    /// Length of the joint action vector.
-    #[getter]
-    fn action_dim(&self, py: Python<'_>) -> PyResult<usize> {
-        guard(py, || Ok(self.joint().dim()))
-    }
-
-    /// Number of joint actions.
-    #[getter]
-    fn n_joint_actions(&self, py: Python<'_>) -> PyResult<usize> {
-        guard(py, || Ok(self.joint().n_joint()))
-    }
-
-    /// The joint action vector of joint action `index`.
-    fn joint_action<'py>(
-        &self,
-        py: Python<'py>,
-        #[pyo3(from_py_with = crate::convert::index)] index: usize,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        guard(py, || {
-            let j = self.joint();
-            let mut u = vec![0.0; j.dim()];
-            j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
-            Ok(PyArray1::from_vec(py, u))
-        })
-    }
-
-    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
-        guard(py, || {
-            Ok({
-                format!(
-                    "CallableModel(state_dim={}, agents={}, joint_actions={})",
-                    self.state_dim,
-                    self.actions.len(),
-                    self.joint().n_joint()
                 )
             })
         })

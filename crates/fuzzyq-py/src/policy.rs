@@ -10,12 +10,12 @@ use fuzzyq_sim::learn::tasks::khepera::observation;
 use fuzzyq_sim::model::F64Model;
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use fuzzyq_sim::run::metrics::{KheperaRun, Trajectory};
-use fuzzyq_sim::run::policy::{AdditivePolicy, Policy as SimPolicy};
+use fuzzyq_sim::run::policy::{AdditivePolicy, Policy as SimPolicy, Scratch};
 use fuzzyq_sim::world::PointMassPlantConfig;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray1, PyArray2, PyArray3};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 use serde_json::Value;
 
 use crate::convert::{arg, finite_vector, one_or_batch, vector};
@@ -36,6 +36,17 @@ const MAX_JOINT_Q: usize = 10_000_000;
 pub struct Policy {
     inner: Arc<SimPolicy>,
     kind: PolicyKind,
+    /// What the policy was made from, for pickling.
+    origin: Origin,
+}
+
+/// What a [`Policy`] was made from.
+pub(crate) enum Origin {
+    /// `Solution.policy(kind)` (the `Solution`, untyped here: the solution module is above
+    /// this one).
+    Solution(Py<PyAny>),
+    /// A policy file learned from samples (its bytes).
+    File(Vec<u8>),
 }
 
 /// Each agent's slice of a joint observation of a policy learned from samples.
@@ -53,8 +64,31 @@ fn split<'a>(p: &AdditivePolicy, x: &'a [f64]) -> Vec<&'a [f64]> {
 }
 
 impl Policy {
-    pub(crate) fn new(inner: Arc<SimPolicy>, kind: PolicyKind) -> Self {
-        Self { inner, kind }
+    pub(crate) fn new(inner: Arc<SimPolicy>, kind: PolicyKind, origin: Origin) -> Self {
+        Self {
+            inner,
+            kind,
+            origin,
+        }
+    }
+
+    /// Rebuilds a pickled policy: `(solution, kind)` or `(file bytes, "greedy")`.
+    pub(crate) fn restore(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+        let (origin, kind): (Bound<'_, PyAny>, String) = data.extract()?;
+        let Ok(bytes) = crate::pickle::bytes(&origin) else {
+            // A solution's policy: the solution rebuilds it.
+            return Ok(origin.call_method1("policy", (kind,))?.unbind());
+        };
+        let file = fuzzyq_sim::io::policy_file::PolicyFile::from_bytes(&bytes, "<pickle>".as_ref())
+            .map_err(|e| crate::errors::policy_file_error(py, &e))?;
+        let policy = py
+            .detach(|| SimPolicy::from_file(file))
+            .map_err(|e| sim_error(py, &e))?;
+        Ok(Py::new(
+            py,
+            Self::new(Arc::new(policy), PolicyKind::Greedy, Origin::File(bytes)),
+        )?
+        .into_any())
     }
 
     fn state_dim_(&self) -> usize {
@@ -97,8 +131,19 @@ impl Policy {
     /// The policy's action at `x` into `u` (`q`: scratch of `n_joint` values for fuzzy
     /// Q-iteration); the joint action index, or `None` for the interpolated policy.
     fn decide(&self, x: &[f64], q: &mut [f64], u: &mut [f64]) -> Result<Option<usize>, SimError> {
+        self.decide_with(x, q, u, &mut Scratch::default())
+    }
+
+    /// [`Self::decide`] with reusable buffers.
+    fn decide_with(
+        &self,
+        x: &[f64],
+        q: &mut [f64],
+        u: &mut [f64],
+        scratch: &mut Scratch,
+    ) -> Result<Option<usize>, SimError> {
         match &*self.inner {
-            SimPolicy::Fqi(p) => p.act(self.kind, x, q, u),
+            SimPolicy::Fqi(p) => p.act_with(self.kind, x, q, u, scratch),
             SimPolicy::Additive(p) => {
                 let mut idx = vec![0; p.q().n_agents()];
                 p.q().greedy_joint(&split(p, x), &mut idx)?;
@@ -109,6 +154,57 @@ impl Policy {
                 Ok(Some(joint_actions::<f64, _>(p.model())?.compose(&idx)?))
             }
         }
+    }
+
+    /// The decisions at a batch of states `xs` (rows of `state_dim`), in parallel with the GIL
+    /// released: the joint action vectors (rows of `action_dim`) and, for a greedy policy, the
+    /// joint action indices. Each state's decision is independent of the others', so the
+    /// result does not depend on the number of threads.
+    fn decide_batch(&self, py: Python<'_>, xs: &[f64]) -> PyResult<(Vec<f64>, Vec<i64>)> {
+        use rayon::prelude::*;
+        /// States per parallel task.
+        const CHUNK: usize = 32;
+        let (e, a) = (self.state_dim_(), self.action_dim_());
+        let n = xs.len() / e.max(1);
+        let mut us = vec![0.0; n * a];
+        let mut idx = vec![-1i64; n];
+        py.detach(|| {
+            xs.par_chunks(e * CHUNK)
+                .zip(us.par_chunks_mut(a * CHUNK))
+                .zip(idx.par_chunks_mut(CHUNK))
+                .try_for_each(|((xs, us), idx)| {
+                    let mut q = self.scratch();
+                    let mut scratch = Scratch::default();
+                    for ((x, u), i) in xs.chunks_exact(e).zip(us.chunks_exact_mut(a)).zip(idx) {
+                        if let Some(j) = self.decide_with(x, &mut q, u, &mut scratch)? {
+                            *i = j as i64;
+                        }
+                    }
+                    Ok::<(), SimError>(())
+                })
+        })
+        .map_err(|e| sim_error(py, &e))?;
+        Ok((us, idx))
+    }
+
+    /// `Q(x, .)` at a batch of states, rows of `n_joint_actions`, in parallel with the GIL
+    /// released.
+    fn q_batch(&self, py: Python<'_>, xs: &[f64]) -> PyResult<Vec<f64>> {
+        use rayon::prelude::*;
+        let e = self.state_dim_();
+        let m = self.n_joint_();
+        let n = xs.len() / e.max(1);
+        let mut out = vec![0.0; n * m];
+        py.detach(|| {
+            xs.par_chunks(e)
+                .zip(out.par_chunks_mut(m))
+                .try_for_each(|(x, row)| {
+                    row.copy_from_slice(&self.joint_q(x)?);
+                    Ok::<(), SimError>(())
+                })
+        })
+        .map_err(|e| sim_error(py, &e))?;
+        Ok(out)
     }
 
     fn require_greedy(&self, py: Python<'_>, what: &str) -> PyResult<()> {
@@ -235,6 +331,53 @@ fn robot_logs(py: Python<'_>, run: &KheperaRun, out: &Bound<'_, PyDict>) -> PyRe
     Ok(())
 }
 
+/// A JSON list of runs (objects) as columns: a numpy array per field whose values are all
+/// numbers or booleans, a list otherwise.
+fn columns<'py>(py: Python<'py>, runs: &Value) -> PyResult<Bound<'py, PyDict>> {
+    let out = PyDict::new(py);
+    let Some(runs) = runs.as_array() else {
+        return Ok(out);
+    };
+    let Some(first) = runs.first().and_then(Value::as_object) else {
+        return Ok(out);
+    };
+    let np = py.import("numpy")?;
+    for key in first.keys() {
+        let values: Vec<&Value> = runs.iter().map(|r| &r[key]).collect();
+        let list = crate::json::to_python(
+            py,
+            &Value::Array(values.iter().map(|v| (*v).clone()).collect()),
+        )?;
+        let scalar = values
+            .iter()
+            .all(|v| v.is_number() || v.is_boolean() || v.is_null());
+        let rectangular = values.iter().all(|v| v.is_array())
+            && values
+                .iter()
+                .map(|v| v.as_array().map_or(0, Vec::len))
+                .collect::<std::collections::BTreeSet<_>>()
+                .len()
+                == 1
+            && values
+                .iter()
+                .flat_map(|v| v.as_array().into_iter().flatten())
+                .all(|x| x.is_number() || x.is_boolean());
+        if scalar && values.iter().any(|v| v.is_null()) {
+            // Missing values (a run that never reached the goal) as NaN.
+            let floats: Vec<f64> = values
+                .iter()
+                .map(|v| v.as_f64().unwrap_or(f64::NAN))
+                .collect();
+            out.set_item(key, PyArray1::from_vec(py, floats))?;
+        } else if scalar || rectangular {
+            out.set_item(key, np.call_method1("asarray", (list,))?)?;
+        } else {
+            out.set_item(key, list)?;
+        }
+    }
+    Ok(out)
+}
+
 fn to_json<T: serde::Serialize>(py: Python<'_>, v: &T) -> PyResult<Value> {
     serde_json::to_value(v).map_err(|e| error(py, Kind::Solver, e.to_string()))
 }
@@ -310,7 +453,9 @@ impl Policy {
         })
     }
 
-    /// The joint action vectors at a batch of states, shape `(n, state_dim)` -> `(n, action_dim)`.
+    /// The joint action vectors at a batch of states, shape `(n, state_dim)` -> `(n,
+    /// action_dim)` (one state `(state_dim,)` gives `(1, action_dim)`): decided in parallel
+    /// in Rust with the GIL released, identical to `act` state by state.
     fn act_batch<'py>(
         &self,
         py: Python<'py>,
@@ -320,29 +465,75 @@ impl Policy {
             let (e, a) = (self.state_dim_(), self.action_dim_());
             let (xs, b) = one_or_batch(states, "states", e)?;
             let n = b.unwrap_or(1);
-            let out = py
-                .detach(|| {
-                    let mut q = self.scratch();
-                    let mut out = vec![0.0; n * a];
-                    for (x, u) in xs.chunks_exact(e).zip(out.chunks_exact_mut(a)) {
-                        self.decide(x, &mut q, u)?;
-                    }
-                    Ok::<_, SimError>(out)
-                })
-                .map_err(|e| sim_error(py, &e))?;
+            let (us, _) = self.decide_batch(py, &xs)?;
             Ok(PyArray2::from_owned_array(
                 py,
-                Array2::from_shape_vec((n, a), out).expect("n x a"),
+                Array2::from_shape_vec((n, a), us).expect("n x a"),
             ))
         })
     }
 
-    /// The greedy joint action index at `x` (lowest index on ties).
-    fn act_index(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<usize> {
+    /// The greedy joint action index at `x` (lowest index on ties): an `int` for one state
+    /// `(state_dim,)`, an int64 array `(n,)` for a batch `(n, state_dim)` (decided in
+    /// parallel, as `act_batch`).
+    fn act_index<'py>(
+        &self,
+        py: Python<'py>,
+        x: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         guard(py, || {
             self.require_greedy(py, "act_index")?;
-            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
-            self.greedy_index(py, &x)
+            let (xs, b) = one_or_batch(x, "x", self.state_dim_())?;
+            match b {
+                None => Ok(self.greedy_index(py, &xs)?.into_pyobject(py)?.into_any()),
+                Some(_) => {
+                    let (_, idx) = self.decide_batch(py, &xs)?;
+                    Ok(PyArray1::from_vec(py, idx).into_any())
+                }
+            }
+        })
+    }
+
+    /// Stable-Baselines3's `predict`: `(actions, None)` for an observation `(state_dim,)` or
+    /// a batch `(n, state_dim)`.
+    ///
+    /// The actions are those of the fuzzyq Gymnasium environments' action spaces: joint action
+    /// indices (int64, shape `()` or `(n,)`) for a greedy policy (a `Discrete` space), joint
+    /// action vectors (`(action_dim,)` or `(n, action_dim)`) for the interpolated policy (a
+    /// `Box`). The policies are deterministic: `deterministic`, `state` and `episode_start`
+    /// are accepted for the convention and change nothing (`state` is returned as `None`).
+    #[pyo3(signature = (observation, state = None, episode_start = None, deterministic = true))]
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        observation: &Bound<'py, PyAny>,
+        state: Option<&Bound<'py, PyAny>>,
+        episode_start: Option<&Bound<'py, PyAny>>,
+        #[pyo3(from_py_with = arg)] deterministic: bool,
+    ) -> PyResult<(Bound<'py, PyAny>, Option<Py<PyAny>>)> {
+        let _ = (state, episode_start, deterministic);
+        guard(py, || {
+            let (e, a) = (self.state_dim_(), self.action_dim_());
+            let (xs, b) = one_or_batch(observation, "observation", e)?;
+            let (us, idx) = self.decide_batch(py, &xs)?;
+            let n = b.unwrap_or(1);
+            let actions = if self.kind == PolicyKind::Greedy {
+                let arr = PyArray1::from_vec(py, idx);
+                match b {
+                    None => arr.call_method1("reshape", (pyo3::types::PyTuple::empty(py),))?,
+                    Some(_) => arr.into_any(),
+                }
+            } else {
+                match b {
+                    None => PyArray1::from_vec(py, us).into_any(),
+                    Some(_) => PyArray2::from_owned_array(
+                        py,
+                        Array2::from_shape_vec((n, a), us).expect("n x a"),
+                    )
+                    .into_any(),
+                }
+            };
+            Ok((actions, None))
         })
     }
 
@@ -366,23 +557,36 @@ impl Policy {
 
     /// `Q(x, .)`, one value per joint action: fuzzy Q-iteration's one-step lookahead on `V`
     /// (eq 7), or the sum of the agents' terms of a policy learned from samples.
-    fn q_values<'py>(
-        &self,
-        py: Python<'py>,
-        x: &Bound<'py, PyAny>,
-    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    ///
+    /// A batch `(n, state_dim)` gives `(n, n_joint_actions)`, computed in parallel.
+    fn q_values<'py>(&self, py: Python<'py>, x: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         guard(py, || {
-            let x = finite_vector(x, "x", Some(self.state_dim_()))?;
+            let (xs, b) = one_or_batch(x, "x", self.state_dim_())?;
             let m = self.n_joint_();
-            if matches!(&*self.inner, SimPolicy::Additive(_)) && m > MAX_JOINT_Q {
+            let rows = b.unwrap_or(1);
+            if (matches!(&*self.inner, SimPolicy::Additive(_)) && m > MAX_JOINT_Q)
+                || rows.saturating_mul(m) > 50_000_000
+            {
                 return Err(error(
                     py,
                     Kind::Input,
-                    format!("q_values: {m} joint actions are too many to return"),
+                    format!("q_values: {rows} x {m} Q-values are too many to return"),
                 ));
             }
-            let q = self.joint_q(&x).map_err(|e| sim_error(py, &e))?;
-            Ok(PyArray1::from_vec(py, q))
+            match b {
+                None => {
+                    let q = self.joint_q(&xs).map_err(|e| sim_error(py, &e))?;
+                    Ok(PyArray1::from_vec(py, q).into_any())
+                }
+                Some(n) => {
+                    let q = self.q_batch(py, &xs)?;
+                    Ok(PyArray2::from_owned_array(
+                        py,
+                        Array2::from_shape_vec((n, m), q).expect("n x m"),
+                    )
+                    .into_any())
+                }
+            }
         })
     }
 
@@ -551,6 +755,131 @@ impl Policy {
             out.set_item("metrics", crate::json::to_python(py, &metrics)?)?;
             Ok(out)
         })
+    }
+
+    /// Monte-Carlo evaluation on the policy's environment, as `fuzzyq compare` evaluates
+    /// policies: runs from many starts, each as `rollout` runs one.
+    ///
+    /// `starts` (an array `(n, state_dim)` of model states; the point masses and the classic
+    /// benchmarks) defaults to `count` states drawn uniformly within the model's state bounds
+    /// with `seed`; the robots always start from `count` random collision-free poses of
+    /// `seed` (run `k` on the plant seeded with `seed + k`). `steps` defaults to the
+    /// environment's. Point masses run on their model, run `i` with its process noise (if
+    /// any) seeded with `i`.
+    ///
+    /// Returns a dict: `runs`, every run's metrics as columns (a numpy array per numeric
+    /// field, one entry per run, with the names of `fuzzyq rollout --json`), and `summary`: the
+    /// robots' success report, or the classic benchmarks' mean discounted return (a dict).
+    #[pyo3(signature = (starts = None, steps = None, *, count = 100, seed = 0))]
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        starts: Option<&Bound<'py, PyAny>>,
+        #[pyo3(from_py_with = arg)] steps: Option<usize>,
+        #[pyo3(from_py_with = arg)] count: usize,
+        #[pyo3(from_py_with = arg)] seed: u64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        guard(py, || {
+            let Some(model) = self.inner.model() else {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "evaluate: a policy of a CallableModel has no environment to run on",
+                ));
+            };
+            let spec = model.kind().spec();
+            let steps = steps.unwrap_or(spec.default_steps);
+            if steps == 0 || count == 0 {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "steps and count: must be at least 1",
+                ));
+            }
+            if steps.saturating_mul(count) > 100_000_000 {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    format!("steps x count: {steps} x {count} steps are too many (at most 1e8)"),
+                ));
+            }
+            let e = F64Model::state_dim(model);
+            let robots = spec.robot_plant;
+            if robots && starts.is_some() {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "starts: the robots start from `count` random poses of `seed`",
+                ));
+            }
+            let starts: Vec<Vec<f64>> = match starts {
+                Some(s) => {
+                    let (xs, b) = one_or_batch(s, "starts", e)?;
+                    if b.is_none() {
+                        return Err(error(
+                            py,
+                            Kind::Input,
+                            format!("starts: expected shape (n, {e}), one start per row"),
+                        ));
+                    }
+                    xs.chunks_exact(e).map(<[f64]>::to_vec).collect()
+                }
+                None if robots => Vec::new(),
+                None => {
+                    let (lo, hi): (Vec<f64>, Vec<f64>) =
+                        (0..e).map(|d| F64Model::state_bounds(model, d)).unzip();
+                    let rng = py
+                        .import("numpy")?
+                        .getattr("random")?
+                        .call_method1("default_rng", (seed,))?;
+                    let xs = rng.call_method1("uniform", (lo, hi, (count, e)))?;
+                    let (xs, _) = one_or_batch(&xs, "starts", e)?;
+                    xs.chunks_exact(e).map(<[f64]>::to_vec).collect()
+                }
+            };
+            let kind = self.kind;
+            let inner = &self.inner;
+            let (runs, summary) = py
+                .detach(|| -> Result<(Value, Value), SimError> {
+                    fn json<T: serde::Serialize>(v: &T) -> Value {
+                        serde_json::to_value(v).unwrap_or(Value::Null)
+                    }
+                    if robots {
+                        let (report, runs) =
+                            evaluate::khepera_starts(inner, count, seed, steps, kind)?;
+                        Ok((json(&runs), json(&report)))
+                    } else if matches!(model, fuzzyq_sim::model::EnvModel::PointMass(_)) {
+                        let runs = evaluate::point_mass_starts(inner, &starts, steps, kind)?;
+                        Ok((json(&runs), Value::Null))
+                    } else {
+                        let mc = evaluate::monte_carlo(inner, &starts, steps, kind)?;
+                        let mut summary = serde_json::to_value(&mc).unwrap_or(Value::Null);
+                        let runs = summary
+                            .as_object_mut()
+                            .and_then(|m| m.remove("runs"))
+                            .unwrap_or(Value::Null);
+                        Ok((runs, summary))
+                    }
+                })
+                .map_err(|e| sim_error(py, &e))?;
+            let out = PyDict::new(py);
+            out.set_item("runs", columns(py, &runs)?)?;
+            out.set_item("summary", crate::json::to_python(py, &summary)?)?;
+            Ok(out)
+        })
+    }
+
+    /// Pickling: the solution and the kind, or the bytes of the learned policy's file.
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let origin = match &self.origin {
+            Origin::Solution(s) => s.bind(py).clone().into_any(),
+            Origin::File(b) => pyo3::types::PyBytes::new(py, b).into_any(),
+        };
+        let data = (origin, self.kind.name()).into_pyobject(py)?.into_any();
+        crate::pickle::reduce(py, "policy", data)
     }
 
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {

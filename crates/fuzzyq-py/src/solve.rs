@@ -7,15 +7,18 @@ use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::{Arc, Mutex, OnceLock};
 
+use fuzzyq_core::NamedOption;
 use fuzzyq_core::options::UnknownName;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
     self, BackupPath, IterationOperator, Kernel, Precision, Progress, SolveError, SweepMode,
     TabulatedModel,
 };
-use fuzzyq_core::{NamedOption, Real};
+use fuzzyq_sim::io::checkpoint::FqiState;
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
-use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary, Values};
+use fuzzyq_sim::io::policy_file::{
+    PolicyArtifact, PolicyFile, TabulatedArtifact, TrainSummary, Values,
+};
 use fuzzyq_sim::learn::fit::FitConfig;
 use fuzzyq_sim::learn::samples::{Collection, Exploration, Transitions};
 use fuzzyq_sim::memory::{Estimate, Limit};
@@ -25,15 +28,16 @@ use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 
+use crate::callable::CallableModel;
 use crate::classic::ClassicModel;
 use crate::convert::{arg, describe, finite_vector, matrix};
 use crate::errors::{
     Kind, config_error, error, guard, machine_limit, memory_error, policy_file_error, sim_error,
     solve_error,
 };
-use crate::model::{CallableModel, Grid, PointMass};
+use crate::model::{Grid, PointMass};
 use crate::policy::Policy;
 
 /// The option named `got`, or a `ConfigError` naming `field` and the accepted names.
@@ -113,37 +117,142 @@ fn with_pool<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> R
     }
 }
 
-/// Calls the progress callback (and checks for Ctrl-C) after each sweep; a raised exception
-/// stops the solve and is kept to be re-raised.
-fn observer<'a>(
+/// What a solve's observer reports back: a raised exception, or the sweep at which the
+/// callback asked to stop (returning `False`) and the run's state one sweep before, from which
+/// the partial solution is finished.
+struct Watch<'a, S> {
     callback: Option<&'a Py<PyAny>>,
-    failure: &'a Mutex<Option<PyErr>>,
-) -> impl FnMut(&Progress) -> ControlFlow<()> + Send + 'a {
-    move |p: &Progress| {
+    /// The tqdm bar of `progress=True`.
+    bar: Option<Py<PyAny>>,
+    failure: Mutex<Option<PyErr>>,
+    halt: Mutex<Halt<S>>,
+}
+
+struct Halt<S> {
+    /// The sweep after which the callback asked to stop.
+    at: Option<usize>,
+    /// The state after the sweep before the latest one (kept only with a callback).
+    before: Option<S>,
+    latest: Option<S>,
+}
+
+impl<'a, S> Watch<'a, S> {
+    fn new(
+        py: Python<'_>,
+        callback: Option<&'a Py<PyAny>>,
+        progress: bool,
+        max_sweeps: usize,
+    ) -> PyResult<Self> {
+        let bar = if progress {
+            let tqdm = py.import("tqdm").map_err(|_| {
+                error(
+                    py,
+                    Kind::Config,
+                    "progress: progress=True shows a tqdm bar, but tqdm is not installed (pip \
+                     install tqdm)",
+                )
+            })?;
+            let kwargs = PyDict::new(py);
+            kwargs.set_item("total", max_sweeps)?;
+            kwargs.set_item("unit", "sweep")?;
+            kwargs.set_item("desc", "fuzzy Q-iteration")?;
+            Some(tqdm.getattr("tqdm")?.call((), Some(&kwargs))?.unbind())
+        } else {
+            None
+        };
+        Ok(Self {
+            callback,
+            bar,
+            failure: Mutex::new(None),
+            halt: Mutex::new(Halt {
+                at: None,
+                before: None,
+                latest: None,
+            }),
+        })
+    }
+
+    /// After each sweep: checks for Ctrl-C, updates the bar, calls the callback (an exception
+    /// it raises is kept to be re-raised; `False` asks to stop), and keeps the state (`state`
+    /// is called only when a callback could stop the run).
+    fn see(&self, p: &Progress, state: impl FnOnce() -> Option<S>) -> ControlFlow<()> {
+        if self.callback.is_some() {
+            let mut h = self.halt.lock().expect("not poisoned");
+            h.before = h.latest.take();
+            h.latest = state();
+        }
         Python::attach(|py| {
-            let result = py.check_signals().and_then(|()| match callback {
-                None => Ok(()),
-                Some(cb) => {
-                    let d = PyDict::new(py);
-                    d.set_item("sweep", p.record.sweep)?;
-                    d.set_item("delta_lower", p.record.delta.lower)?;
-                    d.set_item("delta_upper", p.record.delta.upper)?;
-                    d.set_item("extrapolated", p.record.extrapolated)?;
-                    d.set_item("evaluation", p.record.evaluation)?;
-                    d.set_item("seconds", p.record.seconds)?;
-                    d.set_item("bound", p.bound)?;
-                    d.set_item("xi", p.xi)?;
-                    cb.call1(py, (d,)).map(|_| ())
+            let result = py.check_signals().and_then(|()| {
+                if let Some(bar) = &self.bar {
+                    let bar = bar.bind(py);
+                    if p.record.sweep == 1 && p.bound > 0 {
+                        bar.setattr("total", p.bound.min(bar.getattr("total")?.extract()?))?;
+                    }
+                    let post = PyDict::new(py);
+                    post.set_item("delta", format!("{:.3e}", p.record.delta.upper))?;
+                    post.set_item("xi", p.xi)?;
+                    bar.call_method1("set_postfix", (post,))?;
+                    bar.call_method1("update", (1,))?;
+                }
+                match self.callback {
+                    None => Ok(true),
+                    Some(cb) => {
+                        let d = PyDict::new(py);
+                        d.set_item("sweep", p.record.sweep)?;
+                        d.set_item("delta_lower", p.record.delta.lower)?;
+                        d.set_item("delta_upper", p.record.delta.upper)?;
+                        d.set_item("extrapolated", p.record.extrapolated)?;
+                        d.set_item("evaluation", p.record.evaluation)?;
+                        d.set_item("seconds", p.record.seconds)?;
+                        d.set_item("bound", p.bound)?;
+                        d.set_item("xi", p.xi)?;
+                        let r = cb.call1(py, (d,))?;
+                        // Only `False` itself stops: a callback returning nothing continues.
+                        Ok(!r.bind(py).is(pyo3::types::PyBool::new(py, false)))
+                    }
                 }
             });
             match result {
-                Ok(()) => ControlFlow::Continue(()),
+                Ok(true) => ControlFlow::Continue(()),
+                Ok(false) => {
+                    self.halt.lock().expect("not poisoned").at = Some(p.record.sweep);
+                    ControlFlow::Break(())
+                }
                 Err(e) => {
-                    *failure.lock().expect("not poisoned") = Some(e);
+                    *self.failure.lock().expect("not poisoned") = Some(e);
                     ControlFlow::Break(())
                 }
             }
         })
+    }
+
+    /// The observer of a run without state.
+    fn plain(&self) -> impl FnMut(&Progress) -> ControlFlow<()> + Send + '_
+    where
+        S: Send,
+    {
+        move |p| self.see(p, || None)
+    }
+
+    /// The error of a run that ended with `e`: the callback's exception, if it raised one.
+    fn error(&self, py: Python<'_>, e: &SolveError) -> PyErr {
+        match self.failure.lock().expect("not poisoned").take() {
+            Some(err) => err,
+            None => solve_error(py, e),
+        }
+    }
+
+    /// `Some((k, state after sweep k - 1))` if the callback stopped the run after sweep `k`.
+    fn stopped(&self) -> Option<(usize, Option<S>)> {
+        let mut h = self.halt.lock().expect("not poisoned");
+        let at = h.at?;
+        Some((at, h.before.take()))
+    }
+
+    fn close(&self, py: Python<'_>) {
+        if let Some(bar) = &self.bar {
+            let _ = bar.bind(py).call_method0("close");
+        }
     }
 }
 
@@ -195,6 +304,7 @@ fn observer<'a>(
     callback = None,
     transitions = None,
     max_memory_gb = None,
+    progress = false,
 ))]
 #[allow(clippy::too_many_arguments)] // the solver's settings, as keyword arguments
 pub(crate) fn solve(
@@ -216,6 +326,7 @@ pub(crate) fn solve(
     callback: Option<Py<PyAny>>,
     transitions: Option<&Bound<'_, PyAny>>,
     #[pyo3(from_py_with = arg)] max_memory_gb: Option<f64>,
+    #[pyo3(from_py_with = arg)] progress: bool,
 ) -> PyResult<Solution> {
     let given = Settings {
         gamma,
@@ -240,6 +351,7 @@ pub(crate) fn solve(
             callback,
             transitions,
             max_memory_gb,
+            progress,
         )
     })
 }
@@ -255,6 +367,7 @@ fn solve_(
     callback: Option<Py<PyAny>>,
     transitions: Option<&Bound<'_, PyAny>>,
     max_memory_gb: Option<f64>,
+    progress: bool,
 ) -> PyResult<Solution> {
     check_threads(py, threads)?;
     let limit = Limit::new(max_memory_gb).map_err(|e| sim_error(py, &e))?;
@@ -264,19 +377,27 @@ fn solve_(
         return Err(error(py, Kind::InputType, "callback: expected a callable"));
     }
     let g = grid.get();
-    let failure = Mutex::new(None);
-    let finish = |py: Python<'_>, e: SolveError| -> PyErr {
-        match failure.lock().expect("not poisoned").take() {
-            Some(err) => err,
-            None => solve_error(py, &e),
-        }
-    };
 
     // A built-in model: the configuration `fuzzyq train` would read, trained the same way.
     let builtin = if let Ok(pm) = model.cast::<PointMass>() {
         let settings = given.resolve(py, None)?;
         Some((
             EnvConfig::Pointmass(pm.get().model.config().clone()),
+            GridConfig {
+                membership: g.inner.membership(),
+                ..GridConfig::explicit(g.inner.cores().to_vec())
+            },
+            settings,
+        ))
+    } else if let Ok(k) = model.cast::<crate::khepera::Khepera>() {
+        let defaults = k.get().train_config(py)?;
+        let mut settings = given.resolve(py, None)?;
+        if given.xi.is_none() {
+            // The paper's threshold for the robots.
+            settings.xi = defaults.solver.xi;
+        }
+        Some((
+            defaults.env,
             GridConfig {
                 membership: g.inner.membership(),
                 ..GridConfig::explicit(g.inner.cores().to_vec())
@@ -317,27 +438,50 @@ fn solve_(
         let data = transitions
             .map(|t| transitions_from(t, &config))
             .transpose()?;
-        let cb = callback.as_ref();
-        let result = py
-            .detach(|| {
+        let run = |config: &TrainConfig,
+                   resume: Option<FqiState<'static>>,
+                   watch: &Watch<'_, FqiState<'static>>| {
+            py.detach(|| {
                 with_pool(threads, || match &data {
-                    None => fuzzyq_sim::train::train(&config, observer(cb, &failure)),
+                    None => fuzzyq_sim::train::train_from(config, resume, |p, s| {
+                        watch.see(p, || s.map(|s| s.clone().into_owned()))
+                    }),
                     Some(d) => fuzzyq_sim::train::train_on_transitions(
-                        &config,
+                        config,
                         d,
                         &FitConfig::default(),
-                        observer(cb, &failure),
+                        watch.plain(),
                     )
                     .map(|r| r.artifact),
                 })
             })
-            .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))?;
-        let artifact = match result {
-            Ok(a) => a,
-            Err(fuzzyq_sim::SimError::Solve(e)) => return Err(finish(py, e)),
+            .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
+        };
+        let watch = Watch::new(py, callback.as_ref(), progress, config.solver.max_sweeps)?;
+        let result = run(&config, None, &watch)?;
+        watch.close(py);
+        let (artifact, stopped) = match result {
+            Ok(a) => (a, false),
+            Err(fuzzyq_sim::SimError::Solve(e)) => match watch.stopped() {
+                // Stopped by the callback after sweep k: the run limited to k sweeps, continued
+                // from the state after sweep k - 1 (the same bits as the interrupted run's V).
+                Some((k, before)) => {
+                    let mut limited = config.clone();
+                    limited.solver.max_sweeps = k;
+                    let quiet = Watch::new(py, None, false, k)?;
+                    match run(&limited, before, &quiet)? {
+                        Ok(a) => (a, true),
+                        Err(fuzzyq_sim::SimError::Solve(e)) => return Err(quiet.error(py, &e)),
+                        Err(e) => return Err(sim_error(py, &e)),
+                    }
+                }
+                None => return Err(watch.error(py, &e)),
+            },
             Err(e) => return Err(sim_error(py, &e)),
         };
-        return Solution::from_artifact(py, artifact, Some(grid.clone().unbind()));
+        let mut solution = Solution::from_artifact(py, artifact, Some(grid.clone().unbind()))?;
+        solution.stopped = stopped;
+        return Ok(solution);
     }
 
     if transitions.is_some() {
@@ -353,7 +497,7 @@ fn solve_(
             py,
             Kind::InputType,
             format!(
-                "model: expected a fuzzyq.PointMass, a classic benchmark (fuzzyq.DcMotor, \
+                "model: expected a fuzzyq.PointMass, a fuzzyq.Khepera, a classic benchmark (fuzzyq.DcMotor, \
                  fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm) or a fuzzyq.CallableModel, got {}",
                 describe(model)
             ),
@@ -371,48 +515,69 @@ fn solve_(
     if settings.absorbing_goal {
         return Err(no_goal(py, "a CallableModel has no goal states"));
     }
+    let cm_obj = cm;
     let cm = cm.get();
-    let (next, rewards) = cm.tabulate(py, &g.inner, settings.precision, &limit)?;
+    let tables = cm.tabulate(py, &g.inner, settings.precision, &limit)?;
     let config = settings.solver_config();
-    let cb = callback.as_ref();
     macro_rules! run {
         ($t:ty, $variant:ident) => {{
-            let conv = |v: &[f64]| v.iter().map(|&x| <$t>::from_f64(x)).collect::<Vec<$t>>();
-            let actions = cm.actions.iter().map(|(v, d)| (conv(v), *d)).collect();
-            let table = TabulatedModel::new(
-                g.to_precision::<$t>(py)?,
-                actions,
-                conv(&next),
-                conv(&rewards),
-            )
-            .map_err(|e| solve_error(py, &e))?;
-            drop((next, rewards));
+            let grid_t = g.to_precision::<$t>(py)?;
+            let table = py
+                .detach(|| tables.model::<$t>(grid_t, &cm.actions))
+                .map_err(|e| solve_error(py, &e))?;
             let table = Arc::new(table);
             let grid_t = g.to_precision::<$t>(py)?;
-            let result = py
-                .detach(|| {
+            let run = |config: &solver::SolverConfig,
+                       resume: Option<solver::SolverState<'static, $t>>,
+                       watch: &Watch<'_, solver::SolverState<'static, $t>>| {
+                py.detach(|| {
                     with_pool(threads, || {
-                        solver::solve(&*table, &grid_t, &config, observer(cb, &failure))
+                        solver::solve_from(&*table, &grid_t, config, resume, |p, s| {
+                            watch.see(p, || s.map(|s| s.clone().into_owned()))
+                        })
                     })
                 })
-                .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))?;
-            let s = result.map_err(|e| finish(py, e))?;
+                .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
+            };
+            let watch = Watch::new(py, callback.as_ref(), progress, config.max_sweeps)?;
+            let result = run(&config, None, &watch)?;
+            watch.close(py);
+            let (s, stopped) = match result {
+                Ok(s) => (s, false),
+                Err(e) => match watch.stopped() {
+                    Some((k, before)) => {
+                        let limited = solver::SolverConfig {
+                            max_sweeps: k,
+                            ..config
+                        };
+                        let quiet = Watch::new(py, None, false, k)?;
+                        let s = run(&limited, before, &quiet)?.map_err(|e| quiet.error(py, &e))?;
+                        (s, true)
+                    }
+                    None => return Err(watch.error(py, &e)),
+                },
+            };
             let summary = TrainSummary::from_solution(&s);
             let v = PyArray1::from_vec(py, s.v).into_any().unbind();
-            Solution::assemble(
+            let mut solution = Solution::assemble(
                 py,
                 v,
                 s.greedy,
                 grid.clone().unbind(),
                 summary,
                 &settings,
-                Source::$variant(table),
-            )
+                Source::Callable(
+                    cm_obj.clone().unbind(),
+                    OnceLock::from(Table::$variant(table)),
+                ),
+            )?;
+            solution.stopped = stopped;
+            Ok(solution)
         }};
     }
     match settings.precision {
-        Precision::F32 => run!(f32, Table32),
-        Precision::F64 => run!(f64, Table64),
+        Precision::F32 => run!(f32, F32),
+        Precision::F64 => run!(f64, F64),
     }
 }
 
@@ -567,23 +732,64 @@ pub(crate) fn collect<'py>(
 /// record, `.policy(kind)`), and a `Policy` for a policy learned from samples (fuzzy
 /// Q-learning, VQQL: greedy and decentralised, each agent acting on its own observation).
 #[pyfunction]
+#[pyo3(signature = (path, model = None))]
 pub(crate) fn load(
     py: Python<'_>,
     #[pyo3(from_py_with = arg)] path: PathBuf,
+    model: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Py<PyAny>> {
     guard(py, || {
         let file = py
             .detach(|| PolicyFile::load(&path))
             .map_err(|e| policy_file_error(py, &e))?;
+        let model = match model {
+            Some(m) if !m.is_none() => Some(m.cast::<CallableModel>().map_err(|_| {
+                error(
+                    py,
+                    Kind::InputType,
+                    format!(
+                        "model: expected the fuzzyq.CallableModel the solution was solved with, \
+                         got {}",
+                        describe(m)
+                    ),
+                )
+            })?),
+            _ => None,
+        };
+        if let PolicyFile::Tabulated(t) = file {
+            let Some(model) = model else {
+                return Err(error(
+                    py,
+                    Kind::Config,
+                    "model: the file holds a solution of a fuzzyq.CallableModel; pass that model \
+                     (load(path, model=...)), whose function the file cannot hold",
+                ));
+            };
+            return Ok(Py::new(py, Solution::from_tabulated(py, *t, model)?)?.into_any());
+        }
+        if model.is_some() {
+            return Err(error(
+                py,
+                Kind::Config,
+                "model: applies to files of CallableModel solutions only; this file names its own \
+                 environment",
+            ));
+        }
         match file {
             PolicyFile::Fqi(a) => {
                 Ok(Py::new(py, Solution::from_artifact(py, a, None)?)?.into_any())
             }
+            PolicyFile::Tabulated(_) => unreachable!("returned above"),
             learned => {
+                let bytes = learned.to_bytes().map_err(|e| sim_error(py, &e))?;
                 let policy = py
                     .detach(|| SimPolicy::from_file(learned))
                     .map_err(|e| sim_error(py, &e))?;
-                let policy = Policy::new(Arc::new(policy), PolicyKind::Greedy);
+                let policy = Policy::new(
+                    Arc::new(policy),
+                    PolicyKind::Greedy,
+                    crate::policy::Origin::File(bytes),
+                );
                 Ok(Py::new(py, policy)?.into_any())
             }
         }
@@ -606,9 +812,16 @@ enum Source {
     /// A built-in model: the training configuration (model, grid, settings) and, for a
     /// policy of a learned model, its transition tables; can be saved.
     Env(Box<TrainConfig>, Option<Box<BlockTables>>),
-    /// A tabulated model (from a Python callable), in the solver's precision.
-    Table32(Arc<TabulatedModel<f32>>),
-    Table64(Arc<TabulatedModel<f64>>),
+    /// A `CallableModel`, with its table in the solver's precision (tabulated again on first
+    /// use when the solution was unpickled).
+    Callable(Py<CallableModel>, OnceLock<Table>),
+}
+
+/// A tabulated model in the solver's precision.
+#[derive(Clone)]
+enum Table {
+    F32(Arc<TabulatedModel<f32>>),
+    F64(Arc<TabulatedModel<f64>>),
 }
 
 /// The result of [`solve`] or [`load`]: `V`, the greedy actions, the run's record, and
@@ -626,6 +839,8 @@ pub struct Solution {
     source: Source,
     /// The sim crate's policy, built (and prepared) on first use.
     policy: OnceLock<Arc<SimPolicy>>,
+    /// Whether the callback stopped the solve.
+    stopped: bool,
 }
 
 impl Solution {
@@ -649,6 +864,7 @@ impl Solution {
             precision: settings.precision,
             source,
             policy: OnceLock::new(),
+            stopped: false,
         })
     }
 
@@ -707,27 +923,181 @@ impl Solution {
                     FqiPolicy::with_model(config, learned, values, greedy).and_then(prepared)
                 })
             }
-            (Source::Table32(t), Values::F32(v)) => {
-                let grid = self.grid.get().to_precision::<f32>(py)?;
-                py.detach(|| {
-                    FqiPolicy::tabulated(t.clone(), grid, v, greedy, gamma, absorbing)
-                        .and_then(prepared)
-                })
+            (Source::Callable(model, table), values) => {
+                let table = match table.get() {
+                    Some(t) => t.clone(),
+                    None => {
+                        let g = self.grid.get();
+                        let tables = model.get().tabulate(
+                            py,
+                            &g.inner,
+                            self.precision,
+                            &Limit::new(None).map_err(|e| sim_error(py, &e))?,
+                        )?;
+                        let built = match self.precision {
+                            Precision::F32 => {
+                                let grid = g.to_precision::<f32>(py)?;
+                                let actions = &model.get().actions;
+                                py.detach(|| tables.model(grid, actions))
+                                    .map(|t| Table::F32(Arc::new(t)))
+                            }
+                            Precision::F64 => {
+                                let grid = g.to_precision::<f64>(py)?;
+                                let actions = &model.get().actions;
+                                py.detach(|| tables.model(grid, actions))
+                                    .map(|t| Table::F64(Arc::new(t)))
+                            }
+                        }
+                        .map_err(|e| solve_error(py, &e))?;
+                        table.get_or_init(|| built).clone()
+                    }
+                };
+                match (table, values) {
+                    (Table::F32(t), Values::F32(v)) => {
+                        let grid = self.grid.get().to_precision::<f32>(py)?;
+                        py.detach(|| {
+                            FqiPolicy::tabulated(t, grid, v, greedy, gamma, absorbing)
+                                .and_then(prepared)
+                        })
+                    }
+                    (Table::F64(t), Values::F64(v)) => {
+                        let grid = self.grid.get().to_precision::<f64>(py)?;
+                        py.detach(|| {
+                            FqiPolicy::tabulated(t, grid, v, greedy, gamma, absorbing)
+                                .and_then(prepared)
+                        })
+                    }
+                    _ => unreachable!("a tabulated model is solved in the precision of its table"),
+                }
             }
-            (Source::Table64(t), Values::F64(v)) => {
-                let grid = self.grid.get().to_precision::<f64>(py)?;
-                py.detach(|| {
-                    FqiPolicy::tabulated(t.clone(), grid, v, greedy, gamma, absorbing)
-                        .and_then(prepared)
-                })
-            }
-            _ => unreachable!("a tabulated model is solved in the precision of its table"),
         };
         let policy = built.map_err(|e| sim_error(py, &e))?;
         Ok(self
             .policy
             .get_or_init(|| Arc::new(SimPolicy::Fqi(policy)))
             .clone())
+    }
+}
+
+/// Pickling.
+impl Solution {
+    /// The policy artifact of a solution of a built-in model (what its file holds).
+    fn artifact(&self, py: Python<'_>) -> PyResult<Option<PolicyArtifact>> {
+        let Source::Env(config, learned) = &self.source else {
+            return Ok(None);
+        };
+        Ok(Some(PolicyArtifact {
+            config: (**config).clone(),
+            values: self.values(py)?,
+            greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
+            summary: self.summary.clone(),
+            learned: learned.clone(),
+        }))
+    }
+
+    /// A solution read from a file of a `CallableModel`'s solution, acting with `model`
+    /// (checked to have the file's state length and actions).
+    fn from_tabulated(
+        py: Python<'_>,
+        t: TabulatedArtifact,
+        model: &Bound<'_, CallableModel>,
+    ) -> PyResult<Self> {
+        let m = model.get();
+        if t.cores.len() != m.state_dim() || t.actions != m.actions {
+            return Err(error(
+                py,
+                Kind::Config,
+                format!(
+                    "model: the file's solution has a state of {} variables and actions {:?}; \
+                     the model has {} and {:?}",
+                    t.cores.len(),
+                    t.actions,
+                    m.state_dim(),
+                    m.actions
+                ),
+            ));
+        }
+        let mut grid = Grid::checked(py, t.cores)?;
+        grid.inner = grid.inner.with_membership(t.membership);
+        let precision = t.values.precision();
+        let v = match t.values {
+            Values::F32(v) => PyArray1::from_vec(py, v).into_any().unbind(),
+            Values::F64(v) => PyArray1::from_vec(py, v).into_any().unbind(),
+        };
+        Ok(Self {
+            v,
+            greedy: PyArray1::from_vec(py, t.greedy).unbind(),
+            grid: Py::new(py, grid)?,
+            summary: t.summary,
+            gamma: t.gamma,
+            xi: t.xi,
+            absorbing_goal: t.absorbing_goal,
+            precision,
+            source: Source::Callable(model.clone().unbind(), OnceLock::new()),
+            policy: OnceLock::new(),
+            stopped: false,
+        })
+    }
+
+    /// Rebuilds a pickled solution (see `__reduce__`).
+    pub(crate) fn restore(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
+        let tag: String = data.get_item(0)?.extract()?;
+        let mut solution = if tag == "env" {
+            let (_, bytes, seconds, stopped): (String, Bound<'_, PyAny>, f64, bool) =
+                data.extract()?;
+            let file = PolicyFile::from_bytes(&crate::pickle::bytes(&bytes)?, "<pickle>".as_ref())
+                .map_err(|e| policy_file_error(py, &e))?;
+            let PolicyFile::Fqi(a) = file else {
+                return Err(error(
+                    py,
+                    Kind::Input,
+                    "_restore: not a fuzzy Q-iteration solution",
+                ));
+            };
+            let mut s = Self::from_artifact(py, a, None)?;
+            s.summary.seconds = seconds;
+            s.stopped = stopped;
+            s
+        } else {
+            #[allow(clippy::type_complexity)] // the pickled fields, in order
+            let (_, model, grid, v, greedy, summary, gamma, xi, absorbing_goal, precision, stopped): (
+                String,
+                Py<CallableModel>,
+                Py<Grid>,
+                Bound<'_, PyAny>,
+                Vec<u32>,
+                String,
+                f64,
+                f64,
+                bool,
+                String,
+                bool,
+            ) = data.extract()?;
+            let precision: Precision = parse_option(py, "precision", &precision)?;
+            let np = py.import("numpy")?;
+            let dtype = match precision {
+                Precision::F32 => "float32",
+                Precision::F64 => "float64",
+            };
+            let v = np.call_method1("ascontiguousarray", (v, dtype))?.unbind();
+            let summary: TrainSummary = serde_json::from_str(&summary)
+                .map_err(|e| error(py, Kind::Input, format!("_restore: {e}")))?;
+            Self {
+                v,
+                greedy: PyArray1::from_vec(py, greedy).unbind(),
+                grid,
+                summary,
+                gamma,
+                xi,
+                absorbing_goal,
+                precision,
+                source: Source::Callable(model, OnceLock::new()),
+                policy: OnceLock::new(),
+                stopped,
+            }
+        };
+        solution.policy = OnceLock::new();
+        Ok(Py::new(py, solution)?.into_any())
     }
 }
 
@@ -779,6 +1149,13 @@ impl Solution {
     #[getter]
     fn converged(&self) -> bool {
         self.summary.converged
+    }
+
+    /// Whether the callback stopped the solve (returning `False`): the solution is then that of
+    /// the run limited to the sweeps done, with its error bound.
+    #[getter]
+    fn stopped(&self) -> bool {
+        self.stopped
     }
 
     /// The exact change `||theta_K - theta_{K-1}||_inf` of the last sweep.
@@ -874,31 +1251,100 @@ impl Solution {
 
     /// A policy: `"greedy"` (eq 7, the maximiser of `Q(x, .)`) or `"interpolated"` (eq 22).
     #[pyo3(signature = (kind = "greedy"))]
-    fn policy(&self, py: Python<'_>, #[pyo3(from_py_with = arg)] kind: &str) -> PyResult<Policy> {
+    fn policy(slf: &Bound<'_, Self>, #[pyo3(from_py_with = arg)] kind: &str) -> PyResult<Policy> {
+        let py = slf.py();
         guard(py, || {
             let kind = parse_option::<PolicyKind>(py, "kind", kind)?;
-            Ok(Policy::new(self.sim_policy(py)?, kind))
+            Ok(Policy::new(
+                slf.get().sim_policy(py)?,
+                kind,
+                crate::policy::Origin::Solution(slf.clone().into_any().unbind()),
+            ))
         })
     }
 
+    /// Pickling (`pickle`, `copy`, `joblib`, process pools): a solution of a built-in model
+    /// as its policy file's bytes (and its timing), a solution of a `CallableModel` as the
+    /// model (its function pickled by reference: a module-level function), the grid, `V`, the
+    /// greedy actions and the run's record; its table is computed again on first use.
+    fn __reduce__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyTuple>)> {
+        let data = match self.artifact(py)? {
+            Some(a) => {
+                let bytes = PolicyFile::Fqi(a)
+                    .to_bytes()
+                    .map_err(|e| sim_error(py, &e))?;
+                (
+                    "env",
+                    pyo3::types::PyBytes::new(py, &bytes),
+                    self.summary.seconds,
+                    self.stopped,
+                )
+                    .into_pyobject(py)?
+                    .into_any()
+            }
+            None => {
+                let Source::Callable(model, _) = &self.source else {
+                    unreachable!("a solution without an artifact is of a CallableModel")
+                };
+                let summary = serde_json::to_string(&self.summary)
+                    .map_err(|e| error(py, Kind::Internal, e.to_string()))?;
+                let greedy: Vec<u32> = self.greedy.bind(py).readonly().as_slice()?.to_vec();
+                PyTuple::new(
+                    py,
+                    [
+                        "callable".into_pyobject(py)?.into_any(),
+                        model.bind(py).clone().into_any(),
+                        self.grid.bind(py).clone().into_any(),
+                        self.v.bind(py).clone(),
+                        greedy.into_pyobject(py)?.into_any(),
+                        summary.into_pyobject(py)?.into_any(),
+                        self.gamma.into_pyobject(py)?.into_any(),
+                        self.xi.into_pyobject(py)?.into_any(),
+                        pyo3::types::PyBool::new(py, self.absorbing_goal)
+                            .to_owned()
+                            .into_any(),
+                        self.precision.name().into_pyobject(py)?.into_any(),
+                        pyo3::types::PyBool::new(py, self.stopped)
+                            .to_owned()
+                            .into_any(),
+                    ],
+                )?
+                .into_any()
+            }
+        };
+        crate::pickle::reduce(py, "solution", data)
+    }
+
     /// Writes the policy file (the format `fuzzyq rollout` reads), atomically. Only solutions
-    /// of built-in models can be saved.
+    /// of built-in models can be saved; a solution of a `CallableModel` pickles.
     fn save(&self, py: Python<'_>, #[pyo3(from_py_with = arg)] path: PathBuf) -> PyResult<()> {
         guard(py, || {
-            let Source::Env(config, learned) = &self.source else {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    "save: only solutions of built-in models (PointMass, DcMotor, Pendulum, CarHill, \
-                 Arm) can be written to a policy file",
-                ));
-            };
-            let artifact = PolicyArtifact {
-                config: (**config).clone(),
-                values: self.values(py)?,
-                greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
-                summary: self.summary.clone(),
-                learned: learned.clone(),
+            let Some(artifact) = self.artifact(py)? else {
+                let Source::Callable(model, _) = &self.source else {
+                    unreachable!("a solution without an artifact is of a CallableModel")
+                };
+                let m = model.get();
+                let g = &self.grid.get().inner;
+                let file = PolicyFile::Tabulated(Box::new(TabulatedArtifact {
+                    cores: g.cores().to_vec(),
+                    membership: g.membership(),
+                    actions: m.actions.clone(),
+                    blocks: m.declared_blocks().to_vec(),
+                    values: self.values(py)?,
+                    greedy: self.greedy.bind(py).readonly().as_slice()?.to_vec(),
+                    gamma: self.gamma,
+                    xi: self.xi,
+                    absorbing_goal: self.absorbing_goal,
+                    summary: self.summary.clone(),
+                }));
+                file.check()
+                    .map_err(|e| error(py, Kind::Input, format!("save: {e}")))?;
+                return py
+                    .detach(|| file.save(&path))
+                    .map_err(|e| sim_error(py, &e));
             };
             artifact
                 .check()

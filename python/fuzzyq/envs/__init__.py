@@ -1,18 +1,30 @@
-"""Gymnasium and PettingZoo environments of the paper's point-mass task.
+"""Gymnasium and PettingZoo environments: the paper's point-mass task, and any fuzzyq model.
 
 Requires the optional dependencies: ``pip install fuzzyq[envs]`` (gymnasium and pettingzoo).
 
 - `PointMassEnv`: a Gymnasium `Env` with the joint observation and ``Discrete(25**agents)``
-  joint actions; registered as ``"FuzzyQ/PointMass-v0"`` when this package is imported.
+  joint actions; registered as ``"FuzzyQ/PointMass-v0"`` (with ``max_episode_steps=75``) by
+  ``import fuzzyq`` whenever gymnasium is installed, so ``gymnasium.make`` and
+  Stable-Baselines3's ``make_vec_env("FuzzyQ/PointMass-v0", env_kwargs={"agents": 1})`` work
+  without importing this package.
 - `PointMassParallelEnv` (built by `parallel_env`): a PettingZoo `ParallelEnv` with one agent
   per point mass, ``"agent_0"``, ``"agent_1"``, ..., each observing the joint state and choosing
   from ``Discrete(25)``; all agents share the reward.
 - `greedy_actions(policy, observations)`: the parallel env's actions under a greedy policy from
   `fuzzyq.solve`. For `PointMassEnv` the joint action is ``policy.act_index(observation)``.
+- `ModelEnv(model, *, start=None, max_steps="default", bounds=None, render_mode=None)` and
+  `ModelParallelEnv(...)` (same arguments): any fuzzyq model (`fuzzyq.PointMass`, the classic
+  `DcMotor`, `Pendulum`, `CarHill`, `Arm`, or a `CallableModel`) as a Gymnasium `Env` with
+  ``Discrete(n_joint_actions)`` actions, or as a PettingZoo `ParallelEnv` with each agent's own
+  ``Discrete(n_i)``; `default_episode_steps(model)` is their default `max_steps`.
 
-Both envs take the keyword arguments of `fuzzyq.PointMass` plus ``max_steps=75`` and
-``render_mode=None`` (or ``"ansi"``). Rewards are the paper's rho(x, u), evaluated at the state
-before the step; the task is continuing (never terminated) and truncated after `max_steps`.
+Both point-mass envs take the keyword arguments of `fuzzyq.PointMass` plus ``max_steps=75`` and
+``render_mode=None``. Rewards are the paper's rho(x, u), evaluated at the state before the step;
+the task is continuing (never terminated) and truncated after `max_steps`. Every env renders
+as ``"rgb_array"`` (a uint8 picture drawn with NumPy: for the point masses the arena, the goal
+and each agent in its colour of `AGENT_COLOURS` with a velocity tick), ``"human"`` (that picture
+in a matplotlib window: ``pip install fuzzyq[plot]``) or ``"ansi"`` (text), so
+`gymnasium.wrappers.RecordVideo` records them.
 
 >>> import fuzzyq, fuzzyq.envs
 >>> env = fuzzyq.envs.PointMassEnv(agents=1)
@@ -27,7 +39,7 @@ True
 from __future__ import annotations
 
 try:
-    import gymnasium
+    import gymnasium  # noqa: F401
     import pettingzoo  # type: ignore[import-untyped, unused-ignore]  # noqa: F401
 except ImportError as exc:  # pragma: no cover - exercised by a test that hides the modules
     raise ImportError(
@@ -35,13 +47,24 @@ except ImportError as exc:  # pragma: no cover - exercised by a test that hides 
         "pip install fuzzyq[envs]"
     ) from exc
 
+from ._model_sim import default_episode_steps
+from ._render import AGENT_COLOURS
+from .model_env import ModelEnv
+from .model_parallel import ModelParallelEnv
 from .point_mass_gym import PointMassEnv
 from .point_mass_parallel import PointMassParallelEnv, greedy_actions, parallel_env
 
-#: The Gymnasium id of `PointMassEnv`.
+#: The Gymnasium id of `PointMassEnv` (registered by ``import fuzzyq``).
 ENV_ID = "FuzzyQ/PointMass-v0"
 
-if ENV_ID not in gymnasium.registry:
-    gymnasium.register(id=ENV_ID, entry_point="fuzzyq.envs.point_mass_gym:PointMassEnv")
-
-__all__ = ["ENV_ID", "PointMassEnv", "PointMassParallelEnv", "greedy_actions", "parallel_env"]
+__all__ = [
+    "AGENT_COLOURS",
+    "ENV_ID",
+    "ModelEnv",
+    "ModelParallelEnv",
+    "PointMassEnv",
+    "PointMassParallelEnv",
+    "default_episode_steps",
+    "greedy_actions",
+    "parallel_env",
+]

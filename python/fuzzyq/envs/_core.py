@@ -9,7 +9,7 @@ environments cannot drift apart.
 from __future__ import annotations
 
 import operator
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,8 @@ from gymnasium import error as gym_error
 from gymnasium import spaces
 
 import fuzzyq
+
+from ._render import Frame, HumanViewer, point_mass_frame, require_matplotlib
 
 #: Observations are float32 (what Gymnasium prefers); the simulation itself stays float64.
 OBS_DTYPE = np.float32
@@ -32,10 +34,38 @@ def agent_name(i: int) -> str:
 
 
 def validate_render_mode(render_mode: str | None, modes: list[str]) -> str | None:
-    """`render_mode` must be None or one of `modes`."""
+    """`render_mode` must be None or one of `modes`; ``"human"`` also needs matplotlib."""
     if render_mode is not None and render_mode not in modes:
         raise fuzzyq.InputError(f"render_mode must be None or one of {modes}, got {render_mode!r}")
+    if render_mode == "human":
+        require_matplotlib()
     return render_mode
+
+
+class Rendering:
+    """An environment's `render_mode` and what it takes to honour it (the ``"human"`` window)."""
+
+    def __init__(self, render_mode: str | None, modes: list[str], title: str) -> None:
+        self.mode = validate_render_mode(render_mode, modes)
+        self.viewer = HumanViewer(title) if self.mode == "human" else None
+
+    def render(
+        self, frame: Callable[[], Frame], text: Callable[[], str], fps: float
+    ) -> Frame | str | None:
+        """What `render` returns: `frame()` for ``"rgb_array"``, `text()` for ``"ansi"``, None
+        otherwise (``"human"`` shows `frame()` in its window first)."""
+        if self.mode == "rgb_array":
+            return frame()
+        if self.mode == "ansi":
+            return text()
+        if self.viewer is not None:
+            self.viewer.show(frame(), fps)
+        return None
+
+    def close(self) -> None:
+        """Closes the ``"human"`` window, if any."""
+        if self.viewer is not None:
+            self.viewer.close()
 
 
 def validate_max_steps(max_steps: object) -> int | None:
@@ -180,20 +210,26 @@ class PointMassSim:
             "steps": self.steps,
         }
 
-    def render_ansi(self, names: list[str]) -> str:
-        """A one-line-per-agent text picture of the current state."""
+    def render_ansi(self, names: list[str], max_steps: int | None) -> str:
+        """A one-line-per-agent text picture of the current state (the step count shows
+        `max_steps` unless it is None: then a wrapper's TimeLimit may truncate)."""
         state = self.require_state()
-        limit = "inf" if self.max_steps is None else str(self.max_steps)
-        lines = [f"step {self.steps}/{limit}  in_goal={bool(self.model.in_goal(state))}"]
+        limit = "" if max_steps is None else f"/{max_steps}"
+        lines = [f"step {self.steps}{limit}  in_goal={bool(self.model.in_goal(state))}"]
         for name, (sx, sy, vx, vy) in zip(names, state.reshape(-1, 4), strict=True):
             lines.append(f"  {name}: s=({sx:+.3f}, {sy:+.3f}) v=({vx:+.3f}, {vy:+.3f})")
         return "\n".join(lines) + "\n"
+
+    def render_rgb(self) -> Frame:
+        """The ``"rgb_array"`` picture of the current state (see `point_mass_frame`)."""
+        return point_mass_frame(self.model, self.require_state())
 
 
 class SimBacked:
     """What both environments read straight from their `PointMassSim`."""
 
     _sim: PointMassSim
+    _rendering: Rendering
     metadata: dict[str, Any]
     render_mode: str | None
 
@@ -205,8 +241,20 @@ class SimBacked:
         model = self._sim.model
         # Per-instance metadata: frames are one sample time apart.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / model.sample_time}
-        self.render_mode = validate_render_mode(render_mode, self.metadata["render_modes"])
+        self._rendering = Rendering(render_mode, self.metadata["render_modes"], "fuzzyq point mass")
+        self.render_mode = self._rendering.mode
         return model
+
+    def _render(self, names: list[str], max_steps: int | None) -> Frame | str | None:
+        return self._rendering.render(
+            self._sim.render_rgb,
+            lambda: self._sim.render_ansi(names, max_steps),
+            self.metadata["render_fps"],
+        )
+
+    def close(self) -> None:
+        """Closes the ``"human"`` window, if any (the env stays usable)."""
+        self._rendering.close()
 
     @property
     def model(self) -> fuzzyq.PointMass:

@@ -16,19 +16,29 @@ from ._core import (
     agent_name,
     validate_index,
 )
+from ._render import RENDER_MODES, Frame
 
 
 class PointMassEnv(SimBacked, gymnasium.Env[Observation, np.int64]):
     """The paper's point-mass task (Luviano-Cruz et al. 2018, section 3.1) as a Gymnasium env.
 
     One environment drives all agents: the observation is the joint state and the action is a
-    joint action index. Registered as ``"FuzzyQ/PointMass-v0"``, so
-    ``gymnasium.make("FuzzyQ/PointMass-v0", agents=1)`` works once `fuzzyq.envs` is imported.
+    joint action index. Registered as ``"FuzzyQ/PointMass-v0"`` by ``import fuzzyq`` (when
+    gymnasium is installed), with ``max_episode_steps=75``: ``gymnasium.make(
+    "FuzzyQ/PointMass-v0", agents=1)`` truncates after 75 steps (Gymnasium's `TimeLimit`
+    wrapper; the made env has ``max_steps=None``) and ``gymnasium.make(...,
+    max_episode_steps=200)`` after 200. Built directly, ``PointMassEnv(max_steps=...)``
+    truncates on its own.
 
     Args:
         max_steps: the episode is truncated after this many steps (default 75, the paper's 30 s
-            at the default sample time of 0.4 s); None never truncates.
-        render_mode: None or ``"ansi"`` (`render` returns a text picture of the state).
+            at the default sample time of 0.4 s); None never truncates (what
+            `gymnasium.make` passes: its `TimeLimit` truncates instead).
+        render_mode: None, ``"rgb_array"`` (`render` returns a ``(400, 400, 3)`` uint8 picture
+            of the arena, the goal and the agents: see `fuzzyq.envs.PointMassEnv.render`),
+            ``"human"`` (the same picture in a matplotlib window, updated on every `reset` and
+            `step` at ``metadata["render_fps"]``; needs ``pip install fuzzyq[plot]``) or
+            ``"ansi"`` (`render` returns a text picture of the state).
         **model_kwargs: passed to `fuzzyq.PointMass` (``agents=2``, ``mass``, ``sample_time``,
             ``position_limit``, ``velocity_limit``, ``force_levels``, ``goal_radius``,
             ``goal_reward``, ``integrator``, ``rk4_substeps``, ``friction``,
@@ -68,7 +78,9 @@ class PointMassEnv(SimBacked, gymnasium.Env[Observation, np.int64]):
     ``policy.act_index(observation)``.
     """
 
-    metadata: dict[str, Any] = {"render_modes": ["ansi"], "render_fps": 2.5}
+    #: ``render_fps`` is that of the default sample time; each instance's is
+    #: ``1 / sample_time``, one frame per step.
+    metadata: dict[str, Any] = {"render_modes": list(RENDER_MODES), "render_fps": 2.5}
 
     def __init__(
         self, *, max_steps: int | None = 75, render_mode: str | None = None, **model_kwargs: Any
@@ -89,16 +101,30 @@ class PointMassEnv(SimBacked, gymnasium.Env[Observation, np.int64]):
         """Start an episode; see the class docstring for `options`."""
         super().reset(seed=seed)
         self._sim.reset(self.np_random, options)
+        if self.render_mode == "human":
+            self.render()
         return self._sim.observation(), self._sim.info()
 
     def step(self, action: Any) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
         """Apply joint action index `action`; see the class docstring."""
         index = validate_index(action, self._sim.model.n_joint_actions, "action")
         reward = self._sim.step(index)
+        if self.render_mode == "human":
+            self.render()
         return self._sim.observation(), reward, False, self._sim.truncated, self._sim.info()
 
-    def render(self) -> str | None:
-        """The ``"ansi"`` text picture of the state, or None when `render_mode` is None."""
-        if self.render_mode is None:
-            return None
-        return self._sim.render_ansi(self._names)
+    def render(self) -> Frame | str | None:
+        """A picture of the current state, as `render_mode` asks.
+
+        Returns:
+            For ``"rgb_array"``, a new ``(400, 400, 3)`` uint8 image: the arena (the position
+            limits) as a grey square with a dark border, y pointing up; the goal region as a
+            green disc at the origin (at least 5 pixels in radius); agent `i` as a disc of
+            colour ``fuzzyq.envs.AGENT_COLOURS[i]`` with a darker tick along its velocity,
+            longer the faster it moves. For ``"ansi"``, one line for the step count and one per
+            agent. None for ``"human"`` (the picture goes to the window) and for None.
+
+        Raises:
+            gymnasium.error.ResetNeeded: before the first `reset` (with a render mode).
+        """
+        return self._render(self._names, self.max_steps)

@@ -20,6 +20,7 @@ from ._core import (
     agent_name,
     validate_index,
 )
+from ._render import RENDER_MODES, Frame
 
 
 class PointMassParallelEnv(
@@ -37,7 +38,10 @@ class PointMassParallelEnv(
     Args:
         max_steps: all agents are truncated (and removed from `agents`) after this many steps
             (default 75); None never truncates.
-        render_mode: None or ``"ansi"`` (`render` returns a text picture of the state).
+        render_mode: None, ``"rgb_array"`` (`render` returns the ``(400, 400, 3)`` uint8
+            picture of `PointMassEnv.render`), ``"human"`` (that picture in a matplotlib window,
+            updated on every `reset` and `step`; needs ``pip install fuzzyq[plot]``) or
+            ``"ansi"`` (`render` returns a text picture of the state).
         **model_kwargs: passed to `fuzzyq.PointMass` (``agents=2``, ``mass``, ``sample_time``,
             ...); invalid options raise the model's errors.
 
@@ -68,7 +72,7 @@ class PointMassParallelEnv(
 
     metadata: dict[str, Any] = {
         "name": "fuzzyq_pointmass_v0",
-        "render_modes": ["ansi"],
+        "render_modes": list(RENDER_MODES),
         "render_fps": 2.5,
     }
 
@@ -128,6 +132,8 @@ class PointMassParallelEnv(
         self.agents = self.possible_agents[:]
         observations = {a: self._sim.observation() for a in self.agents}
         infos = {a: self._sim.info() for a in self.agents}
+        if self.render_mode == "human":
+            self.render()
         return observations, infos
 
     def step(
@@ -170,20 +176,25 @@ class PointMassParallelEnv(
         infos = {a: self._sim.info() for a in agents}
         if truncated:
             self.agents = []
+        if self.render_mode == "human":
+            self.render()
         return observations, rewards, terminations, truncations, infos
 
     def state(self) -> Observation:
         """A fresh float32 copy of the joint state (in `state_space`)."""
         return self._sim.observation()
 
-    def render(self) -> str | None:
-        """The ``"ansi"`` text picture of the state, or None when `render_mode` is None."""
-        if self.render_mode is None:
-            return None
-        return self._sim.render_ansi(self.possible_agents)
+    def render(self) -> Frame | str | None:
+        """A picture of the current state, as `render_mode` asks.
 
-    def close(self) -> None:
-        """Nothing to release."""
+        Returns:
+            The ``(400, 400, 3)`` uint8 image of `PointMassEnv.render` for ``"rgb_array"``, a
+            text picture for ``"ansi"``, None for ``"human"`` (shown in the window) and None.
+
+        Raises:
+            gymnasium.error.ResetNeeded: before the first `reset` (with a render mode).
+        """
+        return self._render(self.possible_agents, self.max_steps)
 
 
 def parallel_env(**kwargs: Any) -> PointMassParallelEnv:

@@ -33,14 +33,15 @@
 //! Cost per sweep on the paper grid (4 blocks of 45 cores and 5 actions, at most 4 successor
 //! entries per row): about 1.25e10 multiply-adds, 82% of them in the last stage.
 
+use std::boxed::Box;
+use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
 use super::simd::{INPUT_PAD, Kernels, RowsBuf, last_scratch_len};
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
-use crate::backup::{SparseRows, contract};
 use crate::model::Model;
-use crate::partition::{MAX_DIMS, Partition, ProductPartition};
+use crate::partition::{MAX_DIMS, Partition, ProductPartition, Segment};
 use crate::real::Real;
 
 /// One block's sparse transition table.
@@ -58,6 +59,8 @@ struct BlockTable<T> {
     /// The block's successor values per (block core, block action), `dims.len()` each; kept
     /// only for a model with terminal states.
     succ: Vec<T>,
+    /// Row-major strides of the block core index over `dims` (the last variable fastest).
+    strides: Vec<usize>,
 }
 
 impl<T: Real> BlockTable<T> {
@@ -127,6 +130,22 @@ pub(super) struct BlockOperator<T: 'static> {
     /// The (core, joint action) pairs whose successor is terminal, if the model has terminal
     /// states.
     terminals: Option<Terminals>,
+    /// What [`Self::q_values`] needs besides the tables (boxed: the operator stays small).
+    q: Box<QPlan<T>>,
+}
+
+/// Index maps and buffers of [`BlockOperator::q_values`].
+struct QPlan<T> {
+    /// Per grid variable: its stride in the internal core index.
+    internal_strides: Vec<usize>,
+    /// Per joint action: its position in the contraction's result (block actions with the
+    /// first block slowest).
+    q_index: Vec<u32>,
+    /// Blocks in the order `V` is gathered (the block of the largest grid strides outermost,
+    /// so the innermost loop reads nearby values).
+    gather_order: Vec<usize>,
+    /// Buffers, kept between calls (one per concurrent caller).
+    work: Mutex<Vec<QWork<T>>>,
 }
 
 /// The terminal (core, joint action) pairs, by internal core index.
@@ -150,24 +169,6 @@ fn sub_partition<'a, T: Real>(
     }
     let parts: &[Partition<'a, T>] = &parts[..dims.len()];
     ProductPartition::from_partitions(parts).expect("a block of a valid grid is a valid grid")
-}
-
-/// Compressed rows of `(block core, weight)` entries, with block cores renumbered by `local`.
-fn local_rows<T: Real, R: Iterator<Item = (usize, T)>>(
-    rows: impl Iterator<Item = R>,
-    local: &[u32],
-) -> (Vec<u32>, Vec<u32>, Vec<T>) {
-    let mut ptr = vec![0u32];
-    let mut col = Vec::new();
-    let mut weight = Vec::new();
-    for row in rows {
-        for (k, w) in row {
-            col.push(local[k]);
-            weight.push(w);
-        }
-        ptr.push(col.len() as u32);
-    }
-    (ptr, col, weight)
 }
 
 /// The row-major grid offset of every core of `sub`, the sub-grid over `dims`.
@@ -358,6 +359,7 @@ impl<T: Real> BlockOperator<T> {
                     grid_offset,
                     rows,
                     succ: Vec::new(),
+                    strides: sub.strides().to_vec(),
                 });
                 continue;
             }
@@ -425,6 +427,7 @@ impl<T: Real> BlockOperator<T> {
                 grid_offset,
                 rows,
                 succ,
+                strides: sub.strides().to_vec(),
             });
         }
 
@@ -452,6 +455,35 @@ impl<T: Real> BlockOperator<T> {
             })
             .collect();
         let identity = product_len == m && map.iter().enumerate().all(|(u, &p)| p as usize == u);
+        let mut internal_strides = vec![0usize; e];
+        for (t, &r) in tables.iter().zip(&r_len) {
+            for (&d, &s) in t.dims.iter().zip(&t.strides) {
+                internal_strides[d] = s * r;
+            }
+        }
+        // Position of block action tuple (a_0, ..., a_{B-1}) with a_0 slowest.
+        let mut suffix = vec![1usize; nb];
+        for b in (0..nb.saturating_sub(1)).rev() {
+            suffix[b] = suffix[b + 1] * tables[b + 1].n_actions;
+        }
+        let q_index = map
+            .iter()
+            .map(|&p| {
+                (0..nb)
+                    .map(|b| (p as usize / p_len[b]) % tables[b].n_actions * suffix[b])
+                    .sum::<usize>() as u32
+            })
+            .collect();
+        let min_stride = |b: usize| {
+            tables[b]
+                .dims
+                .iter()
+                .map(|&d| grid.strides()[d])
+                .min()
+                .unwrap_or(0)
+        };
+        let mut gather_order: Vec<usize> = (0..nb).collect();
+        gather_order.sort_by_key(|&b| core::cmp::Reverse(min_stride(b)));
         let mut op = Self {
             tables,
             kernels: super::simd::select_real::<T>(None).expect("the scalar kernels always exist"),
@@ -459,6 +491,12 @@ impl<T: Real> BlockOperator<T> {
             p_len,
             map: (!identity).then_some(map),
             terminals: None,
+            q: Box::new(QPlan {
+                internal_strides,
+                q_index,
+                gather_order,
+                work: Mutex::new(Vec::new()),
+            }),
         };
         if terminal {
             op.terminals = Some(op.scan_terminals(model, e, m));
@@ -1108,6 +1146,12 @@ impl<T: Real> BlockOperator<T> {
     /// `sum_d mu_d(x) P[d, u] V = sum_k prod_b (sum_{c_b} mu_{c_b} T_b[c_b, a_b, k_b]) V[k]`:
     /// the same contraction with one mixed row per block and action, over the box of
     /// successor cores those rows reach.
+    ///
+    /// Every value is the sum the first version of this function computed, in the same order
+    /// (each mixed weight summed over the active block cores in their order, each stage's
+    /// entries in increasing successor core); only the layout changed: the contraction keeps
+    /// block actions outermost (`[a_0 .. a_{b-1}][k_b][rest]`), so each stage runs along whole
+    /// contiguous rows, and `V` is gathered in grid order. The buffers are kept between calls.
     pub(super) fn q_values<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
@@ -1115,195 +1159,427 @@ impl<T: Real> BlockOperator<T> {
         x: &[T],
         out: &mut [T],
     ) -> Result<(), SolveError> {
-        let grid = &op.grid;
-        let active = grid.active(x)?;
-        let nb = self.tables.len();
+        // Validates the state (length, finite values).
+        op.grid.active(x)?;
+        let pool = || self.q.work.lock().unwrap_or_else(PoisonError::into_inner);
+        let taken = pool().pop();
+        let mut w = taken.unwrap_or_else(|| self.q_work_new(op));
+        self.q_values_in(op, v, x, out, &mut w);
+        pool().push(w);
+        Ok(())
+    }
 
-        // Per block: active block cores with memberships, the mixed rows and their support.
-        struct Mixed<T> {
-            support: Vec<usize>,
-            /// Block core -> position in `support`.
-            local: Vec<u32>,
-            ptr: Vec<u32>,
-            col: Vec<u32>,
-            weight: Vec<T>,
+    /// Fresh buffers for [`Self::q_values`].
+    fn q_work_new<M: Model<T> + Sync + ?Sized>(&self, op: &Operator<'_, T, M>) -> QWork<T> {
+        let nb = self.tables.len();
+        let most = self.tables.iter().map(|t| t.n_cores).max().unwrap_or(0);
+        let mj = op.joint.n_joint();
+        QWork {
+            mixed: (0..nb).map(|_| LocalRows::default()).collect(),
+            pure: (0..nb).map(|_| LocalRows::default()).collect(),
+            support: vec![Vec::new(); nb],
+            local: self.tables.iter().map(|t| vec![0; t.n_cores]).collect(),
+            grid_offset: vec![Vec::new(); nb],
+            act: Vec::new(),
+            hit: Vec::new(),
+            dense: vec![T::ZERO; most],
+            touched: vec![false; most],
+            in_support: vec![false; most],
+            vbox: Vec::new(),
+            ev: Vec::new(),
+            tmp: Vec::new(),
+            ev_core: Vec::new(),
+            reward: vec![T::ZERO; mj],
+            goal_ev: vec![T::ZERO; mj],
+            drop: vec![false; mj],
+            corrections: Vec::new(),
+            x: vec![T::ZERO; op.state_dim()],
+            u: vec![T::ZERO; op.joint.dim()],
         }
-        let mut mixed: Vec<Mixed<T>> = Vec::with_capacity(nb);
-        for t in &self.tables {
-            let sub = sub_partition(grid, &t.dims);
-            let xs: Vec<T> = t.dims.iter().map(|&d| x[d]).collect();
-            let mut act = Vec::new();
-            sub.active_unchecked(&xs).for_each(|c, w| act.push((c, w)));
-            let mut dense = vec![T::ZERO; t.n_cores];
-            let mut touched = vec![false; t.n_cores];
-            let mut rows: Vec<Vec<(usize, T)>> = Vec::with_capacity(t.n_actions);
+    }
+
+    /// [`Self::q_values`] on buffers `w`, for a validated state.
+    fn q_values_in<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        x: &[T],
+        out: &mut [T],
+        w: &mut QWork<T>,
+    ) {
+        let grid = &op.grid;
+        let e = grid.n_dims();
+        let nb = self.tables.len();
+        let mut seg = [Segment {
+            lower: 0,
+            upper_weight: T::ZERO,
+        }; MAX_DIMS];
+        for (s, (p, &xe)) in seg.iter_mut().zip(grid.dims().iter().zip(x)) {
+            *s = p.locate(xe);
+        }
+
+        // Per block: the active block cores, the mixed rows (one per block action, entries in
+        // increasing block core, zero weights left out) and their support.
+        for (b, t) in self.tables.iter().enumerate() {
+            let mut bseg = seg;
+            for (s, &d) in bseg.iter_mut().zip(&t.dims) {
+                *s = seg[d];
+            }
+            w.act.clear();
+            for_each_core(&bseg[..t.dims.len()], |idx, mu| {
+                let c = idx
+                    .iter()
+                    .zip(&t.strides)
+                    .map(|(i, s)| i * s)
+                    .sum::<usize>();
+                w.act.push((c, mu));
+            });
+            let rows = &mut w.mixed[b];
+            rows.clear();
+            let support = &mut w.support[b];
+            support.clear();
             for a in 0..t.n_actions {
-                dense.fill(T::ZERO);
-                let mut hit = Vec::new();
-                for &(c, mu) in &act {
+                w.hit.clear();
+                for &(c, mu) in &w.act {
                     let (cols, ws) = t.row(c, a);
-                    for (&k, &w) in cols.iter().zip(ws) {
-                        if !hit.contains(&(k as usize)) {
-                            hit.push(k as usize);
+                    for (&k, &wk) in cols.iter().zip(ws) {
+                        let k = k as usize;
+                        if !w.touched[k] {
+                            w.touched[k] = true;
+                            w.dense[k] = T::ZERO;
+                            w.hit.push(k as u32);
                         }
-                        dense[k as usize] += mu * w;
+                        w.dense[k] += mu * wk;
                     }
                 }
-                hit.sort_unstable();
-                for &k in &hit {
-                    touched[k] = true;
+                w.hit.sort_unstable();
+                for &k in &w.hit {
+                    let k = k as usize;
+                    w.touched[k] = false;
+                    if !w.in_support[k] {
+                        w.in_support[k] = true;
+                        support.push(k as u32);
+                    }
+                    if w.dense[k] != T::ZERO {
+                        rows.col.push(k as u32);
+                        rows.weight.push(w.dense[k]);
+                    }
                 }
-                rows.push(hit.iter().map(|&k| (k, dense[k])).collect());
+                rows.ptr.push(rows.col.len() as u32);
             }
-            let support: Vec<usize> = (0..t.n_cores).filter(|&k| touched[k]).collect();
-            let mut local = vec![u32::MAX; t.n_cores];
+            support.sort_unstable();
+            let local = &mut w.local[b];
+            let offsets = &mut w.grid_offset[b];
+            offsets.clear();
             for (i, &k) in support.iter().enumerate() {
-                local[k] = i as u32;
+                w.in_support[k as usize] = false;
+                local[k as usize] = i as u32;
+                offsets.push(t.grid_offset[k as usize]);
             }
-            let (ptr, col, weight) = local_rows(rows.iter().map(|r| r.iter().copied()), &local);
-            mixed.push(Mixed {
-                support,
-                local,
-                ptr,
-                col,
-                weight,
-            });
+            for k in &mut rows.col {
+                *k = local[*k as usize];
+            }
         }
 
-        // The box of V over the supports, first block slowest.
-        let box_len: usize = mixed.iter().map(|m| m.support.len()).product();
-        let mut vbox = vec![T::ZERO; box_len];
-        let mut idx = vec![0usize; nb];
-        for slot in vbox.iter_mut() {
-            let g: usize = (0..nb)
-                .map(|b| self.tables[b].grid_offset[mixed[b].support[idx[b]]])
-                .sum();
-            *slot = v[g];
-            for b in (0..nb).rev() {
-                idx[b] += 1;
-                if idx[b] < mixed[b].support.len() {
-                    break;
+        // The box of V over the supports (first block slowest), read in grid order.
+        let mut sizes = [0usize; MAX_DIMS];
+        let mut stride = [0usize; MAX_DIMS];
+        let mut box_len = 1;
+        for b in (0..nb).rev() {
+            sizes[b] = w.support[b].len();
+            stride[b] = box_len;
+            box_len *= sizes[b];
+        }
+        w.vbox.resize(box_len, T::ZERO);
+        {
+            let order = &self.q.gather_order;
+            let inner = order[nb - 1];
+            let (inner_off, inner_stride) = (&w.grid_offset[inner], stride[inner]);
+            let mut digit = [0usize; MAX_DIMS];
+            let mut g: usize = order[..nb - 1].iter().map(|&b| w.grid_offset[b][0]).sum();
+            let mut j = 0usize;
+            'gather: loop {
+                for (i, &gi) in inner_off.iter().enumerate() {
+                    w.vbox[j + i * inner_stride] = v[g + gi];
                 }
-                idx[b] = 0;
+                // Next combination of the outer blocks, like an odometer.
+                let mut l = nb - 1;
+                loop {
+                    if l == 0 {
+                        break 'gather;
+                    }
+                    l -= 1;
+                    let b = order[l];
+                    let off = &w.grid_offset[b];
+                    g -= off[digit[l]];
+                    j -= digit[l] * stride[b];
+                    digit[l] += 1;
+                    if digit[l] < sizes[b] {
+                        g += off[digit[l]];
+                        j += digit[l] * stride[b];
+                        break;
+                    }
+                    digit[l] = 0;
+                    g += off[0];
+                }
             }
         }
-
-        // Contract the box with the given rows (one row per block action for each block).
-        let contract_box = |rows: &dyn Fn(usize) -> (Vec<u32>, Vec<u32>, Vec<T>)| -> Vec<T> {
-            let mut input = vbox.clone();
-            let mut p = 1usize;
-            for b in 0..nb {
-                let k = mixed[b].support.len();
-                let r: usize = mixed[b + 1..].iter().map(|m| m.support.len()).product();
-                let a = self.tables[b].n_actions;
-                let (ptr, col, weight) = rows(b);
-                let mut out = vec![T::ZERO; r * a * p];
-                contract(
-                    SparseRows {
-                        ptr: &ptr,
-                        col: &col,
-                        weight: &weight,
-                    },
-                    0,
-                    a,
-                    k,
-                    r,
-                    p,
-                    &input,
-                    &mut out,
-                )
-                .expect("mixed rows are sized to the box");
-                input = out;
-                p *= a;
-            }
-            input
-        };
-        let ev_mixed = contract_box(&|b| {
-            let m = &mixed[b];
-            (m.ptr.clone(), m.col.clone(), m.weight.clone())
-        });
+        self.contract_box(&w.mixed, &sizes[..nb], &w.vbox, &mut w.ev, &mut w.tmp);
 
         // Rewards of the active cores, and the expectations of goal cores and of transitions
         // into terminal states, to take back out (per joint action).
-        let e = op.state_dim();
         let mj = op.joint.n_joint();
-        let mut xd = vec![T::ZERO; e];
-        let mut uvec = vec![T::ZERO; op.joint.dim()];
-        let mut reward_mix = vec![T::ZERO; mj];
-        let mut goal_ev = vec![T::ZERO; mj];
-        let mut any_goal = false;
-        let mut succ = vec![T::ZERO; e];
-        let mut drop = vec![false; mj];
         let depends = op.model.reward_depends_on_action();
-        let mut cores = Vec::new();
-        active.for_each(|d, mu| cores.push((d, mu)));
-        for &(d, mu) in &cores {
-            grid.core_state(d, &mut xd)?;
-            if depends {
-                for (u, r) in reward_mix.iter_mut().enumerate() {
-                    op.joint.vector_unchecked(u, &mut uvec);
-                    *r += mu * op.model.reward(&xd, &uvec);
-                }
-            } else {
-                op.joint.vector_unchecked(0, &mut uvec);
-                let rd = op.model.reward(&xd, &uvec);
-                for r in reward_mix.iter_mut() {
-                    *r += mu * rd;
+        let state_rewards = op.rewards.as_deref().filter(|_| !depends);
+        let mut reward = T::ZERO;
+        if depends {
+            w.reward.fill(T::ZERO);
+        } else if state_rewards.is_none() {
+            op.joint.vector_unchecked(0, &mut w.u);
+        }
+        let check = op.backup.absorbing_goal || self.terminals.is_some();
+        w.corrections.clear();
+        for_each_core(&seg[..e], |idx, mu| {
+            let internal = idx
+                .iter()
+                .zip(&self.q.internal_strides)
+                .map(|(i, s)| i * s)
+                .sum::<usize>();
+            match state_rewards {
+                Some(r) => reward += mu * r[internal],
+                None => {
+                    for ((xe, p), &i) in w.x.iter_mut().zip(grid.dims()).zip(idx) {
+                        *xe = p.cores()[i];
+                    }
+                    if depends {
+                        for (u, r) in w.reward.iter_mut().enumerate() {
+                            op.joint.vector_unchecked(u, &mut w.u);
+                            *r += mu * op.model.reward(&w.x, &w.u);
+                        }
+                    } else {
+                        reward += mu * op.model.reward(&w.x, &w.u);
+                    }
                 }
             }
-            let goal = op.backup.absorbing_goal && op.model.is_goal(&xd);
-            if goal || self.terminals.is_some() {
-                // This core's block cores, to contract its pure rows.
-                let block_cores: Vec<usize> = self
-                    .tables
-                    .iter()
-                    .map(|t| {
-                        let sub = sub_partition(grid, &t.dims);
-                        let xs: Vec<T> = t.dims.iter().map(|&dd| xd[dd]).collect();
-                        let mut c = 0;
-                        sub.active_unchecked(&xs).for_each(|k, _| c = k);
-                        c
-                    })
-                    .collect();
+            if check && (op.is_goal(internal) || !self.terminal_actions(internal).is_empty()) {
+                w.corrections.push((internal, mu));
+            }
+        });
+        let mut any_goal = false;
+        if !w.corrections.is_empty() {
+            w.goal_ev.fill(T::ZERO);
+            for i in 0..w.corrections.len() {
+                let (internal, mu) = w.corrections[i];
                 // The joint actions whose expectation drops out: all of them at a goal core,
                 // else those leading to a terminal state.
-                let mut any = goal;
-                for (u, d) in drop.iter_mut().enumerate() {
-                    *d = goal || {
-                        self.assemble_successor(&block_cores, u, &mut succ);
-                        op.model.is_terminal(&succ)
-                    };
-                    any |= *d;
-                }
-                if !any {
-                    continue;
+                let goal = op.is_goal(internal);
+                w.drop.fill(goal);
+                if !goal {
+                    for &u in self.terminal_actions(internal) {
+                        w.drop[u as usize] = true;
+                    }
                 }
                 any_goal = true;
-                let ev_d = contract_box(&|b| {
-                    let t = &self.tables[b];
-                    let rows = (0..t.n_actions).map(|a| {
-                        let (cols, ws) = t.row(block_cores[b], a);
-                        cols.iter().map(|&k| k as usize).zip(ws.iter().copied())
-                    });
-                    local_rows(rows, &mixed[b].local)
-                });
-                for (u, g) in goal_ev.iter_mut().enumerate() {
-                    if drop[u] {
-                        *g += mu * ev_d[self.product_index(u)];
+                // This core's pure rows, over the box.
+                for (b, t) in self.tables.iter().enumerate() {
+                    let c = (internal / self.r_len[b]) % t.n_cores;
+                    let rows = &mut w.pure[b];
+                    rows.clear();
+                    for a in 0..t.n_actions {
+                        let (cols, ws) = t.row(c, a);
+                        for (&k, &wk) in cols.iter().zip(ws) {
+                            rows.col.push(w.local[b][k as usize]);
+                            rows.weight.push(wk);
+                        }
+                        rows.ptr.push(rows.col.len() as u32);
+                    }
+                }
+                self.contract_box(&w.pure, &sizes[..nb], &w.vbox, &mut w.ev_core, &mut w.tmp);
+                for (u, g) in w.goal_ev.iter_mut().enumerate() {
+                    if w.drop[u] {
+                        *g += mu * w.ev_core[self.q.q_index[u] as usize];
                     }
                 }
             }
         }
         let gamma = op.gamma;
-        for (u, o) in out.iter_mut().enumerate() {
-            let p = self.product_index(u);
+        for (u, o) in out[..mj].iter_mut().enumerate() {
+            let f = self.q.q_index[u] as usize;
             let ev = if any_goal {
-                ev_mixed[p] - goal_ev[u]
+                w.ev[f] - w.goal_ev[u]
             } else {
-                ev_mixed[p]
+                w.ev[f]
             };
-            *o = reward_mix[u] + gamma * ev;
+            let r = if depends { w.reward[u] } else { reward };
+            *o = r + gamma * ev;
         }
-        Ok(())
+    }
+
+    /// Contracts the box `vbox` (`[k_0][k_1]..`, block supports of `sizes`) with `rows` (per
+    /// block, one row per block action, local columns) into `out`, `[a_0][a_1]..` with the
+    /// first block slowest; `tmp` is scratch.
+    ///
+    /// Stage `b` maps `[p][k_b][r]` to `[p][a_b][r]` (`p` over the earlier blocks' actions,
+    /// `r` over the later blocks' support cores): every element is `sum_e w_e in[p][k_e][r]`
+    /// over the row's entries in order, the same sum as [`crate::backup::contract`] forms in
+    /// its `[k][r][p]` layout, computed along whole contiguous rows of length `r`.
+    fn contract_box(
+        &self,
+        rows: &[LocalRows<T>],
+        sizes: &[usize],
+        vbox: &[T],
+        out: &mut Vec<T>,
+        tmp: &mut Vec<T>,
+    ) {
+        let nb = sizes.len();
+        let mut r: usize = sizes.iter().product();
+        let mut p = 1usize;
+        // Stages alternate between `out` and `tmp` so that the last one writes `out`.
+        let (mut dst, mut src) = if nb % 2 == 1 {
+            (&mut *out, &mut *tmp)
+        } else {
+            (&mut *tmp, &mut *out)
+        };
+        for b in 0..nb {
+            let (k, a) = (sizes[b], self.tables[b].n_actions);
+            r /= k;
+            dst.resize(p * a * r, T::ZERO);
+            let input: &[T] = if b == 0 { vbox } else { src };
+            stage_rows(&rows[b], a, k, r, &input[..p * k * r], dst);
+            p *= a;
+            core::mem::swap(&mut dst, &mut src);
+        }
     }
 }
+
+/// Sparse rows with columns local to a box (positions in a block's support).
+#[derive(Default)]
+struct LocalRows<T> {
+    ptr: Vec<u32>,
+    col: Vec<u32>,
+    weight: Vec<T>,
+}
+
+impl<T> LocalRows<T> {
+    /// No rows (ready for the first row's entries).
+    fn clear(&mut self) {
+        self.ptr.clear();
+        self.ptr.push(0);
+        self.col.clear();
+        self.weight.clear();
+    }
+}
+
+/// Buffers of [`BlockOperator::q_values`], kept between calls.
+struct QWork<T> {
+    /// Per block: the mixed rows.
+    mixed: Vec<LocalRows<T>>,
+    /// Per block: one core's rows (goal and terminal corrections).
+    pure: Vec<LocalRows<T>>,
+    /// Per block: the support of the mixed rows (block cores, increasing).
+    support: Vec<Vec<u32>>,
+    /// Per block and block core: its position in the support (support cores only).
+    local: Vec<Vec<u32>>,
+    /// Per block: the grid offsets of the support cores.
+    grid_offset: Vec<Vec<usize>>,
+    /// One block's active block cores and memberships.
+    act: Vec<(usize, T)>,
+    /// The block cores one mixed row touches.
+    hit: Vec<u32>,
+    /// One mixed row, dense over a block's cores (entries of `hit` only).
+    dense: Vec<T>,
+    /// Per block core: in `hit` (all false between rows).
+    touched: Vec<bool>,
+    /// Per block core: in the support (all false between blocks).
+    in_support: Vec<bool>,
+    /// The box of `V`.
+    vbox: Vec<T>,
+    /// The mixed rows' expectations, `[a_0][a_1]..`.
+    ev: Vec<T>,
+    /// Contraction scratch.
+    tmp: Vec<T>,
+    /// One core's expectations, `[a_0][a_1]..`.
+    ev_core: Vec<T>,
+    /// Per joint action: the mixed reward (action-dependent rewards).
+    reward: Vec<T>,
+    /// Per joint action: the expectations to take back out.
+    goal_ev: Vec<T>,
+    /// Per joint action: whether one core's expectation drops out.
+    drop: Vec<bool>,
+    /// Active cores with a goal or terminal correction: (internal index, membership).
+    corrections: Vec<(usize, T)>,
+    /// A core's state.
+    x: Vec<T>,
+    /// A joint action vector.
+    u: Vec<T>,
+}
+
+/// Calls `f(idx, mu)` for every combination of the cores of `segs` (one segment per
+/// variable): `idx` holds each variable's core, `mu` the product of the memberships. The
+/// visit order (increasing row-major index) and the products (the split variables'
+/// memberships multiplied in variable order from 1) are those of
+/// [`crate::partition::ActiveCores::for_each`], so the weights are bit-identical.
+fn for_each_core<T: Real>(segs: &[Segment<T>], mut f: impl FnMut(&[usize], T)) {
+    let mut split = [0usize; MAX_DIMS];
+    let mut s = 0;
+    let mut idx = [0usize; MAX_DIMS];
+    for (e, sg) in segs.iter().enumerate() {
+        idx[e] = sg.lower;
+        if sg.is_split() {
+            split[s] = e;
+            s += 1;
+        }
+    }
+    for mask in 0..(1usize << s) {
+        let mut mu = T::ONE;
+        for (j, &e) in split[..s].iter().enumerate() {
+            let sg = &segs[e];
+            if (mask >> (s - 1 - j)) & 1 == 1 {
+                idx[e] = sg.lower + 1;
+                mu *= sg.upper_weight;
+            } else {
+                idx[e] = sg.lower;
+                mu *= sg.lower_weight();
+            }
+        }
+        f(&idx[..segs.len()], mu);
+    }
+}
+
+/// One stage of [`BlockOperator::contract_box`]: `input` is `[p][k][r]`, `out` `[p][a][r]`
+/// with `a` the rows of `rows`; `out[p][a][.] = sum_e w_e input[p][k_e][.]` over row `a`'s
+/// entries in order (zeros for a row without entries).
+fn stage_rows<T: Real>(
+    rows: &LocalRows<T>,
+    n_actions: usize,
+    k: usize,
+    r: usize,
+    input: &[T],
+    out: &mut [T],
+) {
+    for (inp, o) in input
+        .chunks_exact(k * r)
+        .zip(out.chunks_exact_mut(n_actions * r))
+    {
+        for (a, o) in o.chunks_exact_mut(r).enumerate() {
+            let (s, t) = (rows.ptr[a] as usize, rows.ptr[a + 1] as usize);
+            let (cols, ws) = (&rows.col[s..t], &rows.weight[s..t]);
+            let Some((&k0, &w0)) = cols.first().zip(ws.first()) else {
+                o.fill(T::ZERO);
+                continue;
+            };
+            for (y, &x) in o.iter_mut().zip(&inp[k0 as usize * r..][..r]) {
+                *y = w0 * x;
+            }
+            for (&kk, &wk) in cols[1..].iter().zip(&ws[1..]) {
+                for (y, &x) in o.iter_mut().zip(&inp[kk as usize * r..][..r]) {
+                    *y += wk * x;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+#[path = "block_tests.rs"]
+mod tests;

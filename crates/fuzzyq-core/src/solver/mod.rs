@@ -95,7 +95,7 @@ mod table;
 pub use iterate::{solve, solve_from};
 pub use qiter::{QSolution, solve_q};
 pub use state::SolverState;
-pub use table::TabulatedModel;
+pub use table::{BlockTable, TabulatedModel};
 
 use std::time::Instant;
 use std::vec::Vec;
@@ -709,8 +709,10 @@ pub struct Operator<'a, T: Real, M: ?Sized> {
     gamma: T,
     /// `rho(x_d)` per core in internal order, when the reward does not depend on the action.
     rewards: Option<Vec<T>>,
-    /// `rho(x_d, u)` per core and joint action, for a tabulated model.
-    reward_table: Option<&'a [T]>,
+    /// `rho(x_d, u)` per core (internal order) and joint action, for a tabulated model or a
+    /// model's [`reward_table`](Model::reward_table) (copied into internal order on the block
+    /// path).
+    reward_table: Option<std::borrow::Cow<'a, [T]>>,
     /// Absorbing goal flags per core in internal order (empty unless absorbing).
     goal: Vec<bool>,
     reward_bound: f64,
@@ -769,6 +771,24 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         } else {
             Path::Generic(GenericOperator::new(model, &grid, joint.n_joint(), table))
         };
+        let m = joint.n_joint();
+        let reward_table = match (table, model.reward_table()) {
+            (Some(t), _) => Some(std::borrow::Cow::Borrowed(t.rewards)),
+            (None, Some(t)) => {
+                crate::error::check_len("reward table", grid.n_cores() * m, t.len())?;
+                Some(match &path {
+                    Path::Generic(_) => std::borrow::Cow::Borrowed(t),
+                    Path::Block(b) => {
+                        let mut out = vec![T::ZERO; t.len()];
+                        b.for_each_grid_index(|i, g| {
+                            out[i * m..(i + 1) * m].copy_from_slice(&t[g * m..(g + 1) * m]);
+                        });
+                        std::borrow::Cow::Owned(out)
+                    }
+                })
+            }
+            (None, None) => None,
+        };
         let mut op = Self {
             model,
             grid,
@@ -776,7 +796,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             backup,
             gamma: backup.gamma,
             rewards: None,
-            reward_table: table.map(|t| t.rewards),
+            reward_table,
             goal: Vec::new(),
             reward_bound: 0.0,
             path,
@@ -862,7 +882,10 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let e = self.state_dim();
         let a = self.joint.dim();
         let absorbing = self.backup.absorbing_goal;
-        if let Some(t) = self.reward_table {
+        if let Some(t) = &self.reward_table {
+            if t.iter().any(|r| !r.is_finite()) {
+                return Err(SolveError::NonFinite { what: "reward" });
+            }
             self.reward_bound = t.iter().fold(0.0, |m, r| m.max(r.to_f64().abs()));
             if absorbing {
                 let mut x = vec![T::ZERO; e];
@@ -976,7 +999,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                     return (rd + self.gamma * best, arg);
                 }
                 let reward_at = |u: usize, work: &mut ReduceWork<T>| -> T {
-                    match (&self.rewards, self.reward_table) {
+                    match (&self.rewards, &self.reward_table) {
                         (Some(r), _) => r[internal],
                         (None, Some(t)) => t[internal * m + u],
                         (None, None) => {

@@ -5,7 +5,7 @@
 //! | bytes | content |
 //! |---|---|
 //! | 8 | magic tag `\x89FUZZYQ\n` (the high byte catches 7-bit and text-mode mangling) |
-//! | 4 | format version, `u32` (4 for a policy of a learned model, else 2; versions 1 and 3 are still read: version 1 files hold fuzzy Q-iteration only, version 3 learned tables without their membership functions, which were then always triangular) |
+//! | 4 | format version, `u32` (4 for a policy of a learned model, 5 for a solution of a model defined in Python (`TabulatedArtifact`), else 2; versions 1 and 3 are still read: version 1 files hold fuzzy Q-iteration only, version 3 learned tables without their membership functions, which were then always triangular) |
 //! | 8 | payload length in bytes, `u64` |
 //! | 4 | CRC-32 of the payload, `u32` |
 //! | n | payload in postcard encoding: which learner, then its content |
@@ -47,7 +47,7 @@ pub const MAGIC: [u8; 8] = *b"\x89FUZZYQ\n";
 /// the payload of a learned model's policy and version 4 the membership functions of its
 /// tables; only such policies are written as version 4, so that every other file stays
 /// readable by builds that read version 2.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 const HEADER_LEN: usize = 8 + 4 + 8 + 4;
 
 /// Per-core values in the solver's precision.
@@ -221,6 +221,70 @@ enum Payload<F, L> {
     Khepera(String),
     /// Fuzzy Q-iteration on a learned model, with its tables (versions 3 and 4).
     LearnedFqi(F, L),
+    /// Fuzzy Q-iteration on a model defined outside fuzzyq (version 5).
+    Tabulated(Box<TabulatedArtifact>),
+}
+
+/// A fuzzy Q-iteration solution of a model defined outside fuzzyq (a Python
+/// `fuzzyq.CallableModel`): everything acting needs but the model's function, which a file
+/// cannot hold. Python's `fuzzyq.load(path, model=...)` reads it back with the model; the
+/// command line refuses it by name.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TabulatedArtifact {
+    /// The grid's cores per state variable.
+    pub cores: Vec<Vec<f64>>,
+    /// The grid's membership functions.
+    pub membership: fuzzyq_core::Membership,
+    /// Each agent's actions: values (action-major) and components per action.
+    pub actions: Vec<(Vec<f64>, usize)>,
+    /// The model's declared independent dynamics blocks: state variables and action
+    /// components (empty: none).
+    pub blocks: Vec<(Vec<usize>, Vec<usize>)>,
+    /// `V` per core, in the solver's precision.
+    pub values: Values,
+    /// The greedy joint action of every core.
+    pub greedy: Vec<u32>,
+    /// Discount factor.
+    pub gamma: f64,
+    /// Stopping threshold.
+    pub xi: f64,
+    /// Whether goal states were absorbing.
+    pub absorbing_goal: bool,
+    /// How the solve went.
+    pub summary: TrainSummary,
+}
+
+impl TabulatedArtifact {
+    /// Checks the artifact's internal consistency.
+    pub fn check(&self) -> Result<(), String> {
+        let grid = fuzzyq_core::solver::Grid::new(self.cores.clone()).map_err(|e| e.to_string())?;
+        let n = grid.n_cores();
+        if self.values.len() != n || self.greedy.len() != n {
+            return Err(format!(
+                "{} values and {} greedy actions for a grid of {n} cores",
+                self.values.len(),
+                self.greedy.len()
+            ));
+        }
+        if !self.values.all_finite() {
+            return Err("a value is not a finite number".into());
+        }
+        let mut m = 1usize;
+        for (values, dim) in &self.actions {
+            let set = fuzzyq_core::ActionSet::try_new(values, *dim).map_err(|e| e.to_string())?;
+            m = m.saturating_mul(set.n_actions());
+        }
+        if self.actions.is_empty() {
+            return Err("no agents".into());
+        }
+        if let Some(u) = self.greedy.iter().find(|&&u| u as usize >= m) {
+            return Err(format!("greedy action {u} is out of range 0..{m}"));
+        }
+        if !(0.0..1.0).contains(&self.gamma) {
+            return Err(format!("gamma {} is not in [0, 1)", self.gamma));
+        }
+        Ok(())
+    }
 }
 
 /// [`BlockTables`] as version 3 encoded them: before crisp grids could be learned, so their
@@ -422,6 +486,9 @@ pub enum PolicyFile {
     PointMass(PointMassPolicyFile),
     /// Fuzzy Q-learning on the Khepera robots.
     Khepera(KheperaPolicyFile),
+    /// Fuzzy Q-iteration on a model defined in Python (`Solution.save` of a
+    /// `fuzzyq.CallableModel`'s solution).
+    Tabulated(Box<TabulatedArtifact>),
 }
 
 impl PolicyFile {
@@ -510,6 +577,7 @@ impl PolicyFile {
                 Payload::Fqi(f) => Payload::Fqi(f),
                 Payload::PointMass(text) => Payload::PointMass(text),
                 Payload::Khepera(text) => Payload::Khepera(text),
+                Payload::Tabulated(t) => Payload::Tabulated(t),
             }),
             _ => postcard::from_bytes(payload),
         }
@@ -530,6 +598,7 @@ impl PolicyFile {
             Payload::LearnedFqi(p, tables) => fqi(p, Some(Box::new(tables)))?,
             Payload::PointMass(text) => Self::PointMass(from_toml(&text, path)?),
             Payload::Khepera(text) => Self::Khepera(from_toml(&text, path)?),
+            Payload::Tabulated(t) => Self::Tabulated(t),
         };
         file.check().map_err(|reason| malformed(path, reason))?;
         Ok(file)
@@ -584,6 +653,7 @@ impl PolicyFile {
             Self::Fqi(a) => a.check(),
             Self::PointMass(f) => f.validate().map(|_| ()).map_err(|e| e.to_string()),
             Self::Khepera(f) => f.validate().map_err(|e| e.to_string()),
+            Self::Tabulated(t) => t.check(),
         }
     }
 
@@ -616,6 +686,17 @@ impl PolicyFile {
             }
             Self::PointMass(f) => Payload::PointMass(to_toml(f)?),
             Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
+            Self::Tabulated(t) => {
+                version = 5;
+                Payload::Tabulated(Box::new(TabulatedArtifact {
+                    summary: TrainSummary {
+                        seconds: 0.0,
+                        sweep_seconds: 0.0,
+                        ..t.summary.clone()
+                    },
+                    ..(**t).clone()
+                }))
+            }
         };
         let payload = postcard::to_stdvec(&payload).expect("a policy always serialises");
         let out = super::container::encode(&MAGIC, version, &payload);
@@ -778,14 +859,14 @@ mod tests {
         let e = decode(&flipped).unwrap_err();
         assert!(matches!(e, PolicyFileError::Checksum { .. }), "{e}");
 
-        let mut v5 = bytes.clone();
-        v5[8] = 5;
-        let e = decode(&v5).unwrap_err();
+        let mut v6 = bytes.clone();
+        v6[8] = 6;
+        let e = decode(&v6).unwrap_err();
         assert!(
-            matches!(e, PolicyFileError::Version { found: 5, .. }),
+            matches!(e, PolicyFileError::Version { found: 6, .. }),
             "{e}"
         );
-        assert!(e.to_string().contains("versions 1 to 4"), "{e}");
+        assert!(e.to_string().contains("versions 1 to 5"), "{e}");
 
         let mut bad = tiny();
         bad.greedy[0] = 625;

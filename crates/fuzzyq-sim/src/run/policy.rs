@@ -753,6 +753,15 @@ impl Policy {
             PolicyFile::Fqi(a) => Self::Fqi(FqiPolicy::from_artifact(a)?),
             PolicyFile::PointMass(f) => Self::Additive(AdditivePolicy::from_point_mass_file(f)?),
             PolicyFile::Khepera(f) => Self::Additive(AdditivePolicy::from_khepera_file(f)?),
+            PolicyFile::Tabulated(_) => {
+                return Err(ConfigError::invalid(
+                    "policy",
+                    "the file holds a solution of a model defined in Python (a \
+                     fuzzyq.CallableModel), which only Python can run: \
+                     fuzzyq.load(path, model=...)",
+                )
+                .into());
+            }
         })
     }
 
