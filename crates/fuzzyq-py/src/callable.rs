@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
 use crate::convert::{arg, distinct, finite_vector, matrix, vector};
-use crate::errors::{Kind, error, eval_error, guard};
+use crate::errors::{Kind, error, guard};
 
 /// A model defined by a vectorised Python function.
 ///
@@ -675,12 +675,7 @@ impl CallableModel {
         py: Python<'py>,
         #[pyo3(from_py_with = crate::convert::index)] index: usize,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        guard(py, || {
-            let j = self.joint();
-            let mut u = vec![0.0; j.dim()];
-            j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
-            Ok(PyArray1::from_vec(py, u))
-        })
+        guard(py, || crate::joint::vector(py, &self.joint(), index))
     }
 
     /// The joint action index of per-agent action indices (agent 0 most significant).
@@ -689,11 +684,7 @@ impl CallableModel {
         py: Python<'_>,
         #[pyo3(from_py_with = arg)] per_agent: Vec<usize>,
     ) -> PyResult<usize> {
-        guard(py, || {
-            self.joint()
-                .compose(&per_agent)
-                .map_err(|e| error(py, Kind::Input, format!("per_agent: {e}")))
-        })
+        guard(py, || crate::joint::index(py, &self.joint(), &per_agent))
     }
 
     /// The per-agent action indices of joint action `index`.
@@ -702,13 +693,7 @@ impl CallableModel {
         py: Python<'_>,
         #[pyo3(from_py_with = crate::convert::index)] index: usize,
     ) -> PyResult<Vec<usize>> {
-        guard(py, || {
-            let j = self.joint();
-            let mut out = vec![0; j.n_agents()];
-            j.decompose(index, &mut out)
-                .map_err(|e| eval_error(py, &e))?;
-            Ok(out)
-        })
+        guard(py, || crate::joint::per_agent(py, &self.joint(), index))
     }
 
     /// One transition: `(next_state, reward, terminal)` of state `x` under joint action vector

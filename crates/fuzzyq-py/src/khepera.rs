@@ -155,9 +155,7 @@ impl Khepera {
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         guard(py, || {
             let j = joint_actions::<f64, _>(self.m()).map_err(|e| eval_error(py, &e))?;
-            let mut u = vec![0.0; j.dim()];
-            j.vector(index, &mut u).map_err(|e| eval_error(py, &e))?;
-            Ok(PyArray1::from_vec(py, u))
+            crate::joint::vector(py, &j, index)
         })
     }
 

@@ -10,6 +10,7 @@ mod callable;
 mod classic;
 mod convert;
 mod errors;
+mod joint;
 mod json;
 mod khepera;
 mod model;
