@@ -1,0 +1,447 @@
+//! Decisions on the block path (`block.rs`): `Q(x, .)` at any state from the blocks' tables,
+//! mixing the active block cores' rows first and contracting them with the box of `V` they
+//! reach.
+
+use super::*;
+
+impl<T: Real> BlockOperator<T> {
+    /// `Q(x, .)` at any state from `v` in grid order (see [`Operator::q_values`]).
+    ///
+    /// The active cores of `x` are the products of each block's active block cores, and their
+    /// memberships the products of the block memberships, so
+    /// `sum_d mu_d(x) P[d, u] V = sum_k prod_b (sum_{c_b} mu_{c_b} T_b[c_b, a_b, k_b]) V[k]`:
+    /// the same contraction with one mixed row per block and action, over the box of
+    /// successor cores those rows reach.
+    ///
+    /// Every value is the sum the first version of this function computed, in the same order
+    /// (each mixed weight summed over the active block cores in their order, each stage's
+    /// entries in increasing successor core); only the layout changed: the contraction keeps
+    /// block actions outermost (`[a_0 .. a_{b-1}][k_b][rest]`), so each stage runs along whole
+    /// contiguous rows, and `V` is gathered in grid order. The buffers are kept between calls.
+    pub(in crate::solver) fn q_values<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        x: &[T],
+        out: &mut [T],
+    ) -> Result<(), SolveError> {
+        // Validates the state (length, finite values).
+        op.grid.active(x)?;
+        let pool = || self.q.work.lock().unwrap_or_else(PoisonError::into_inner);
+        let taken = pool().pop();
+        let mut w = taken.unwrap_or_else(|| self.q_work_new(op));
+        self.q_values_in(op, v, x, out, &mut w);
+        pool().push(w);
+        Ok(())
+    }
+
+    /// Fresh buffers for [`Self::q_values`].
+    fn q_work_new<M: Model<T> + Sync + ?Sized>(&self, op: &Operator<'_, T, M>) -> QWork<T> {
+        let nb = self.tables.len();
+        let most = self.tables.iter().map(|t| t.n_cores).max().unwrap_or(0);
+        let mj = op.joint.n_joint();
+        QWork {
+            mixed: (0..nb).map(|_| LocalRows::default()).collect(),
+            pure: (0..nb).map(|_| LocalRows::default()).collect(),
+            support: vec![Vec::new(); nb],
+            local: self.tables.iter().map(|t| vec![0; t.n_cores]).collect(),
+            grid_offset: vec![Vec::new(); nb],
+            act: Vec::new(),
+            hit: Vec::new(),
+            dense: vec![T::ZERO; most],
+            touched: vec![false; most],
+            in_support: vec![false; most],
+            vbox: Vec::new(),
+            ev: Vec::new(),
+            tmp: Vec::new(),
+            ev_core: Vec::new(),
+            reward: vec![T::ZERO; mj],
+            goal_ev: vec![T::ZERO; mj],
+            drop: vec![false; mj],
+            corrections: Vec::new(),
+            x: vec![T::ZERO; op.state_dim()],
+            u: vec![T::ZERO; op.joint.dim()],
+        }
+    }
+
+    /// [`Self::q_values`] on buffers `w`, for a validated state.
+    fn q_values_in<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        x: &[T],
+        out: &mut [T],
+        w: &mut QWork<T>,
+    ) {
+        let grid = &op.grid;
+        let e = grid.n_dims();
+        let nb = self.tables.len();
+        let mut seg = [Segment {
+            lower: 0,
+            upper_weight: T::ZERO,
+        }; MAX_DIMS];
+        for (s, (p, &xe)) in seg.iter_mut().zip(grid.dims().iter().zip(x)) {
+            *s = p.locate(xe);
+        }
+
+        // Per block: the active block cores, the mixed rows (one per block action, entries in
+        // increasing block core, zero weights left out) and their support.
+        for (b, t) in self.tables.iter().enumerate() {
+            let mut bseg = seg;
+            for (s, &d) in bseg.iter_mut().zip(&t.dims) {
+                *s = seg[d];
+            }
+            w.act.clear();
+            for_each_core(&bseg[..t.dims.len()], |idx, mu| {
+                let c = idx
+                    .iter()
+                    .zip(&t.strides)
+                    .map(|(i, s)| i * s)
+                    .sum::<usize>();
+                w.act.push((c, mu));
+            });
+            let rows = &mut w.mixed[b];
+            rows.clear();
+            let support = &mut w.support[b];
+            support.clear();
+            for a in 0..t.n_actions {
+                w.hit.clear();
+                for &(c, mu) in &w.act {
+                    let (cols, ws) = t.row(c, a);
+                    for (&k, &wk) in cols.iter().zip(ws) {
+                        let k = k as usize;
+                        if !w.touched[k] {
+                            w.touched[k] = true;
+                            w.dense[k] = T::ZERO;
+                            w.hit.push(k as u32);
+                        }
+                        w.dense[k] += mu * wk;
+                    }
+                }
+                w.hit.sort_unstable();
+                for &k in &w.hit {
+                    let k = k as usize;
+                    w.touched[k] = false;
+                    if !w.in_support[k] {
+                        w.in_support[k] = true;
+                        support.push(k as u32);
+                    }
+                    if w.dense[k] != T::ZERO {
+                        rows.col.push(k as u32);
+                        rows.weight.push(w.dense[k]);
+                    }
+                }
+                rows.ptr.push(rows.col.len() as u32);
+            }
+            support.sort_unstable();
+            let local = &mut w.local[b];
+            let offsets = &mut w.grid_offset[b];
+            offsets.clear();
+            for (i, &k) in support.iter().enumerate() {
+                w.in_support[k as usize] = false;
+                local[k as usize] = i as u32;
+                offsets.push(t.grid_offset[k as usize]);
+            }
+            for k in &mut rows.col {
+                *k = local[*k as usize];
+            }
+        }
+
+        // The box of V over the supports (first block slowest), read in grid order.
+        let mut sizes = [0usize; MAX_DIMS];
+        let mut stride = [0usize; MAX_DIMS];
+        let mut box_len = 1;
+        for b in (0..nb).rev() {
+            sizes[b] = w.support[b].len();
+            stride[b] = box_len;
+            box_len *= sizes[b];
+        }
+        w.vbox.resize(box_len, T::ZERO);
+        {
+            let order = &self.q.gather_order;
+            let inner = order[nb - 1];
+            let (inner_off, inner_stride) = (&w.grid_offset[inner], stride[inner]);
+            let mut digit = [0usize; MAX_DIMS];
+            let mut g: usize = order[..nb - 1].iter().map(|&b| w.grid_offset[b][0]).sum();
+            let mut j = 0usize;
+            'gather: loop {
+                for (i, &gi) in inner_off.iter().enumerate() {
+                    w.vbox[j + i * inner_stride] = v[g + gi];
+                }
+                // Next combination of the outer blocks, like an odometer.
+                let mut l = nb - 1;
+                loop {
+                    if l == 0 {
+                        break 'gather;
+                    }
+                    l -= 1;
+                    let b = order[l];
+                    let off = &w.grid_offset[b];
+                    g -= off[digit[l]];
+                    j -= digit[l] * stride[b];
+                    digit[l] += 1;
+                    if digit[l] < sizes[b] {
+                        g += off[digit[l]];
+                        j += digit[l] * stride[b];
+                        break;
+                    }
+                    digit[l] = 0;
+                    g += off[0];
+                }
+            }
+        }
+        self.contract_box(&w.mixed, &sizes[..nb], &w.vbox, &mut w.ev, &mut w.tmp);
+
+        // Rewards of the active cores, and the expectations of goal cores and of transitions
+        // into terminal states, to take back out (per joint action).
+        let mj = op.joint.n_joint();
+        let depends = op.model.reward_depends_on_action();
+        let state_rewards = op.rewards.as_deref().filter(|_| !depends);
+        let mut reward = T::ZERO;
+        if depends {
+            w.reward.fill(T::ZERO);
+        } else if state_rewards.is_none() {
+            op.joint.vector_unchecked(0, &mut w.u);
+        }
+        let check = op.backup.absorbing_goal || self.terminals.is_some();
+        w.corrections.clear();
+        for_each_core(&seg[..e], |idx, mu| {
+            let internal = idx
+                .iter()
+                .zip(&self.q.internal_strides)
+                .map(|(i, s)| i * s)
+                .sum::<usize>();
+            match state_rewards {
+                Some(r) => reward += mu * r[internal],
+                None => {
+                    for ((xe, p), &i) in w.x.iter_mut().zip(grid.dims()).zip(idx) {
+                        *xe = p.cores()[i];
+                    }
+                    if depends {
+                        for (u, r) in w.reward.iter_mut().enumerate() {
+                            op.joint.vector_unchecked(u, &mut w.u);
+                            *r += mu * op.model.reward(&w.x, &w.u);
+                        }
+                    } else {
+                        reward += mu * op.model.reward(&w.x, &w.u);
+                    }
+                }
+            }
+            if check && (op.is_goal(internal) || !self.terminal_actions(internal).is_empty()) {
+                w.corrections.push((internal, mu));
+            }
+        });
+        let mut any_goal = false;
+        if !w.corrections.is_empty() {
+            w.goal_ev.fill(T::ZERO);
+            for i in 0..w.corrections.len() {
+                let (internal, mu) = w.corrections[i];
+                // The joint actions whose expectation drops out: all of them at a goal core,
+                // else those leading to a terminal state.
+                let goal = op.is_goal(internal);
+                w.drop.fill(goal);
+                if !goal {
+                    for &u in self.terminal_actions(internal) {
+                        w.drop[u as usize] = true;
+                    }
+                }
+                any_goal = true;
+                // This core's pure rows, over the box.
+                for (b, t) in self.tables.iter().enumerate() {
+                    let c = (internal / self.r_len[b]) % t.n_cores;
+                    let rows = &mut w.pure[b];
+                    rows.clear();
+                    for a in 0..t.n_actions {
+                        let (cols, ws) = t.row(c, a);
+                        for (&k, &wk) in cols.iter().zip(ws) {
+                            rows.col.push(w.local[b][k as usize]);
+                            rows.weight.push(wk);
+                        }
+                        rows.ptr.push(rows.col.len() as u32);
+                    }
+                }
+                self.contract_box(&w.pure, &sizes[..nb], &w.vbox, &mut w.ev_core, &mut w.tmp);
+                for (u, g) in w.goal_ev.iter_mut().enumerate() {
+                    if w.drop[u] {
+                        *g += mu * w.ev_core[self.q.q_index[u] as usize];
+                    }
+                }
+            }
+        }
+        let gamma = op.gamma;
+        for (u, o) in out[..mj].iter_mut().enumerate() {
+            let f = self.q.q_index[u] as usize;
+            let ev = if any_goal {
+                w.ev[f] - w.goal_ev[u]
+            } else {
+                w.ev[f]
+            };
+            let r = if depends { w.reward[u] } else { reward };
+            *o = r + gamma * ev;
+        }
+    }
+
+    /// Contracts the box `vbox` (`[k_0][k_1]..`, block supports of `sizes`) with `rows` (per
+    /// block, one row per block action, local columns) into `out`, `[a_0][a_1]..` with the
+    /// first block slowest; `tmp` is scratch.
+    ///
+    /// Stage `b` maps `[p][k_b][r]` to `[p][a_b][r]` (`p` over the earlier blocks' actions,
+    /// `r` over the later blocks' support cores): every element is `sum_e w_e in[p][k_e][r]`
+    /// over the row's entries in order, the same sum as [`crate::backup::contract`] forms in
+    /// its `[k][r][p]` layout, computed along whole contiguous rows of length `r`.
+    fn contract_box(
+        &self,
+        rows: &[LocalRows<T>],
+        sizes: &[usize],
+        vbox: &[T],
+        out: &mut Vec<T>,
+        tmp: &mut Vec<T>,
+    ) {
+        let nb = sizes.len();
+        let mut r: usize = sizes.iter().product();
+        let mut p = 1usize;
+        // Stages alternate between `out` and `tmp` so that the last one writes `out`.
+        let (mut dst, mut src) = if nb % 2 == 1 {
+            (&mut *out, &mut *tmp)
+        } else {
+            (&mut *tmp, &mut *out)
+        };
+        for b in 0..nb {
+            let (k, a) = (sizes[b], self.tables[b].n_actions);
+            r /= k;
+            dst.resize(p * a * r, T::ZERO);
+            let input: &[T] = if b == 0 { vbox } else { src };
+            stage_rows(&rows[b], a, k, r, &input[..p * k * r], dst);
+            p *= a;
+            core::mem::swap(&mut dst, &mut src);
+        }
+    }
+}
+
+/// Sparse rows with columns local to a box (positions in a block's support).
+#[derive(Default)]
+pub(super) struct LocalRows<T> {
+    ptr: Vec<u32>,
+    col: Vec<u32>,
+    weight: Vec<T>,
+}
+
+impl<T> LocalRows<T> {
+    /// No rows (ready for the first row's entries).
+    fn clear(&mut self) {
+        self.ptr.clear();
+        self.ptr.push(0);
+        self.col.clear();
+        self.weight.clear();
+    }
+}
+
+/// Buffers of [`BlockOperator::q_values`], kept between calls.
+pub(super) struct QWork<T> {
+    /// Per block: the mixed rows.
+    mixed: Vec<LocalRows<T>>,
+    /// Per block: one core's rows (goal and terminal corrections).
+    pure: Vec<LocalRows<T>>,
+    /// Per block: the support of the mixed rows (block cores, increasing).
+    support: Vec<Vec<u32>>,
+    /// Per block and block core: its position in the support (support cores only).
+    local: Vec<Vec<u32>>,
+    /// Per block: the grid offsets of the support cores.
+    grid_offset: Vec<Vec<usize>>,
+    /// One block's active block cores and memberships.
+    act: Vec<(usize, T)>,
+    /// The block cores one mixed row touches.
+    hit: Vec<u32>,
+    /// One mixed row, dense over a block's cores (entries of `hit` only).
+    dense: Vec<T>,
+    /// Per block core: in `hit` (all false between rows).
+    touched: Vec<bool>,
+    /// Per block core: in the support (all false between blocks).
+    in_support: Vec<bool>,
+    /// The box of `V`.
+    vbox: Vec<T>,
+    /// The mixed rows' expectations, `[a_0][a_1]..`.
+    ev: Vec<T>,
+    /// Contraction scratch.
+    tmp: Vec<T>,
+    /// One core's expectations, `[a_0][a_1]..`.
+    ev_core: Vec<T>,
+    /// Per joint action: the mixed reward (action-dependent rewards).
+    reward: Vec<T>,
+    /// Per joint action: the expectations to take back out.
+    goal_ev: Vec<T>,
+    /// Per joint action: whether one core's expectation drops out.
+    drop: Vec<bool>,
+    /// Active cores with a goal or terminal correction: (internal index, membership).
+    corrections: Vec<(usize, T)>,
+    /// A core's state.
+    x: Vec<T>,
+    /// A joint action vector.
+    u: Vec<T>,
+}
+
+/// Calls `f(idx, mu)` for every combination of the cores of `segs` (one segment per
+/// variable): `idx` holds each variable's core, `mu` the product of the memberships. The
+/// visit order (increasing row-major index) and the products (the split variables'
+/// memberships multiplied in variable order from 1) are those of
+/// [`crate::partition::ActiveCores::for_each`], so the weights are bit-identical.
+fn for_each_core<T: Real>(segs: &[Segment<T>], mut f: impl FnMut(&[usize], T)) {
+    let mut split = [0usize; MAX_DIMS];
+    let mut s = 0;
+    let mut idx = [0usize; MAX_DIMS];
+    for (e, sg) in segs.iter().enumerate() {
+        idx[e] = sg.lower;
+        if sg.is_split() {
+            split[s] = e;
+            s += 1;
+        }
+    }
+    for mask in 0..(1usize << s) {
+        let mut mu = T::ONE;
+        for (j, &e) in split[..s].iter().enumerate() {
+            let sg = &segs[e];
+            if (mask >> (s - 1 - j)) & 1 == 1 {
+                idx[e] = sg.lower + 1;
+                mu *= sg.upper_weight;
+            } else {
+                idx[e] = sg.lower;
+                mu *= sg.lower_weight();
+            }
+        }
+        f(&idx[..segs.len()], mu);
+    }
+}
+
+/// One stage of [`BlockOperator::contract_box`]: `input` is `[p][k][r]`, `out` `[p][a][r]`
+/// with `a` the rows of `rows`; `out[p][a][.] = sum_e w_e input[p][k_e][.]` over row `a`'s
+/// entries in order (zeros for a row without entries).
+fn stage_rows<T: Real>(
+    rows: &LocalRows<T>,
+    n_actions: usize,
+    k: usize,
+    r: usize,
+    input: &[T],
+    out: &mut [T],
+) {
+    for (inp, o) in input
+        .chunks_exact(k * r)
+        .zip(out.chunks_exact_mut(n_actions * r))
+    {
+        for (a, o) in o.chunks_exact_mut(r).enumerate() {
+            let (s, t) = (rows.ptr[a] as usize, rows.ptr[a + 1] as usize);
+            let (cols, ws) = (&rows.col[s..t], &rows.weight[s..t]);
+            let Some((&k0, &w0)) = cols.first().zip(ws.first()) else {
+                o.fill(T::ZERO);
+                continue;
+            };
+            for (y, &x) in o.iter_mut().zip(&inp[k0 as usize * r..][..r]) {
+                *y = w0 * x;
+            }
+            for (&kk, &wk) in cols[1..].iter().zip(&ws[1..]) {
+                for (y, &x) in o.iter_mut().zip(&inp[kk as usize * r..][..r]) {
+                    *y += wk * x;
+                }
+            }
+        }
+    }
+}
