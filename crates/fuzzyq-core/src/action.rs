@@ -87,6 +87,9 @@ pub struct JointActions<'a, T> {
     sets: [ActionSet<'a, T>; MAX_AGENTS],
     offsets: [usize; MAX_AGENTS],
     radix: [usize; MAX_AGENTS],
+    /// Per agent: `u64::MAX / radix + 1` and `u64::MAX / n_actions + 1` (wrapping), the
+    /// multipliers that divide and reduce 32-bit joint indices without a division.
+    magic: [(u64, u64); MAX_AGENTS],
     n_agents: usize,
     n_joint: usize,
     dim: usize,
@@ -102,6 +105,7 @@ impl<'a, T: Real> JointActions<'a, T> {
             sets: [ActionSet::default(); MAX_AGENTS],
             offsets: [0; MAX_AGENTS],
             radix: [0; MAX_AGENTS],
+            magic: [(0, 0); MAX_AGENTS],
             n_agents: sets.len(),
             n_joint: 1,
             dim: 0,
@@ -124,6 +128,8 @@ impl<'a, T: Real> JointActions<'a, T> {
         let mut stride = 1;
         for i in (0..sets.len()).rev() {
             j.radix[i] = stride;
+            let magic = |d: usize| (u64::MAX / d as u64).wrapping_add(1);
+            j.magic[i] = (magic(stride), magic(sets[i].n_actions()));
             stride *= sets[i].n_actions();
         }
         Ok(j)
@@ -173,6 +179,23 @@ impl<'a, T: Real> JointActions<'a, T> {
     #[must_use]
     pub fn agent_index(&self, u: usize, i: usize) -> usize {
         (u / self.radix[i]) % self.sets[i].n_actions()
+    }
+
+    /// [`Self::agent_index`] for a joint index known to be in range, without a division
+    /// (multiply-high by the stored reciprocals, exact for every 32-bit index: Lemire, Kaser
+    /// and Kurz, "Faster remainder by direct computation", 2019).
+    #[inline]
+    #[must_use]
+    pub(crate) fn agent_index_in_range(&self, u: u32, i: usize) -> usize {
+        let (div, rem) = self.magic[i];
+        let u = u64::from(u);
+        let q = if self.radix[i] == 1 {
+            u
+        } else {
+            ((u128::from(div) * u128::from(u)) >> 64) as u64
+        };
+        let low = rem.wrapping_mul(q);
+        ((u128::from(low) * self.sets[i].n_actions() as u128) >> 64) as usize
     }
 
     /// The joint index of per-agent action indices `per_agent` (one per agent, each in range).
@@ -236,6 +259,35 @@ impl<'a, T: Real> JointActions<'a, T> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn agent_index_in_range_matches_division() {
+        let values: std::vec::Vec<f64> = (0..2000).map(f64::from).collect();
+        for sizes in [
+            &[1usize][..],
+            &[7],
+            &[5, 5],
+            &[3, 1, 4],
+            &[25, 25, 25],
+            &[2000, 1999, 1],
+        ] {
+            let sets: std::vec::Vec<ActionSet<'_, f64>> = sizes
+                .iter()
+                .map(|&n| ActionSet::try_new(&values[..n], 1).unwrap())
+                .collect();
+            let j = JointActions::try_new(&sets).unwrap();
+            let step = (j.n_joint() / 50_000).max(1);
+            for u in (0..j.n_joint()).step_by(step).chain([j.n_joint() - 1]) {
+                for i in 0..j.n_agents() {
+                    assert_eq!(
+                        j.agent_index_in_range(u as u32, i),
+                        j.agent_index(u, i),
+                        "{sizes:?} u {u} agent {i}"
+                    );
+                }
+            }
+        }
+    }
+
     use super::*;
 
     #[test]

@@ -515,6 +515,40 @@ impl<T: Real> ActiveCores<T> {
         }
     }
 
+    /// Writes the active cores' flat indices and memberships into `index` and `weight`, in the
+    /// order and with the products of [`Self::for_each`] (bit-identical weights), and returns
+    /// how many there are; `None` (nothing written) if the buffers hold fewer than `2^s`.
+    ///
+    /// Filled a split variable at a time, so each core costs one multiply and one add: the
+    /// fast path for code that visits the cores more than once or gathers their table values
+    /// together.
+    #[inline]
+    pub fn write_to(&self, index: &mut [usize], weight: &mut [T]) -> Option<usize> {
+        let n = 1usize.checked_shl(self.n_split as u32)?;
+        if index.len() < n || weight.len() < n {
+            return None;
+        }
+        index[0] = self.base;
+        weight[0] = self.base_weight;
+        for j in 0..self.n_split {
+            let (stride, lo, hi) = (
+                self.split_stride[j],
+                self.split_lower[j],
+                self.split_upper[j],
+            );
+            // Core `i` of the first `2^j` becomes cores `2i` (lower) and `2i + 1` (upper):
+            // split variable 0 ends up the most significant bit, as in `for_each`.
+            for i in (0..1usize << j).rev() {
+                let (d, w) = (index[i], weight[i]);
+                index[2 * i + 1] = d + stride;
+                weight[2 * i + 1] = w * hi;
+                index[2 * i] = d;
+                weight[2 * i] = w * lo;
+            }
+        }
+        Some(n)
+    }
+
     /// Sum of `weight * values[index]` over the active cores: the fuzzy interpolation of a
     /// per-core table (for example a value function `V`) at the state.
     ///
@@ -531,6 +565,32 @@ impl<T: Real> ActiveCores<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn write_to_lists_for_each_bit_for_bit() {
+        let c = [0.0f64, 0.3, 1.0, 2.5];
+        for dims in [1usize, 3, 6] {
+            let parts = std::vec![&c[..]; dims];
+            let g = ProductPartition::try_new(&parts).unwrap();
+            for x in [0.1, 0.3, 1.7, 2.5, 2.2] {
+                let xs = std::vec![x; dims];
+                let active = g.active(&xs).unwrap();
+                let mut want = std::vec::Vec::new();
+                active.for_each(|d, w| want.push((d, w.to_bits())));
+                let (mut idx, mut w) = ([0usize; 64], [0.0f64; 64]);
+                let n = active.write_to(&mut idx, &mut w).unwrap();
+                let got: std::vec::Vec<_> = idx[..n]
+                    .iter()
+                    .zip(&w[..n])
+                    .map(|(&d, w)| (d, w.to_bits()))
+                    .collect();
+                assert_eq!(got, want, "{dims} dims at {x}");
+                if n > 1 {
+                    assert!(active.write_to(&mut idx[..n - 1], &mut w).is_none());
+                }
+            }
+        }
+    }
 
     #[test]
     fn rejects_bad_cores() {

@@ -37,7 +37,7 @@ use std::boxed::Box;
 use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
-use super::simd::{INPUT_PAD, Kernels, RowsBuf, last_scratch_len};
+use super::simd::{INPUT_PAD, Kernels, Rows, RowsBuf, last_scratch_len};
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
 use crate::model::Model;
@@ -138,11 +138,11 @@ pub(super) struct BlockOperator<T: 'static> {
 struct QPlan<T> {
     /// Per grid variable: its stride in the internal core index.
     internal_strides: Vec<usize>,
-    /// Per joint action: its position in the contraction's result (block actions with the
-    /// first block slowest).
+    /// Per joint action: its position in the contraction's result (block actions in gather
+    /// order, the first slowest).
     q_index: Vec<u32>,
-    /// Blocks in the order `V` is gathered (the block of the largest grid strides outermost,
-    /// so the innermost loop reads nearby values).
+    /// Blocks in the order `V` is gathered and contracted (the block of the largest grid
+    /// strides outermost, so the innermost loop reads nearby values).
     gather_order: Vec<usize>,
     /// Buffers, kept between calls (one per concurrent caller).
     work: Mutex<Vec<QWork<T>>>,
@@ -461,19 +461,6 @@ impl<T: Real> BlockOperator<T> {
                 internal_strides[d] = s * r;
             }
         }
-        // Position of block action tuple (a_0, ..., a_{B-1}) with a_0 slowest.
-        let mut suffix = vec![1usize; nb];
-        for b in (0..nb.saturating_sub(1)).rev() {
-            suffix[b] = suffix[b + 1] * tables[b + 1].n_actions;
-        }
-        let q_index = map
-            .iter()
-            .map(|&p| {
-                (0..nb)
-                    .map(|b| (p as usize / p_len[b]) % tables[b].n_actions * suffix[b])
-                    .sum::<usize>() as u32
-            })
-            .collect();
         let min_stride = |b: usize| {
             tables[b]
                 .dims
@@ -484,6 +471,21 @@ impl<T: Real> BlockOperator<T> {
         };
         let mut gather_order: Vec<usize> = (0..nb).collect();
         gather_order.sort_by_key(|&b| core::cmp::Reverse(min_stride(b)));
+        // Position of block action tuple (a_0, ..., a_{B-1}) in the decisions' contraction,
+        // the blocks in gather order with the first slowest.
+        let mut suffix = vec![1usize; nb];
+        for l in (0..nb.saturating_sub(1)).rev() {
+            suffix[gather_order[l]] =
+                suffix[gather_order[l + 1]] * tables[gather_order[l + 1]].n_actions;
+        }
+        let q_index = map
+            .iter()
+            .map(|&p| {
+                (0..nb)
+                    .map(|b| (p as usize / p_len[b]) % tables[b].n_actions * suffix[b])
+                    .sum::<usize>() as u32
+            })
+            .collect();
         let mut op = Self {
             tables,
             kernels: super::simd::select_real::<T>(None).expect("the scalar kernels always exist"),

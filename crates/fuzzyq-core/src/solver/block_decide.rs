@@ -13,11 +13,13 @@ impl<T: Real> BlockOperator<T> {
     /// the same contraction with one mixed row per block and action, over the box of
     /// successor cores those rows reach.
     ///
-    /// Every value is the sum the first version of this function computed, in the same order
-    /// (each mixed weight summed over the active block cores in their order, each stage's
-    /// entries in increasing successor core); only the layout changed: the contraction keeps
-    /// block actions outermost (`[a_0 .. a_{b-1}][k_b][rest]`), so each stage runs along whole
-    /// contiguous rows, and `V` is gathered in grid order. The buffers are kept between calls.
+    /// Layout and arithmetic: the box of `V` is gathered with the blocks in gather order (the
+    /// block of the largest grid strides slowest), so its innermost rows are nearby values of
+    /// `V`; the stages contract it in that order, one block at a time (`[p][k][r]` to
+    /// `[p][a][r]`), on the operator's run-time kernel: each element sums its row's entries in
+    /// increasing successor core with fused multiply-adds from 0, as the backup's kernels do,
+    /// so every kernel instance gives the same bits. Each mixed weight is summed over the
+    /// active block cores in their order. The buffers are kept between calls.
     pub(in crate::solver) fn q_values<M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
@@ -52,6 +54,7 @@ impl<T: Real> BlockOperator<T> {
             touched: vec![false; most],
             in_support: vec![false; most],
             vbox: Vec::new(),
+            cores: Vec::new(),
             ev: Vec::new(),
             tmp: Vec::new(),
             ev_core: Vec::new(),
@@ -147,42 +150,59 @@ impl<T: Real> BlockOperator<T> {
             }
         }
 
-        // The box of V over the supports (first block slowest), read in grid order.
+        // The active cores (internal index, membership), in increasing row-major order; their
+        // rewards (and goal flags) are requested now and read after the contraction.
+        w.cores.clear();
+        for_each_core(&seg[..e], |idx, mu| {
+            let internal = idx
+                .iter()
+                .zip(&self.q.internal_strides)
+                .map(|(i, s)| i * s)
+                .sum::<usize>();
+            w.cores.push((internal, mu));
+        });
+        if let Some(r) = op.rewards.as_deref() {
+            for &(i, _) in &w.cores {
+                crate::solver::simd::prefetch(r, i);
+            }
+        }
+
+        // The box of V over the supports, blocks in gather order (the block of the largest
+        // grid strides slowest, the innermost block's values contiguous in the box).
+        let order = &self.q.gather_order;
+        let inner = order[nb - 1];
         let mut sizes = [0usize; MAX_DIMS];
         let mut stride = [0usize; MAX_DIMS];
         let mut box_len = 1;
-        for b in (0..nb).rev() {
-            sizes[b] = w.support[b].len();
-            stride[b] = box_len;
-            box_len *= sizes[b];
+        for l in (0..nb).rev() {
+            sizes[l] = w.support[order[l]].len();
+            stride[l] = box_len;
+            box_len *= sizes[l];
         }
-        w.vbox.resize(box_len, T::ZERO);
+        w.vbox.resize(box_len + INPUT_PAD, T::ZERO);
+        // Copied an inner row at a time, the outer blocks' combinations visited like an
+        // odometer.
         {
-            let order = &self.q.gather_order;
-            let inner = order[nb - 1];
-            let (inner_off, inner_stride) = (&w.grid_offset[inner], stride[inner]);
+            let inner_off = &w.grid_offset[inner];
+            let span = inner_off.iter().max().map_or(0, |&o| o + 1);
             let mut digit = [0usize; MAX_DIMS];
             let mut g: usize = order[..nb - 1].iter().map(|&b| w.grid_offset[b][0]).sum();
-            let mut j = 0usize;
-            'gather: loop {
-                for (i, &gi) in inner_off.iter().enumerate() {
-                    w.vbox[j + i * inner_stride] = v[g + gi];
+            'combos: for dst in w.vbox[..box_len].chunks_exact_mut(sizes[nb - 1]) {
+                let src = &v[g..g + span];
+                for (d, &gi) in dst.iter_mut().zip(inner_off) {
+                    *d = src[gi];
                 }
-                // Next combination of the outer blocks, like an odometer.
                 let mut l = nb - 1;
                 loop {
                     if l == 0 {
-                        break 'gather;
+                        break 'combos;
                     }
                     l -= 1;
-                    let b = order[l];
-                    let off = &w.grid_offset[b];
+                    let off = &w.grid_offset[order[l]];
                     g -= off[digit[l]];
-                    j -= digit[l] * stride[b];
                     digit[l] += 1;
-                    if digit[l] < sizes[b] {
+                    if digit[l] < sizes[l] {
                         g += off[digit[l]];
-                        j += digit[l] * stride[b];
                         break;
                     }
                     digit[l] = 0;
@@ -205,18 +225,11 @@ impl<T: Real> BlockOperator<T> {
         }
         let check = op.backup.absorbing_goal || self.terminals.is_some();
         w.corrections.clear();
-        for_each_core(&seg[..e], |idx, mu| {
-            let internal = idx
-                .iter()
-                .zip(&self.q.internal_strides)
-                .map(|(i, s)| i * s)
-                .sum::<usize>();
+        for &(internal, mu) in &w.cores {
             match state_rewards {
                 Some(r) => reward += mu * r[internal],
                 None => {
-                    for ((xe, p), &i) in w.x.iter_mut().zip(grid.dims()).zip(idx) {
-                        *xe = p.cores()[i];
-                    }
+                    op.core_state(internal, &mut w.x);
                     if depends {
                         for (u, r) in w.reward.iter_mut().enumerate() {
                             op.joint.vector_unchecked(u, &mut w.u);
@@ -230,7 +243,7 @@ impl<T: Real> BlockOperator<T> {
             if check && (op.is_goal(internal) || !self.terminal_actions(internal).is_empty()) {
                 w.corrections.push((internal, mu));
             }
-        });
+        }
         let mut any_goal = false;
         if !w.corrections.is_empty() {
             w.goal_ev.fill(T::ZERO);
@@ -281,14 +294,14 @@ impl<T: Real> BlockOperator<T> {
         }
     }
 
-    /// Contracts the box `vbox` (`[k_0][k_1]..`, block supports of `sizes`) with `rows` (per
-    /// block, one row per block action, local columns) into `out`, `[a_0][a_1]..` with the
-    /// first block slowest; `tmp` is scratch.
+    /// Contracts the box `vbox` (block supports of `sizes`, blocks in gather order, the
+    /// first slowest) with `rows` (per block in table order, one row per block action, local
+    /// columns) into `out`, `[a_0][a_1]..` over the blocks in gather order; `tmp` is scratch.
     ///
-    /// Stage `b` maps `[p][k_b][r]` to `[p][a_b][r]` (`p` over the earlier blocks' actions,
-    /// `r` over the later blocks' support cores): every element is `sum_e w_e in[p][k_e][r]`
-    /// over the row's entries in order, the same sum as [`crate::backup::contract`] forms in
-    /// its `[k][r][p]` layout, computed along whole contiguous rows of length `r`.
+    /// Stage `l` maps `[p][k][r]` to `[p][a][r]` (`p` over the earlier blocks' actions, `r`
+    /// over the later blocks' support cores), one [`Kernels::stage`] call per `p`: every
+    /// element is `sum_e w_e in[p][k_e][r]` over the row's entries in order, with fused
+    /// multiply-adds from 0, so the result is the same on every kernel instance.
     fn contract_box(
         &self,
         rows: &[LocalRows<T>],
@@ -300,18 +313,25 @@ impl<T: Real> BlockOperator<T> {
         let nb = sizes.len();
         let mut r: usize = sizes.iter().product();
         let mut p = 1usize;
-        // Stages alternate between `out` and `tmp` so that the last one writes `out`.
+        // Stages alternate between `out` and `tmp` so that the last one writes `out`; both
+        // keep `INPUT_PAD` spare elements so that every kernel instance loads whole vectors.
         let (mut dst, mut src) = if nb % 2 == 1 {
             (&mut *out, &mut *tmp)
         } else {
             (&mut *tmp, &mut *out)
         };
-        for b in 0..nb {
-            let (k, a) = (sizes[b], self.tables[b].n_actions);
+        for (l, &k) in sizes.iter().enumerate() {
+            let b = self.q.gather_order[l];
+            let a = self.tables[b].n_actions;
             r /= k;
-            dst.resize(p * a * r, T::ZERO);
-            let input: &[T] = if b == 0 { vbox } else { src };
-            stage_rows(&rows[b], a, k, r, &input[..p * k * r], dst);
+            dst.resize(p * a * r + INPUT_PAD, T::ZERO);
+            let input: &[T] = if l == 0 { vbox } else { src };
+            let view = rows[b].view(k);
+            let stage = self.kernels.stage;
+            for (i, o) in dst[..p * a * r].chunks_exact_mut(a * r).enumerate() {
+                // The chunk's own spare elements are the next chunks' (or the padding).
+                stage(view, 0, a, 1, r, &input[i * k * r..], o);
+            }
             p *= a;
             core::mem::swap(&mut dst, &mut src);
         }
@@ -326,7 +346,13 @@ pub(super) struct LocalRows<T> {
     weight: Vec<T>,
 }
 
-impl<T> LocalRows<T> {
+impl<T: Real> LocalRows<T> {
+    /// The rows as the kernels take them, over `n_cols` local columns.
+    fn view(&self, n_cols: usize) -> Rows<'_, T> {
+        Rows::checked(&self.ptr, &self.col, &self.weight, n_cols)
+            .expect("local rows hold memberships over their box's support")
+    }
+
     /// No rows (ready for the first row's entries).
     fn clear(&mut self) {
         self.ptr.clear();
@@ -360,6 +386,8 @@ pub(super) struct QWork<T> {
     in_support: Vec<bool>,
     /// The box of `V`.
     vbox: Vec<T>,
+    /// The active cores: (internal index, membership).
+    cores: Vec<(usize, T)>,
     /// The mixed rows' expectations, `[a_0][a_1]..`.
     ev: Vec<T>,
     /// Contraction scratch.
@@ -409,39 +437,5 @@ fn for_each_core<T: Real>(segs: &[Segment<T>], mut f: impl FnMut(&[usize], T)) {
             }
         }
         f(&idx[..segs.len()], mu);
-    }
-}
-
-/// One stage of [`BlockOperator::contract_box`]: `input` is `[p][k][r]`, `out` `[p][a][r]`
-/// with `a` the rows of `rows`; `out[p][a][.] = sum_e w_e input[p][k_e][.]` over row `a`'s
-/// entries in order (zeros for a row without entries).
-fn stage_rows<T: Real>(
-    rows: &LocalRows<T>,
-    n_actions: usize,
-    k: usize,
-    r: usize,
-    input: &[T],
-    out: &mut [T],
-) {
-    for (inp, o) in input
-        .chunks_exact(k * r)
-        .zip(out.chunks_exact_mut(n_actions * r))
-    {
-        for (a, o) in o.chunks_exact_mut(r).enumerate() {
-            let (s, t) = (rows.ptr[a] as usize, rows.ptr[a + 1] as usize);
-            let (cols, ws) = (&rows.col[s..t], &rows.weight[s..t]);
-            let Some((&k0, &w0)) = cols.first().zip(ws.first()) else {
-                o.fill(T::ZERO);
-                continue;
-            };
-            for (y, &x) in o.iter_mut().zip(&inp[k0 as usize * r..][..r]) {
-                *y = w0 * x;
-            }
-            for (&kk, &wk) in cols[1..].iter().zip(&ws[1..]) {
-                for (y, &x) in o.iter_mut().zip(&inp[kk as usize * r..][..r]) {
-                    *y += wk * x;
-                }
-            }
-        }
     }
 }

@@ -1,10 +1,13 @@
-//! Unit tests of the block operator (`block.rs`): the decision path against the previous
-//! implementation, kept verbatim as the reference.
+//! Unit tests of the block operator (`block.rs`): the decision path against a reference
+//! written the straightforward way (fresh buffers, the whole box of `V` materialised, the
+//! stages of the scalar kernel).
 
 use super::*;
 use crate::action::ActionSet;
-use crate::backup::{Backup, SparseRows, contract};
+use crate::backup::Backup;
 use crate::model::Block;
+use crate::solver::Kernel;
+use crate::solver::simd::{Rows, select_real};
 use crate::solver::{BackupPath, Path};
 
 /// Compressed rows of `(block core, weight)` entries, with block cores renumbered by `local`.
@@ -25,8 +28,9 @@ fn local_rows<T: Real, R: Iterator<Item = (usize, T)>>(
     (ptr, col, weight)
 }
 
-/// `Q(x, .)` as the block path computed it before the buffers and layout of
-/// [`BlockOperator::q_values`] (kept verbatim as the reference).
+/// `Q(x, .)` by the definition of [`BlockOperator::q_values`], written plainly: fresh buffers,
+/// the whole box materialised by its product index, the scalar kernel's stages in the
+/// `[k][r][p]` layout, rewards from the model at each active core.
 fn reference<T: Real, M: Model<T> + Sync + ?Sized>(
     blk: &BlockOperator<T>,
     op: &Operator<'_, T, M>,
@@ -89,53 +93,62 @@ fn reference<T: Real, M: Model<T> + Sync + ?Sized>(
         });
     }
 
-    // The box of V over the supports, first block slowest.
+    // The box of V over the supports, blocks in gather order with the first slowest.
+    let order = blk.q.gather_order.clone();
     let box_len: usize = mixed.iter().map(|m| m.support.len()).product();
     let mut vbox = vec![T::ZERO; box_len];
     let mut idx = vec![0usize; nb];
     for slot in vbox.iter_mut() {
         let g: usize = (0..nb)
-            .map(|b| blk.tables[b].grid_offset[mixed[b].support[idx[b]]])
+            .map(|l| {
+                let b = order[l];
+                blk.tables[b].grid_offset[mixed[b].support[idx[l]]]
+            })
             .sum();
         *slot = v[g];
-        for b in (0..nb).rev() {
-            idx[b] += 1;
-            if idx[b] < mixed[b].support.len() {
+        for l in (0..nb).rev() {
+            idx[l] += 1;
+            if idx[l] < mixed[order[l]].support.len() {
                 break;
             }
-            idx[b] = 0;
+            idx[l] = 0;
         }
     }
 
-    // Contract the box with the given rows (one row per block action for each block).
+    // Contract the box with the given rows (one row per block action for each block), the
+    // blocks in gather order, with the scalar kernel's stage: `[k][r][p]` to `[r][a][p]`, so
+    // the result is `[a_last]..[a_first]`.
+    let stage = select_real::<T>(Some(Kernel::Scalar)).unwrap().stage;
     let contract_box = |rows: &dyn Fn(usize) -> (Vec<u32>, Vec<u32>, Vec<T>)| -> Vec<T> {
         let mut input = vbox.clone();
         let mut p = 1usize;
-        for b in 0..nb {
+        for l in 0..nb {
+            let b = order[l];
             let k = mixed[b].support.len();
-            let r: usize = mixed[b + 1..].iter().map(|m| m.support.len()).product();
+            let r: usize = order[l + 1..]
+                .iter()
+                .map(|&b| mixed[b].support.len())
+                .product();
             let a = blk.tables[b].n_actions;
             let (ptr, col, weight) = rows(b);
             let mut out = vec![T::ZERO; r * a * p];
-            contract(
-                SparseRows {
-                    ptr: &ptr,
-                    col: &col,
-                    weight: &weight,
-                },
-                0,
-                a,
-                k,
-                r,
-                p,
-                &input,
-                &mut out,
-            )
-            .expect("mixed rows are sized to the box");
+            let rows = Rows::checked(&ptr, &col, &weight, k).expect("memberships over the box");
+            stage(rows, 0, a, r, p, &input, &mut out);
             input = out;
             p *= a;
         }
         input
+    };
+    // Position of joint action `u` in the result.
+    let position = |u: usize| {
+        let prod = blk.product_index(u);
+        let (mut pos, mut scale) = (0, 1);
+        for &b in &order {
+            let n = blk.tables[b].n_actions;
+            pos += (prod / blk.p_len[b]) % n * scale;
+            scale *= n;
+        }
+        pos
     };
     let ev_mixed = contract_box(&|b| {
         let m = &mixed[b];
@@ -208,14 +221,14 @@ fn reference<T: Real, M: Model<T> + Sync + ?Sized>(
             });
             for (u, g) in goal_ev.iter_mut().enumerate() {
                 if drop[u] {
-                    *g += mu * ev_d[blk.product_index(u)];
+                    *g += mu * ev_d[position(u)];
                 }
             }
         }
     }
     let gamma = op.gamma;
     for (u, o) in out.iter_mut().enumerate() {
-        let p = blk.product_index(u);
+        let p = position(u);
         let ev = if any_goal {
             ev_mixed[p] - goal_ev[u]
         } else {
@@ -433,7 +446,8 @@ fn check<T: Real>(m: &Masses<T>, absorbing: bool, seed: u64) {
     );
 }
 
-/// The buffered, re-laid-out `q_values` gives the reference's bits: one and two agents,
+/// The buffered `q_values` (gathered and contracted a row at a time, on the detected kernel)
+/// gives the reference's bits: one and two agents,
 /// blocks in and out of the joint radix order, absorbing goals, terminal states,
 /// action-dependent rewards, both precisions.
 #[test]

@@ -58,14 +58,8 @@ impl<T: Real> RowsBuf<T> {
     /// `weight` of equal length, every column below `n_cols`, every weight finite and
     /// non-negative (memberships; the last stage's pruning relies on it). `None` otherwise.
     pub(super) fn new(ptr: Vec<u32>, col: Vec<u32>, weight: Vec<T>, n_cols: usize) -> Option<Self> {
-        let ok = !ptr.is_empty()
-            && ptr[0] == 0
-            && ptr.windows(2).all(|w| w[0] <= w[1])
-            && *ptr.last()? as usize == col.len()
-            && col.len() == weight.len()
-            && col.iter().all(|&k| (k as usize) < n_cols)
-            && weight.iter().all(|w| w.is_finite() && *w >= T::ZERO);
-        ok.then_some(Self {
+        Rows::checked(&ptr, &col, &weight, n_cols)?;
+        Some(Self {
             ptr,
             col,
             weight,
@@ -85,6 +79,31 @@ impl<T: Real> RowsBuf<T> {
     /// Number of entries.
     pub(super) fn nnz(&self) -> usize {
         self.col.len()
+    }
+}
+
+impl<'a, T: Real> Rows<'a, T> {
+    /// A view of borrowed compressed rows after the checks of [`RowsBuf::new`] (`None` if
+    /// one fails).
+    pub(in crate::solver) fn checked(
+        ptr: &'a [u32],
+        col: &'a [u32],
+        weight: &'a [T],
+        n_cols: usize,
+    ) -> Option<Self> {
+        let ok = !ptr.is_empty()
+            && ptr[0] == 0
+            && ptr.windows(2).all(|w| w[0] <= w[1])
+            && *ptr.last()? as usize == col.len()
+            && col.len() == weight.len()
+            && col.iter().all(|&k| (k as usize) < n_cols)
+            && weight.iter().all(|w| w.is_finite() && *w >= T::ZERO);
+        ok.then_some(Self {
+            ptr,
+            col,
+            weight,
+            n_cols,
+        })
     }
 }
 
@@ -184,6 +203,20 @@ pub type PeakFn<T> = fn(iters: usize, seed: T, a: T, b: T) -> T;
 /// Independent chains in the throughput probe: enough to cover the latency of every current
 /// CPU's fused multiply-add units (two units of 4-cycle latency need 8).
 pub(super) const PEAK_CHAINS: usize = 12;
+
+/// Asks the cache for the line holding `v[i]`, if in bounds (a hint: no effect on results).
+#[inline(always)]
+pub(crate) fn prefetch<T>(v: &[T], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(x) = v.get(i) {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch only hints the cache (it never faults); SSE is part of the x86_64
+        // baseline, and the address is that of a live element anyway.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (v, i);
+}
 
 /// The kernels of one instruction set for one scalar type.
 pub struct Kernels<T> {
