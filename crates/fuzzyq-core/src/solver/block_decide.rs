@@ -150,8 +150,7 @@ impl<T: Real> BlockOperator<T> {
             }
         }
 
-        // The active cores (internal index, membership), in increasing row-major order; their
-        // rewards (and goal flags) are requested now and read after the contraction.
+        // The active cores (internal index, membership), in increasing row-major order.
         w.cores.clear();
         for_each_core(&seg[..e], |idx, mu| {
             let internal = idx
@@ -161,11 +160,6 @@ impl<T: Real> BlockOperator<T> {
                 .sum::<usize>();
             w.cores.push((internal, mu));
         });
-        if let Some(r) = op.rewards.as_deref() {
-            for &(i, _) in &w.cores {
-                crate::solver::simd::prefetch(r, i);
-            }
-        }
 
         // The box of V over the supports, blocks in gather order (the block of the largest
         // grid strides slowest, the innermost block's values contiguous in the box).

@@ -204,20 +204,6 @@ pub type PeakFn<T> = fn(iters: usize, seed: T, a: T, b: T) -> T;
 /// CPU's fused multiply-add units (two units of 4-cycle latency need 8).
 pub(super) const PEAK_CHAINS: usize = 12;
 
-/// Asks the cache for the line holding `v[i]`, if in bounds (a hint: no effect on results).
-#[inline(always)]
-pub(crate) fn prefetch<T>(v: &[T], i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    if let Some(x) = v.get(i) {
-        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        // SAFETY: a prefetch only hints the cache (it never faults); SSE is part of the x86_64
-        // baseline, and the address is that of a live element anyway.
-        unsafe { _mm_prefetch::<_MM_HINT_T0>((x as *const T).cast::<i8>()) };
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (v, i);
-}
-
 /// The kernels of one instruction set for one scalar type.
 pub struct Kernels<T> {
     /// `"avx512"`, `"avx2"`, `"portable"` or `"scalar"`.
