@@ -259,6 +259,8 @@ impl<'a, T: Real> JointActions<'a, T> {
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     #[test]
     fn agent_index_in_range_matches_division() {
         let values: std::vec::Vec<f64> = (0..2000).map(f64::from).collect();
@@ -287,8 +289,6 @@ mod tests {
             }
         }
     }
-
-    use super::*;
 
     #[test]
     fn joint_index_is_agent_major() {

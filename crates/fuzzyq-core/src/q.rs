@@ -106,7 +106,6 @@ pub fn interpolated_action<T: Real>(
     check_len("greedy actions", grid.n_cores(), greedy.len())?;
     check_len("joint action vector", joint.dim(), out.len())?;
     let active = grid.active(x)?;
-    out.fill(T::ZERO);
     // Up to `FAST` active cores (8 split variables) are listed on the stack first, so that
     // their greedy actions load together; the order and the sums are those of `for_each`.
     const FAST: usize = 256;
@@ -124,6 +123,7 @@ pub fn interpolated_action<T: Real>(
                 len: joint.n_joint(),
             });
         }
+        out.fill(T::ZERO);
         // Agent by agent, the components summed in registers (in core order, as below).
         for i in 0..joint.n_agents() {
             let set = joint.agent(i);
@@ -161,6 +161,7 @@ pub fn interpolated_action<T: Real>(
                 len: joint.n_joint(),
             });
         }
+        out.fill(T::ZERO);
         active.for_each(|d, w| add_action(joint, greedy[d] as usize, w, out));
     }
     for i in 0..joint.n_agents() {
@@ -232,7 +233,12 @@ mod tests {
         let mut out = [0.0];
         interpolated_action(&g, &j, &[0, 2], &[0.25], &mut out).unwrap();
         assert!((out[0] - (0.75 * -2.0 + 0.25 * 2.0)).abs() < 1e-12);
+        out[0] = 7.0;
         assert!(interpolated_action(&g, &j, &[0, 3], &[0.25], &mut out).is_err());
+        assert_eq!(
+            out[0], 7.0,
+            "a refused greedy table leaves the output alone"
+        );
     }
 
     /// The stack fast path (up to 8 split variables) and the callback path (more) give the
