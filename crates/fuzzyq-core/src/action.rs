@@ -198,6 +198,33 @@ impl<'a, T: Real> JointActions<'a, T> {
         ((u128::from(low) * self.sets[i].n_actions() as u128) >> 64) as usize
     }
 
+    /// Every agent's action index within joint action `u`, for exactly `N = n_agents()`
+    /// agents and `u` known to be in range: [`Self::agent_index_in_range`] for all agents at
+    /// once, by successive division from the last agent (one multiply-high per agent after
+    /// the first; the first agent's index is what remains).
+    #[inline(always)]
+    #[must_use]
+    pub(crate) fn agent_indices_in_range<const N: usize>(&self, u: u32) -> [usize; N] {
+        debug_assert_eq!(N, self.n_agents);
+        let mut digits = [0usize; N];
+        let mut r = u64::from(u);
+        for i in (1..N).rev() {
+            let n = self.sets[i].n_actions() as u64;
+            // The reciprocal of 1 wraps to 0; one action leaves the index unchanged.
+            let q = if n == 1 {
+                r
+            } else {
+                ((u128::from(self.magic[i].1) * u128::from(r)) >> 64) as u64
+            };
+            digits[i] = (r - q * n) as usize;
+            r = q;
+        }
+        if N > 0 {
+            digits[0] = r as usize;
+        }
+        digits
+    }
+
     /// The joint index of per-agent action indices `per_agent` (one per agent, each in range).
     pub fn compose(&self, per_agent: &[usize]) -> Result<usize, EvalError> {
         check_len("per-agent actions", self.n_agents, per_agent.len())?;
@@ -279,12 +306,19 @@ mod tests {
             let j = JointActions::try_new(&sets).unwrap();
             let step = (j.n_joint() / 50_000).max(1);
             for u in (0..j.n_joint()).step_by(step).chain([j.n_joint() - 1]) {
+                let all = match j.n_agents() {
+                    1 => j.agent_indices_in_range::<1>(u as u32).to_vec(),
+                    2 => j.agent_indices_in_range::<2>(u as u32).to_vec(),
+                    3 => j.agent_indices_in_range::<3>(u as u32).to_vec(),
+                    n => unreachable!("{n} agents"),
+                };
                 for i in 0..j.n_agents() {
                     assert_eq!(
                         j.agent_index_in_range(u as u32, i),
                         j.agent_index(u, i),
                         "{sizes:?} u {u} agent {i}"
                     );
+                    assert_eq!(all[i], j.agent_index(u, i), "{sizes:?} u {u} agent {i}");
                 }
             }
         }
