@@ -865,7 +865,7 @@ impl Model<f64> for Chain {
 /// coordinates. Optional: an action-independent reward, an absorbing goal core, terminal
 /// states switched off (same `is_terminal`, but not declared), and the first coordinate
 /// clamped to `[0, 4]` instead (so that only some slabs of the block path see terminal pairs).
-struct Cliff<T> {
+pub(crate) struct Cliff<T> {
     dims: usize,
     actions: Vec<T>,
     action_reward: bool,
@@ -878,7 +878,7 @@ const CLIFF_C: [f64; 2] = [0.0, 0.2];
 const CLIFF_LEVELS: [[f64; 3]; 2] = [[-1.0, 0.0, 0.8], [-0.9, 0.0, 1.2]];
 
 impl<T: Real> Cliff<T> {
-    fn new(dims: usize, action_reward: bool) -> Self {
+    pub(crate) fn new(dims: usize, action_reward: bool) -> Self {
         let actions = if dims == 1 {
             [-1.3, -0.4, 0.0, 0.5, 1.1]
                 .iter()
@@ -903,7 +903,7 @@ impl<T: Real> Cliff<T> {
         }
     }
 
-    fn grid(&self) -> Grid<T> {
+    pub(crate) fn grid(&self) -> Grid<T> {
         let cores: [&[f64]; 2] = [
             &[0.0, 0.5, 1.2, 2.0, 2.6, 3.3, 4.0],
             &[0.0, 1.0, 1.8, 2.9, 4.0],

@@ -604,7 +604,7 @@ impl<T: Real> BlockOperator<T> {
         self.map.as_deref()
     }
 
-    fn slab_len(&self) -> usize {
+    pub(super) fn slab_len(&self) -> usize {
         self.r_len[0]
     }
 
@@ -670,6 +670,17 @@ impl<T: Real> BlockOperator<T> {
         self.r_len[b] * self.tables[b].n_actions * self.p_len[b]
     }
 
+    /// The rows of stage `level`: `rows0` for the first (the block's own rows, or those rows
+    /// with their columns renumbered into a halo of input slabs), the block's own otherwise.
+    #[inline]
+    fn rows<'r>(&'r self, rows0: Rows<'r, T>, level: usize) -> Rows<'r, T> {
+        if level == 0 {
+            rows0
+        } else {
+            self.tables[level].rows.view()
+        }
+    }
+
     /// Fresh per-task buffers.
     fn work<M: Model<T> + Sync + ?Sized>(&self, op: &Operator<'_, T, M>) -> Work<T> {
         let last = self.tables.last().expect("at least one block");
@@ -694,35 +705,29 @@ impl<T: Real> BlockOperator<T> {
 
     /// Stage `level` for block core `c`: `out = T_level[c] x input`. A stage over rows of one
     /// value (the first stage) runs transposed, as `n_actions` long rows, then interleaves.
-    fn stage(&self, level: usize, c: usize, input: &[T], out: &mut [T], scratch: &mut [T]) {
+    #[allow(clippy::too_many_arguments)] // the stage's context, spelled out
+    fn stage(
+        &self,
+        rows0: Rows<'_, T>,
+        level: usize,
+        c: usize,
+        input: &[T],
+        out: &mut [T],
+        scratch: &mut [T],
+    ) {
         let t = &self.tables[level];
+        let rows = self.rows(rows0, level);
         let (r, p) = (self.r_len[level], self.p_len[level]);
         if p == 1 && r > 1 && t.n_actions > 1 {
             let na = t.n_actions;
-            (self.kernels.stage)(
-                t.rows.view(),
-                c * na,
-                na,
-                1,
-                r,
-                input,
-                &mut scratch[..na * r],
-            );
+            (self.kernels.stage)(rows, c * na, na, 1, r, input, &mut scratch[..na * r]);
             for (ri, o) in out[..r * na].chunks_exact_mut(na).enumerate() {
                 for (a, x) in o.iter_mut().enumerate() {
                     *x = scratch[a * r + ri];
                 }
             }
         } else {
-            (self.kernels.stage)(
-                t.rows.view(),
-                c * t.n_actions,
-                t.n_actions,
-                r,
-                p,
-                input,
-                out,
-            );
+            (self.kernels.stage)(rows, c * t.n_actions, t.n_actions, r, p, input, out);
         }
     }
 
@@ -731,6 +736,7 @@ impl<T: Real> BlockOperator<T> {
     #[allow(clippy::too_many_arguments)] // the stage's context, spelled out
     fn last_stage<'w>(
         &self,
+        rows0: Rows<'_, T>,
         level: usize,
         first: usize,
         n: usize,
@@ -740,7 +746,7 @@ impl<T: Real> BlockOperator<T> {
         policy: &[u32],
     ) -> Out<'w, T> {
         let t = &self.tables[level];
-        let (rows, na, p) = (t.rows.view(), t.n_actions, self.p_len[level]);
+        let (rows, na, p) = (self.rows(rows0, level), t.n_actions, self.p_len[level]);
         let m = &mut extra.maxima[..n];
         let bounds = &mut extra.bounds;
         match last {
@@ -768,6 +774,7 @@ impl<T: Real> BlockOperator<T> {
     #[allow(clippy::too_many_arguments)] // recursion state, spelled out
     fn run<E: FnMut(usize, Out<'_, T>)>(
         &self,
+        rows0: Rows<'_, T>,
         level: usize,
         c: usize,
         input: &[T],
@@ -788,7 +795,7 @@ impl<T: Real> BlockOperator<T> {
         };
         if last != Last::Rows && level + 1 == nb {
             // A single block: this stage is the last one, for core `c` alone.
-            let out = self.last_stage(level, c, 1, input, last, extra, pol(local, 1));
+            let out = self.last_stage(rows0, level, c, 1, input, last, extra, pol(local, 1));
             emit(local, out);
             return;
         }
@@ -800,7 +807,8 @@ impl<T: Real> BlockOperator<T> {
             // the same sum as in a full backup, so evaluating the greedy actions gives its bits.
             let t = &self.tables[level];
             let (na, rp) = (t.n_actions, self.r_len[level] * self.p_len[level]);
-            (self.kernels.stage)(t.rows.view(), c * na, na, 1, rp, input, &mut out[..na * rp]);
+            let rows = self.rows(rows0, level);
+            (self.kernels.stage)(rows, c * na, na, 1, rp, input, &mut out[..na * rp]);
             let (block, next) = (&self.tables[level + 1], &self.tables[level + 2]);
             let n = next.n_cores;
             for c2 in 0..block.n_cores {
@@ -820,7 +828,7 @@ impl<T: Real> BlockOperator<T> {
             }
             return;
         }
-        self.stage(level, c, input, out, &mut extra.scratch);
+        self.stage(rows0, level, c, input, out, &mut extra.scratch);
         if level + 1 == nb {
             emit(local, Out::Row(&out[..self.stage_len(level)]));
             return;
@@ -828,12 +836,13 @@ impl<T: Real> BlockOperator<T> {
         let next = &self.tables[level + 1];
         if last != Last::Rows && level + 2 == nb {
             let n = next.n_cores;
-            let out = self.last_stage(level + 1, 0, n, out, last, extra, pol(local * n, n));
+            let out = self.last_stage(rows0, level + 1, 0, n, out, last, extra, pol(local * n, n));
             emit(local * n, out);
             return;
         }
         for c2 in 0..next.n_cores {
             self.run(
+                rows0,
                 level + 1,
                 c2,
                 out,
@@ -856,7 +865,19 @@ impl<T: Real> BlockOperator<T> {
         last: Last,
         emit: &mut E,
     ) {
-        self.run(0, c0, v, &mut w.stages, &mut w.extra, 0, last, &[], emit);
+        let rows0 = self.tables[0].rows.view();
+        self.run(
+            rows0,
+            0,
+            c0,
+            v,
+            &mut w.stages,
+            &mut w.extra,
+            0,
+            last,
+            &[],
+            emit,
+        );
     }
 
     /// Whether the last stage can be fused with the reduction `kind`: the maximum over the
@@ -954,7 +975,10 @@ impl<T: Real> BlockOperator<T> {
             out,
             slab,
             || self.work(op),
-            |w, c0, chunk| self.slab_into(op, v, kind, None, c0, w, chunk, &pick),
+            |w, c0, chunk| {
+                let rows0 = self.tables[0].rows.view();
+                self.slab_into(op, rows0, v, kind, None, c0, w, chunk, &pick);
+            },
         );
     }
 
@@ -964,6 +988,7 @@ impl<T: Real> BlockOperator<T> {
     fn slab_into<U, M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
+        rows0: Rows<'_, T>,
         v: &[T],
         kind: Reduce,
         policy: Option<&[u32]>,
@@ -983,6 +1008,7 @@ impl<T: Real> BlockOperator<T> {
             reduce,
         } = w;
         self.run(
+            rows0,
             0,
             c0,
             v,
@@ -993,6 +1019,71 @@ impl<T: Real> BlockOperator<T> {
             policy.unwrap_or(&[]),
             &mut |first, values| {
                 self.deliver(op, kind, base, 0, first, values, chunk, reduce, pick);
+            },
+        );
+    }
+
+    /// Number of slabs: the cores of the first contracted block. Slab `c0` is the internal
+    /// range `c0 * slab_len() .. (c0 + 1) * slab_len()` of `V`.
+    pub(super) fn n_slabs(&self) -> usize {
+        self.tables[0].n_cores
+    }
+
+    /// The input slabs that the backup of the output slabs `slabs` reads: the columns of the
+    /// first block's rows for those cores (every action), sorted, each once. Only the first
+    /// stage reads `V`; the later ones read its output.
+    pub(super) fn input_slabs(&self, slabs: core::ops::Range<usize>) -> Vec<u32> {
+        let t = &self.tables[0];
+        let rows = t.rows.view();
+        let mut halo: Vec<u32> = (slabs.start * t.n_actions..slabs.end * t.n_actions)
+            .flat_map(|r| rows.row(r).0.iter().copied())
+            .collect();
+        halo.sort_unstable();
+        halo.dedup();
+        halo
+    }
+
+    /// [`Self::each_core`] for the output slabs `slabs` alone, reading `v_halo`: the input
+    /// slabs `halo` (strictly increasing, covering [`Self::input_slabs`]) one after another.
+    /// `out` holds the range's cores; with `policy` (their actions), evaluates them instead.
+    /// Every core gets the bits of the full sweep: the first stage's rows are the same rows
+    /// with their columns renumbered into the halo, so each sum reads the same values in the
+    /// same order.
+    #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out
+    pub(super) fn each_core_in<U: Send, M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        slabs: core::ops::Range<usize>,
+        halo: &[u32],
+        v_halo: &[T],
+        policy: Option<&[u32]>,
+        out: &mut [U],
+        kind: Reduce,
+        pick: impl Fn((T, u32)) -> U + Sync + Send,
+    ) {
+        let rows = self.tables[0].rows.view();
+        let mut position = vec![0u32; self.n_slabs()];
+        for (k, &c) in halo.iter().enumerate() {
+            position[c as usize] = k as u32;
+        }
+        // Columns outside the halo become 0: only rows of the range run, and theirs are in it.
+        let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
+        for r in 0..rows.n_rows() {
+            let (c, w) = rows.row(r);
+            col.extend(c.iter().map(|&k| position[k as usize]));
+            weight.extend_from_slice(w);
+            ptr.push(col.len() as u32);
+        }
+        let rows0 = RowsBuf::new(ptr, col, weight, halo.len()).expect("renumbered valid rows");
+        let slab = self.slab_len();
+        par::for_each_chunk_mut(
+            out,
+            slab,
+            || self.work(op),
+            |w, i, chunk| {
+                let pol = policy.map(|p| &p[i * slab..i * slab + chunk.len()]);
+                let c0 = slabs.start + i;
+                self.slab_into(op, rows0.view(), v_halo, kind, pol, c0, w, chunk, &pick);
             },
         );
     }
@@ -1028,6 +1119,7 @@ impl<T: Real> BlockOperator<T> {
                 let pol = &policy[c0 * slab..c0 * slab + chunk.len()];
                 self.slab_into(
                     op,
+                    self.tables[0].rows.view(),
                     v,
                     Reduce::Max,
                     Some(pol),
@@ -1074,7 +1166,8 @@ impl<T: Real> BlockOperator<T> {
                 // Stage 0 reads V as earlier slabs left it; the later stages only read its
                 // output, so they run in parallel over the second block's cores.
                 let (w0, _) = w.stages.split_first_mut().expect("one buffer per stage");
-                self.stage(0, c0, v, w0, &mut w.extra.scratch);
+                let rows0 = self.tables[0].rows.view();
+                self.stage(rows0, 0, c0, v, w0, &mut w.extra.scratch);
                 let w0 = &w.stages[0];
                 let chunk_len = self.r_len[1];
                 par::for_each_chunk_mut(
@@ -1089,6 +1182,7 @@ impl<T: Real> BlockOperator<T> {
                         } = t;
                         let shift = c1 * chunk_len;
                         self.run(
+                            rows0,
                             1,
                             c1,
                             w0,
@@ -1134,7 +1228,18 @@ impl<T: Real> BlockOperator<T> {
             1,
             || (self.work(op), vec![T::ZERO; slab]),
             |(w, buf), c0| {
-                self.slab_into(op, dv, Reduce::AbsMax, None, c0, w, buf, &|r: (T, u32)| r.0);
+                let rows0 = self.tables[0].rows.view();
+                self.slab_into(
+                    op,
+                    rows0,
+                    dv,
+                    Reduce::AbsMax,
+                    None,
+                    c0,
+                    w,
+                    buf,
+                    &|r: (T, u32)| r.0,
+                );
                 buf.iter().copied().fold(T::ZERO, T::max_of)
             },
         );

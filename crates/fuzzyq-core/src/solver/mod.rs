@@ -89,11 +89,13 @@ mod iterate;
 mod par;
 mod qiter;
 pub(crate) mod simd;
+mod slabs;
 mod state;
 mod table;
 
 pub use iterate::{solve, solve_from};
 pub use qiter::{QSolution, solve_q};
+pub use slabs::SlabLayout;
 pub use state::SolverState;
 pub use table::{BlockTable, TabulatedModel};
 
@@ -463,6 +465,12 @@ pub enum SolveError {
         /// What does not fit.
         reason: &'static str,
     },
+    /// A slab range, halo or buffer given to the slab entry points
+    /// ([`Operator::apply_slabs`]) does not fit the operator.
+    Slabs {
+        /// What does not fit.
+        reason: &'static str,
+    },
     /// The observer asked to stop.
     Interrupted {
         /// Sweeps completed before the stop.
@@ -511,6 +519,7 @@ impl core::fmt::Display for SolveError {
                  reward, no absorbing goal and no terminal states",
             ),
             Self::Resume { reason } => write!(f, "cannot continue the solve: {reason}"),
+            Self::Slabs { reason } => write!(f, "slab backup: {reason}"),
             Self::Interrupted { sweeps } => write!(f, "interrupted after {sweeps} sweeps"),
         }
     }
@@ -1121,6 +1130,16 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     pub fn evaluate_policy(&self, v: &[T], policy: &[u32]) -> Result<Vec<T>, SolveError> {
         crate::error::check_len("V", self.n_cores(), v.len())?;
         crate::error::check_len("policy", self.n_cores(), policy.len())?;
+        self.check_policy(policy)?;
+        let (vi, pi) = (self.to_internal(v), self.to_internal(policy));
+        let mut out = self.zeros();
+        self.evaluate(&vi, &pi, &mut out);
+        Ok(self.to_grid(&out))
+    }
+
+    /// That every entry of `policy` names a joint action and that the operator can evaluate
+    /// a policy.
+    fn check_policy(&self, policy: &[u32]) -> Result<(), SolveError> {
         let n_joint = self.joint.n_joint();
         if let Some(&u) = policy.iter().find(|&&u| u as usize >= n_joint) {
             return Err(EvalError::OutOfRange {
@@ -1133,10 +1152,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         if !self.can_evaluate() {
             return Err(SolveError::PolicyEvaluation);
         }
-        let (vi, pi) = (self.to_internal(v), self.to_internal(policy));
-        let mut out = self.zeros();
-        self.evaluate(&vi, &pi, &mut out);
-        Ok(self.to_grid(&out))
+        Ok(())
     }
 
     /// Whether [`Self::evaluate`] runs on this operator (see [`Scheme::ModifiedPolicy`]).

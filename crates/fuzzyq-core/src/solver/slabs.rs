@@ -1,0 +1,172 @@
+//! Slabs: the block backup of a range of output slabs from only the input slabs it reads,
+//! the entry points for holding `V` in shards (processes, machines) instead of one buffer.
+//!
+//! On the block path `V` is kept in an internal order in which the first contracted block is
+//! the slowest index: slab `c0` is the contiguous range `c0 * slab_len .. (c0 + 1) * slab_len`
+//! of that order, one core of the first block times every core of the others. Only the first
+//! stage of a backup reads `V`, and it reads, for slab `c0`, the slabs that the first block's
+//! successors of core `c0` reach in one step (every action): a few neighbours. So a shard
+//! of output slabs needs only a bounded halo of input slabs ([`Operator::input_slabs`]), and
+//! its backup ([`Operator::apply_slabs`], [`Operator::greedy_slabs`],
+//! [`Operator::evaluate_slabs`]) gives every core the bits of the full sweep.
+//!
+//! Everything else a sweep does (the change, extrapolation, the stopping rules) reduces
+//! maxima and minima over cores, so a driver combining shards in any grouping gets the
+//! single-process results.
+
+use core::ops::Range;
+use std::vec::Vec;
+
+use super::{Operator, Path, Reduce, SolveError};
+use crate::error::check_len;
+use crate::model::Model;
+use crate::real::Real;
+
+/// How the block path lays out `V` in slabs (internal order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SlabLayout {
+    /// Number of slabs (the first contracted block's cores).
+    pub n_slabs: usize,
+    /// Cores per slab (the product of the other blocks' core counts).
+    pub slab_len: usize,
+}
+
+impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
+    /// The slab layout of `V`, or `None` on the generic path (which has no slabs).
+    #[must_use]
+    pub fn slab_layout(&self) -> Option<SlabLayout> {
+        match &self.path {
+            Path::Block(b) => Some(SlabLayout {
+                n_slabs: b.n_slabs(),
+                slab_len: b.slab_len(),
+            }),
+            Path::Generic(_) => None,
+        }
+    }
+
+    /// The input slabs that the backup of the output slabs `slabs` reads (sorted, each once):
+    /// the halo to fetch before [`Self::apply_slabs`]. It does not depend on `V` or on a
+    /// policy.
+    pub fn input_slabs(&self, slabs: Range<usize>) -> Result<Vec<u32>, SolveError> {
+        let (b, _) = self.slab_range(&slabs)?;
+        Ok(b.input_slabs(slabs))
+    }
+
+    /// The backup `max_u (rho + gamma P v)` of the cores of output slabs `slabs` (internal
+    /// order, `out` holding `slabs.len() * slab_len` values), from `v_halo`: the input slabs
+    /// `halo` of `V` (internal order) one after another. `halo` must be strictly increasing
+    /// and contain [`Self::input_slabs`]; more slabs are allowed. Bit for bit the matching
+    /// part of a full sweep ([`Self::apply`] in internal order), for any thread count.
+    pub fn apply_slabs(
+        &self,
+        slabs: Range<usize>,
+        halo: &[u32],
+        v_halo: &[T],
+        out: &mut [T],
+    ) -> Result<(), SolveError> {
+        let b = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        b.each_core_in(self, slabs, halo, v_halo, None, out, Reduce::Max, |r| r.0);
+        Ok(())
+    }
+
+    /// The greedy joint actions of the cores of output slabs `slabs` (internal order; the
+    /// lowest-index maximiser, as [`Self::greedy`]), from the halo as in
+    /// [`Self::apply_slabs`].
+    pub fn greedy_slabs(
+        &self,
+        slabs: Range<usize>,
+        halo: &[u32],
+        v_halo: &[T],
+        out: &mut [u32],
+    ) -> Result<(), SolveError> {
+        let b = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        b.each_core_in(self, slabs, halo, v_halo, None, out, Reduce::Argmax, |r| {
+            r.1
+        });
+        Ok(())
+    }
+
+    /// One policy-evaluation sweep of the cores of output slabs `slabs` under `policy` (their
+    /// joint actions, internal order): [`Self::evaluate_policy`] on a shard, from the halo as
+    /// in [`Self::apply_slabs`]. [`SolveError::PolicyEvaluation`] where the operator cannot
+    /// evaluate a policy.
+    pub fn evaluate_slabs(
+        &self,
+        slabs: Range<usize>,
+        halo: &[u32],
+        v_halo: &[T],
+        policy: &[u32],
+        out: &mut [T],
+    ) -> Result<(), SolveError> {
+        let b = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        check_len("policy", out.len(), policy.len())?;
+        self.check_policy(policy)?;
+        b.each_core_in(
+            self,
+            slabs,
+            halo,
+            v_halo,
+            Some(policy),
+            out,
+            Reduce::Max,
+            |r| r.0,
+        );
+        Ok(())
+    }
+
+    /// `v` (one value per core, row-major grid order) in the internal order of the slabs.
+    pub fn to_internal_order<U: Copy + Default>(&self, v: &[U]) -> Result<Vec<U>, SolveError> {
+        check_len("values", self.n_cores(), v.len())?;
+        Ok(self.to_internal(v))
+    }
+
+    /// `v` (one value per core, internal order) in row-major grid order.
+    pub fn to_grid_order<U: Copy + Default>(&self, v: &[U]) -> Result<Vec<U>, SolveError> {
+        check_len("values", self.n_cores(), v.len())?;
+        Ok(self.to_grid(v))
+    }
+
+    /// The block operator and slab length, if `slabs` is a non-empty range of slabs.
+    fn slab_range(
+        &self,
+        slabs: &Range<usize>,
+    ) -> Result<(&super::block::BlockOperator<T>, usize), SolveError> {
+        let Path::Block(b) = &self.path else {
+            return Err(SolveError::Slabs {
+                reason: "the generic backup path has no slabs",
+            });
+        };
+        if slabs.start >= slabs.end || slabs.end > b.n_slabs() {
+            return Err(SolveError::Slabs {
+                reason: "the slab range is empty or ends past the last slab",
+            });
+        }
+        Ok((b, b.slab_len()))
+    }
+
+    /// [`Self::slab_range`] plus the halo and the buffer lengths.
+    fn slab_check(
+        &self,
+        slabs: &Range<usize>,
+        halo: &[u32],
+        v_halo: &[T],
+        out_len: usize,
+    ) -> Result<&super::block::BlockOperator<T>, SolveError> {
+        let (b, slab) = self.slab_range(slabs)?;
+        if halo.windows(2).any(|w| w[0] >= w[1]) || halo.iter().any(|&c| c as usize >= b.n_slabs())
+        {
+            return Err(SolveError::Slabs {
+                reason: "the halo's slabs are not strictly increasing slab indices",
+            });
+        }
+        let need = b.input_slabs(slabs.clone());
+        if need.iter().any(|c| halo.binary_search(c).is_err()) {
+            return Err(SolveError::Slabs {
+                reason: "the halo lacks an input slab of the range (see input_slabs)",
+            });
+        }
+        check_len("V halo", halo.len() * slab, v_halo.len())?;
+        check_len("output", slabs.len() * slab, out_len)?;
+        Ok(b)
+    }
+}
