@@ -1043,38 +1043,47 @@ impl<T: Real> BlockOperator<T> {
         halo
     }
 
+    /// The first block's rows for the output slabs `slabs`, their columns renumbered to their
+    /// positions in `halo` (strictly increasing slab indices); every other row empty, since
+    /// only the range's rows run. `None` if a column is not in `halo`.
+    pub(super) fn halo_rows(
+        &self,
+        slabs: &core::ops::Range<usize>,
+        halo: &[u32],
+    ) -> Option<RowsBuf<T>> {
+        let t = &self.tables[0];
+        let rows = t.rows.view();
+        let range = slabs.start * t.n_actions..slabs.end * t.n_actions;
+        let (mut ptr, mut col, mut weight) = (vec![0u32; range.start + 1], Vec::new(), Vec::new());
+        for r in range {
+            let (c, w) = rows.row(r);
+            for &k in c {
+                col.push(halo.binary_search(&k).ok()? as u32);
+            }
+            weight.extend_from_slice(w);
+            ptr.push(col.len() as u32);
+        }
+        ptr.resize(rows.n_rows() + 1, col.len() as u32);
+        RowsBuf::new(ptr, col, weight, halo.len())
+    }
+
     /// [`Self::each_core`] for the output slabs `slabs` alone, reading `v_halo`: the input
-    /// slabs `halo` (strictly increasing, covering [`Self::input_slabs`]) one after another.
-    /// `out` holds the range's cores; with `policy` (their actions), evaluates them instead.
-    /// Every core gets the bits of the full sweep: the first stage's rows are the same rows
-    /// with their columns renumbered into the halo, so each sum reads the same values in the
-    /// same order.
+    /// slabs of the halo that `rows0` ([`Self::halo_rows`]) was renumbered into, one after
+    /// another. `out` holds the range's cores; with `policy` (their actions), evaluates them
+    /// instead. Every core gets the bits of the full sweep: the first stage's rows are the
+    /// same rows over renumbered columns, so each sum reads the same values in the same order.
     #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out
     pub(super) fn each_core_in<U: Send, M: Model<T> + Sync + ?Sized>(
         &self,
         op: &Operator<'_, T, M>,
         slabs: core::ops::Range<usize>,
-        halo: &[u32],
+        rows0: &RowsBuf<T>,
         v_halo: &[T],
         policy: Option<&[u32]>,
         out: &mut [U],
         kind: Reduce,
         pick: impl Fn((T, u32)) -> U + Sync + Send,
     ) {
-        let rows = self.tables[0].rows.view();
-        let mut position = vec![0u32; self.n_slabs()];
-        for (k, &c) in halo.iter().enumerate() {
-            position[c as usize] = k as u32;
-        }
-        // Columns outside the halo become 0: only rows of the range run, and theirs are in it.
-        let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
-        for r in 0..rows.n_rows() {
-            let (c, w) = rows.row(r);
-            col.extend(c.iter().map(|&k| position[k as usize]));
-            weight.extend_from_slice(w);
-            ptr.push(col.len() as u32);
-        }
-        let rows0 = RowsBuf::new(ptr, col, weight, halo.len()).expect("renumbered valid rows");
         let slab = self.slab_len();
         par::for_each_chunk_mut(
             out,

@@ -17,6 +17,7 @@
 use core::ops::Range;
 use std::vec::Vec;
 
+use super::simd::RowsBuf;
 use super::{Operator, Path, Reduce, SolveError};
 use crate::error::check_len;
 use crate::model::Model;
@@ -64,8 +65,8 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         v_halo: &[T],
         out: &mut [T],
     ) -> Result<(), SolveError> {
-        let b = self.slab_check(&slabs, halo, v_halo, out.len())?;
-        b.each_core_in(self, slabs, halo, v_halo, None, out, Reduce::Max, |r| r.0);
+        let (b, rows0) = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        b.each_core_in(self, slabs, &rows0, v_halo, None, out, Reduce::Max, |r| r.0);
         Ok(())
     }
 
@@ -79,10 +80,17 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         v_halo: &[T],
         out: &mut [u32],
     ) -> Result<(), SolveError> {
-        let b = self.slab_check(&slabs, halo, v_halo, out.len())?;
-        b.each_core_in(self, slabs, halo, v_halo, None, out, Reduce::Argmax, |r| {
-            r.1
-        });
+        let (b, rows0) = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        b.each_core_in(
+            self,
+            slabs,
+            &rows0,
+            v_halo,
+            None,
+            out,
+            Reduce::Argmax,
+            |r| r.1,
+        );
         Ok(())
     }
 
@@ -98,13 +106,13 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         policy: &[u32],
         out: &mut [T],
     ) -> Result<(), SolveError> {
-        let b = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        let (b, rows0) = self.slab_check(&slabs, halo, v_halo, out.len())?;
         check_len("policy", out.len(), policy.len())?;
         self.check_policy(policy)?;
         b.each_core_in(
             self,
             slabs,
-            halo,
+            &rows0,
             v_halo,
             Some(policy),
             out,
@@ -144,14 +152,15 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         Ok((b, b.slab_len()))
     }
 
-    /// [`Self::slab_range`] plus the halo and the buffer lengths.
+    /// [`Self::slab_range`] plus the halo and the buffer lengths; the block operator and the
+    /// range's first-block rows renumbered into the halo.
     fn slab_check(
         &self,
         slabs: &Range<usize>,
         halo: &[u32],
         v_halo: &[T],
         out_len: usize,
-    ) -> Result<&super::block::BlockOperator<T>, SolveError> {
+    ) -> Result<(&super::block::BlockOperator<T>, RowsBuf<T>), SolveError> {
         let (b, slab) = self.slab_range(slabs)?;
         if halo.windows(2).any(|w| w[0] >= w[1]) || halo.iter().any(|&c| c as usize >= b.n_slabs())
         {
@@ -159,14 +168,11 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
                 reason: "the halo's slabs are not strictly increasing slab indices",
             });
         }
-        let need = b.input_slabs(slabs.clone());
-        if need.iter().any(|c| halo.binary_search(c).is_err()) {
-            return Err(SolveError::Slabs {
-                reason: "the halo lacks an input slab of the range (see input_slabs)",
-            });
-        }
+        let rows0 = b.halo_rows(slabs, halo).ok_or(SolveError::Slabs {
+            reason: "the halo lacks an input slab of the range (see input_slabs)",
+        })?;
         check_len("V halo", halo.len() * slab, v_halo.len())?;
         check_len("output", slabs.len() * slab, out_len)?;
-        Ok(b)
+        Ok((b, rows0))
     }
 }
