@@ -33,7 +33,7 @@ LAYERS = {
         {"world"},
         {"learn"},
         {"io"},
-        {"run", "memory"},
+        {"run", "memory", "slabs"},
         {"train"},
         {"compare"},
     ],

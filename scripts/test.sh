@@ -17,7 +17,7 @@ cargo build --release --locked \
 venv=target/python-test-venv
 rm -rf "$venv"
 ./scripts/setup-python.sh "$venv"
-"$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib tqdm
+"$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib tqdm "ray>=2.9"
 # Run from outside the source tree so that `import fuzzyq` finds the installed wheel; the
 # Python-CLI tests use the binary `cargo test` just built from this checkout.
 export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"

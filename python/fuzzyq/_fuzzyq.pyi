@@ -1547,6 +1547,198 @@ def load(path: str | PathLike[str], model: CallableModel | None = None) -> Solut
         PolicyFileError: the file cannot be read, or is truncated, corrupted or foreign.
     """
 
+_Values = npt.NDArray[np.float32] | npt.NDArray[np.float64]
+_Actions = npt.NDArray[np.uint32]
+
+@final
+class SlabProblem:
+    """The block operator of a training configuration, for computing sweeps in shards.
+
+    `V` is kept in the operator's internal order, in slabs: one core of the first contracted
+    dynamics block times every core of the others (`n_slabs` slabs of `slab_len` cores). Each
+    method computes one pass for the output slabs ``start..stop`` from their halo: the input
+    slabs `input_slabs` names (or more, increasing) and those slabs' values one after another,
+    in the configured precision (`dtype`). The work runs in Rust with the GIL released; every
+    process that builds the problem from the same configuration computes the same bits, so
+    shards assembled in any grouping give the single-process solver's sweeps. This is the
+    building block of `fuzzyq.distributed`.
+
+    Args:
+        config: a training configuration as TOML text (``fuzzyq config`` writes one).
+
+    Raises:
+        ConfigError: the configuration does not parse, or its sweeps cannot be sharded (the
+            q-values operator, asynchronous sweeps, the generic backup path).
+    """
+
+    def __new__(cls, config: str) -> SlabProblem: ...
+    @property
+    def n_slabs(self) -> int:
+        """Slabs of `V` (the first contracted block's cores)."""
+
+    @property
+    def slab_len(self) -> int:
+        """Cores per slab."""
+
+    @property
+    def dtype(self) -> Literal["float32", "float64"]:
+        """The value type of every buffer."""
+
+    def input_slabs(self, start: int, stop: int) -> _Actions:
+        """The input slabs that the output slabs ``start..stop`` read.
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+
+        Returns:
+            Slab indices, increasing, each once (uint32).
+
+        Raises:
+            ConfigError: an empty range or one past the last slab.
+        """
+
+    def backup(self, start: int, stop: int, halo: _Actions, v_halo: _Values) -> _Values:
+        """The backup ``max_u (rho + gamma P V)`` of the output slabs' cores.
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+            halo: input slabs, increasing, containing ``input_slabs(start, stop)``.
+            v_halo: the values of those slabs of `V`, one slab after another.
+
+        Returns:
+            ``(stop - start) * slab_len`` values.
+
+        Raises:
+            ConfigError: a bad range or halo.
+            InputError: `v_halo` of the wrong length.
+            InputTypeError: `v_halo` not of `dtype`.
+        """
+
+    def backup_greedy(
+        self, start: int, stop: int, halo: _Actions, v_halo: _Values
+    ) -> tuple[_Values, _Actions]:
+        """`backup` and each core's greedy joint action (the lowest-index maximiser).
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+            halo: input slabs, increasing, containing ``input_slabs(start, stop)``.
+            v_halo: the values of those slabs of `V`, one slab after another.
+
+        Returns:
+            The values and the joint actions.
+        """
+
+    def rewards(self, start: int, stop: int) -> _Values:
+        """The backup of ``V = 0`` on the output slabs' cores (``max_u rho``).
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+
+        Returns:
+            ``(stop - start) * slab_len`` values.
+        """
+
+    def evaluate(
+        self, start: int, stop: int, halo: _Actions, v_halo: _Values, policy: _Actions
+    ) -> _Values:
+        """One policy-evaluation sweep ``rho + gamma P_policy V`` of the output slabs' cores.
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+            halo: input slabs, increasing, containing ``input_slabs(start, stop)``.
+            v_halo: the values of those slabs of `V`, one slab after another.
+            policy: the output slabs' joint actions.
+
+        Returns:
+            ``(stop - start) * slab_len`` values.
+        """
+
+    def greedy(self, start: int, stop: int, halo: _Actions, v_halo: _Values) -> _Actions:
+        """The greedy joint actions of the output slabs' cores.
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+            halo: input slabs, increasing, containing ``input_slabs(start, stop)``.
+            v_halo: the values of those slabs of `V`, one slab after another.
+
+        Returns:
+            Joint actions (uint32).
+        """
+
+    def abs_max(
+        self, start: int, stop: int, halo: _Actions, a_halo: _Values, b_halo: _Values
+    ) -> float:
+        """``gamma max |P (a - b)|`` over the output slabs' cores: the exact change of theta.
+
+        Args:
+            start: the first output slab.
+            stop: one past the last output slab.
+            halo: input slabs, increasing, containing ``input_slabs(start, stop)``.
+            a_halo: those slabs of one value buffer.
+            b_halo: the same slabs of another.
+
+        Returns:
+            The maximum over these cores (maxima of disjoint shards combine exactly).
+        """
+
+    def diff_stats(self, a: _Values, b: _Values, shift: float) -> tuple[float, float, float]:
+        """A sweep's change on some cores, in float64.
+
+        Args:
+            a: the sweep's output on those cores.
+            b: its input on the same cores.
+            shift: the constant the extrapolation added to `b`.
+
+        Returns:
+            ``(max |a - b + shift|, min (a - b), max (a - b))``.
+        """
+
+    def shifted(self, v: _Values, shift: float) -> _Values:
+        """A copy of `v` with `shift` added to every value, in `dtype`.
+
+        Args:
+            v: values.
+            shift: the constant.
+
+        Returns:
+            The shifted copy.
+        """
+
+def train_sharded(
+    config: str,
+    backend: Any,
+    *,
+    resume: str | PathLike[str] | None = None,
+    checkpoint: str | PathLike[str] | None = None,
+    on_sweep: Callable[[dict[str, Any]], bool | None] | None = None,
+) -> Solution:
+    """Trains a configuration with every pass over `V` run by `backend` (the driver of
+    `fuzzyq.distributed`; use that module).
+
+    Args:
+        config: a training configuration as TOML text.
+        backend: an object with the methods ``backup``, ``backup_greedy``, ``rewards``,
+            ``evaluate``, ``diff_stats``, ``shift``, ``exact_delta``, ``greedy``, ``load``,
+            ``load_policy``, ``values`` and ``policy`` on value buffers numbered 0, 1, 2.
+        resume: a checkpoint to continue from.
+        checkpoint: where to write the run's state after every sweep.
+        on_sweep: called with each sweep's record; returning False stops the run.
+
+    Returns:
+        The solution ``fuzzyq train --config`` computes, bit for bit.
+
+    Raises:
+        ConfigError: the configuration does not parse or cannot be sharded.
+        InputError: `resume` is not a checkpoint of this configuration.
+        SolverError: `on_sweep` stopped the run.
+    """
+
 def available_kernels() -> list[Literal["avx512", "avx2", "portable", "scalar"]]:
     """The kernel instances this CPU runs, fastest first.
 

@@ -5,6 +5,7 @@ mod fuzz;
 mod khepera;
 mod learned;
 mod memberships;
+mod sharded;
 mod slabs;
 mod solver;
 mod table;

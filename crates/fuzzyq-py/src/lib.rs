@@ -16,6 +16,7 @@ mod khepera;
 mod model;
 mod pickle;
 mod policy;
+mod slabs;
 mod solve;
 
 use pyo3::prelude::*;
@@ -36,10 +37,12 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<classic::Arm>()?;
     m.add_class::<solve::Solution>()?;
     m.add_class::<policy::Policy>()?;
+    m.add_class::<slabs::SlabProblem>()?;
     m.add_function(wrap_pyfunction!(solve::solve, m)?)?;
     m.add_function(wrap_pyfunction!(solve::load, m)?)?;
     m.add_function(wrap_pyfunction!(solve::collect, m)?)?;
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;
+    m.add_function(wrap_pyfunction!(slabs::train_sharded, m)?)?;
     m.add_function(wrap_pyfunction!(restore, m)?)?;
     Ok(())
 }

@@ -868,7 +868,11 @@ impl Solution {
         })
     }
 
-    fn from_artifact(py: Python<'_>, a: PolicyArtifact, grid: Option<Py<Grid>>) -> PyResult<Self> {
+    pub(crate) fn from_artifact(
+        py: Python<'_>,
+        a: PolicyArtifact,
+        grid: Option<Py<Grid>>,
+    ) -> PyResult<Self> {
         let grid = match grid {
             Some(g) => g,
             None => {

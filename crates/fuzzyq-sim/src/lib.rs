@@ -15,7 +15,7 @@
 //! | 2 | [`world`] | rapier2d worlds: colliding point masses, robots with ray-cast sonars |
 //! | 3 | [`learn`] | learning from samples: fuzzy Q-learning, VQQL, the tasks as environments |
 //! | 4 | [`io`] | TOML configurations and the policy files of every learner |
-//! | 5 | [`run`] | policies, plants, the one rollout loop, metrics, evaluations |
+//! | 5 | [`run`], [`slabs`] | policies, plants, the one rollout loop, metrics, evaluations; a configuration's operator for sharded sweeps |
 //! | 6 | [`train`] | a configuration in, a policy out, for every learner |
 //! | 7 | [`compare`] | the paper's Table 1: every learner trained and measured alike |
 //!
@@ -62,6 +62,7 @@ pub mod memory;
 pub mod model;
 pub mod paper;
 pub mod run;
+pub mod slabs;
 #[cfg(test)]
 mod test_support;
 mod toml_doc;

@@ -12,7 +12,8 @@ use std::ops::ControlFlow;
 use fuzzyq_core::Real;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, Delta, IterationOperator, Precision, Progress, Solution, SolverState, SweepRecord,
+    self, Delta, IterationOperator, Precision, Progress, Solution, SolveError, SolverState,
+    SweepRecord,
 };
 use serde::Serialize;
 
@@ -49,7 +50,7 @@ fuzzyq_core::named_option! {
 }
 
 /// Runs fuzzy Q-iteration as configured; `observer` sees every sweep and may stop the run
-/// ([`SolveError::Interrupted`](fuzzyq_core::solver::SolveError::Interrupted)).
+/// ([`SolveError::Interrupted`]).
 pub fn train(
     config: &TrainConfig,
     mut observer: impl FnMut(&Progress) -> ControlFlow<()>,
@@ -72,6 +73,85 @@ pub fn train_from(
     solve_and_pack(&model, config, resume, observer)
 }
 
+/// [`train_from`] with the passes over `V` run by `sweeps`, a backend that holds `V`
+/// elsewhere (in shards on a cluster, say) and computes every pass from the slab entry
+/// points ([`crate::slabs::SlabProblem`]): the same policy, bit for bit, as [`train_from`]
+/// when the backend computes each pass as the in-process one does.
+///
+/// The observer is shown the run's state (every value, read from the backend) only with
+/// `show_state`. Fuzzy Q-iteration's values operator with synchronous sweeps only: the
+/// q-values operator and asynchronous sweeps are refused (neither runs on slabs).
+pub fn train_on<S, E>(
+    config: &TrainConfig,
+    sweeps: &mut S,
+    resume: Option<FqiState<'static>>,
+    show_state: bool,
+    mut observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, E>
+where
+    S: solver::Sweeps<f32, Error = E> + solver::Sweeps<f64, Error = E>,
+    E: From<SimError> + From<SolveError>,
+{
+    crate::slabs::check_shardable(config).map_err(SimError::from)?;
+    let model = config.build_model()?;
+    let solver_config = config.solver.solver_config();
+    match split_resume(config, resume)? {
+        Resume::F32(resume) => {
+            let grid = config.grid::<f32>()?;
+            let s = solver::solve_on(
+                &model,
+                &grid,
+                &solver_config,
+                sweeps,
+                resume,
+                show_state,
+                |p, s| observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref()),
+            )?;
+            Ok(artifact(config, s, Values::F32))
+        }
+        Resume::F64(resume) => {
+            let grid = config.grid::<f64>()?;
+            let s = solver::solve_on(
+                &model,
+                &grid,
+                &solver_config,
+                sweeps,
+                resume,
+                show_state,
+                |p, s| observer(p, s.map(|s| FqiState::F64(s.clone())).as_ref()),
+            )?;
+            Ok(artifact(config, s, Values::F64))
+        }
+    }
+}
+
+/// A run's state to continue from, in the configured precision.
+enum Resume {
+    F32(Option<SolverState<'static, f32>>),
+    F64(Option<SolverState<'static, f64>>),
+}
+
+/// `resume` in `config`'s precision, or the error naming the mismatch.
+fn split_resume(
+    config: &TrainConfig,
+    resume: Option<FqiState<'static>>,
+) -> Result<Resume, SimError> {
+    match (config.solver.precision, resume) {
+        (Precision::F32, None) => Ok(Resume::F32(None)),
+        (Precision::F64, None) => Ok(Resume::F64(None)),
+        (Precision::F32, Some(FqiState::F32(s))) => Ok(Resume::F32(Some(s))),
+        (Precision::F64, Some(FqiState::F64(s))) => Ok(Resume::F64(Some(s))),
+        _ => Err(ConfigError::invalid(
+            "checkpoint",
+            format!(
+                "holds values in the other precision than solver.precision = \"{}\"",
+                config.solver.precision.name()
+            ),
+        )
+        .into()),
+    }
+}
+
 /// Solves `model` with the grid and solver settings of `config` in its precision, from
 /// `resume` if given.
 fn solve_and_pack<M>(
@@ -83,37 +163,19 @@ fn solve_and_pack<M>(
 where
     M: fuzzyq_core::Model<f32> + fuzzyq_core::Model<f64> + Sync,
 {
-    let precision_error = || {
-        ConfigError::invalid(
-            "checkpoint",
-            format!(
-                "holds values in the other precision than solver.precision = \"{}\"",
-                config.solver.precision.name()
-            ),
-        )
-    };
-    match (config.solver.precision, resume) {
-        (Precision::F32, resume @ (None | Some(FqiState::F32(_)))) => {
-            let resume = resume.and_then(|s| match s {
-                FqiState::F32(s) => Some(s),
-                FqiState::F64(_) => None,
-            });
+    match split_resume(config, resume)? {
+        Resume::F32(resume) => {
             let s = solve::<f32, M>(model, config, resume, |p, s| {
                 observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref())
             })?;
             Ok(artifact(config, s, Values::F32))
         }
-        (Precision::F64, resume @ (None | Some(FqiState::F64(_)))) => {
-            let resume = resume.and_then(|s| match s {
-                FqiState::F64(s) => Some(s),
-                FqiState::F32(_) => None,
-            });
+        Resume::F64(resume) => {
             let s = solve::<f64, M>(model, config, resume, |p, s| {
                 observer(p, s.map(|s| FqiState::F64(s.clone())).as_ref())
             })?;
             Ok(artifact(config, s, Values::F64))
         }
-        _ => Err(precision_error().into()),
     }
 }
 

@@ -91,12 +91,14 @@ mod qiter;
 pub(crate) mod simd;
 mod slabs;
 mod state;
+mod sweeps;
 mod table;
 
-pub use iterate::{solve, solve_from};
+pub use iterate::{solve, solve_from, solve_on};
 pub use qiter::{QSolution, solve_q};
 pub use slabs::SlabLayout;
 pub use state::SolverState;
+pub use sweeps::{Buf, DiffStats, Local, Sweeps, diff_stats, shift};
 pub use table::{BlockTable, TabulatedModel};
 
 use std::time::Instant;

@@ -94,6 +94,79 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         Ok(())
     }
 
+    /// [`Self::apply_slabs`] and [`Self::greedy_slabs`] in one pass: each core's backed-up
+    /// value into `out` and its greedy joint action into `actions` (the full backup of
+    /// modified policy iteration).
+    pub fn backup_greedy_slabs(
+        &self,
+        slabs: Range<usize>,
+        halo: &[u32],
+        v_halo: &[T],
+        out: &mut [T],
+        actions: &mut [u32],
+    ) -> Result<(), SolveError> {
+        let (b, rows0) = self.slab_check(&slabs, halo, v_halo, out.len())?;
+        check_len("actions", out.len(), actions.len())?;
+        let mut pairs = std::vec![(T::ZERO, 0u32); out.len()];
+        b.each_core_in(
+            self,
+            slabs,
+            &rows0,
+            v_halo,
+            None,
+            &mut pairs,
+            Reduce::Argmax,
+            |r| r,
+        );
+        for ((o, a), &(x, u)) in out.iter_mut().zip(actions.iter_mut()).zip(&pairs) {
+            *o = x;
+            *a = u;
+        }
+        Ok(())
+    }
+
+    /// The backup of `V = 0` on the cores of output slabs `slabs`, `max_u rho` for a
+    /// state-only reward (every action ties), without a pass over the blocks: the first full
+    /// backup of modified policy iteration. [`SolveError::PolicyEvaluation`] where the
+    /// operator cannot run that scheme.
+    pub fn reward_slabs(&self, slabs: Range<usize>, out: &mut [T]) -> Result<(), SolveError> {
+        let (_, slab) = self.slab_range(&slabs)?;
+        check_len("output", slabs.len() * slab, out.len())?;
+        if !self.can_evaluate() {
+            return Err(SolveError::PolicyEvaluation);
+        }
+        let base = slabs.start * slab;
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = self.finish_max(base + i, T::ZERO);
+        }
+        Ok(())
+    }
+
+    /// `gamma max_{d non-goal, u} |(P dv)[d, u]|` over the cores `d` of output slabs `slabs`,
+    /// from the halo of `dv` as in [`Self::apply_slabs`]: the maximum of these over a
+    /// partition of the slabs is the exact change of theta the stopping rule tests.
+    pub fn abs_max_slabs(
+        &self,
+        slabs: Range<usize>,
+        halo: &[u32],
+        dv_halo: &[T],
+    ) -> Result<T, SolveError> {
+        let (_, slab) = self.slab_range(&slabs)?;
+        let mut out = std::vec![T::ZERO; slabs.len() * slab];
+        let (b, rows0) = self.slab_check(&slabs, halo, dv_halo, out.len())?;
+        b.each_core_in(
+            self,
+            slabs,
+            &rows0,
+            dv_halo,
+            None,
+            &mut out,
+            Reduce::AbsMax,
+            |r| r.0,
+        );
+        Ok(out.into_iter().fold(T::ZERO, T::max_of))
+    }
+
     /// One policy-evaluation sweep of the cores of output slabs `slabs` under `policy` (their
     /// joint actions, internal order): [`Self::evaluate_policy`] on a shard, from the halo as
     /// in [`Self::apply_slabs`]. [`SolveError::PolicyEvaluation`] where the operator cannot
