@@ -35,10 +35,12 @@ __all__ = [
     "Arm",
     "Solution",
     "Policy",
+    "SlabProblem",
     "solve",
     "load",
     "collect",
     "available_kernels",
+    "train_sharded",
     "_restore",
 ]
 
@@ -1571,7 +1573,9 @@ class SlabProblem:
             q-values operator, asynchronous sweeps, the generic backup path).
     """
 
-    def __new__(cls, config: str) -> SlabProblem: ...
+    def __new__(cls, config: str) -> SlabProblem:
+        """Builds the operator of `config` (see the class docstring)."""
+
     @property
     def n_slabs(self) -> int:
         """Slabs of `V` (the first contracted block's cores)."""
