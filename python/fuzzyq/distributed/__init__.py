@@ -1,9 +1,9 @@
 """Fuzzy Q-iteration with its sweeps distributed on a Ray cluster.
 
-`V` is held in Ray's object store as one object per group of slabs (a slab: one core of the
-first contracted dynamics block times every core of the others). Every pass over `V` is one
-Ray task per group, which fetches only the groups holding its halo (the input slabs its cores'
-successors reach) and computes its slabs with the same Rust kernels as the single-process
+`V` is held in Ray's object store as one object per slab (a slab: one core of the first
+contracted dynamics block times every core of the others). Every pass over `V` is one Ray task
+per group of consecutive slabs, which fetches exactly the slabs of its halo (the input slabs
+its cores' successors reach) and computes its group's slabs with the same Rust kernels as the single-process
 solver (`fuzzyq.SlabProblem`, the GIL released). The driver is the solver's own (stopping rule,
 extrapolation, modified policy iteration, error bound); it only combines the groups' maxima and
 minima, so every sweep's `V`, the greedy actions and the policy file are bit for bit those of

@@ -42,7 +42,7 @@ class DistributedRun:
     solution: fuzzyq.Solution
     """The result, the single-process solver's bit for bit."""
     groups: int
-    """Tasks per pass: groups of slabs, each one object of the store per value buffer."""
+    """Tasks per pass: groups of consecutive slabs (each slab is one object of the store)."""
     slabs_per_group: int
     """Slabs per group (the last may hold fewer)."""
     sweeps: int
@@ -93,40 +93,29 @@ class DistributedRun:
 
 class _RayBackend:
     """The solver's passes over three value buffers and a policy buffer, each held as one
-    Ray object per group of slabs (`fuzzyq._fuzzyq.train_sharded` calls these methods)."""
+    Ray object per slab, computed by one task per group of consecutive slabs that receives
+    exactly its halo's slabs (`fuzzyq._fuzzyq.train_sharded` calls these methods)."""
 
     def __init__(self, ray: Any, config: str, problem: SlabProblem, per_group: int) -> None:
         self.ray = ray
-        self.config = config
-        self.problem = problem
         n, self.slab_len = problem.n_slabs, problem.slab_len
+        self.n_slabs = n
         self.dtype = np.dtype(problem.dtype)
         self.groups = [(s, min(s + per_group, n)) for s in range(0, n, per_group)]
-        owner = np.repeat(np.arange(len(self.groups)), per_group)[:n]
-        # Per group: the halo, the groups holding it, and where each halo slab sits in them.
-        self.halos: list[Any] = []
-        self.needs: list[list[int]] = []
-        self.pieces: list[list[tuple[int, int]]] = []
-        for start, stop in self.groups:
-            halo = problem.input_slabs(start, stop)
-            need = sorted({int(owner[c]) for c in halo})
-            at = {g: i for i, g in enumerate(need)}
-            self.halos.append(halo)
-            self.needs.append(need)
-            self.pieces.append(
-                [(at[int(owner[c])], int(c) - self.groups[int(owner[c])][0]) for c in halo]
-            )
+        self.halos = [problem.input_slabs(start, stop) for start, stop in self.groups]
+        # `bufs[b][c]`: slab `c` of value buffer `b`; None: every value 0 (not yet written).
         self.bufs: list[list[Any] | None] = [None, None, None]
         self.policy_refs: list[Any] | None = None
-        self.config_ref = ray.put(config)
+        self.config = ray.put(config)
+        self.slab_bytes = self.slab_len * self.dtype.itemsize
         self.fetched_bytes = 0
         self.broadcast_bytes = 0
-        self.v_bytes = n * self.slab_len * self.dtype.itemsize
-        remote = ray.remote(max_retries=_RETRIES)
-        self.t = {
-            name: remote(getattr(_tasks, name))
+        self.v_bytes = n * self.slab_bytes
+        self.task = {
+            name: ray.remote(max_retries=_RETRIES)(getattr(_tasks, name))
             for name in (
                 "backup",
+                "backup_greedy",
                 "rewards",
                 "evaluate",
                 "greedy",
@@ -135,14 +124,10 @@ class _RayBackend:
                 "shifted",
             )
         }
-        self.t["backup_greedy"] = ray.remote(num_returns=2, max_retries=_RETRIES)(_tasks.backup_greedy)
-
-    def _shard_len(self, g: int) -> int:
-        start, stop = self.groups[g]
-        return (stop - start) * self.slab_len
 
     def _zeros(self, dtype: Any) -> list[Any]:
-        return [self.ray.put(np.zeros(self._shard_len(g), dtype)) for g in range(len(self.groups))]
+        zero = self.ray.put(np.zeros(self.slab_len, dtype))
+        return [zero] * self.n_slabs
 
     def _buf(self, b: int) -> list[Any]:
         refs = self.bufs[b]
@@ -155,65 +140,68 @@ class _RayBackend:
             self.policy_refs = self._zeros(np.uint32)
         return self.policy_refs
 
-    def _halo_args(self, g: int, *bufs: int) -> list[Any]:
-        """The needed groups of each buffer, counted as fetched."""
-        args = [self._buf(b)[h] for b in bufs for h in self.needs[g]]
-        size = sum(self._shard_len(h) for h in self.needs[g]) * self.dtype.itemsize
-        self.fetched_bytes += size * len(bufs)
+    def _halo(self, g: int, *bufs: int) -> list[Any]:
+        """Group `g`'s halo slabs of each buffer in `bufs`, counted as fetched."""
+        halo = self.halos[g]
+        self.fetched_bytes += len(halo) * self.slab_bytes * len(bufs)
         self.broadcast_bytes += self.v_bytes * len(bufs)
-        return args
+        return [self._buf(b)[c] for b in bufs for c in halo]
 
-    def _each(self, task: str, v: int, *extra: Callable[[int], Any]) -> list[Any]:
-        refs = []
+    def _call(self, name: str, g: int, returns: int, *args: Any) -> list[Any]:
+        """Task `name` for group `g` with `returns` objects (a list even for one)."""
+        start, stop = self.groups[g]
+        refs = (
+            self.task[name]
+            .options(num_returns=returns)
+            .remote(self.config, start, stop, *args)
+        )
+        return [refs] if returns == 1 else list(refs)
+
+    def _per_group(self, name: str, extra: Callable[[int], list[Any]], v: int) -> list[Any]:
+        """One task per group: the new slabs of a buffer, in order."""
+        out: list[Any] = []
         for g, (start, stop) in enumerate(self.groups):
-            args = [f(g) for f in extra]
-            refs.append(
-                self.t[task].remote(
-                    self.config_ref,
-                    start,
-                    stop,
-                    self.halos[g],
-                    self.pieces[g],
-                    *args,
-                    *self._halo_args(g, v),
-                )
-            )
-        return refs
+            out += self._call(name, g, stop - start, self.halos[g], *extra(g), *self._halo(g, v))
+        return out
 
-    def _wait(self, refs: list[Any]) -> list[Any]:
-        """Waits for `refs` (so a failed task raises here, in its pass)."""
-        got: list[Any] = self.ray.get(refs)
-        return got
+    def _own(self, refs: list[Any], g: int) -> list[Any]:
+        start, stop = self.groups[g]
+        return refs[start:stop]
 
     # The passes (buffer numbers 0, 1, 2 in the solver's internal order).
 
     def backup(self, v: int, out: int) -> None:
-        refs = self._each("backup", v)
-        self.bufs[out] = refs
+        self.bufs[out] = self._per_group("backup", lambda g: [], v)
 
     def backup_greedy(self, v: int, out: int) -> None:
-        pairs = self._each("backup_greedy", v)
-        values, actions = [p[0] for p in pairs], [p[1] for p in pairs]
+        values: list[Any] = []
+        actions: list[Any] = []
+        for g, (start, stop) in enumerate(self.groups):
+            k = stop - start
+            refs = self._call("backup_greedy", g, 2 * k, self.halos[g], *self._halo(g, v))
+            values += refs[:k]
+            actions += refs[k:]
         self.bufs[out], self.policy_refs = values, actions
 
     def rewards(self, out: int) -> None:
-        refs = [self.t["rewards"].remote(self.config_ref, s, e) for s, e in self.groups]
+        refs: list[Any] = []
+        for g, (start, stop) in enumerate(self.groups):
+            refs += self._call("rewards", g, stop - start)
         self.bufs[out] = refs
 
     def evaluate(self, v: int, out: int) -> None:
         policy = self._policy()
-        refs = self._each("evaluate", v, lambda g: policy[g])
-        self.bufs[out] = refs
+        self.bufs[out] = self._per_group("evaluate", lambda g: self._own(policy, g), v)
 
     def greedy(self, v: int) -> None:
-        refs = self._each("greedy", v)
-        self.policy_refs = refs
+        self.policy_refs = self._per_group("greedy", lambda g: [], v)
 
     def diff_stats(self, a: int, b: int, shift: float) -> tuple[float, float, float]:
-        stats = self._wait(
+        x, y = self._buf(a), self._buf(b)
+        stats = self.ray.get(
             [
-                self.t["diff_stats"].remote(self.config_ref, x, y, shift)
-                for x, y in zip(self._buf(a), self._buf(b), strict=True)
+                self.task["diff_stats"].remote(self.config, shift, *x[s:e], *y[s:e])
+                for s, e in self.groups
             ]
         )
         return (
@@ -223,23 +211,20 @@ class _RayBackend:
         )
 
     def shift(self, v: int, shift: float) -> None:
-        refs = [self.t["shifted"].remote(self.config_ref, x, shift) for x in self._buf(v)]
+        refs: list[Any] = []
+        x = self._buf(v)
+        for s, e in self.groups:
+            task = self.task["shifted"].options(num_returns=e - s)
+            r = task.remote(self.config, shift, *x[s:e])
+            refs += [r] if e - s == 1 else list(r)
         self.bufs[v] = refs
 
     def exact_delta(self, a: int, b: int) -> float:
-        refs = []
-        for g, (start, stop) in enumerate(self.groups):
-            refs.append(
-                self.t["abs_max"].remote(
-                    self.config_ref,
-                    start,
-                    stop,
-                    self.halos[g],
-                    self.pieces[g],
-                    *self._halo_args(g, a, b),
-                )
-            )
-        return float(max(self._wait(refs)))
+        refs = [
+            self._call("abs_max", g, 1, self.halos[g], *self._halo(g, a, b))[0]
+            for g in range(len(self.groups))
+        ]
+        return float(max(self.ray.get(refs)))
 
     def load(self, v: int, values: Any) -> None:
         self.bufs[v] = self._split(values)
@@ -248,14 +233,14 @@ class _RayBackend:
         self.policy_refs = self._split(policy)
 
     def _split(self, a: Any) -> list[Any]:
-        bounds = np.cumsum([0] + [self._shard_len(g) for g in range(len(self.groups))])
-        return [self.ray.put(np.array(a[s:e])) for s, e in zip(bounds[:-1], bounds[1:])]
+        k = self.slab_len
+        return [self.ray.put(np.array(a[c * k : (c + 1) * k])) for c in range(self.n_slabs)]
 
     def values(self, v: int) -> Any:
-        return np.concatenate(self._wait(self._buf(v)))
+        return np.concatenate(self.ray.get(self._buf(v)))
 
     def policy(self) -> Any:
-        return np.concatenate(self._wait(self._policy()))
+        return np.concatenate(self.ray.get(self._policy()))
 
 
 def _default_per_group(n_slabs: int, cpus: float) -> int:

@@ -40,67 +40,66 @@ def _maybe_die() -> None:
     os._exit(1)
 
 
-def gather(slab_len: int, pieces: list[tuple[int, int]], shards: tuple[Any, ...]) -> Any:
-    """The halo's values: for each halo slab, `(shard, first slab in it)` names where it is."""
-    return np.concatenate([shards[s][o * slab_len : (o + 1) * slab_len] for s, o in pieces])
+def _slabs(p: SlabProblem, values: Any) -> Any:
+    """`values` of consecutive slabs, one array per slab (a single array for one slab: Ray
+    stores a task's return as one object unless it returns several)."""
+    parts = tuple(values[i : i + p.slab_len] for i in range(0, len(values), p.slab_len))
+    return parts[0] if len(parts) == 1 else parts
 
 
-def backup(
-    config: str, start: int, stop: int, halo: Any, pieces: list[tuple[int, int]], *shards: Any
-) -> Any:
+def _halo(shards: tuple[Any, ...]) -> Any:
+    return np.concatenate(shards) if len(shards) > 1 else shards[0]
+
+
+def backup(config: str, start: int, stop: int, halo: Any, *v: Any) -> Any:
+    """The backup of slabs `start..stop` from `v`, the halo's slabs in order."""
     _maybe_die()
     p = problem(config)
-    return p.backup(start, stop, halo, gather(p.slab_len, pieces, shards))
+    return _slabs(p, p.backup(start, stop, halo, _halo(v)))
 
 
-def backup_greedy(
-    config: str, start: int, stop: int, halo: Any, pieces: list[tuple[int, int]], *shards: Any
-) -> tuple[Any, Any]:
+def backup_greedy(config: str, start: int, stop: int, halo: Any, *v: Any) -> Any:
+    """Each slab's values, then each slab's greedy actions."""
     _maybe_die()
     p = problem(config)
-    values, actions = p.backup_greedy(start, stop, halo, gather(p.slab_len, pieces, shards))
-    return values, actions
+    values, actions = p.backup_greedy(start, stop, halo, _halo(v))
+    vals = (values[i : i + p.slab_len] for i in range(0, len(values), p.slab_len))
+    acts = (actions[i : i + p.slab_len] for i in range(0, len(actions), p.slab_len))
+    return (*vals, *acts)
 
 
 def rewards(config: str, start: int, stop: int) -> Any:
-    return problem(config).rewards(start, stop)
+    p = problem(config)
+    return _slabs(p, p.rewards(start, stop))
 
 
-def evaluate(
-    config: str,
-    start: int,
-    stop: int,
-    halo: Any,
-    pieces: list[tuple[int, int]],
-    policy: Any,
-    *shards: Any,
-) -> Any:
+def evaluate(config: str, start: int, stop: int, halo: Any, *refs: Any) -> Any:
+    """`refs`: the slabs' policy, then the halo's values."""
     _maybe_die()
     p = problem(config)
-    return p.evaluate(start, stop, halo, gather(p.slab_len, pieces, shards), policy)
+    k = stop - start
+    policy, v = _halo(refs[:k]), _halo(refs[k:])
+    return _slabs(p, p.evaluate(start, stop, halo, v, policy))
 
 
-def greedy(
-    config: str, start: int, stop: int, halo: Any, pieces: list[tuple[int, int]], *shards: Any
-) -> Any:
+def greedy(config: str, start: int, stop: int, halo: Any, *v: Any) -> Any:
     p = problem(config)
-    return p.greedy(start, stop, halo, gather(p.slab_len, pieces, shards))
+    return _slabs(p, p.greedy(start, stop, halo, _halo(v)))
 
 
-def abs_max(
-    config: str, start: int, stop: int, halo: Any, pieces: list[tuple[int, int]], *shards: Any
-) -> float:
-    """`shards` holds the needed groups of buffer `a`, then the same groups of `b`."""
+def abs_max(config: str, start: int, stop: int, halo: Any, *refs: Any) -> float:
+    """`refs`: the halo's slabs of buffer `a`, then the same slabs of `b`."""
     p = problem(config)
-    half = len(shards) // 2
-    a = gather(p.slab_len, pieces, shards[:half])
-    b = gather(p.slab_len, pieces, shards[half:])
-    return p.abs_max(start, stop, halo, a, b)
+    half = len(refs) // 2
+    return p.abs_max(start, stop, halo, _halo(refs[:half]), _halo(refs[half:]))
 
 
-def diff_stats(config: str, a: Any, b: Any, shift: float) -> tuple[float, float, float]:
-    return problem(config).diff_stats(a, b, shift)
+def diff_stats(config: str, shift: float, *refs: Any) -> tuple[float, float, float]:
+    """`refs`: some slabs of buffer `a`, then the same slabs of `b`."""
+    half = len(refs) // 2
+    return problem(config).diff_stats(_halo(refs[:half]), _halo(refs[half:]), shift)
 
 
-def shifted(config: str, v: Any, shift: float) -> Any:
-    return problem(config).shifted(v, shift)
+def shifted(config: str, shift: float, *v: Any) -> Any:
+    p = problem(config)
+    return _slabs(p, p.shifted(_halo(v), shift))
