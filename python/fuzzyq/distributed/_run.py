@@ -105,6 +105,11 @@ class _RayBackend:
         self.halos = [problem.input_slabs(start, stop) for start, stop in self.groups]
         # `bufs[b][c]`: slab `c` of value buffer `b`; None: every value 0 (not yet written).
         self.bufs: list[list[Any] | None] = [None, None, None]
+        # `owed[b]`: the extrapolation's shift buffer `b` still owes its values. A shift is
+        # applied by the tasks that next read the buffer (the same `x + s` in the value type),
+        # which saves a pass over `V` per sweep.
+        self.owed = [0.0, 0.0, 0.0]
+        self.problem = problem
         self.policy_refs: list[Any] | None = None
         self.config = ray.put(config)
         self.slab_bytes = self.slab_len * self.dtype.itemsize
@@ -161,8 +166,13 @@ class _RayBackend:
         """One task per group: the new slabs of a buffer, in order."""
         out: list[Any] = []
         for g, (start, stop) in enumerate(self.groups):
-            out += self._call(name, g, stop - start, self.halos[g], *extra(g), *self._halo(g, v))
+            out += self._call(
+                name, g, stop - start, self.halos[g], self.owed[v], *extra(g), *self._halo(g, v)
+            )
         return out
+
+    def _write(self, out: int, refs: list[Any]) -> None:
+        self.bufs[out], self.owed[out] = refs, 0.0
 
     def _own(self, refs: list[Any], g: int) -> list[Any]:
         start, stop = self.groups[g]
@@ -171,27 +181,30 @@ class _RayBackend:
     # The passes (buffer numbers 0, 1, 2 in the solver's internal order).
 
     def backup(self, v: int, out: int) -> None:
-        self.bufs[out] = self._per_group("backup", lambda g: [], v)
+        self._write(out, self._per_group("backup", lambda g: [], v))
 
     def backup_greedy(self, v: int, out: int) -> None:
         values: list[Any] = []
         actions: list[Any] = []
         for g, (start, stop) in enumerate(self.groups):
             k = stop - start
-            refs = self._call("backup_greedy", g, 2 * k, self.halos[g], *self._halo(g, v))
+            refs = self._call(
+                "backup_greedy", g, 2 * k, self.halos[g], self.owed[v], *self._halo(g, v)
+            )
             values += refs[:k]
             actions += refs[k:]
-        self.bufs[out], self.policy_refs = values, actions
+        self._write(out, values)
+        self.policy_refs = actions
 
     def rewards(self, out: int) -> None:
         refs: list[Any] = []
         for g, (start, stop) in enumerate(self.groups):
             refs += self._call("rewards", g, stop - start)
-        self.bufs[out] = refs
+        self._write(out, refs)
 
     def evaluate(self, v: int, out: int) -> None:
         policy = self._policy()
-        self.bufs[out] = self._per_group("evaluate", lambda g: self._own(policy, g), v)
+        self._write(out, self._per_group("evaluate", lambda g: self._own(policy, g), v))
 
     def greedy(self, v: int) -> None:
         self.policy_refs = self._per_group("greedy", lambda g: [], v)
@@ -200,7 +213,9 @@ class _RayBackend:
         x, y = self._buf(a), self._buf(b)
         stats = self.ray.get(
             [
-                self.task["diff_stats"].remote(self.config, shift, *x[s:e], *y[s:e])
+                self.task["diff_stats"].remote(
+                    self.config, shift, self.owed[a], self.owed[b], *x[s:e], *y[s:e]
+                )
                 for s, e in self.groups
             ]
         )
@@ -211,23 +226,31 @@ class _RayBackend:
         )
 
     def shift(self, v: int, shift: float) -> None:
+        if self.owed[v] != 0.0:
+            self._settle(v)
+        self.owed[v] = shift
+
+    def _settle(self, v: int) -> None:
+        """Applies the shift `v` owes (a pass of its own: two shifts in a row never add up to
+        the same bits as one)."""
         refs: list[Any] = []
         x = self._buf(v)
         for s, e in self.groups:
             task = self.task["shifted"].options(num_returns=e - s)
-            r = task.remote(self.config, shift, *x[s:e])
+            r = task.remote(self.config, self.owed[v], *x[s:e])
             refs += [r] if e - s == 1 else list(r)
-        self.bufs[v] = refs
+        self._write(v, refs)
 
     def exact_delta(self, a: int, b: int) -> float:
         refs = [
-            self._call("abs_max", g, 1, self.halos[g], *self._halo(g, a, b))[0]
+            self._call("abs_max", g, 1, self.halos[g], self.owed[a], self.owed[b],
+                       *self._halo(g, a, b))[0]  # fmt: skip
             for g in range(len(self.groups))
         ]
         return float(max(self.ray.get(refs)))
 
     def load(self, v: int, values: Any) -> None:
-        self.bufs[v] = self._split(values)
+        self._write(v, self._split(values))
 
     def load_policy(self, policy: Any) -> None:
         self.policy_refs = self._split(policy)
@@ -237,7 +260,8 @@ class _RayBackend:
         return [self.ray.put(np.array(a[c * k : (c + 1) * k])) for c in range(self.n_slabs)]
 
     def values(self, v: int) -> Any:
-        return np.concatenate(self.ray.get(self._buf(v)))
+        values = np.concatenate(self.ray.get(self._buf(v)))
+        return self.problem.shifted(values, self.owed[v]) if self.owed[v] != 0.0 else values
 
     def policy(self) -> Any:
         return np.concatenate(self.ray.get(self._policy()))

@@ -51,18 +51,25 @@ def _halo(shards: tuple[Any, ...]) -> Any:
     return np.concatenate(shards) if len(shards) > 1 else shards[0]
 
 
-def backup(config: str, start: int, stop: int, halo: Any, *v: Any) -> Any:
-    """The backup of slabs `start..stop` from `v`, the halo's slabs in order."""
+def _read(p: SlabProblem, shards: tuple[Any, ...], shift: float) -> Any:
+    """The slabs `shards` of a buffer, one after another, with the extrapolation's shift the
+    buffer still owes them added (in the value type, as the solver adds it)."""
+    values = _halo(shards)
+    return p.shifted(values, shift) if shift != 0.0 else values
+
+
+def backup(config: str, start: int, stop: int, halo: Any, shift: float, *v: Any) -> Any:
+    """The backup of slabs `start..stop` from `v`, the halo's slabs in order (owing `shift`)."""
     _maybe_die()
     p = problem(config)
-    return _slabs(p, p.backup(start, stop, halo, _halo(v)))
+    return _slabs(p, p.backup(start, stop, halo, _read(p, v, shift)))
 
 
-def backup_greedy(config: str, start: int, stop: int, halo: Any, *v: Any) -> Any:
+def backup_greedy(config: str, start: int, stop: int, halo: Any, shift: float, *v: Any) -> Any:
     """Each slab's values, then each slab's greedy actions."""
     _maybe_die()
     p = problem(config)
-    values, actions = p.backup_greedy(start, stop, halo, _halo(v))
+    values, actions = p.backup_greedy(start, stop, halo, _read(p, v, shift))
     vals = (values[i : i + p.slab_len] for i in range(0, len(values), p.slab_len))
     acts = (actions[i : i + p.slab_len] for i in range(0, len(actions), p.slab_len))
     return (*vals, *acts)
@@ -73,31 +80,38 @@ def rewards(config: str, start: int, stop: int) -> Any:
     return _slabs(p, p.rewards(start, stop))
 
 
-def evaluate(config: str, start: int, stop: int, halo: Any, *refs: Any) -> Any:
+def evaluate(config: str, start: int, stop: int, halo: Any, shift: float, *refs: Any) -> Any:
     """`refs`: the slabs' policy, then the halo's values."""
     _maybe_die()
     p = problem(config)
     k = stop - start
-    policy, v = _halo(refs[:k]), _halo(refs[k:])
+    policy, v = _halo(refs[:k]), _read(p, refs[k:], shift)
     return _slabs(p, p.evaluate(start, stop, halo, v, policy))
 
 
-def greedy(config: str, start: int, stop: int, halo: Any, *v: Any) -> Any:
+def greedy(config: str, start: int, stop: int, halo: Any, shift: float, *v: Any) -> Any:
     p = problem(config)
-    return _slabs(p, p.greedy(start, stop, halo, _halo(v)))
+    return _slabs(p, p.greedy(start, stop, halo, _read(p, v, shift)))
 
 
-def abs_max(config: str, start: int, stop: int, halo: Any, *refs: Any) -> float:
+def abs_max(
+    config: str, start: int, stop: int, halo: Any, a_shift: float, b_shift: float, *refs: Any
+) -> float:
     """`refs`: the halo's slabs of buffer `a`, then the same slabs of `b`."""
     p = problem(config)
     half = len(refs) // 2
-    return p.abs_max(start, stop, halo, _halo(refs[:half]), _halo(refs[half:]))
+    a, b = _read(p, refs[:half], a_shift), _read(p, refs[half:], b_shift)
+    return p.abs_max(start, stop, halo, a, b)
 
 
-def diff_stats(config: str, shift: float, *refs: Any) -> tuple[float, float, float]:
+def diff_stats(
+    config: str, shift: float, a_shift: float, b_shift: float, *refs: Any
+) -> tuple[float, float, float]:
     """`refs`: some slabs of buffer `a`, then the same slabs of `b`."""
+    p = problem(config)
     half = len(refs) // 2
-    return problem(config).diff_stats(_halo(refs[:half]), _halo(refs[half:]), shift)
+    a, b = _read(p, refs[:half], a_shift), _read(p, refs[half:], b_shift)
+    return p.diff_stats(a, b, shift)
 
 
 def shifted(config: str, shift: float, *v: Any) -> Any:
