@@ -109,6 +109,16 @@ def test_unshardable_configurations_are_refused(tmp_path: Path) -> None:
         p.input_slabs(3, 3)
 
 
+def test_a_worker_keeps_the_operators_of_its_latest_two_configurations() -> None:
+    configs = [setting("xi", str(x)) for x in (0.01, 0.02, 0.03)]
+    first = _tasks.problem(configs[0])
+    assert _tasks.problem(configs[0]) is first  # built once
+    _tasks.problem(configs[1])
+    _tasks.problem(configs[2])
+    assert list(_tasks._PROBLEMS) == configs[1:]
+    assert _tasks.problem(configs[0]) is not first  # evicted, built again
+
+
 def test_the_command_line_refuses_bad_input_with_exit_code_2(tmp_path: Path) -> None:
     config = tmp_path / "c.toml"
     config.write_text(setting("sweep", '"async"'))

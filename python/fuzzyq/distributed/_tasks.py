@@ -12,7 +12,10 @@ import numpy as np
 
 from fuzzyq._fuzzyq import SlabProblem
 
+# The operators this worker process built, most recent last: a few configurations at most (a
+# long-lived worker serving many runs keeps only the latest, each can hold gigabytes).
 _PROBLEMS: dict[str, SlabProblem] = {}
+_KEEP = 2
 
 # Testing hook: the first task to see this variable creates the file it names and kills its
 # own worker process mid-task (Ray then retries the task elsewhere). Unset in normal use.
@@ -20,10 +23,13 @@ KILL_ONCE = "_FUZZYQ_DISTRIBUTED_KILL_WORKER_ONCE"
 
 
 def problem(config: str) -> SlabProblem:
-    """The configuration's operator, built once per process."""
-    p = _PROBLEMS.get(config)
+    """The configuration's operator, built once per process (while it is among the latest)."""
+    p = _PROBLEMS.pop(config, None)
     if p is None:
-        p = _PROBLEMS[config] = SlabProblem(config)
+        while len(_PROBLEMS) >= _KEEP:
+            del _PROBLEMS[next(iter(_PROBLEMS))]
+        p = SlabProblem(config)
+    _PROBLEMS[config] = p
     return p
 
 
