@@ -24,7 +24,7 @@ LAYERS = {
         {"partition", "action"},
         {"model"},
         {"q", "additive", "backup"},
-        {"solver"},
+        {"solver", "view"},
     ],
     "fuzzyq-sim": [
         {"error", "paper", "fs"},

@@ -1,6 +1,7 @@
 //! Integration and property tests of fuzzyq: one binary, several modules.
 
 mod approxrl;
+mod export;
 mod fuzz;
 mod khepera;
 mod learned;

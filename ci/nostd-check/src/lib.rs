@@ -96,3 +96,25 @@ pub extern "C" fn fuzzyq_learn(
         _ => f32::NAN,
     }
 }
+
+/// An exported policy read in place from the caller's bytes (for example `include_bytes!`
+/// in a `#[repr(align(8))]` static), no heap: the interpolated decision at `(x[0], ..)`, or
+/// `false` if the bytes are refused or the state is invalid.
+#[unsafe(no_mangle)]
+pub extern "C" fn fuzzyq_act_from_export(
+    bytes: *const u8,
+    len: usize,
+    x: &[f32; 4],
+    out: &mut [f32; 2],
+) -> bool {
+    if bytes.is_null() {
+        return false;
+    }
+    // Safety is the caller's (a C interface): `bytes` points at `len` readable bytes.
+    #[allow(unsafe_code)]
+    let bytes = unsafe { core::slice::from_raw_parts(bytes, len) };
+    match fuzzyq_core::view::PolicyView::<f32>::parse(bytes) {
+        Ok(view) => view.interpolated_action(x, out).is_ok(),
+        Err(_) => false,
+    }
+}

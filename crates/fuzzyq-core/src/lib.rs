@@ -21,6 +21,8 @@
 //! - [`options`]: the named settings (sweep order, backup path, membership kind, update,
 //!   policy kind, ...), each spelled once for files, the command line and Python.
 //! - [`backup`]: the backup kernels (generic and per-block) on caller buffers.
+//! - [`view`]: a trained policy exported by `fuzzyq-sim` (`io::export`), checked and borrowed
+//!   in place from bytes (flash, `include_bytes!`): the interpolated policy without a heap.
 //! - `solver` (feature `std`, parallel with `parallel`): the fuzzy Q-iteration driver that keeps
 //!   only `V` and exploits the block structure of the dynamics.
 //!
@@ -70,6 +72,7 @@ pub mod q;
 pub mod real;
 #[cfg(feature = "std")]
 pub mod solver;
+pub mod view;
 
 pub use action::{ActionSet, JointActions};
 pub use backup::Backup;

@@ -103,6 +103,47 @@ pub fn interpolated_action<T: Real>(
     x: &[T],
     out: &mut [T],
 ) -> Result<(), EvalError> {
+    interpolated_action_in(grid, joint, greedy, x, out)
+}
+
+/// A per-core table of greedy joint actions in the smallest unsigned integer type that holds
+/// them (`u8`, `u16` or `u32`): what [`interpolated_action_in`] reads.
+pub trait GreedyTable {
+    /// Entries (one per core).
+    fn len(&self) -> usize;
+    /// Whether the table is empty.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The greedy joint action of core `core` (`core < len()`).
+    fn action(&self, core: usize) -> u32;
+}
+
+macro_rules! greedy_table {
+    ($($t:ty),*) => {$(
+        impl GreedyTable for [$t] {
+            #[inline]
+            fn len(&self) -> usize {
+                <[$t]>::len(self)
+            }
+            #[inline]
+            fn action(&self, core: usize) -> u32 {
+                u32::from(self[core])
+            }
+        }
+    )*};
+}
+greedy_table!(u8, u16, u32);
+
+/// [`interpolated_action`] on a greedy table of any width ([`GreedyTable`]): the same sums in
+/// the same order, so the same bits for the same actions.
+pub fn interpolated_action_in<T: Real, G: GreedyTable + ?Sized>(
+    grid: &ProductPartition<'_, T>,
+    joint: &JointActions<'_, T>,
+    greedy: &G,
+    x: &[T],
+    out: &mut [T],
+) -> Result<(), EvalError> {
     check_len("greedy actions", grid.n_cores(), greedy.len())?;
     check_len("joint action vector", joint.dim(), out.len())?;
     let active = grid.active(x)?;
@@ -117,7 +158,7 @@ pub fn interpolated_action<T: Real>(
         // all their cache misses overlap (loading them inside the sums measured 30% slower).
         let mut action = [0u32; FAST];
         for (a, &d) in action[..n].iter_mut().zip(&index[..n]) {
-            *a = greedy[d];
+            *a = greedy.action(d);
         }
         let action = &action[..n];
         if let Some(&bad) = action.iter().find(|&&u| u as usize >= joint.n_joint()) {
@@ -152,15 +193,15 @@ pub fn interpolated_action<T: Real>(
         // Validate before accumulating so the callback cannot fail halfway.
         let mut bad = None;
         active.for_each(|d, _| {
-            if greedy[d] as usize >= joint.n_joint() {
-                bad = Some(greedy[d]);
+            if greedy.action(d) as usize >= joint.n_joint() {
+                bad = Some(greedy.action(d));
             }
         });
         if let Some(u) = bad {
             return Err(greedy_out_of_range(joint, u));
         }
         out.fill(T::ZERO);
-        active.for_each(|d, w| add_action(joint, greedy[d] as usize, w, out));
+        active.for_each(|d, w| add_action(joint, greedy.action(d) as usize, w, out));
     }
     for i in 0..joint.n_agents() {
         let set = joint.agent(i);

@@ -5,6 +5,7 @@
 pub mod checkpoint;
 pub mod config;
 mod container;
+pub mod export;
 pub mod policy_file;
 pub mod transitions;
 

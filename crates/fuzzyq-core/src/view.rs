@@ -1,0 +1,426 @@
+//! A trained policy read in place from bytes: [`PolicyView`] checks an exported policy
+//! (`include_bytes!` of a file, or flash memory) and borrows its grid, action sets, per-core
+//! greedy actions and optionally `V` without copying or allocating, so a `no_std` controller
+//! without an allocator can act with it.
+//!
+//! # The format (version 1)
+//! Little-endian throughout; every section starts at a multiple of 8 bytes from the start.
+//!
+//! | offset | field |
+//! |---|---|
+//! | 0 | tag `\x89FZQVIEW` (8 bytes) |
+//! | 8 | format version, `u32` (1) |
+//! | 12 | bytes per value: 4 (`f32`) or 8 (`f64`), `u32` |
+//! | 16 | bytes per greedy action: 1, 2 or 4, `u32` |
+//! | 20 | membership: 0 triangular, 1 crisp, `u32` |
+//! | 24 | state variables `E`, `u32` |
+//! | 28 | agents `N`, `u32` |
+//! | 32 | cores (the product of the core counts), `u64` |
+//! | 40 | whether `V` follows, `u32` (0 or 1); then 4 bytes of zeros |
+//! | 48 | payload bytes (everything after this 64-byte header up to the checksum), `u64` |
+//! | 56 | 8 bytes of zeros |
+//! | 64 | payload: `E` core counts (`u32`), then `N` pairs (actions, components) (`u32`); the cores of every variable; the actions of every agent (action-major); the greedy joint action of every core (row-major core order); `V` per core if present. Each section padded with zeros to a multiple of 8 bytes |
+//! | 64 + payload | CRC-32 (ISO-HDLC, as zlib's) of every byte before it, `u32`, then 4 bytes of zeros |
+//!
+//! The view refuses, with a typed [`ViewError`], bytes that are not such a file, that are cut
+//! short, damaged (checksum), of another precision or version, misaligned in memory (the
+//! values are borrowed as `&[f32]`/`&[f64]`: place the bytes at an 8-byte boundary, for
+//! example in a `#[repr(align(8))]` wrapper), or whose contents are invalid (unsorted cores,
+//! greedy actions that name no joint action).
+
+use core::fmt;
+
+use crate::action::{ActionSet, JointActions};
+use crate::error::{EvalError, PartitionError};
+use crate::limits::{MAX_AGENTS, MAX_DIMS};
+use crate::partition::{Membership, ProductPartition};
+use crate::q::{GreedyTable, interpolated_action_in};
+use crate::real::Real;
+
+/// The tag every exported policy starts with.
+pub const MAGIC: [u8; 8] = *b"\x89FZQVIEW";
+/// The format version this build reads.
+pub const VERSION: u32 = 1;
+/// Bytes of the header.
+pub const HEADER_LEN: usize = 64;
+
+/// Why bytes are not a usable exported policy.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ViewError {
+    /// The bytes do not start with [`MAGIC`].
+    NotAPolicy,
+    /// Another format version.
+    Version {
+        /// The version found.
+        found: u32,
+    },
+    /// Fewer bytes than the header announces.
+    Truncated {
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes given.
+        found: usize,
+    },
+    /// The checksum does not match: the bytes are damaged.
+    Checksum {
+        /// The stored CRC-32.
+        stored: u32,
+        /// The CRC-32 of the bytes.
+        computed: u32,
+    },
+    /// The values are of another precision than the view's type.
+    Precision {
+        /// Bytes per value in the file.
+        found: u32,
+        /// Bytes per value of the view's type.
+        expected: u32,
+    },
+    /// The bytes do not start at an 8-byte boundary, so the values cannot be borrowed.
+    Misaligned,
+    /// A header field or section is invalid.
+    Header {
+        /// Which.
+        what: &'static str,
+    },
+    /// The cores are not a valid grid.
+    Grid(PartitionError),
+    /// The action sets or the greedy actions are invalid.
+    Actions(EvalError),
+}
+
+impl fmt::Display for ViewError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::NotAPolicy => write!(f, "not an exported fuzzyq policy (no \\x89FZQVIEW tag)"),
+            Self::Version { found } => write!(
+                f,
+                "exported policy of format version {found}; this build reads version {VERSION}"
+            ),
+            Self::Truncated { needed, found } => write!(
+                f,
+                "exported policy cut short: {found} bytes, {needed} needed"
+            ),
+            Self::Checksum { stored, computed } => write!(
+                f,
+                "exported policy damaged: checksum {computed:#010x}, stored {stored:#010x}"
+            ),
+            Self::Precision { found, expected } => write!(
+                f,
+                "exported policy holds {found}-byte values; this view reads {expected}-byte values"
+            ),
+            Self::Misaligned => write!(
+                f,
+                "exported policy not at an 8-byte boundary in memory (wrap it in a \
+                 #[repr(align(8))] struct)"
+            ),
+            Self::Header { what } => write!(f, "exported policy: invalid {what}"),
+            Self::Grid(e) => write!(f, "exported policy: grid: {e}"),
+            Self::Actions(e) => write!(f, "exported policy: {e}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for ViewError {}
+
+/// The greedy actions of an exported policy, in the width they were stored in.
+#[derive(Clone, Copy, Debug)]
+pub enum Greedy<'a> {
+    /// One byte per core (at most 256 joint actions).
+    U8(&'a [u8]),
+    /// Two bytes per core (at most 65,536 joint actions).
+    U16(&'a [u16]),
+    /// Four bytes per core.
+    U32(&'a [u32]),
+}
+
+impl GreedyTable for Greedy<'_> {
+    #[inline]
+    fn len(&self) -> usize {
+        match self {
+            Self::U8(g) => g.len(),
+            Self::U16(g) => g.len(),
+            Self::U32(g) => g.len(),
+        }
+    }
+
+    #[inline]
+    fn action(&self, core: usize) -> u32 {
+        match self {
+            Self::U8(g) => u32::from(g[core]),
+            Self::U16(g) => u32::from(g[core]),
+            Self::U32(g) => g[core],
+        }
+    }
+}
+
+/// A value type a view can borrow from bytes (`f32`, `f64`).
+pub trait ViewReal: Real + bytemuck::Pod {}
+impl ViewReal for f32 {}
+impl ViewReal for f64 {}
+
+/// An exported policy, checked and borrowed in place: its grid, joint action set, greedy
+/// actions and optionally `V`. No allocation; a `no_std` controller can hold one in a
+/// `static`'s lifetime.
+#[derive(Clone, Copy, Debug)]
+pub struct PolicyView<'a, T> {
+    grid: ProductPartition<'a, T>,
+    joint: JointActions<'a, T>,
+    greedy: Greedy<'a>,
+    v: Option<&'a [T]>,
+}
+
+/// Reads little-endian fields at increasing offsets.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], ViewError> {
+        let end = self.at.checked_add(n).ok_or(ViewError::Header {
+            what: "section length",
+        })?;
+        let s = self.bytes.get(self.at..end).ok_or(ViewError::Truncated {
+            needed: end,
+            found: self.bytes.len(),
+        })?;
+        self.at = end;
+        Ok(s)
+    }
+
+    fn u32(&mut self) -> Result<u32, ViewError> {
+        let b = self.take(4)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn u64(&mut self) -> Result<u64, ViewError> {
+        let b = self.take(8)?;
+        let mut a = [0u8; 8];
+        a.copy_from_slice(b);
+        Ok(u64::from_le_bytes(a))
+    }
+
+    /// `n` items of `U`, then the padding to a multiple of 8.
+    fn section<U: bytemuck::Pod>(&mut self, n: usize) -> Result<&'a [U], ViewError> {
+        let len = n
+            .checked_mul(core::mem::size_of::<U>())
+            .ok_or(ViewError::Header {
+                what: "section length",
+            })?;
+        let s = self.take(len)?;
+        self.take(padding(len))?;
+        bytemuck::try_cast_slice(s).map_err(|_| ViewError::Misaligned)
+    }
+}
+
+/// Zeros after `len` bytes up to a multiple of 8.
+#[must_use]
+pub const fn padding(len: usize) -> usize {
+    (8 - len % 8) % 8
+}
+
+impl<'a, T: ViewReal> PolicyView<'a, T> {
+    /// Checks `bytes` (an exported policy in `T`'s precision, at an 8-byte boundary) and
+    /// borrows its parts.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, ViewError> {
+        if !bytes.starts_with(&MAGIC) {
+            return Err(if bytes.len() < MAGIC.len() && MAGIC.starts_with(bytes) {
+                ViewError::Truncated {
+                    needed: HEADER_LEN,
+                    found: bytes.len(),
+                }
+            } else {
+                ViewError::NotAPolicy
+            });
+        }
+        if bytes.as_ptr().align_offset(8) != 0 {
+            return Err(ViewError::Misaligned);
+        }
+        let mut r = Reader { bytes, at: 8 };
+        let version = r.u32()?;
+        let value_bytes = r.u32()?;
+        let greedy_bytes = r.u32()?;
+        let membership = match r.u32()? {
+            0 => Membership::Triangular,
+            1 => Membership::Crisp,
+            _ => return Err(ViewError::Header { what: "membership" }),
+        };
+        let (n_dims, n_agents) = (r.u32()? as usize, r.u32()? as usize);
+        let n_cores = usize::try_from(r.u64()?).map_err(|_| ViewError::Header { what: "cores" })?;
+        let has_v = match r.u32()? {
+            0 => false,
+            1 => true,
+            _ => return Err(ViewError::Header { what: "V flag" }),
+        };
+        r.take(4)?;
+        let payload = usize::try_from(r.u64()?).map_err(|_| ViewError::Header {
+            what: "payload length",
+        })?;
+        r.take(8)?;
+        // The checksum first: a damaged file is reported as damaged, whatever else it says.
+        let end = HEADER_LEN.checked_add(payload).ok_or(ViewError::Header {
+            what: "payload length",
+        })?;
+        // The checksum and its padding: a file cut anywhere is refused, longer bytes (flash
+        // beyond the file) are not read.
+        let stored = bytes.get(end..end + 8).ok_or(ViewError::Truncated {
+            needed: end + 8,
+            found: bytes.len(),
+        })?;
+        let stored = u32::from_le_bytes([stored[0], stored[1], stored[2], stored[3]]);
+        let computed = crc32(&bytes[..end]);
+        if stored != computed {
+            return Err(ViewError::Checksum { stored, computed });
+        }
+        // (Later versions keep this header, so their checksum is found and checked first.)
+        if version != VERSION {
+            return Err(ViewError::Version { found: version });
+        }
+        let expected = core::mem::size_of::<T>() as u32;
+        if value_bytes != expected {
+            return Err(ViewError::Precision {
+                found: value_bytes,
+                expected,
+            });
+        }
+        if n_dims == 0 || n_dims > MAX_DIMS {
+            return Err(ViewError::Header {
+                what: "number of state variables",
+            });
+        }
+        if n_agents == 0 || n_agents > MAX_AGENTS {
+            return Err(ViewError::Header {
+                what: "number of agents",
+            });
+        }
+        let body = &bytes[..end];
+        let mut r = Reader {
+            bytes: body,
+            at: HEADER_LEN,
+        };
+        let counts: &[u32] = r.section(n_dims)?;
+        let shapes: &[u32] = r.section(2 * n_agents)?;
+        let total_cores: usize = counts.iter().map(|&c| c as usize).sum();
+        let cores: &[T] = r.section(total_cores)?;
+        let mut slices: [&[T]; MAX_DIMS] = [&[]; MAX_DIMS];
+        let mut at = 0;
+        for (s, &c) in slices.iter_mut().zip(counts) {
+            *s = &cores[at..at + c as usize];
+            at += c as usize;
+        }
+        let grid = ProductPartition::try_new(&slices[..n_dims])
+            .map_err(ViewError::Grid)?
+            .with_membership(membership);
+        if grid.n_cores() != n_cores {
+            return Err(ViewError::Header { what: "cores" });
+        }
+        let total_actions = shapes
+            .chunks_exact(2)
+            .try_fold(0usize, |acc, s| {
+                (s[0] as usize)
+                    .checked_mul(s[1] as usize)
+                    .and_then(|n| acc.checked_add(n))
+            })
+            .ok_or(ViewError::Header {
+                what: "action set sizes",
+            })?;
+        let actions: &[T] = r.section(total_actions)?;
+        let mut sets = [ActionSet::default(); MAX_AGENTS];
+        let mut at = 0;
+        for (set, s) in sets.iter_mut().zip(shapes.chunks_exact(2)) {
+            let len = s[0] as usize * s[1] as usize;
+            *set = ActionSet::try_new(&actions[at..at + len], s[1] as usize)
+                .map_err(ViewError::Actions)?;
+            if set.n_actions() != s[0] as usize {
+                return Err(ViewError::Header {
+                    what: "action set sizes",
+                });
+            }
+            at += len;
+        }
+        let joint = JointActions::try_new(&sets[..n_agents]).map_err(ViewError::Actions)?;
+        let greedy = match greedy_bytes {
+            1 => Greedy::U8(r.section(n_cores)?),
+            2 => Greedy::U16(r.section(n_cores)?),
+            4 => Greedy::U32(r.section(n_cores)?),
+            _ => {
+                return Err(ViewError::Header {
+                    what: "greedy action width",
+                });
+            }
+        };
+        let n_joint = joint.n_joint();
+        if let Some(u) = (0..n_cores)
+            .map(|d| greedy.action(d))
+            .find(|&u| u as usize >= n_joint)
+        {
+            return Err(ViewError::Actions(EvalError::OutOfRange {
+                what: "greedy action",
+                index: u as usize,
+                len: n_joint,
+            }));
+        }
+        let v = if has_v {
+            Some(r.section::<T>(n_cores)?)
+        } else {
+            None
+        };
+        if r.at != end {
+            return Err(ViewError::Header {
+                what: "payload length",
+            });
+        }
+        Ok(Self {
+            grid,
+            joint,
+            greedy,
+            v,
+        })
+    }
+
+    /// The grid.
+    #[must_use]
+    pub fn grid(&self) -> &ProductPartition<'a, T> {
+        &self.grid
+    }
+
+    /// The joint action set.
+    #[must_use]
+    pub fn joint(&self) -> &JointActions<'a, T> {
+        &self.joint
+    }
+
+    /// The per-core greedy joint actions, in the width they were stored in.
+    #[must_use]
+    pub fn greedy(&self) -> Greedy<'a> {
+        self.greedy
+    }
+
+    /// `V` per core, if it was exported.
+    #[must_use]
+    pub fn values(&self) -> Option<&'a [T]> {
+        self.v
+    }
+
+    /// The interpolated policy (eq 22) at state `x` into `out` (`joint().dim()` components):
+    /// [`crate::q::interpolated_action`], the same bits as from the policy the file was
+    /// exported from.
+    pub fn interpolated_action(&self, x: &[T], out: &mut [T]) -> Result<(), EvalError> {
+        interpolated_action_in(&self.grid, &self.joint, &self.greedy, x, out)
+    }
+
+    /// `V` interpolated at `x` (`None` if `V` was not exported).
+    pub fn value(&self, x: &[T]) -> Option<Result<T, EvalError>> {
+        self.v
+            .map(|v| self.grid.active(x).map(|a| a.interpolate(v)))
+    }
+}
+
+/// CRC-32 (ISO-HDLC: reflected, polynomial 0xEDB88320, as zlib's) of `bytes`.
+#[must_use]
+pub fn crc32(bytes: &[u8]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(bytes);
+    h.finalize()
+}

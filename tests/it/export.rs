@@ -1,0 +1,180 @@
+//! Exported policies (`fuzzyq_sim::io::export`) read in place by the core's `PolicyView`: the
+//! interpolated action and `V` at any state have the bits of the policy they were exported
+//! from, the greedy actions take the smallest integer type, and damaged, cut, misaligned or
+//! foreign bytes are refused with typed errors.
+
+use std::ops::ControlFlow;
+
+use fuzzyq_core::view::{Greedy, PolicyView, ViewError, ViewReal, crc32};
+use fuzzyq_core::{q, solver::Precision};
+use fuzzyq_sim::io::config::{EnvConfig, GridConfig, TrainConfig};
+use fuzzyq_sim::io::export::export_bytes;
+use fuzzyq_sim::io::policy_file::{PolicyArtifact, Values};
+use fuzzyq_sim::model::Wide;
+
+/// The point masses on a coarse grid (5 position x 3 velocity cores per axis).
+fn trained(agents: usize, precision: Precision) -> PolicyArtifact {
+    let mut config = TrainConfig::default();
+    if let EnvConfig::Pointmass(p) = &mut config.env {
+        p.agents = agents;
+    }
+    let (pos, vel) = (vec![-6.0, -3.0, 0.0, 3.0, 6.0], vec![-3.0, 0.0, 3.0]);
+    let mut cores = Vec::new();
+    for _ in 0..agents {
+        cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
+    }
+    config.grid = GridConfig::explicit(cores);
+    config.solver.precision = precision;
+    fuzzyq_sim::train::train(&config, |_| ControlFlow::Continue(())).unwrap()
+}
+
+/// `bytes` copied to an 8-byte boundary (plus `shift` bytes) of a fresh buffer.
+fn placed(bytes: &[u8], shift: usize) -> (Vec<u8>, usize) {
+    let mut buf = vec![0u8; bytes.len() + 16];
+    let at = buf.as_ptr().align_offset(8) + shift;
+    buf[at..at + bytes.len()].copy_from_slice(bytes);
+    (buf, at)
+}
+
+/// States spread over the grid's range, from a fixed sequence.
+fn states(dim: usize, n: usize) -> Vec<Vec<f64>> {
+    let mut s = 0x9e37_79b9_7f4a_7c15u64;
+    (0..n)
+        .map(|_| {
+            (0..dim)
+                .map(|d| {
+                    s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                    let u = (s >> 11) as f64 / (1u64 << 53) as f64;
+                    let range = if d % 4 < 2 { 7.0 } else { 3.5 };
+                    (2.0 * u - 1.0) * range
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The view of `artifact`'s export answers as the policy does, bit for bit.
+fn same_decisions<T: ViewReal + Wide>(artifact: &PolicyArtifact, values: &[T]) -> Greedy<'static> {
+    let bytes = export_bytes(artifact, true).unwrap();
+    let (buf, at) = placed(&bytes, 0);
+    let view = PolicyView::<T>::parse(&buf[at..at + bytes.len()]).unwrap();
+    let model = artifact.config.build_model().unwrap();
+    let grid = artifact.config.grid::<T>().unwrap();
+    let joint = fuzzyq_core::model::joint_actions::<T, _>(&model).unwrap();
+    assert_eq!(view.grid().n_cores(), grid.n_cores());
+    let bits = |v: &[T]| v.iter().map(|x| x.to_f64().to_bits()).collect::<Vec<_>>();
+    for x in states(grid.n_dims(), 300) {
+        let x: Vec<T> = x.iter().map(|&v| T::from_f64(v)).collect();
+        let (mut a, mut b) = (vec![T::ZERO; joint.dim()], vec![T::ZERO; joint.dim()]);
+        view.interpolated_action(&x, &mut a).unwrap();
+        q::interpolated_action(&grid.view(), &joint, &artifact.greedy, &x, &mut b).unwrap();
+        assert_eq!(
+            bits(&a),
+            bits(&b),
+            "at {:?}",
+            x.iter().map(|v| v.to_f64()).collect::<Vec<_>>()
+        );
+        let v = view.value(&x).unwrap().unwrap();
+        let w = grid.view().active(&x).unwrap().interpolate(values);
+        assert_eq!(v.to_f64().to_bits(), w.to_f64().to_bits());
+    }
+    match view.greedy() {
+        Greedy::U8(_) => Greedy::U8(&[]),
+        Greedy::U16(_) => Greedy::U16(&[]),
+        Greedy::U32(_) => Greedy::U32(&[]),
+    }
+}
+
+#[test]
+fn exported_policies_decide_as_the_policy_in_the_smallest_action_type() {
+    // One agent: 25 joint actions in a byte; two: 625 in two bytes; both precisions.
+    let one = trained(1, Precision::F32);
+    let Values::F32(v) = &one.values else {
+        unreachable!()
+    };
+    assert!(matches!(same_decisions(&one, v), Greedy::U8(_)));
+    let two = trained(2, Precision::F32);
+    let Values::F32(v) = &two.values else {
+        unreachable!()
+    };
+    assert!(matches!(same_decisions(&two, v), Greedy::U16(_)));
+    let one64 = trained(1, Precision::F64);
+    let Values::F64(v) = &one64.values else {
+        unreachable!()
+    };
+    same_decisions(&one64, v);
+    // Without V: the interpolated policy still acts; `value` says there is none.
+    let bytes = export_bytes(&one, false).unwrap();
+    let (buf, at) = placed(&bytes, 0);
+    let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
+    assert!(view.values().is_none() && view.value(&[0.0; 4]).is_none());
+    let mut u = [0.0f32; 2];
+    view.interpolated_action(&[-4.0, 3.0, 0.0, 0.0], &mut u)
+        .unwrap();
+}
+
+#[test]
+fn damaged_cut_misaligned_or_foreign_bytes_are_refused() {
+    let artifact = trained(1, Precision::F32);
+    let bytes = export_bytes(&artifact, true).unwrap();
+    let parse = |b: &[u8], shift: usize| -> Result<(), ViewError> {
+        let (buf, at) = placed(b, shift);
+        PolicyView::<f32>::parse(&buf[at..at + b.len()]).map(|_| ())
+    };
+    assert_eq!(parse(&bytes, 0), Ok(()));
+    // A flipped bit anywhere in the header or payload.
+    for at in [9, 30, 70, bytes.len() / 2, bytes.len() - 12] {
+        let mut b = bytes.clone();
+        b[at] ^= 0x10;
+        assert!(
+            matches!(
+                parse(&b, 0),
+                Err(ViewError::Checksum { .. }
+                    | ViewError::Truncated { .. }
+                    | ViewError::Header { .. })
+            ),
+            "flipped byte {at}: {:?}",
+            parse(&b, 0)
+        );
+    }
+    let mut b = bytes.clone();
+    b[bytes.len() / 2] ^= 1;
+    assert!(matches!(parse(&b, 0), Err(ViewError::Checksum { .. })));
+    // Cut short, at any length.
+    for len in [0, 4, 8, 40, 64, 100, bytes.len() - 8, bytes.len() - 1] {
+        let r = parse(&bytes[..len], 0);
+        assert!(
+            matches!(r, Err(ViewError::Truncated { .. })),
+            "{len} bytes: {r:?}"
+        );
+    }
+    // Not at an 8-byte boundary; another file; another precision; another version.
+    assert_eq!(parse(&bytes, 4), Err(ViewError::Misaligned));
+    assert_eq!(
+        parse(b"\x89FZQCKP\n and more bytes", 0),
+        Err(ViewError::NotAPolicy)
+    );
+    let (buf, at) = placed(&bytes, 0);
+    assert_eq!(
+        PolicyView::<f64>::parse(&buf[at..at + bytes.len()]).map(|_| ()),
+        Err(ViewError::Precision {
+            found: 4,
+            expected: 8
+        })
+    );
+    let mut b = bytes.clone();
+    b[8] = 2;
+    let end = b.len() - 8;
+    let crc = crc32(&b[..end]);
+    b[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+    assert_eq!(parse(&b, 0), Err(ViewError::Version { found: 2 }));
+    // Every error says what is wrong in one line.
+    for e in [
+        ViewError::Misaligned,
+        ViewError::NotAPolicy,
+        ViewError::Version { found: 2 },
+    ] {
+        let m = e.to_string();
+        assert!(!m.contains('\n') && m.starts_with("exported policy") || m.starts_with("not an"));
+    }
+}
