@@ -5,7 +5,8 @@
 //! planned before any work (no output over another or over an input), staged in full, and put
 //! in place only when the command has succeeded, so a failure replaces no file.
 //!
-//! - `cmd/`: one file per subcommand (`train`, `rollout`, `compare`, `config`); each parses
+//! - `cmd/`: one file per subcommand (`train`, `rollout`, `compare`, `config`, `bench`,
+//!   `export`); each parses
 //!   its flags with clap, turns them into the library's validated settings in one place, and
 //!   writes its outputs;
 //! - `output/`: what every subcommand shares to read flags and write files;
@@ -38,6 +39,9 @@ enum Command {
     Compare(cmd::compare::CompareArgs),
     /// Print an environment's default configuration (the paper's values) as TOML.
     Config(cmd::config::ConfigArgs),
+    /// Export a fuzzy Q-iteration policy in the compact format a `no_std` controller reads in
+    /// place (`fuzzyq_core::view::PolicyView`).
+    Export(cmd::export::ExportArgs),
     /// Know the machine: CPU, caches, kernels, the measured multiply-add peak, and the
     /// solver's full backups on a problem (the paper's by default) as a fraction of it.
     Bench(cmd::bench::BenchArgs),
@@ -82,6 +86,7 @@ fn main() -> ExitCode {
         Command::Compare(args) => cmd::compare::run(args),
         Command::Config(args) => cmd::config::run(args),
         Command::Bench(args) => cmd::bench::run(args),
+        Command::Export(args) => cmd::export::run(args),
     };
     // The outputs go in place only when the whole command has succeeded.
     // A closed stdout (`fuzzyq ... | head`) is a normal end: what was written stays.

@@ -4,5 +4,6 @@ pub(crate) mod bench;
 mod checkpoints;
 pub(crate) mod compare;
 pub(crate) mod config;
+pub(crate) mod export;
 pub(crate) mod rollout;
 pub(crate) mod train;

@@ -1119,3 +1119,51 @@ fn bench_reports_the_machine_and_the_backup_against_the_peak() {
         ],
     );
 }
+
+#[test]
+fn export_writes_the_compact_policy_and_refuses_what_it_cannot_export() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let config = one_agent_config(d);
+    let o = fuzzyq(
+        &[
+            "train",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            "p.fzq",
+            "--quiet",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for (extra, out) in [(None, "p.bin"), (Some("--no-values"), "p-small.bin")] {
+        let mut args = vec!["export", "--policy", "p.fzq", "--out", out];
+        args.extend(extra);
+        let o = fuzzyq(&args, d);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let bytes = std::fs::read(d.join(out)).unwrap();
+        assert!(bytes.starts_with(b"\x89FZQVIEW"));
+        assert!(stderr(&o).contains(&format!("{} bytes", bytes.len())));
+    }
+    let (full, small) = (
+        std::fs::metadata(d.join("p.bin")).unwrap().len(),
+        std::fs::metadata(d.join("p-small.bin")).unwrap().len(),
+    );
+    // V is 4 bytes a core in f32; the greedy actions one byte (25 joint actions).
+    assert!(small < full / 3, "{small} against {full}");
+    std::fs::write(d.join("not-a-policy"), "hello").unwrap();
+    assert_all_fail(
+        d,
+        &[
+            ("export --policy missing.fzq --out x.bin", "missing.fzq"),
+            ("export --policy not-a-policy --out x.bin", "not-a-policy"),
+            ("export --policy p.fzq --out p.fzq", "would overwrite"),
+            (
+                "export --policy p.fzq --out no/such/dir/x.bin",
+                "no/such/dir",
+            ),
+            ("export --out x.bin", "--policy"),
+        ],
+    );
+}
