@@ -241,18 +241,10 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         let version = r.u32()?;
         let value_bytes = r.u32()?;
         let greedy_bytes = r.u32()?;
-        let membership = match r.u32()? {
-            0 => Membership::Triangular,
-            1 => Membership::Crisp,
-            _ => return Err(ViewError::Header { what: "membership" }),
-        };
+        let membership = r.u32()?;
         let (n_dims, n_agents) = (r.u32()? as usize, r.u32()? as usize);
         let n_cores = usize::try_from(r.u64()?).map_err(|_| ViewError::Header { what: "cores" })?;
-        let has_v = match r.u32()? {
-            0 => false,
-            1 => true,
-            _ => return Err(ViewError::Header { what: "V flag" }),
-        };
+        let has_v = r.u32()?;
         r.take(4)?;
         let payload = usize::try_from(r.u64()?).map_err(|_| ViewError::Header {
             what: "payload length",
@@ -277,6 +269,16 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         if version != VERSION {
             return Err(ViewError::Version { found: version });
         }
+        let membership = match membership {
+            0 => Membership::Triangular,
+            1 => Membership::Crisp,
+            _ => return Err(ViewError::Header { what: "membership" }),
+        };
+        let has_v = match has_v {
+            0 => false,
+            1 => true,
+            _ => return Err(ViewError::Header { what: "V flag" }),
+        };
         let expected = core::mem::size_of::<T>() as u32;
         if value_bytes != expected {
             return Err(ViewError::Precision {
