@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Runs every test of fuzzyq: the check that modules form layers without cycles; Rust unit,
-# property, integration and CLI end-to-end tests and doctests; the proof that fuzzyq-core
-# builds without std and without an allocator; and the Python package's tests (pytest,
-# hypothesis, the Gymnasium and PettingZoo checkers, stubtest) against a wheel built from this
-# checkout and installed into a fresh virtual environment.
+# property, integration and CLI end-to-end tests and doctests; the proof that fuzzyq-core and
+# the example robot controller build without std and without an allocator; and the Python
+# package's tests (pytest, hypothesis, the Gymnasium and PettingZoo checkers, stubtest) against
+# a wheel built from this checkout and installed into a fresh virtual environment.
 # Also: mypy --strict on the README's examples, the package's doctests, and the strict build of
 # the documentation site (mkdocs.yml).
 set -euo pipefail
@@ -13,6 +13,10 @@ python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Laye
 cargo test --workspace --locked
 cargo build --release --locked \
     --manifest-path ci/nostd-check/Cargo.toml --target-dir target/nostd-check
+# The example robot controller as firmware: `no_std`, no allocator, its own panic handler, a
+# static library exporting its C entry point (examples/embedded-controller).
+cargo rustc --locked -p fuzzyq-embedded-controller --lib --profile firmware \
+    --features firmware --crate-type staticlib
 
 venv=target/python-test-venv
 rm -rf "$venv"

@@ -6,11 +6,13 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::view::{Greedy, PolicyView, ViewError, ViewReal, crc32};
-use fuzzyq_core::{q, solver::Precision};
+use fuzzyq_core::{EvalError, q, solver::Precision};
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, TrainConfig};
 use fuzzyq_sim::io::export::export_bytes;
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, Values};
 use fuzzyq_sim::model::Wide;
+
+use crate::alloc_count::allocations;
 
 /// The point masses on a coarse grid (5 position x 3 velocity cores per axis).
 fn trained(agents: usize, precision: Precision) -> PolicyArtifact {
@@ -112,6 +114,62 @@ fn exported_policies_decide_as_the_policy_in_the_smallest_action_type() {
     let mut u = [0.0f32; 2];
     view.interpolated_action(&[-4.0, 3.0, 0.0, 0.0], &mut u)
         .unwrap();
+}
+
+#[test]
+fn reading_and_acting_with_a_view_allocate_nothing() {
+    for agents in [1, 2] {
+        let artifact = trained(agents, Precision::F32);
+        let bytes = export_bytes(&artifact, true).unwrap();
+        let (buf, at) = placed(&bytes, 0);
+        let xs: Vec<Vec<f32>> = states(4 * agents, 200)
+            .iter()
+            .map(|x| x.iter().map(|&v| v as f32).collect())
+            .collect();
+        let mut u = vec![0.0f32; 2 * agents];
+        let (sum, n) = allocations(|| {
+            let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
+            let mut sum = 0.0;
+            for x in &xs {
+                view.interpolated_action(x, &mut u).unwrap();
+                sum += u[0] + view.value(x).unwrap().unwrap();
+            }
+            // And a view of parts in memory, as a generated module builds it.
+            let again =
+                PolicyView::from_parts(*view.grid(), *view.joint(), view.greedy(), view.values())
+                    .unwrap();
+            again.interpolated_action(&xs[0], &mut u).unwrap();
+            sum + u[0]
+        });
+        assert!(sum.is_finite());
+        assert_eq!(n, 0, "{agents} agent(s): {n} allocations");
+    }
+}
+
+#[test]
+fn a_view_of_parts_checks_them() {
+    let artifact = trained(1, Precision::F32);
+    let bytes = export_bytes(&artifact, true).unwrap();
+    let (buf, at) = placed(&bytes, 0);
+    let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
+    let (grid, joint) = (*view.grid(), *view.joint());
+    let n = grid.n_cores();
+    let short = vec![0u8; n - 1];
+    assert!(matches!(
+        PolicyView::from_parts(grid, joint, Greedy::U8(&short), None),
+        Err(ViewError::Actions(EvalError::Length { .. }))
+    ));
+    let mut bad = vec![0u8; n];
+    bad[n / 2] = 25;
+    assert!(matches!(
+        PolicyView::from_parts(grid, joint, Greedy::U8(&bad), None),
+        Err(ViewError::Actions(EvalError::OutOfRange { index: 25, .. }))
+    ));
+    let v = vec![0.0f32; n + 1];
+    assert!(matches!(
+        PolicyView::from_parts(grid, joint, view.greedy(), Some(&v)),
+        Err(ViewError::Actions(EvalError::Length { what: "V", .. }))
+    ));
 }
 
 #[test]

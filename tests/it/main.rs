@@ -1,5 +1,6 @@
 //! Integration and property tests of fuzzyq: one binary, several modules.
 
+mod alloc_count;
 mod approxrl;
 mod export;
 mod fuzz;

@@ -154,6 +154,23 @@ impl GreedyTable for Greedy<'_> {
     }
 }
 
+/// Bytes at an 8-byte boundary, as [`PolicyView::parse`] needs them: `include_bytes!` gives
+/// bytes aligned to 1 only, so a controller wraps them.
+///
+/// ```
+/// use fuzzyq_core::view::{Aligned, PolicyView, ViewError};
+///
+/// // A controller writes `&Aligned(*include_bytes!("policy.bin"))`.
+/// static POLICY: &Aligned<[u8]> = &Aligned([0; 16]);
+/// assert_eq!(
+///     PolicyView::<f32>::parse(&POLICY.0).unwrap_err(),
+///     ViewError::NotAPolicy
+/// );
+/// ```
+#[repr(C, align(8))]
+#[derive(Debug)]
+pub struct Aligned<B: ?Sized>(pub B);
+
 /// A value type a view can borrow from bytes (`f32`, `f64`).
 pub trait ViewReal: Real + bytemuck::Pod {}
 impl ViewReal for f32 {}
@@ -352,6 +369,45 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
                 });
             }
         };
+        let v = if has_v {
+            Some(r.section::<T>(n_cores)?)
+        } else {
+            None
+        };
+        if r.at != end {
+            return Err(ViewError::Header {
+                what: "payload length",
+            });
+        }
+        Self::from_parts(grid, joint, greedy, v)
+    }
+
+    /// A view of parts already in memory, for example the `static` arrays of a module that
+    /// `fuzzyq export --format rust` generated: checks that `greedy` (and `v`, if given)
+    /// hold one entry per core of `grid` and that every greedy action names a joint action.
+    pub fn from_parts(
+        grid: ProductPartition<'a, T>,
+        joint: JointActions<'a, T>,
+        greedy: Greedy<'a>,
+        v: Option<&'a [T]>,
+    ) -> Result<Self, ViewError> {
+        let n_cores = grid.n_cores();
+        if greedy.len() != n_cores {
+            return Err(ViewError::Actions(EvalError::Length {
+                what: "greedy actions",
+                expected: n_cores,
+                found: greedy.len(),
+            }));
+        }
+        if let Some(v) = v
+            && v.len() != n_cores
+        {
+            return Err(ViewError::Actions(EvalError::Length {
+                what: "V",
+                expected: n_cores,
+                found: v.len(),
+            }));
+        }
         let n_joint = joint.n_joint();
         if let Some(u) = (0..n_cores)
             .map(|d| greedy.action(d))
@@ -362,16 +418,6 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
                 index: u as usize,
                 len: n_joint,
             }));
-        }
-        let v = if has_v {
-            Some(r.section::<T>(n_cores)?)
-        } else {
-            None
-        };
-        if r.at != end {
-            return Err(ViewError::Header {
-                what: "payload length",
-            });
         }
         Ok(Self {
             grid,

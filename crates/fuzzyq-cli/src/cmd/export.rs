@@ -1,11 +1,11 @@
 //! `fuzzyq export`: a fuzzy Q-iteration policy in the compact format the `no_std` core reads
-//! in place (`fuzzyq_core::view::PolicyView`).
+//! in place (`fuzzyq_core::view::PolicyView`), or as a Rust module of `static` arrays.
 
 use std::path::PathBuf;
 
 use anyhow::bail;
-use clap::Args;
-use fuzzyq_sim::io::export::export_bytes;
+use clap::{Args, ValueEnum};
+use fuzzyq_sim::io::export::{export_bytes, export_rust};
 use fuzzyq_sim::io::policy_file::PolicyFile;
 
 use crate::output;
@@ -18,9 +18,22 @@ pub(crate) struct ExportArgs {
     /// Where to write the exported policy.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
+    /// The form: the binary file `PolicyView::parse` reads in place (for `include_bytes!` or
+    /// flash), or a Rust module of `static` arrays with a `view()` function.
+    #[arg(long, value_enum, default_value_t = Format::Bin)]
+    format: Format,
     /// Leave `V` out: the interpolated policy needs only the greedy actions.
     #[arg(long)]
     no_values: bool,
+}
+
+/// The forms of an exported policy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Format {
+    /// The compact binary format (fuzzyq_core::view).
+    Bin,
+    /// A Rust module of static arrays (for `mod policy;`).
+    Rust,
 }
 
 pub(crate) fn run(args: ExportArgs) -> anyhow::Result<()> {
@@ -35,13 +48,21 @@ pub(crate) fn run(args: ExportArgs) -> anyhow::Result<()> {
             args.policy.display()
         );
     };
-    let bytes = export_bytes(&artifact, !args.no_values)?;
+    let bytes = match args.format {
+        Format::Bin => export_bytes(&artifact, !args.no_values)?,
+        Format::Rust => export_rust(&artifact, !args.no_values)?.into_bytes(),
+    };
     output::write_file(&args.out, &bytes)?;
     eprintln!(
-        "exported {} to {}: {} bytes ({} cores{})",
+        "exported {} to {}: {} bytes{} ({} cores{})",
         args.policy.display(),
         args.out.display(),
         bytes.len(),
+        if args.format == Format::Rust {
+            " of Rust"
+        } else {
+            ""
+        },
         artifact.greedy.len(),
         if args.no_values {
             ", without V"

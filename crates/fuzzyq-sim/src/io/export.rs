@@ -1,41 +1,82 @@
-//! Exported policies: a fuzzy Q-iteration policy in the compact format that
-//! [`fuzzyq_core::view::PolicyView`] reads in place on a `no_std` controller (the format is
-//! specified there): the grid, each agent's actions, the per-core greedy actions in the
+//! Exported policies: a fuzzy Q-iteration policy in the forms a `no_std` controller reads
+//! without allocating: the grid, each agent's actions, the per-core greedy actions in the
 //! smallest integer type that holds them, and optionally `V`, in the policy's precision.
+//!
+//! - [`export_bytes`]: the compact binary format that [`fuzzyq_core::view::PolicyView::parse`]
+//!   checks and borrows in place (the format is specified there), for `include_bytes!` or
+//!   flash memory;
+//! - [`export_rust`]: a Rust module of `static` arrays whose `view()` builds the same
+//!   [`fuzzyq_core::view::PolicyView`] with [`fuzzyq_core::view::PolicyView::from_parts`]
+//!   (no parsing, no checksum; the compiler checks the types).
 
-use fuzzyq_core::Model;
+use std::fmt::Write as _;
+
 use fuzzyq_core::view::{HEADER_LEN, MAGIC, VERSION, crc32, padding};
+use fuzzyq_core::{Membership, Model};
 
 use crate::error::SimError;
 use crate::io::policy_file::{PolicyArtifact, Values};
 
+/// What both forms hold, gathered from a policy.
+struct Parts<'p> {
+    /// Each state variable's cores.
+    cores: Vec<Vec<f64>>,
+    /// Per agent: (actions, components per action, the actions' components action-major).
+    sets: Vec<(usize, usize, Vec<f64>)>,
+    /// Bytes per greedy action: 1, 2 or 4.
+    greedy_bytes: u32,
+    membership: Membership,
+    artifact: &'p PolicyArtifact,
+}
+
+impl<'p> Parts<'p> {
+    fn of(artifact: &'p PolicyArtifact) -> Result<Self, SimError> {
+        let config = &artifact.config;
+        let model = config.build_model()?;
+        let n_agents = Model::<f64>::n_agents(&model);
+        let sets: Vec<(usize, usize, Vec<f64>)> = (0..n_agents)
+            .map(|i| {
+                let s = Model::<f64>::action_set(&model, i);
+                let values = (0..s.n_actions())
+                    .flat_map(|a| s.action(a).to_vec())
+                    .collect();
+                (s.n_actions(), s.dim(), values)
+            })
+            .collect();
+        let n_joint: usize = sets.iter().map(|s| s.0).product();
+        let greedy_bytes: u32 = if n_joint <= 1 << 8 {
+            1
+        } else if n_joint <= 1 << 16 {
+            2
+        } else {
+            4
+        };
+        Ok(Self {
+            cores: config.grid_cores(),
+            sets,
+            greedy_bytes,
+            membership: config.grid.membership,
+            artifact,
+        })
+    }
+
+    /// Bytes per value: 4 (`f32`) or 8 (`f64`).
+    fn value_bytes(&self) -> u32 {
+        match self.artifact.values {
+            Values::F32(_) => 4,
+            Values::F64(_) => 8,
+        }
+    }
+
+    fn n_joint(&self) -> usize {
+        self.sets.iter().map(|s| s.0).product()
+    }
+}
+
 /// The bytes of `artifact` exported (with `V` if `with_values`).
 pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<u8>, SimError> {
-    let config = &artifact.config;
-    let model = config.build_model()?;
-    let cores = config.grid_cores();
-    let n_agents = Model::<f64>::n_agents(&model);
-    let sets: Vec<(usize, usize, Vec<f64>)> = (0..n_agents)
-        .map(|i| {
-            let s = Model::<f64>::action_set(&model, i);
-            let values = (0..s.n_actions())
-                .flat_map(|a| s.action(a).to_vec())
-                .collect();
-            (s.n_actions(), s.dim(), values)
-        })
-        .collect();
-    let n_joint: usize = sets.iter().map(|s| s.0).product();
-    let greedy_bytes: u32 = if n_joint <= 1 << 8 {
-        1
-    } else if n_joint <= 1 << 16 {
-        2
-    } else {
-        4
-    };
-    let (value_bytes, v): (u32, Vec<u8>) = match &artifact.values {
-        Values::F32(v) => (4, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
-        Values::F64(v) => (8, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
-    };
+    let parts = Parts::of(artifact)?;
+    let value_bytes = parts.value_bytes();
     let real = |x: f64| -> Vec<u8> {
         if value_bytes == 4 {
             (x as f32).to_le_bytes().to_vec()
@@ -48,26 +89,34 @@ pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<
         payload.extend_from_slice(bytes);
         payload.resize(payload.len() + padding(bytes.len()), 0);
     };
-    let counts: Vec<u8> = cores
+    let counts: Vec<u8> = parts
+        .cores
         .iter()
         .flat_map(|c| (c.len() as u32).to_le_bytes())
         .collect();
     section(&mut payload, &counts);
-    let shapes: Vec<u8> = sets
+    let shapes: Vec<u8> = parts
+        .sets
         .iter()
         .flat_map(|s| [(s.0 as u32).to_le_bytes(), (s.1 as u32).to_le_bytes()])
         .flatten()
         .collect();
     section(&mut payload, &shapes);
-    let core_values: Vec<u8> = cores.iter().flatten().flat_map(|&x| real(x)).collect();
+    let core_values: Vec<u8> = parts
+        .cores
+        .iter()
+        .flatten()
+        .flat_map(|&x| real(x))
+        .collect();
     section(&mut payload, &core_values);
-    let action_values: Vec<u8> = sets
+    let action_values: Vec<u8> = parts
+        .sets
         .iter()
         .flat_map(|s| &s.2)
         .flat_map(|&x| real(x))
         .collect();
     section(&mut payload, &action_values);
-    let greedy: Vec<u8> = match greedy_bytes {
+    let greedy: Vec<u8> = match parts.greedy_bytes {
         1 => artifact.greedy.iter().map(|&u| u as u8).collect(),
         2 => artifact
             .greedy
@@ -82,6 +131,10 @@ pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<
     };
     section(&mut payload, &greedy);
     if with_values {
+        let v: Vec<u8> = match &artifact.values {
+            Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            Values::F64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+        };
         section(&mut payload, &v);
     }
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len() + 8);
@@ -89,13 +142,13 @@ pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<
     for field in [
         VERSION,
         value_bytes,
-        greedy_bytes,
-        match config.grid.membership {
-            fuzzyq_core::Membership::Triangular => 0,
-            fuzzyq_core::Membership::Crisp => 1,
+        parts.greedy_bytes,
+        match parts.membership {
+            Membership::Triangular => 0,
+            Membership::Crisp => 1,
         },
-        cores.len() as u32,
-        n_agents as u32,
+        parts.cores.len() as u32,
+        parts.sets.len() as u32,
     ] {
         out.extend_from_slice(&field.to_le_bytes());
     }
@@ -109,4 +162,142 @@ pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<
     out.extend_from_slice(&crc.to_le_bytes());
     out.extend_from_slice(&[0; 4]);
     Ok(out)
+}
+
+/// Columns a generated line fills at most (rustfmt's default width).
+const WIDTH: usize = 100;
+
+/// `values` (already written as source) as the elements of a Rust array literal, indented by
+/// `indent` spaces, as many to a line as fit in [`WIDTH`]. Floats are written with `{:?}`, the
+/// shortest form that parses back to the same bits.
+fn elements(out: &mut String, indent: usize, values: impl IntoIterator<Item = String>) {
+    let mut line = String::new();
+    for v in values {
+        if !line.is_empty() && indent + line.len() + 1 + v.len() + 1 > WIDTH {
+            let _ = writeln!(out, "{:indent$}{line}", "");
+            line.clear();
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(&v);
+        line.push(',');
+    }
+    if !line.is_empty() {
+        let _ = writeln!(out, "{:indent$}{line}", "");
+    }
+}
+
+/// `artifact` as the source of a Rust module (with `V` if `with_values`): `static` arrays of
+/// the cores, the actions, the greedy actions (`u8`, `u16` or `u32`) and `V`, and a
+/// `view()` that checks them into a [`fuzzyq_core::view::PolicyView`] without allocating.
+/// The module needs only `fuzzyq-core` (no default features) and is meant for `mod name;`.
+pub fn export_rust(artifact: &PolicyArtifact, with_values: bool) -> Result<String, SimError> {
+    let parts = Parts::of(artifact)?;
+    let t = if parts.value_bytes() == 4 {
+        "f32"
+    } else {
+        "f64"
+    };
+    let g = match parts.greedy_bytes {
+        1 => "u8",
+        2 => "u16",
+        _ => "u32",
+    };
+    let as_t = |x: f64| -> String {
+        if t == "f32" {
+            format!("{:?}", x as f32)
+        } else {
+            format!("{x:?}")
+        }
+    };
+    let n_cores = artifact.greedy.len();
+    let (n_dims, n_agents) = (parts.cores.len(), parts.sets.len());
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "//! A fuzzy Q-iteration policy, generated by `fuzzyq export --format rust` (regenerate it \
+         rather\n//! than edit it): {n_cores} cores over {n_dims} state variables, {n_agents} \
+         agent(s), {} joint actions,\n//! `{t}` values, greedy actions as `{g}`{}.\n//!\n//! \
+         [`view`] checks the arrays into a `fuzzyq_core::view::PolicyView` (no allocation); it \
+         acts\n//! with `interpolated_action(x, u)`. The module needs only `fuzzyq-core` with \
+         no default features;\n//! declare it with `#[rustfmt::skip]` to keep its long \
+         arrays as they are.\n",
+        parts.n_joint(),
+        if with_values {
+            ", with V"
+        } else {
+            ", without V"
+        },
+    );
+    // Cores at multiples of pi are data, not approximations of the constant.
+    s.push_str(
+        "#![allow(clippy::approx_constant)]\n\n\
+         use fuzzyq_core::view::{Greedy, PolicyView, ViewError};\n\
+         use fuzzyq_core::{ActionSet, JointActions, Membership, ProductPartition};\n",
+    );
+    let _ = writeln!(
+        s,
+        "\n/// The cores of each state variable, increasing.\npub static CORES: [&[{t}]; \
+         {n_dims}] = ["
+    );
+    for c in &parts.cores {
+        s.push_str("    &[\n");
+        elements(&mut s, 8, c.iter().map(|&x| as_t(x)));
+        s.push_str("    ],\n");
+    }
+    s.push_str("];\n");
+    let _ = writeln!(
+        s,
+        "\n/// Each agent's actions (the components of each action in turn) and the components \
+         per\n/// action.\npub static ACTIONS: [(&[{t}], usize); {n_agents}] = ["
+    );
+    for (_, dim, values) in &parts.sets {
+        s.push_str("    (\n        &[\n");
+        elements(&mut s, 12, values.iter().map(|&x| as_t(x)));
+        let _ = writeln!(s, "        ],\n        {dim},\n    ),");
+    }
+    s.push_str("];\n");
+    let _ = writeln!(
+        s,
+        "\n/// The greedy joint action of each core (row-major core order).\npub static GREEDY: \
+         [{g}; {n_cores}] = ["
+    );
+    elements(&mut s, 4, artifact.greedy.iter().map(|u| u.to_string()));
+    s.push_str("];\n");
+    if with_values {
+        let _ = writeln!(
+            s,
+            "\n/// `V` at each core (row-major core order).\npub static V: [{t}; {n_cores}] = ["
+        );
+        match &artifact.values {
+            Values::F32(v) => elements(&mut s, 4, v.iter().map(|x| format!("{x:?}"))),
+            Values::F64(v) => elements(&mut s, 4, v.iter().map(|x| format!("{x:?}"))),
+        }
+        s.push_str("];\n");
+    }
+    let membership = match parts.membership {
+        Membership::Triangular => "Triangular",
+        Membership::Crisp => "Crisp",
+    };
+    let greedy_variant = g.to_uppercase();
+    let v = if with_values { "Some(&V)" } else { "None" };
+    let _ = write!(
+        s,
+        "
+/// The policy's view of the arrays above, checked (no allocation).
+pub fn view() -> Result<PolicyView<'static, {t}>, ViewError> {{
+    let grid = ProductPartition::try_new(&CORES)
+        .map_err(ViewError::Grid)?
+        .with_membership(Membership::{membership});
+    let mut sets = [ActionSet::default(); {n_agents}];
+    for (set, &(values, dim)) in sets.iter_mut().zip(&ACTIONS) {{
+        *set = ActionSet::try_new(values, dim).map_err(ViewError::Actions)?;
+    }}
+    let joint = JointActions::try_new(&sets).map_err(ViewError::Actions)?;
+    PolicyView::from_parts(grid, joint, Greedy::{greedy_variant}(&GREEDY), {v})
+}}
+"
+    );
+    Ok(s)
 }
