@@ -24,7 +24,8 @@ LAYERS = {
         {"partition", "action"},
         {"model"},
         {"q", "additive", "backup"},
-        {"solver", "view"},
+        {"solver"},
+        {"view"},
     ],
     "fuzzyq-sim": [
         {"error", "paper", "fs"},

@@ -5,10 +5,11 @@
 
 use std::ops::ControlFlow;
 
-use fuzzyq_core::view::{Greedy, PolicyView, ViewError, ViewReal, crc32};
+use fuzzyq_core::solver::{BackupPath, Operator};
+use fuzzyq_core::view::{DecideError, Greedy, PolicyView, ViewError, ViewReal, crc32};
 use fuzzyq_core::{EvalError, q, solver::Precision};
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, TrainConfig};
-use fuzzyq_sim::io::export::export_bytes;
+use fuzzyq_sim::io::export::{ExportOptions, export_bytes};
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, Values};
 use fuzzyq_sim::model::Wide;
 
@@ -58,7 +59,7 @@ fn states(dim: usize, n: usize) -> Vec<Vec<f64>> {
 /// The view of `artifact`'s export answers as the policy does, bit for bit; returns the
 /// bytes per greedy action it stored.
 fn same_decisions<T: ViewReal + Wide>(artifact: &PolicyArtifact, values: &[T]) -> usize {
-    let bytes = export_bytes(artifact, true).unwrap();
+    let bytes = export_bytes(artifact, ExportOptions::default()).unwrap();
     let (buf, at) = placed(&bytes, 0);
     let view = PolicyView::<T>::parse(&buf[at..at + bytes.len()]).unwrap();
     let model = artifact.config.build_model().unwrap();
@@ -107,7 +108,14 @@ fn exported_policies_decide_as_the_policy_in_the_smallest_action_type() {
     };
     same_decisions(&one64, v);
     // Without V: the interpolated policy still acts; `value` says there is none.
-    let bytes = export_bytes(&one, false).unwrap();
+    let bytes = export_bytes(
+        &one,
+        ExportOptions {
+            values: false,
+            decisions: false,
+        },
+    )
+    .unwrap();
     let (buf, at) = placed(&bytes, 0);
     let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
     assert!(view.values().is_none() && view.value(&[0.0; 4]).is_none());
@@ -120,7 +128,7 @@ fn exported_policies_decide_as_the_policy_in_the_smallest_action_type() {
 fn reading_and_acting_with_a_view_allocate_nothing() {
     for agents in [1, 2] {
         let artifact = trained(agents, Precision::F32);
-        let bytes = export_bytes(&artifact, true).unwrap();
+        let bytes = export_bytes(&artifact, ExportOptions::default()).unwrap();
         let (buf, at) = placed(&bytes, 0);
         let xs: Vec<Vec<f32>> = states(4 * agents, 200)
             .iter()
@@ -146,10 +154,87 @@ fn reading_and_acting_with_a_view_allocate_nothing() {
     }
 }
 
+/// The view's greedy decisions from its decision tables equal the solver's `Q(x, .)` bit for
+/// bit (and allocate nothing).
+fn same_greedy<T: ViewReal + Wide>(artifact: &PolicyArtifact, values: &[T])
+where
+    fuzzyq_sim::model::EnvModel: fuzzyq_core::Model<T> + Sync,
+{
+    let options = ExportOptions {
+        values: true,
+        decisions: true,
+    };
+    let bytes = export_bytes(artifact, options).unwrap();
+    let (buf, at) = placed(&bytes, 0);
+    let view = PolicyView::<T>::parse(&buf[at..at + bytes.len()]).unwrap();
+    assert!(view.has_decision_tables());
+    let model = artifact.config.build_model().unwrap();
+    let grid = artifact.config.grid::<T>().unwrap();
+    let backup = fuzzyq_core::Backup {
+        gamma: T::from_f64(artifact.config.solver.gamma),
+        absorbing_goal: false,
+    };
+    let op = Operator::new(&model, grid.view(), backup, BackupPath::Auto).unwrap();
+    let m = view.joint().n_joint();
+    let mut scratch = vec![0u64; view.decision_scratch_len().unwrap()];
+    let (mut a, mut b) = (vec![T::ZERO; m], vec![T::ZERO; m]);
+    let mut u = vec![T::ZERO; view.joint().dim()];
+    let bits = |v: &[T]| v.iter().map(|x| x.to_f64().to_bits()).collect::<Vec<_>>();
+    for x in states(grid.n_dims(), 300) {
+        let x: Vec<T> = x.iter().map(|&v| T::from_f64(v)).collect();
+        let (best, n) = allocations(|| view.greedy_action(&x, &mut scratch, &mut a, &mut u));
+        assert_eq!(n, 0, "allocations in a greedy decision");
+        op.q_values(values, &x, &mut b).unwrap();
+        assert_eq!(bits(&a), bits(&b));
+        assert_eq!(best.unwrap(), q::argmax(&b).unwrap());
+    }
+    // Too little scratch, and a state of the wrong length, are refused.
+    let short = scratch.len() - 1;
+    assert!(matches!(
+        view.q_values(&vec![T::ZERO; grid.n_dims()], &mut scratch[..short], &mut a),
+        Err(DecideError::Eval(EvalError::Length { .. }))
+    ));
+    assert!(view.q_values(&[T::ZERO], &mut scratch, &mut a).is_err());
+}
+
+#[test]
+fn greedy_decisions_from_the_decision_tables_have_the_solvers_bits() {
+    let one = trained(1, Precision::F32);
+    let Values::F32(v) = &one.values else {
+        unreachable!()
+    };
+    same_greedy(&one, v);
+    let two = trained(2, Precision::F32);
+    let Values::F32(v) = &two.values else {
+        unreachable!()
+    };
+    same_greedy(&two, v);
+    let two64 = trained(2, Precision::F64);
+    let Values::F64(v) = &two64.values else {
+        unreachable!()
+    };
+    same_greedy(&two64, v);
+    // Without tables, the view says so; tables without V are refused at export.
+    let bytes = export_bytes(&one, ExportOptions::default()).unwrap();
+    let (buf, at) = placed(&bytes, 0);
+    let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
+    assert_eq!(view.decision_scratch_len(), None);
+    let mut q = [0.0f32; 25];
+    assert_eq!(
+        view.q_values(&[0.0; 4], &mut [0; 4], &mut q),
+        Err(DecideError::NoTables)
+    );
+    let options = ExportOptions {
+        values: false,
+        decisions: true,
+    };
+    assert!(export_bytes(&one, options).is_err());
+}
+
 #[test]
 fn a_view_of_parts_checks_them() {
     let artifact = trained(1, Precision::F32);
-    let bytes = export_bytes(&artifact, true).unwrap();
+    let bytes = export_bytes(&artifact, ExportOptions::default()).unwrap();
     let (buf, at) = placed(&bytes, 0);
     let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
     let (grid, joint) = (*view.grid(), *view.joint());
@@ -175,7 +260,7 @@ fn a_view_of_parts_checks_them() {
 #[test]
 fn damaged_cut_misaligned_or_foreign_bytes_are_refused() {
     let artifact = trained(1, Precision::F32);
-    let bytes = export_bytes(&artifact, true).unwrap();
+    let bytes = export_bytes(&artifact, ExportOptions::default()).unwrap();
     let parse = |b: &[u8], shift: usize| -> Result<(), ViewError> {
         let (buf, at) = placed(b, shift);
         PolicyView::<f32>::parse(&buf[at..at + b.len()]).map(|_| ())

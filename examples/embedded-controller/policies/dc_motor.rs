@@ -2,7 +2,7 @@
 //! than edit it): 441 cores over 2 state variables, 1 agent(s), 5 joint actions,
 //! `f64` values, greedy actions as `u8`, with V.
 //!
-//! [`view`] checks the arrays into a `fuzzyq_core::view::PolicyView` (no allocation); it acts
+//! `view()` checks the arrays into a `fuzzyq_core::view::PolicyView` (no allocation); it acts
 //! with `interpolated_action(x, u)`. The module needs only `fuzzyq-core` with no default features;
 //! declare it with `#[rustfmt::skip]` to keep its long arrays as they are.
 

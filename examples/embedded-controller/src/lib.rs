@@ -11,7 +11,8 @@
 //!    [`PolicyView::parse`], or `mod dc_motor;` and its `view()`. Both are here:
 //!    [`DC_MOTOR_BIN`] and [`dc_motor`], the same policy.
 //! 3. Act: a [`Controller`] holds the view and gives the interpolated policy's action for
-//!    each measured state; [`run`] is the control loop (sense, act, actuate through [`Io`]) that the
+//!    each measured state ([`Controller::new`]), or the greedy policy's from an export with
+//!    `--greedy` on buffers the caller provides ([`Controller::greedy`]); [`run`] is the control loop (sense, act, actuate through [`Io`]) that the
 //!    host tests drive against the model and the firmware entry point drives from C.
 //!
 //! The firmware build (`--features firmware`, as a static library with `panic = "abort"`)
@@ -20,7 +21,7 @@
 #![no_std]
 
 use fuzzyq_core::EvalError;
-use fuzzyq_core::view::{Aligned, PolicyView, ViewError, ViewReal};
+use fuzzyq_core::view::{Aligned, DecideError, PolicyView, ViewError, ViewReal};
 
 /// The DC motor policy (`fuzzyq train --env dcmotor --preset toolbox-demo`) as a generated
 /// module of `static` arrays (`fuzzyq export --format rust`).
@@ -38,28 +39,66 @@ pub enum Decision {
     Policy,
     /// The fallback action: the policy could not act on the measured state (for example a
     /// failed sensor's NaN, or a state of the wrong length).
-    Fallback(EvalError),
+    Fallback(DecideError),
+}
+
+/// Which of the paper's policies a controller follows.
+#[derive(Debug)]
+enum Policy<'a, T> {
+    /// Eq 22: the memberships' weighted average of the active cores' greedy actions.
+    Interpolated,
+    /// Eq 7: the joint action maximising `Q(x, .)`, from the export's decision tables, on the
+    /// caller's buffers.
+    Greedy {
+        scratch: &'a mut [u64],
+        q: &'a mut [T],
+    },
 }
 
 /// A policy acting on measured states, with a fallback action for states it cannot act on: a
 /// control loop never stops on a bad measurement.
-#[derive(Clone, Copy, Debug)]
+#[derive(Debug)]
 pub struct Controller<'a, T> {
-    policy: PolicyView<'a, T>,
+    view: PolicyView<'a, T>,
+    policy: Policy<'a, T>,
     fallback: &'a [T],
     faults: u32,
 }
 
 impl<'a, T: ViewReal> Controller<'a, T> {
-    /// A controller acting with `policy`, writing `fallback` (one value per action component,
-    /// for example zero torque) when a state cannot be acted on.
-    pub fn new(policy: PolicyView<'a, T>, fallback: &'a [T]) -> Result<Self, EvalError> {
-        fuzzyq_core::error::check_len("fallback action", policy.joint().dim(), fallback.len())?;
+    /// A controller following the interpolated policy of `view`, writing `fallback` (one
+    /// value per action component, for example zero torque) when a state cannot be acted on.
+    pub fn new(view: PolicyView<'a, T>, fallback: &'a [T]) -> Result<Self, EvalError> {
+        fuzzyq_core::error::check_len("fallback action", view.joint().dim(), fallback.len())?;
         Ok(Self {
-            policy,
+            view,
+            policy: Policy::Interpolated,
             fallback,
             faults: 0,
         })
+    }
+
+    /// A controller following the greedy policy of `view` (exported with `--greedy`) on the
+    /// caller's buffers: `scratch` of at least `view.decision_scratch_len()` words and `q` of
+    /// one value per joint action (for example `static` arrays sized at build time).
+    pub fn greedy(
+        view: PolicyView<'a, T>,
+        fallback: &'a [T],
+        scratch: &'a mut [u64],
+        q: &'a mut [T],
+    ) -> Result<Self, DecideError> {
+        let needed = view.decision_scratch_len().ok_or(DecideError::NoTables)?;
+        if scratch.len() < needed {
+            return Err(DecideError::Eval(EvalError::Length {
+                what: "decision scratch (u64 words)",
+                expected: needed,
+                found: scratch.len(),
+            }));
+        }
+        fuzzyq_core::error::check_len("Q-values", view.joint().n_joint(), q.len())?;
+        let mut c = Self::new(view, fallback)?;
+        c.policy = Policy::Greedy { scratch, q };
+        Ok(c)
     }
 
     /// A controller acting with the exported policy in `bytes` (see [`Self::new`]).
@@ -68,10 +107,10 @@ impl<'a, T: ViewReal> Controller<'a, T> {
         Self::new(policy, fallback).map_err(ViewError::Actions)
     }
 
-    /// The policy.
+    /// The exported policy.
     #[must_use]
-    pub fn policy(&self) -> &PolicyView<'a, T> {
-        &self.policy
+    pub fn view(&self) -> &PolicyView<'a, T> {
+        &self.view
     }
 
     /// Steps that fell back so far.
@@ -80,10 +119,17 @@ impl<'a, T: ViewReal> Controller<'a, T> {
         self.faults
     }
 
-    /// One decision: the interpolated policy's action (eq 22 of the paper) at the measured
-    /// state `x` into `u` (`policy().joint().dim()` values), or the fallback action.
+    /// One decision: the policy's action at the measured state `x` into `u`
+    /// (`view().joint().dim()` values), or the fallback action.
     pub fn act(&mut self, x: &[T], u: &mut [T]) -> Decision {
-        match self.policy.interpolated_action(x, u) {
+        let acted = match &mut self.policy {
+            Policy::Interpolated => self
+                .view
+                .interpolated_action(x, u)
+                .map_err(DecideError::Eval),
+            Policy::Greedy { scratch, q } => self.view.greedy_action(x, scratch, q, u).map(|_| ()),
+        };
+        match acted {
             Ok(()) => Decision::Policy,
             Err(e) => {
                 self.faults = self.faults.saturating_add(1);

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::{Args, ValueEnum};
-use fuzzyq_sim::io::export::{export_bytes, export_rust};
+use fuzzyq_sim::io::export::{ExportOptions, export_bytes, export_rust};
 use fuzzyq_sim::io::policy_file::PolicyFile;
 
 use crate::output;
@@ -23,8 +23,13 @@ pub(crate) struct ExportArgs {
     #[arg(long, value_enum, default_value_t = Format::Bin)]
     format: Format,
     /// Leave `V` out: the interpolated policy needs only the greedy actions.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "greedy")]
     no_values: bool,
+    /// Also write the decision tables (the model's block tables and the rewards), so that the
+    /// controller takes greedy decisions without the model (block-path models without
+    /// terminal states or an absorbing goal, such as the point masses; binary format only).
+    #[arg(long)]
+    greedy: bool,
 }
 
 /// The forms of an exported policy.
@@ -41,6 +46,9 @@ pub(crate) fn run(args: ExportArgs) -> anyhow::Result<()> {
         &[(Some(&args.out), "--out")],
         &[(Some(&args.policy), "--policy")],
     )?;
+    if args.greedy && args.format == Format::Rust {
+        bail!("--greedy: the decision tables are written in the binary format only (--format bin)");
+    }
     let PolicyFile::Fqi(artifact) = PolicyFile::load(&args.policy)? else {
         bail!(
             "--policy {}: only fuzzy Q-iteration policies can be exported (this one was learned \
@@ -49,7 +57,13 @@ pub(crate) fn run(args: ExportArgs) -> anyhow::Result<()> {
         );
     };
     let bytes = match args.format {
-        Format::Bin => export_bytes(&artifact, !args.no_values)?,
+        Format::Bin => export_bytes(
+            &artifact,
+            ExportOptions {
+                values: !args.no_values,
+                decisions: args.greedy,
+            },
+        )?,
         Format::Rust => export_rust(&artifact, !args.no_values)?.into_bytes(),
     };
     output::write_file(&args.out, &bytes)?;
@@ -66,6 +80,8 @@ pub(crate) fn run(args: ExportArgs) -> anyhow::Result<()> {
         artifact.greedy.len(),
         if args.no_values {
             ", without V"
+        } else if args.greedy {
+            ", with V and the decision tables"
         } else {
             ", with V"
         }

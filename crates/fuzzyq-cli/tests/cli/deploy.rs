@@ -2,7 +2,9 @@
 //! example controller (`examples/embedded-controller`) in a closed loop against the model,
 //! and gives the actions and states of `fuzzyq rollout --policy-kind interpolated`, step by
 //! step, bit for bit: the DC motor (also as the controller's compiled-in policy, both the
-//! binary and the generated Rust module), the pendulum and the paper's point masses.
+//! binary and the generated Rust module), the pendulum and the paper's point masses. The
+//! greedy policy (`fuzzyq rollout`'s default) too: from the export's decision tables for the
+//! point masses, and from `V` and the model for the DC motor and the pendulum.
 
 use std::path::Path;
 
@@ -69,9 +71,16 @@ impl<T: ViewReal, P: Plant> Io<T> for ModelIo<'_, P> {
     }
 }
 
-/// Runs `policy` in the example controller's loop against the model of the policy file `fzq`
+/// Runs `controller` in the example's control loop against the model of the policy file `fzq`
 /// from the CSV's first state, and checks every state and action against the CSV's.
 fn same_closed_loop<T: ViewReal>(policy: PolicyView<'_, T>, fzq: &Path, csv: &Path) {
+    let fallback = vec![T::ZERO; policy.joint().dim()];
+    let controller = Controller::new(policy, &fallback).unwrap();
+    same_loop(controller, fzq, csv);
+}
+
+fn same_loop<T: ViewReal>(mut controller: Controller<'_, T>, fzq: &Path, csv: &Path) {
+    let policy = *controller.view();
     let PolicyFile::Fqi(artifact) = PolicyFile::load(fzq).unwrap() else {
         panic!("not a fuzzy Q-iteration policy")
     };
@@ -80,8 +89,6 @@ fn same_closed_loop<T: ViewReal>(policy: PolicyView<'_, T>, fzq: &Path, csv: &Pa
     let want = rows(csv);
     let (e, m) = (policy.grid().n_dims(), policy.joint().dim());
     plant.reset(&want[0][..e]).unwrap();
-    let fallback = vec![T::ZERO; m];
-    let mut controller = Controller::new(policy, &fallback).unwrap();
     let (mut x, mut u) = (vec![T::ZERO; e], vec![T::ZERO; m]);
     let steps = want.len() - 1;
     let mut io = ModelIo {
@@ -93,6 +100,37 @@ fn same_closed_loop<T: ViewReal>(policy: PolicyView<'_, T>, fzq: &Path, csv: &Pa
     let ran = run(&mut controller, &mut io, &mut x, &mut u);
     assert_eq!(ran, steps as u64);
     assert_eq!(controller.faults(), 0);
+}
+
+/// The greedy policy from `view` and the model of the policy file `fzq` (the controller has
+/// the model), against the model, checked against the rollout in `csv` step by step.
+fn same_greedy_with_model(view: PolicyView<'_, f64>, fzq: &Path, csv: &Path) {
+    let PolicyFile::Fqi(artifact) = PolicyFile::load(fzq).unwrap() else {
+        panic!("not a fuzzy Q-iteration policy")
+    };
+    let model = artifact.config.build_model().unwrap();
+    let backup = fuzzyq_core::Backup {
+        gamma: artifact.config.solver.gamma,
+        absorbing_goal: artifact.config.solver.absorbing_goal,
+    };
+    let mut plant = ModelPlant::new(&model);
+    let want = rows(csv);
+    let (e, joint) = (view.grid().n_dims(), *view.joint());
+    plant.reset(&want[0][..e]).unwrap();
+    let mut scratch = vec![0.0; fuzzyq_core::backup::scratch_len(e, joint.dim())];
+    let (mut row, mut q) = (vec![0.0; joint.n_joint()], vec![0.0; joint.n_joint()]);
+    let mut u = vec![0.0; joint.dim()];
+    for (k, w) in want[..want.len() - 1].iter().enumerate() {
+        let x = plant.observe().state.to_vec();
+        assert_eq!(x, &w[..e], "state at step {k}");
+        view.q_values_with_model(&model, backup, &x, &mut scratch, &mut row, &mut q)
+            .unwrap();
+        joint
+            .vector(fuzzyq_core::q::argmax(&q).unwrap(), &mut u)
+            .unwrap();
+        assert_eq!(u, &w[e..e + u.len()], "action at step {k}");
+        plant.step(&u).unwrap();
+    }
 }
 
 /// Trains with `train` (arguments after `train`), exports the policy in both forms and rolls
@@ -142,6 +180,23 @@ fn exported_policies_act_in_the_embedded_controller_as_the_cli_rollout() {
         let (buf, at) = placed(&exported);
         let view = PolicyView::<f64>::parse(&buf[at..]).unwrap();
         same_closed_loop(view, &d.join("p.fzq"), &d.join("r.csv"));
+        // The greedy policy (the rollout's default), where the controller has the model.
+        let o = fuzzyq(
+            &[
+                "rollout",
+                "--policy",
+                "p.fzq",
+                "--x0=-1,0",
+                "--steps",
+                "150",
+                "--csv",
+                "g.csv",
+                "-q",
+            ],
+            d,
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        same_greedy_with_model(view, &d.join("p.fzq"), &d.join("g.csv"));
         if env == "dcmotor" {
             // The controller's compiled-in policy is this one: regenerate it with the
             // commands of examples/embedded-controller/src/lib.rs when this fails.
@@ -162,11 +217,26 @@ fn exported_policies_act_in_the_embedded_controller_as_the_cli_rollout() {
             );
         }
     }
-    // The paper's two point masses (4.1 million cores, f32, 625 joint actions as u16).
+    // The paper's two point masses (4.1 million cores, f32, 625 joint actions as u16): the
+    // interpolated policy, then the greedy one (the default of `fuzzyq rollout`) from the
+    // export's decision tables.
     let exported = train_export_rollout(d, &["--env", "pointmass"], &[]);
     let (buf, at) = placed(&exported);
     let view = PolicyView::<f32>::parse(&buf[at..]).unwrap();
     same_closed_loop(view, &d.join("p.fzq"), &d.join("r.csv"));
+    let export = ["export", "--policy", "p.fzq", "--greedy", "--out", "g.bin"];
+    let o = fuzzyq(&export, d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = fuzzyq(&["rollout", "--policy", "p.fzq", "--csv", "g.csv", "-q"], d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let exported = std::fs::read(d.join("g.bin")).unwrap();
+    let (buf, at) = placed(&exported);
+    let view = PolicyView::<f32>::parse(&buf[at..]).unwrap();
+    let mut scratch = vec![0u64; view.decision_scratch_len().unwrap()];
+    let mut q = vec![0.0f32; view.joint().n_joint()];
+    let fallback = [0.0f32; 4];
+    let greedy = Controller::greedy(view, &fallback, &mut scratch, &mut q).unwrap();
+    same_loop(greedy, &d.join("p.fzq"), &d.join("g.csv"));
 }
 
 #[test]

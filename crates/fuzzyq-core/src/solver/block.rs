@@ -1257,7 +1257,7 @@ impl<T: Real> BlockOperator<T> {
 }
 
 #[path = "block_decide.rs"]
-mod decide;
+pub(super) mod decide;
 use decide::QWork;
 
 #[cfg(test)]

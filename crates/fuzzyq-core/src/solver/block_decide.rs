@@ -433,3 +433,133 @@ fn for_each_core<T: Real>(segs: &[Segment<T>], mut f: impl FnMut(&[usize], T)) {
         f(&idx[..segs.len()], mu);
     }
 }
+
+/// What a controller needs to take the greedy decisions of [`Operator::q_values`] without
+/// the model: the block path's tables, the map from joint actions to their block actions, the
+/// discount and the per-core rewards ([`Operator::decision_tables`]; written into an exported
+/// policy by `fuzzyq export --greedy` and read by [`crate::view::PolicyView::q_values`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecisionTables<T> {
+    /// The discount `gamma`.
+    pub gamma: T,
+    /// The blocks in contraction order: the block of the largest grid strides first.
+    pub blocks: Vec<DecisionBlock<T>>,
+    /// Per joint action: its position in the contraction's result, `[a_0][a_1]..` over the
+    /// blocks in contraction order (the first slowest).
+    pub q_index: Vec<u32>,
+    /// `rho(x_d)` per core, row-major grid order.
+    pub rewards: Vec<T>,
+}
+
+/// One block of [`DecisionTables`]: its transition rows over block cores, numbered row-major
+/// over [`Self::dims`] (the last fastest).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DecisionBlock<T> {
+    /// The block's state variables, increasing.
+    pub dims: Vec<u32>,
+    /// Block actions (rows per block core).
+    pub n_actions: u32,
+    /// Row `c * n_actions + a` holds entries `ptr[i]..ptr[i + 1]` of `col` and `weight`.
+    pub ptr: Vec<u32>,
+    /// Successor block core of each entry, increasing within a row.
+    pub col: Vec<u32>,
+    /// Successor membership of each entry.
+    pub weight: Vec<T>,
+    /// The most block cores the rows of one state's active block cores reach, over every
+    /// state: the bound a decision's buffers are sized by.
+    pub max_support: u32,
+}
+
+impl<T: Real> BlockOperator<T> {
+    /// See [`Operator::decision_tables`].
+    pub(in crate::solver) fn decision_tables<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+    ) -> Result<DecisionTables<T>, SolveError> {
+        let refuse = |why| Err(SolveError::NoDecisionTables { why });
+        if self.terminals.is_some() {
+            return refuse("the model has terminal states");
+        }
+        if op.backup.absorbing_goal {
+            return refuse("the backup has an absorbing goal");
+        }
+        let Some(internal_rewards) = op
+            .rewards
+            .as_deref()
+            .filter(|_| !op.model.reward_depends_on_action())
+        else {
+            return refuse("the reward depends on the action");
+        };
+        let mut rewards = vec![T::ZERO; internal_rewards.len()];
+        for (i, &r) in internal_rewards.iter().enumerate() {
+            rewards[self.to_grid_index(i)] = r;
+        }
+        let blocks = self
+            .q
+            .gather_order
+            .iter()
+            .map(|&b| {
+                let t = &self.tables[b];
+                let rows = t.rows.view();
+                let n_rows = rows.n_rows();
+                let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
+                for i in 0..n_rows {
+                    let (c, w) = rows.row(i);
+                    col.extend_from_slice(c);
+                    weight.extend_from_slice(w);
+                    ptr.push(col.len() as u32);
+                }
+                DecisionBlock {
+                    dims: t.dims.iter().map(|&d| d as u32).collect(),
+                    n_actions: t.n_actions as u32,
+                    ptr,
+                    col,
+                    weight,
+                    max_support: max_support(t, op) as u32,
+                }
+            })
+            .collect();
+        Ok(DecisionTables {
+            gamma: op.gamma,
+            blocks,
+            q_index: self.q.q_index.clone(),
+            rewards,
+        })
+    }
+}
+
+/// The most block cores that the rows of the active block cores of one state reach, over every
+/// state: per cell of the block's grid (each variable's lower core, and the next one if there
+/// is one), the union of its corner cores' rows over every block action.
+fn max_support<T: Real, M: ?Sized>(t: &BlockTable<T>, op: &Operator<'_, T, M>) -> usize {
+    let counts: Vec<usize> = t.dims.iter().map(|&d| op.grid.dim(d).n_cores()).collect();
+    let mut seen = vec![usize::MAX; t.n_cores];
+    let mut best = 0;
+    for cell in 0..t.n_cores {
+        let mut n = 0;
+        let k = counts.len();
+        for corner in 0..(1usize << k) {
+            let mut c = 0;
+            let mut inside = true;
+            for (j, (&count, &stride)) in counts.iter().zip(&t.strides).enumerate() {
+                let lower = (cell / stride) % count;
+                let i = lower + ((corner >> j) & 1);
+                inside &= i < count;
+                c += i * stride;
+            }
+            if !inside {
+                continue;
+            }
+            for a in 0..t.n_actions {
+                for &s in t.row(c, a).0 {
+                    if seen[s as usize] != cell {
+                        seen[s as usize] = cell;
+                        n += 1;
+                    }
+                }
+            }
+        }
+        best = best.max(n);
+    }
+    best
+}

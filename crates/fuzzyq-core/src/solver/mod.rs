@@ -94,6 +94,7 @@ mod state;
 mod sweeps;
 mod table;
 
+pub use block::decide::{DecisionBlock, DecisionTables};
 pub use iterate::{solve, solve_from, solve_on};
 pub use qiter::{QSolution, solve_q};
 pub use slabs::SlabLayout;
@@ -460,6 +461,11 @@ pub enum SolveError {
     },
     /// The requested kernel instance cannot run on this CPU.
     KernelUnavailable(Kernel),
+    /// [`Operator::decision_tables`] on an operator whose greedy decisions need the model.
+    NoDecisionTables {
+        /// Why.
+        why: &'static str,
+    },
     /// [`Operator::evaluate_policy`] on an operator that cannot evaluate a policy.
     PolicyEvaluation,
     /// A state to continue from ([`solve_from`]) does not fit the run.
@@ -513,6 +519,12 @@ impl core::fmt::Display for SolveError {
             }
             Self::NonFinite { what } => write!(f, "the model produced a non-finite {what}"),
             Self::TooLarge { what } => write!(f, "the {what} would exceed 2^32 entries"),
+            Self::NoDecisionTables { why } => write!(
+                f,
+                "greedy decisions need the model here ({why}): only a block-path operator \
+                 without terminal states or an absorbing goal, with rewards of the state alone, \
+                 can be written as tables"
+            ),
             Self::KernelUnavailable(k) => {
                 write!(f, "this CPU cannot run the {} kernels", k.name())
             }
@@ -1214,6 +1226,18 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let mut out = vec![0u32; self.n_cores()];
         self.greedy_internal(&vi, &mut out)?;
         Ok(self.to_grid(&out))
+    }
+
+    /// What a controller needs to take the greedy decisions of [`Self::q_values`] without the
+    /// model ([`DecisionTables`]): block path only, without terminal states or an absorbing
+    /// goal, with rewards of the state alone ([`SolveError::NoDecisionTables`] otherwise).
+    pub fn decision_tables(&self) -> Result<DecisionTables<T>, SolveError> {
+        match &self.path {
+            Path::Block(b) => b.decision_tables(self),
+            Path::Generic(_) => Err(SolveError::NoDecisionTables {
+                why: "the operator takes the generic path",
+            }),
+        }
     }
 
     /// `out[u] = Q(x, u) = sum_d mu_d(x) theta[d, u]` at any state `x`, with

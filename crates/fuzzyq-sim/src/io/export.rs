@@ -4,18 +4,90 @@
 //!
 //! - [`export_bytes`]: the compact binary format that [`fuzzyq_core::view::PolicyView::parse`]
 //!   checks and borrows in place (the format is specified there), for `include_bytes!` or
-//!   flash memory;
+//!   flash memory; with [`ExportOptions::decisions`], also the block path's tables and the
+//!   rewards, so that the view takes greedy decisions without the model;
 //! - [`export_rust`]: a Rust module of `static` arrays whose `view()` builds the same
 //!   [`fuzzyq_core::view::PolicyView`] with [`fuzzyq_core::view::PolicyView::from_parts`]
 //!   (no parsing, no checksum; the compiler checks the types).
 
 use std::fmt::Write as _;
 
+use fuzzyq_core::solver::{BackupPath, DecisionTables, Operator};
 use fuzzyq_core::view::{HEADER_LEN, MAGIC, VERSION, crc32, padding};
-use fuzzyq_core::{Membership, Model};
+use fuzzyq_core::{Backup, Membership, Model, Real};
 
 use crate::error::SimError;
+use crate::io::config::TrainConfig;
 use crate::io::policy_file::{PolicyArtifact, Values};
+
+/// What an exported policy holds besides its grid, actions and greedy actions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExportOptions {
+    /// `V` per core: the value at any state, and the greedy policy's `Q(x, .)`.
+    pub values: bool,
+    /// The decision tables (with `V`): the greedy policy without the model
+    /// ([`DecisionTables`]; block-path models only).
+    pub decisions: bool,
+}
+
+impl Default for ExportOptions {
+    /// `V`, no decision tables.
+    fn default() -> Self {
+        Self {
+            values: true,
+            decisions: false,
+        }
+    }
+}
+
+/// The decision tables of `config`'s operator in precision `T` (the operator the greedy
+/// rollout uses: the automatic backup path).
+fn decision_tables<T: Real>(config: &TrainConfig) -> Result<DecisionTables<T>, SimError>
+where
+    crate::model::EnvModel: Model<T> + Sync,
+{
+    let model = config.build_model()?;
+    let grid = config.grid::<T>()?;
+    let backup = Backup {
+        gamma: T::from_f64(config.solver.gamma),
+        absorbing_goal: config.solver.absorbing_goal,
+    };
+    let op = Operator::new(&model, grid.view(), backup, BackupPath::Auto)?;
+    Ok(op.decision_tables()?)
+}
+
+/// The decision tables' sections (the format of `fuzzyq_core::view`'s `decide` module), values
+/// written by `real`.
+fn decision_sections<T: Real>(
+    t: &DecisionTables<T>,
+    real: &dyn Fn(f64) -> Vec<u8>,
+    section: &mut dyn FnMut(&[u8]),
+) {
+    let u32s =
+        |v: &mut dyn Iterator<Item = u32>| -> Vec<u8> { v.flat_map(u32::to_le_bytes).collect() };
+    let reals =
+        |v: &mut dyn Iterator<Item = T>| -> Vec<u8> { v.flat_map(|x| real(x.to_f64())).collect() };
+    section(&u32s(&mut [t.blocks.len() as u32, 0].into_iter()));
+    section(&u32s(&mut t.blocks.iter().flat_map(|b| {
+        [
+            b.dims.len() as u32,
+            b.n_actions,
+            b.col.len() as u32,
+            b.max_support,
+        ]
+    })));
+    section(&u32s(
+        &mut t.blocks.iter().flat_map(|b| b.dims.iter().copied()),
+    ));
+    section(&u32s(&mut t.q_index.iter().copied()));
+    for b in &t.blocks {
+        section(&u32s(&mut b.ptr.iter().copied()));
+        section(&u32s(&mut b.col.iter().copied()));
+        section(&reals(&mut b.weight.iter().copied()));
+    }
+    section(&reals(&mut core::iter::once(t.gamma)));
+    section(&reals(&mut t.rewards.iter().copied()));
+}
 
 /// What both forms hold, gathered from a policy.
 struct Parts<'p> {
@@ -73,8 +145,19 @@ impl<'p> Parts<'p> {
     }
 }
 
-/// The bytes of `artifact` exported (with `V` if `with_values`).
-pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<u8>, SimError> {
+/// The bytes of `artifact` exported with what `options` asks for.
+pub fn export_bytes(
+    artifact: &PolicyArtifact,
+    options: ExportOptions,
+) -> Result<Vec<u8>, SimError> {
+    let with_values = options.values;
+    if options.decisions && !with_values {
+        return Err(crate::error::ConfigError::invalid(
+            "export",
+            "the decision tables need V: export them with the values",
+        )
+        .into());
+    }
     let parts = Parts::of(artifact)?;
     let value_bytes = parts.value_bytes();
     let real = |x: f64| -> Vec<u8> {
@@ -137,6 +220,17 @@ pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<
         };
         section(&mut payload, &v);
     }
+    if options.decisions {
+        let mut add = |b: &[u8]| section(&mut payload, b);
+        match artifact.values {
+            Values::F32(_) => {
+                decision_sections(&decision_tables::<f32>(&artifact.config)?, &real, &mut add)
+            }
+            Values::F64(_) => {
+                decision_sections(&decision_tables::<f64>(&artifact.config)?, &real, &mut add)
+            }
+        }
+    }
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len() + 8);
     out.extend_from_slice(&MAGIC);
     for field in [
@@ -154,7 +248,7 @@ pub fn export_bytes(artifact: &PolicyArtifact, with_values: bool) -> Result<Vec<
     }
     out.extend_from_slice(&(artifact.greedy.len() as u64).to_le_bytes());
     out.extend_from_slice(&u32::from(with_values).to_le_bytes());
-    out.extend_from_slice(&[0; 4]);
+    out.extend_from_slice(&u32::from(options.decisions).to_le_bytes());
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     out.extend_from_slice(&[0; 8]);
     out.extend_from_slice(&payload);
@@ -219,7 +313,7 @@ pub fn export_rust(artifact: &PolicyArtifact, with_values: bool) -> Result<Strin
         "//! A fuzzy Q-iteration policy, generated by `fuzzyq export --format rust` (regenerate it \
          rather\n//! than edit it): {n_cores} cores over {n_dims} state variables, {n_agents} \
          agent(s), {} joint actions,\n//! `{t}` values, greedy actions as `{g}`{}.\n//!\n//! \
-         [`view`] checks the arrays into a `fuzzyq_core::view::PolicyView` (no allocation); it \
+         `view()` checks the arrays into a `fuzzyq_core::view::PolicyView` (no allocation); it \
          acts\n//! with `interpolated_action(x, u)`. The module needs only `fuzzyq-core` with \
          no default features;\n//! declare it with `#[rustfmt::skip]` to keep its long \
          arrays as they are.\n",

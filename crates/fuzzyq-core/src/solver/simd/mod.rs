@@ -85,7 +85,7 @@ impl<T: Real> RowsBuf<T> {
 impl<'a, T: Real> Rows<'a, T> {
     /// A view of borrowed compressed rows after the checks of [`RowsBuf::new`] (`None` if
     /// one fails).
-    pub(in crate::solver) fn checked(
+    pub(crate) fn checked(
         ptr: &'a [u32],
         col: &'a [u32],
         weight: &'a [T],
@@ -213,7 +213,7 @@ pub struct Kernels<T> {
     /// The fused multiply-add throughput probe ([`super::fma_peak`]).
     pub(super) peak: PeakFn<T>,
     /// One contraction stage.
-    pub(super) stage: StageFn<T>,
+    pub(crate) stage: StageFn<T>,
     /// The last stage fused with the maximum (and the lowest maximiser).
     pub(super) last: LastFn<T>,
     /// The last stage for one given action per core (policy evaluation).

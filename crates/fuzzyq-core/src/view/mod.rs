@@ -16,10 +16,11 @@
 //! | 24 | state variables `E`, `u32` |
 //! | 28 | agents `N`, `u32` |
 //! | 32 | cores (the product of the core counts), `u64` |
-//! | 40 | whether `V` follows, `u32` (0 or 1); then 4 bytes of zeros |
+//! | 40 | whether `V` follows, `u32` (0 or 1) |
+//! | 44 | whether decision tables follow `V`, `u32` (0 or 1; see [`decide`]) |
 //! | 48 | payload bytes (everything after this 64-byte header up to the checksum), `u64` |
 //! | 56 | 8 bytes of zeros |
-//! | 64 | payload: `E` core counts (`u32`), then `N` pairs (actions, components) (`u32`); the cores of every variable; the actions of every agent (action-major); the greedy joint action of every core (row-major core order); `V` per core if present. Each section padded with zeros to a multiple of 8 bytes |
+//! | 64 | payload: `E` core counts (`u32`), then `N` pairs (actions, components) (`u32`); the cores of every variable; the actions of every agent (action-major); the greedy joint action of every core (row-major core order); `V` per core if present; the decision tables if present. Each section padded with zeros to a multiple of 8 bytes |
 //! | 64 + payload | CRC-32 (ISO-HDLC, as zlib's) of every byte before it, `u32`, then 4 bytes of zeros |
 //!
 //! The view refuses, with a typed [`ViewError`], bytes that are not such a file, that are cut
@@ -27,12 +28,32 @@
 //! values are borrowed as `&[f32]`/`&[f64]`: place the bytes at an 8-byte boundary, for
 //! example in a `#[repr(align(8))]` wrapper), or whose contents are invalid (unsorted cores,
 //! greedy actions that name no joint action).
+//!
+//! # Decisions
+//! - The interpolated policy (eq 22) needs the greedy actions only:
+//!   [`PolicyView::interpolated_action`].
+//! - The greedy policy (eq 7) needs `Q(x, .)`, so `V` and the model's transitions:
+//!   - from the decision tables an export with `--greedy` carries (block-path models: the
+//!     paper's point masses), without the model: [`PolicyView::q_values`] and
+//!     [`PolicyView::greedy_action`] on a caller's scratch of
+//!     [`PolicyView::decision_scratch_len`] words;
+//!   - or from the model, where the controller has one (any model implementing
+//!     [`crate::Model`]): [`PolicyView::q_values_with_model`].
+//!
+//!   Both give the bits of the solver's `Operator::q_values` on the laptop.
+
+pub mod decide;
+
+pub use decide::DecideError;
+use decide::Decisions;
 
 use core::fmt;
 
 use crate::action::{ActionSet, JointActions};
+use crate::backup::Backup;
 use crate::error::{EvalError, PartitionError};
 use crate::limits::{MAX_AGENTS, MAX_DIMS};
+use crate::model::Model;
 use crate::partition::{Membership, ProductPartition};
 use crate::q::{GreedyTable, interpolated_action_in};
 use crate::real::Real;
@@ -172,9 +193,22 @@ impl GreedyTable for Greedy<'_> {
 pub struct Aligned<B: ?Sized>(pub B);
 
 /// A value type a view can borrow from bytes (`f32`, `f64`).
-pub trait ViewReal: Real + bytemuck::Pod {}
-impl ViewReal for f32 {}
-impl ViewReal for f64 {}
+pub trait ViewReal: Real + bytemuck::Pod {
+    /// `a * b + c` rounded once (the fused multiply-add of the solver's kernels).
+    fn fma(a: Self, b: Self, c: Self) -> Self;
+}
+impl ViewReal for f32 {
+    #[inline]
+    fn fma(a: Self, b: Self, c: Self) -> Self {
+        libm::fmaf(a, b, c)
+    }
+}
+impl ViewReal for f64 {
+    #[inline]
+    fn fma(a: Self, b: Self, c: Self) -> Self {
+        libm::fma(a, b, c)
+    }
+}
 
 /// An exported policy, checked and borrowed in place: its grid, joint action set, greedy
 /// actions and optionally `V`. No allocation; a `no_std` controller can hold one in a
@@ -185,6 +219,7 @@ pub struct PolicyView<'a, T> {
     joint: JointActions<'a, T>,
     greedy: Greedy<'a>,
     v: Option<&'a [T]>,
+    decisions: Option<Decisions<'a, T>>,
 }
 
 /// Reads little-endian fields at increasing offsets.
@@ -262,7 +297,7 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         let (n_dims, n_agents) = (r.u32()? as usize, r.u32()? as usize);
         let n_cores = usize::try_from(r.u64()?).map_err(|_| ViewError::Header { what: "cores" })?;
         let has_v = r.u32()?;
-        r.take(4)?;
+        let has_tables = r.u32()?;
         let payload = usize::try_from(r.u64()?).map_err(|_| ViewError::Header {
             what: "payload length",
         })?;
@@ -295,6 +330,15 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
             0 => false,
             1 => true,
             _ => return Err(ViewError::Header { what: "V flag" }),
+        };
+        let has_tables = match (has_tables, has_v) {
+            (0, _) => false,
+            (1, true) => true,
+            _ => {
+                return Err(ViewError::Header {
+                    what: "decision tables flag",
+                });
+            }
         };
         let expected = core::mem::size_of::<T>() as u32;
         if value_bytes != expected {
@@ -374,12 +418,19 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         } else {
             None
         };
+        let decisions = if has_tables {
+            Some(Decisions::read(&mut r, &grid, joint.n_joint())?)
+        } else {
+            None
+        };
         if r.at != end {
             return Err(ViewError::Header {
                 what: "payload length",
             });
         }
-        Self::from_parts(grid, joint, greedy, v)
+        let mut view = Self::from_parts(grid, joint, greedy, v)?;
+        view.decisions = decisions;
+        Ok(view)
     }
 
     /// A view of parts already in memory, for example the `static` arrays of a module that
@@ -424,6 +475,7 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
             joint,
             greedy,
             v,
+            decisions: None,
         })
     }
 
@@ -456,6 +508,75 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
     /// exported from.
     pub fn interpolated_action(&self, x: &[T], out: &mut [T]) -> Result<(), EvalError> {
         interpolated_action_in(&self.grid, &self.joint, &self.greedy, x, out)
+    }
+
+    /// Whether the export carries decision tables (`fuzzyq export --greedy`), so that
+    /// [`Self::q_values`] and [`Self::greedy_action`] work without the model.
+    #[must_use]
+    pub fn has_decision_tables(&self) -> bool {
+        self.decisions.is_some()
+    }
+
+    /// The `u64` words of scratch [`Self::q_values`] and [`Self::greedy_action`] need
+    /// (`None` without decision tables): a controller sizes a `static` buffer by it.
+    #[must_use]
+    pub fn decision_scratch_len(&self) -> Option<usize> {
+        self.decisions.map(|d| d.scratch_words())
+    }
+
+    /// `out[u] = Q(x, u)` for every joint action (`joint().n_joint()` values) from the
+    /// decision tables and `V`, on the caller's `scratch` (at least
+    /// [`Self::decision_scratch_len`] words): the bits of the solver's `Operator::q_values`.
+    /// No allocation.
+    pub fn q_values(&self, x: &[T], scratch: &mut [u64], out: &mut [T]) -> Result<(), DecideError> {
+        let (Some(d), Some(v)) = (&self.decisions, self.v) else {
+            return Err(DecideError::NoTables);
+        };
+        Ok(d.q_values(&self.grid, v, x, scratch, out)?)
+    }
+
+    /// The greedy policy (eq 7) at `x` from the decision tables: writes `Q(x, .)` into `q`
+    /// (`joint().n_joint()` values) and the action vector into `u` (`joint().dim()` values),
+    /// and returns the joint action index (the lowest on ties, as the solver's).
+    pub fn greedy_action(
+        &self,
+        x: &[T],
+        scratch: &mut [u64],
+        q: &mut [T],
+        u: &mut [T],
+    ) -> Result<usize, DecideError> {
+        crate::error::check_len("joint action vector", self.joint.dim(), u.len())?;
+        self.q_values(x, scratch, q)?;
+        let best = crate::q::argmax(q).unwrap_or(0);
+        self.joint.vector(best, u)?;
+        Ok(best)
+    }
+
+    /// `out[u] = Q(x, u)` from `V` and a model the controller has (any [`Model`]: the
+    /// generic backup, [`crate::backup::q_values_from_v`]); `scratch` and `row` as that
+    /// function takes them. The bits of the solver's generic path.
+    #[allow(clippy::too_many_arguments)] // a backup's inputs, spelled out.
+    pub fn q_values_with_model<M: Model<T> + ?Sized>(
+        &self,
+        model: &M,
+        backup: Backup<T>,
+        x: &[T],
+        scratch: &mut [T],
+        row: &mut [T],
+        out: &mut [T],
+    ) -> Result<(), DecideError> {
+        let v = self.v.ok_or(DecideError::NoValues)?;
+        Ok(crate::backup::q_values_from_v(
+            model,
+            &self.grid,
+            &self.joint,
+            v,
+            backup,
+            x,
+            scratch,
+            row,
+            out,
+        )?)
     }
 
     /// `V` interpolated at `x` (`None` if `V` was not exported).
