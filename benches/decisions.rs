@@ -8,7 +8,8 @@
 //! policy (`fuzzyq_core::view::PolicyView`, no allocation), on trained policies: the paper's
 //! point masses (`fuzzyq export --greedy`: greedy from the decision tables), the DC motor and
 //! the pendulum (`toolbox-demo`; greedy from `V` and the model). The exported sizes are
-//! printed.
+//! printed. The paper's greedy decision is timed on a plain buffer (4 KiB pages) and as
+//! `fuzzyq_sim::io::export::ExportedBytes` loads it (transparent huge pages on Linux).
 #![allow(missing_docs)]
 
 use std::hint::black_box;
@@ -23,7 +24,7 @@ use fuzzyq_core::view::{PolicyView, ViewReal};
 use fuzzyq_core::{Backup, Model, Real, q};
 use fuzzyq_sim::PolicyArtifact;
 use fuzzyq_sim::io::config::EnvConfig;
-use fuzzyq_sim::io::export::{ExportOptions, export_bytes};
+use fuzzyq_sim::io::export::{ExportOptions, ExportedBytes, export_bytes};
 use fuzzyq_sim::io::policy_file::Values;
 use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::model::classic::{Classic, DcMotor, Dynamics, preset};
@@ -193,15 +194,22 @@ fn bench_view<T: ViewReal>(
     });
     if tables {
         let mut scratch = vec![0u64; view.decision_scratch_len().unwrap()];
-        g.bench_function(format!("greedy_{name}"), |b| {
-            b.iter(|| {
-                i = (i + 1) % STATES;
-                black_box(
-                    view.greedy_action(black_box(&states[i]), &mut scratch, &mut q, &mut u)
-                        .unwrap(),
-                )
-            })
-        });
+        // On 4 KiB pages (a plain buffer), then as a controller with std loads it
+        // (`ExportedBytes`: advised into transparent huge pages).
+        let loaded = ExportedBytes::copy_of(&bytes).unwrap();
+        let huge = PolicyView::<T>::parse(loaded.bytes()).unwrap();
+        for (suffix, v) in [("_small_pages", &view), ("", &huge)] {
+            g.bench_function(format!("greedy_{name}{suffix}"), |b| {
+                b.iter(|| {
+                    i = (i + 1) % STATES;
+                    black_box(
+                        v.greedy_action(black_box(&states[i]), &mut scratch, &mut q, &mut u)
+                            .unwrap(),
+                    )
+                })
+            });
+        }
+        let view = huge;
         // In a control loop: the states of the greedy closed loop from the paper's start
         // (consecutive states are close, so their boxes of V overlap in the caches).
         let model = artifact.config.build_model().unwrap();

@@ -9,7 +9,7 @@ use fuzzyq_core::solver::{BackupPath, Operator};
 use fuzzyq_core::view::{DecideError, Greedy, PolicyView, ViewError, ViewReal, crc32};
 use fuzzyq_core::{EvalError, q, solver::Precision};
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, TrainConfig};
-use fuzzyq_sim::io::export::{ExportOptions, export_bytes};
+use fuzzyq_sim::io::export::{ExportOptions, ExportedBytes, export_bytes};
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, Values};
 use fuzzyq_sim::model::Wide;
 
@@ -229,6 +229,20 @@ fn greedy_decisions_from_the_decision_tables_have_the_solvers_bits() {
         decisions: true,
     };
     assert!(export_bytes(&one, options).is_err());
+}
+
+#[test]
+fn exported_bytes_read_back_for_a_std_controller() {
+    let artifact = trained(1, Precision::F32);
+    let bytes = export_bytes(&artifact, ExportOptions::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("p.bin");
+    std::fs::write(&path, &bytes).unwrap();
+    let loaded = ExportedBytes::read(&path).unwrap();
+    assert_eq!(loaded.bytes(), &bytes[..]);
+    PolicyView::<f32>::parse(loaded.bytes()).unwrap();
+    let missing = ExportedBytes::read(&dir.path().join("none.bin")).unwrap_err();
+    assert!(missing.to_string().contains("none.bin"), "{missing}");
 }
 
 #[test]
