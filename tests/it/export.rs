@@ -232,6 +232,46 @@ fn greedy_decisions_from_the_decision_tables_have_the_solvers_bits() {
 }
 
 #[test]
+fn decision_tables_with_an_empty_row_are_refused() {
+    // One point mass in f32: the first block's row starts follow the header, the sections of
+    // the grid, actions, greedy actions and V, and the tables' shapes, variables and joint
+    // actions (every section padded to 8 bytes).
+    let artifact = trained(1, Precision::F32);
+    let options = ExportOptions {
+        values: true,
+        decisions: true,
+    };
+    let mut bytes = export_bytes(&artifact, options).unwrap();
+    let (buf, at) = placed(&bytes, 0);
+    let view = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap();
+    let pad = |n: usize| n.div_ceil(8) * 8;
+    let (e, n) = (view.grid().n_dims(), view.grid().n_cores());
+    let cores: usize = (0..e).map(|d| view.grid().dim(d).n_cores()).sum();
+    let (m, dim) = (view.joint().n_joint(), view.joint().dim());
+    let mut ptr =
+        64 + pad(4 * e) + pad(8) + pad(4 * cores) + pad(4 * m * dim) + pad(n) + pad(4 * n);
+    let nb = u32::from_le_bytes(bytes[ptr..ptr + 4].try_into().unwrap()) as usize;
+    ptr += 8 + pad(16 * nb) + pad(4 * e) + pad(4 * m);
+    let first = |b: &[u8], i: usize| {
+        u32::from_le_bytes(b[ptr + 4 * i..ptr + 4 * i + 4].try_into().unwrap())
+    };
+    assert_eq!(first(&bytes, 0), 0, "the first row start");
+    assert!(first(&bytes, 1) > 0);
+    // Row 0 emptied (its entries handed to row 1), the checksum made right again.
+    bytes[ptr + 4..ptr + 8].copy_from_slice(&0u32.to_le_bytes());
+    let end = bytes.len() - 8;
+    let crc = crc32(&bytes[..end]);
+    bytes[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+    let (buf, at) = placed(&bytes, 0);
+    assert_eq!(
+        PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap_err(),
+        ViewError::Header {
+            what: "decision block rows"
+        }
+    );
+}
+
+#[test]
 fn exported_bytes_read_back_for_a_std_controller() {
     let artifact = trained(1, Precision::F32);
     let bytes = export_bytes(&artifact, ExportOptions::default()).unwrap();

@@ -221,8 +221,10 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
             let ptr: &[u32] = r.section(n_rows + 1)?;
             let col: &[u32] = r.section(nnz)?;
             let weight: &[T] = r.section(nnz)?;
+            // Every row holds a successor's memberships, so none is empty (an empty support
+            // would leave a decision nothing to contract).
             let rows_ok = ptr[0] == 0
-                && ptr.windows(2).all(|w| w[0] <= w[1])
+                && ptr.windows(2).all(|w| w[0] < w[1])
                 && ptr[n_rows] as usize == nnz
                 && col.iter().all(|&c| (c as usize) < n_cores)
                 && weight.iter().all(|w| w.is_finite() && *w >= T::ZERO);
