@@ -24,7 +24,8 @@
 //! | 64 + payload | CRC-32 (ISO-HDLC, as zlib's) of every byte before it, `u32`, then 4 bytes of zeros |
 //!
 //! The view refuses, with a typed [`ViewError`], bytes that are not such a file, that are cut
-//! short, damaged (checksum), of another precision or version, misaligned in memory (the
+//! short, damaged (checksum), of another precision or version, on a big-endian CPU (the values
+//! are borrowed as they are stored; a generated Rust module works there), misaligned in memory (the
 //! values are borrowed as `&[f32]`/`&[f64]`: place the bytes at an 8-byte boundary, for
 //! example in a `#[repr(align(8))]` wrapper), or whose contents are invalid (unsorted cores,
 //! greedy actions that name no joint action).
@@ -98,6 +99,9 @@ pub enum ViewError {
     },
     /// The bytes do not start at an 8-byte boundary, so the values cannot be borrowed.
     Misaligned,
+    /// This CPU is big-endian: the file's little-endian values cannot be borrowed in place
+    /// (a generated Rust module, `fuzzyq export --format rust`, works on any CPU).
+    BigEndian,
     /// A header field or section is invalid.
     Header {
         /// Which.
@@ -133,6 +137,11 @@ impl fmt::Display for ViewError {
                 f,
                 "exported policy not at an 8-byte boundary in memory (wrap it in a \
                  #[repr(align(8))] struct)"
+            ),
+            Self::BigEndian => write!(
+                f,
+                "exported policy: this CPU is big-endian and the file little-endian, so it \
+                 cannot be read in place (export with --format rust instead)"
             ),
             Self::Header { what } => write!(f, "exported policy: invalid {what}"),
             Self::Grid(e) => write!(f, "exported policy: grid: {e}"),
@@ -285,6 +294,9 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
             } else {
                 ViewError::NotAPolicy
             });
+        }
+        if cfg!(target_endian = "big") {
+            return Err(ViewError::BigEndian);
         }
         if bytes.as_ptr().align_offset(8) != 0 {
             return Err(ViewError::Misaligned);
