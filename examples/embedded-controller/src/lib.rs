@@ -12,8 +12,9 @@
 //!    [`DC_MOTOR_BIN`] and [`dc_motor`], the same policy.
 //! 3. Act: a [`Controller`] holds the view and gives the interpolated policy's action for
 //!    each measured state ([`Controller::new`]), or the greedy policy's from an export with
-//!    `--greedy` on buffers the caller provides ([`Controller::greedy`]); [`run`] is the control loop (sense, act, actuate through [`Io`]) that the
-//!    host tests drive against the model and the firmware entry point drives from C.
+//!    `--greedy` on buffers the caller provides ([`Controller::greedy`]). [`run`] is the
+//!    control loop (sense, act, actuate through [`Io`]) that the host tests drive against the
+//!    model and the firmware entry point drives from C.
 //!
 //! The firmware build (`--features firmware`, as a static library with `panic = "abort"`)
 //! adds a panic handler and `fuzzyq_dc_motor_loop`, a C entry point; it links without std and

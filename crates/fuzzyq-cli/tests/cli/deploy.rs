@@ -255,4 +255,18 @@ fn the_embedded_controller_falls_back_on_states_it_cannot_act_on() {
     assert_eq!(c.act(&[0.5, -3.0], &mut u), Decision::Policy);
     assert!(u[0].abs() <= 10.0 && u[0] != 7.0);
     assert!(Controller::new(view, &[0.0, 0.0]).is_err());
+    // From the binary form: the same action; bytes that are no policy, or a fallback of the
+    // wrong length, are refused.
+    let mut b = Controller::from_bytes(&DC_MOTOR_BIN.0, &[0.0]).unwrap();
+    let mut w = [7.0f64];
+    assert_eq!(b.act(&[0.5, -3.0], &mut w), Decision::Policy);
+    assert_eq!(w[0].to_bits(), u[0].to_bits());
+    assert_eq!(
+        Controller::<f64>::from_bytes(&DC_MOTOR_BIN.0[8..], &[0.0]).unwrap_err(),
+        fuzzyq_core::view::ViewError::NotAPolicy
+    );
+    assert!(matches!(
+        Controller::from_bytes(&DC_MOTOR_BIN.0, &[0.0, 0.0]),
+        Err(fuzzyq_core::view::ViewError::Actions(_))
+    ));
 }

@@ -299,13 +299,7 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
     ) -> Result<(), EvalError> {
         crate::error::check_len("Q-values", self.q_index.len(), out.len())?;
         let words = self.scratch_words();
-        if scratch.len() < words {
-            return Err(EvalError::Length {
-                what: "decision scratch (u64 words)",
-                expected: words,
-                found: scratch.len(),
-            });
-        }
+        crate::error::check_at_least("decision scratch (u64 words)", words, scratch.len())?;
         let active = grid.active(x)?;
         let (reals, u32s, u64s) = self.layout.regions();
         let mut rest = &mut scratch[..words];
@@ -351,11 +345,13 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                 xb[j] = x[d as usize];
             }
             let k = t.dims.len();
+            // The tables were checked when read (1 to `MAX_DIMS` distinct variables of a
+            // valid grid), so this cannot fail.
             let sub = ProductPartition::from_partitions(&parts[..k] as &[Partition<'a, T>])
-                .map_err(|_| EvalError::Length {
-                    what: "decision block",
-                    expected: k,
-                    found: 0,
+                .map_err(|_| EvalError::OutOfRange {
+                    what: "decision block state variables",
+                    index: k,
+                    len: MAX_DIMS,
                 })?;
             let mut n_act = 0;
             sub.active_unchecked(&xb[..k]).for_each(|c, m| {
@@ -498,8 +494,8 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
 
 /// One stage for each of `p` leading indices `i`: `out[(i A + a) r + j] = sum_e w_e
 /// input[(i K + k_e) r + j]` over row `a`'s entries in order (`K = n_cols` columns), fused
-/// multiply-adds from 0.
-#[cfg(feature = "std")]
+/// multiply-adds from 0: on the solver's run-time selected kernels with `std`, else on
+/// [`stage_scalar`] (the same bits).
 #[allow(clippy::too_many_arguments)] // a stage's shape and buffers, spelled out.
 fn stage<T: ViewReal>(
     ptr: &[u32],
@@ -511,37 +507,25 @@ fn stage<T: ViewReal>(
     input: &[T],
     out: &mut [T],
 ) {
-    let kernels = crate::solver::simd::select_real::<T>(None).expect("the scalar kernels exist");
-    let rows = crate::solver::simd::Rows::checked(ptr, col, weight, n_cols)
-        .expect("mixed rows hold memberships over their support");
     let a = ptr.len() - 1;
+    #[cfg(feature = "std")]
+    let (kernels, rows) = (
+        crate::solver::simd::select_real::<T>(None).expect("the scalar kernels exist"),
+        crate::solver::simd::Rows::checked(ptr, col, weight, n_cols)
+            .expect("mixed rows hold memberships over their support"),
+    );
     for (i, o) in out.chunks_exact_mut(a * r).take(p).enumerate() {
         // The chunk's input runs on into the next chunks' (or the padding).
-        (kernels.stage)(rows, 0, a, 1, r, &input[i * n_cols * r..], o);
+        let input = &input[i * n_cols * r..];
+        #[cfg(feature = "std")]
+        (kernels.stage)(rows, 0, a, 1, r, input, o);
+        #[cfg(not(feature = "std"))]
+        stage_scalar(ptr, col, weight, r, input, o);
     }
 }
 
-/// One stage without `std`: [`stage_scalar`] for each leading index.
-#[cfg(not(feature = "std"))]
-#[allow(clippy::too_many_arguments)] // a stage's shape and buffers, spelled out.
-fn stage<T: ViewReal>(
-    ptr: &[u32],
-    col: &[u32],
-    weight: &[T],
-    n_cols: usize,
-    p: usize,
-    r: usize,
-    input: &[T],
-    out: &mut [T],
-) {
-    let a = ptr.len() - 1;
-    for (i, o) in out.chunks_exact_mut(a * r).take(p).enumerate() {
-        stage_scalar(ptr, col, weight, r, &input[i * n_cols * r..], o);
-    }
-}
-
-/// One stage (see the `std` variant) on scalar fused multiply-adds: the same bits as the
-/// solver's kernels (each element's chain in the same order, every step rounded once).
+/// One stage (one leading index) on scalar fused multiply-adds: the same bits as the solver's
+/// kernels (each element's chain in the same order, every step rounded once).
 #[cfg_attr(all(feature = "std", not(test)), allow(dead_code))]
 fn stage_scalar<T: ViewReal>(
     ptr: &[u32],

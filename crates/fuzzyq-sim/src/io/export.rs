@@ -59,6 +59,11 @@ where
     Ok(op.decision_tables()?)
 }
 
+/// Little-endian bytes of `v`.
+fn u32_bytes(v: impl IntoIterator<Item = u32>) -> Vec<u8> {
+    v.into_iter().flat_map(u32::to_le_bytes).collect()
+}
+
 /// The decision tables' sections (the format of `fuzzyq_core::view`'s `decide` module), values
 /// written by `real`.
 fn decision_sections<T: Real>(
@@ -66,12 +71,9 @@ fn decision_sections<T: Real>(
     real: &dyn Fn(f64) -> Vec<u8>,
     section: &mut dyn FnMut(&[u8]),
 ) {
-    let u32s =
-        |v: &mut dyn Iterator<Item = u32>| -> Vec<u8> { v.flat_map(u32::to_le_bytes).collect() };
-    let reals =
-        |v: &mut dyn Iterator<Item = T>| -> Vec<u8> { v.flat_map(|x| real(x.to_f64())).collect() };
-    section(&u32s(&mut [t.blocks.len() as u32, 0].into_iter()));
-    section(&u32s(&mut t.blocks.iter().flat_map(|b| {
+    let reals = |v: &[T]| -> Vec<u8> { v.iter().flat_map(|x| real(x.to_f64())).collect() };
+    section(&u32_bytes([t.blocks.len() as u32, 0]));
+    section(&u32_bytes(t.blocks.iter().flat_map(|b| {
         [
             b.dims.len() as u32,
             b.n_actions,
@@ -79,17 +81,17 @@ fn decision_sections<T: Real>(
             b.max_support,
         ]
     })));
-    section(&u32s(
-        &mut t.blocks.iter().flat_map(|b| b.dims.iter().copied()),
+    section(&u32_bytes(
+        t.blocks.iter().flat_map(|b| b.dims.iter().copied()),
     ));
-    section(&u32s(&mut t.q_index.iter().copied()));
+    section(&u32_bytes(t.q_index.iter().copied()));
     for b in &t.blocks {
-        section(&u32s(&mut b.ptr.iter().copied()));
-        section(&u32s(&mut b.col.iter().copied()));
-        section(&reals(&mut b.weight.iter().copied()));
+        section(&u32_bytes(b.ptr.iter().copied()));
+        section(&u32_bytes(b.col.iter().copied()));
+        section(&reals(&b.weight));
     }
-    section(&reals(&mut core::iter::once(t.gamma)));
-    section(&reals(&mut t.rewards.iter().copied()));
+    section(&reals(&[t.gamma]));
+    section(&reals(&t.rewards));
 }
 
 /// What both forms hold, gathered from a policy.
@@ -175,18 +177,9 @@ pub fn export_bytes(
         payload.extend_from_slice(bytes);
         payload.resize(payload.len() + padding(bytes.len()), 0);
     };
-    let counts: Vec<u8> = parts
-        .cores
-        .iter()
-        .flat_map(|c| (c.len() as u32).to_le_bytes())
-        .collect();
+    let counts = u32_bytes(parts.cores.iter().map(|c| c.len() as u32));
     section(&mut payload, &counts);
-    let shapes: Vec<u8> = parts
-        .sets
-        .iter()
-        .flat_map(|s| [(s.0 as u32).to_le_bytes(), (s.1 as u32).to_le_bytes()])
-        .flatten()
-        .collect();
+    let shapes = u32_bytes(parts.sets.iter().flat_map(|s| [s.0 as u32, s.1 as u32]));
     section(&mut payload, &shapes);
     let core_values: Vec<u8> = parts
         .cores
@@ -209,11 +202,7 @@ pub fn export_bytes(
             .iter()
             .flat_map(|&u| (u as u16).to_le_bytes())
             .collect(),
-        _ => artifact
-            .greedy
-            .iter()
-            .flat_map(|&u| u.to_le_bytes())
-            .collect(),
+        _ => u32_bytes(artifact.greedy.iter().copied()),
     };
     section(&mut payload, &greedy);
     if with_values {
