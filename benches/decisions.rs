@@ -209,6 +209,16 @@ fn bench_view<T: ViewReal>(
                 })
             });
         }
+        // One state again and again: `V`'s lines stay in the caches, so this is the decision's
+        // arithmetic without the memory latency the random states pay.
+        g.bench_function(format!("greedy_{name}_same_state"), |b| {
+            b.iter(|| {
+                black_box(
+                    huge.greedy_action(black_box(&states[7]), &mut scratch, &mut q, &mut u)
+                        .unwrap(),
+                )
+            })
+        });
         let view = huge;
         // In a control loop: the states of the greedy closed loop from the paper's start
         // (consecutive states are close, so their boxes of V overlap in the caches).

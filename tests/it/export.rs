@@ -17,14 +17,37 @@ use crate::alloc_count::allocations;
 
 /// The point masses on a coarse grid (5 position x 3 velocity cores per axis).
 fn trained(agents: usize, precision: Precision) -> PolicyArtifact {
+    let (pos, vel) = (vec![-6.0, -3.0, 0.0, 3.0, 6.0], vec![-3.0, 0.0, 3.0]);
+    trained_on(agents, precision, &pos, &vel, false)
+}
+
+/// The point masses on a grid of `pos` x `vel` cores per axis; with `patches`, on a floor
+/// with a rough patch, so that each agent is one block of four variables (else two of two).
+fn trained_on(
+    agents: usize,
+    precision: Precision,
+    pos: &[f64],
+    vel: &[f64],
+    patches: bool,
+) -> PolicyArtifact {
     let mut config = TrainConfig::default();
     if let EnvConfig::Pointmass(p) = &mut config.env {
         p.agents = agents;
+        if patches {
+            p.integrator = fuzzyq_sim::model::pointmass::Integrator::Rk4;
+            p.friction = fuzzyq_sim::model::pointmass::FrictionConfig::Patches {
+                base: 1.0,
+                patches: vec![fuzzyq_sim::model::pointmass::FrictionPatch {
+                    center: [-2.0, -2.0],
+                    radius: 1.5,
+                    eta: 3.0,
+                }],
+            };
+        }
     }
-    let (pos, vel) = (vec![-6.0, -3.0, 0.0, 3.0, 6.0], vec![-3.0, 0.0, 3.0]);
     let mut cores = Vec::new();
     for _ in 0..agents {
-        cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
+        cores.extend([pos.to_vec(), pos.to_vec(), vel.to_vec(), vel.to_vec()]);
     }
     config.grid = GridConfig::explicit(cores);
     config.solver.precision = precision;
@@ -187,7 +210,34 @@ where
         op.q_values(values, &x, &mut b).unwrap();
         assert_eq!(bits(&a), bits(&b));
         assert_eq!(best.unwrap(), q::argmax(&b).unwrap());
+        // `V` is stored in the tables' decision order; its interpolation keeps the bits.
+        let value = grid.view().active(&x).unwrap().interpolate(values);
+        assert_eq!(
+            view.value(&x).unwrap().unwrap().to_f64().to_bits(),
+            value.to_f64().to_bits()
+        );
     }
+    let (strides, stored) = (view.value_strides(), view.values().unwrap());
+    let mut idx = vec![0usize; grid.n_dims()];
+    for (i, &v) in values.iter().enumerate().step_by(97) {
+        grid.view().unravel(i, &mut idx).unwrap();
+        let at: usize = idx.iter().zip(strides).map(|(i, s)| i * s).sum();
+        assert_eq!(stored[at].to_f64().to_bits(), v.to_f64().to_bits());
+    }
+    // The model's backup reads `V` in grid order, so it is refused on this export.
+    let mut s = vec![T::ZERO; fuzzyq_core::backup::scratch_len(grid.n_dims(), u.len())];
+    let mut row = vec![T::ZERO; m];
+    assert_eq!(
+        view.q_values_with_model(
+            &model,
+            backup,
+            &vec![T::ZERO; grid.n_dims()],
+            &mut s,
+            &mut row,
+            &mut a
+        ),
+        Err(DecideError::DecisionOrder)
+    );
     // Too little scratch, and a state of the wrong length, are refused.
     let short = scratch.len() - 1;
     assert!(matches!(
@@ -214,6 +264,22 @@ fn greedy_decisions_from_the_decision_tables_have_the_solvers_bits() {
         unreachable!()
     };
     same_greedy(&two64, v);
+    // 1 to 6 blocks: one agent on a rough floor (one block of four variables), one and two
+    // agents of each kind, three agents of three blocks and of six (coarser grids).
+    let (pos, vel) = ([-6.0, -3.0, 0.0, 3.0, 6.0], [-3.0, 0.0, 3.0]);
+    let (pos3, vel3) = ([-6.0, 0.0, 6.0], [-3.0, 3.0]);
+    for (agents, patches, pos, vel) in [
+        (1, true, &pos[..], &vel[..]),
+        (2, true, &pos3[..], &vel3[..]),
+        (3, true, &pos3[..], &vel3[..]),
+        (3, false, &pos3[..], &vel3[..]),
+    ] {
+        let artifact = trained_on(agents, Precision::F32, pos, vel, patches);
+        let Values::F32(v) = &artifact.values else {
+            unreachable!()
+        };
+        same_greedy(&artifact, v);
+    }
     // Without tables, the view says so; tables without V are refused at export.
     let bytes = export_bytes(&one, ExportOptions::default()).unwrap();
     let (buf, at) = placed(&bytes, 0);
@@ -269,6 +335,15 @@ fn decision_tables_with_an_empty_row_are_refused() {
             what: "decision block rows"
         }
     );
+    // Tables flagged 1 (an earlier layout, with `V` in grid order) are refused by name.
+    let mut bytes = export_bytes(&artifact, options).unwrap();
+    assert_eq!(bytes[44..48], 2u32.to_le_bytes());
+    bytes[44..48].copy_from_slice(&1u32.to_le_bytes());
+    let crc = crc32(&bytes[..end]);
+    bytes[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+    let (buf, at) = placed(&bytes, 0);
+    let err = PolicyView::<f32>::parse(&buf[at..at + bytes.len()]).unwrap_err();
+    assert!(err.to_string().contains("export the policy again"), "{err}");
 }
 
 #[test]

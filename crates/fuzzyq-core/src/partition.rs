@@ -403,6 +403,20 @@ impl<'a, T: Real> ProductPartition<'a, T> {
         Ok(self.active_unchecked(x))
     }
 
+    /// [`active`](Self::active) with the cores numbered by `strides` (a per-core table in
+    /// another layout than row-major: core `(i_0, ..)` at `sum_d i_d strides[d]`). The cores
+    /// come in the same order with the same weights, so interpolating a table gives the bits
+    /// of the row-major table's interpolation.
+    pub fn active_with_strides(
+        &self,
+        x: &[T],
+        strides: &[usize],
+    ) -> Result<ActiveCores<T>, EvalError> {
+        crate::error::check_len("strides", self.n_dims, strides.len())?;
+        self.active(x)?;
+        Ok(self.active_at(x, strides))
+    }
+
     /// [`active`](Self::active) for a state the caller knows has length `E` and finite values.
     ///
     /// A wrong length or a NaN gives a meaningless (but memory-safe) result; the solver uses
@@ -410,6 +424,12 @@ impl<'a, T: Real> ProductPartition<'a, T> {
     #[inline]
     #[must_use]
     pub fn active_unchecked(&self, x: &[T]) -> ActiveCores<T> {
+        self.active_at(x, &self.strides[..self.n_dims])
+    }
+
+    /// [`Self::active_unchecked`] with the cores numbered by `strides` (`E` of them).
+    #[inline]
+    fn active_at(&self, x: &[T], strides: &[usize]) -> ActiveCores<T> {
         let mut a = ActiveCores {
             base: 0,
             base_weight: T::ONE,
@@ -420,9 +440,9 @@ impl<'a, T: Real> ProductPartition<'a, T> {
         };
         for e in 0..self.n_dims {
             let s = self.dims[e].locate(x[e]);
-            a.base += s.lower * self.strides[e];
+            a.base += s.lower * strides[e];
             if s.is_split() {
-                a.split_stride[a.n_split] = self.strides[e];
+                a.split_stride[a.n_split] = strides[e];
                 a.split_lower[a.n_split] = s.lower_weight();
                 a.split_upper[a.n_split] = s.upper_weight;
                 a.n_split += 1;

@@ -720,14 +720,16 @@ impl<T: Real> BlockOperator<T> {
         let (r, p) = (self.r_len[level], self.p_len[level]);
         if p == 1 && r > 1 && t.n_actions > 1 {
             let na = t.n_actions;
-            (self.kernels.stage)(rows, c * na, na, 1, r, input, &mut scratch[..na * r]);
+            self.kernels
+                .stage(rows, c * na, na, 1, r, input, &mut scratch[..na * r]);
             for (ri, o) in out[..r * na].chunks_exact_mut(na).enumerate() {
                 for (a, x) in o.iter_mut().enumerate() {
                     *x = scratch[a * r + ri];
                 }
             }
         } else {
-            (self.kernels.stage)(rows, c * t.n_actions, t.n_actions, r, p, input, out);
+            self.kernels
+                .stage(rows, c * t.n_actions, t.n_actions, r, p, input, out);
         }
     }
 
@@ -808,7 +810,8 @@ impl<T: Real> BlockOperator<T> {
             let t = &self.tables[level];
             let (na, rp) = (t.n_actions, self.r_len[level] * self.p_len[level]);
             let rows = self.rows(rows0, level);
-            (self.kernels.stage)(rows, c * na, na, 1, rp, input, &mut out[..na * rp]);
+            self.kernels
+                .stage(rows, c * na, na, 1, rp, input, &mut out[..na * rp]);
             let (block, next) = (&self.tables[level + 1], &self.tables[level + 2]);
             let n = next.n_cores;
             for c2 in 0..block.n_cores {

@@ -321,10 +321,9 @@ impl<T: Real> BlockOperator<T> {
             dst.resize(p * a * r + INPUT_PAD, T::ZERO);
             let input: &[T] = if l == 0 { vbox } else { src };
             let view = rows[b].view(k);
-            let stage = self.kernels.stage;
             for (i, o) in dst[..p * a * r].chunks_exact_mut(a * r).enumerate() {
                 // The chunk's own spare elements are the next chunks' (or the padding).
-                stage(view, 0, a, 1, r, &input[i * k * r..], o);
+                self.kernels.stage(view, 0, a, 1, r, &input[i * k * r..], o);
             }
             p *= a;
             core::mem::swap(&mut dst, &mut src);

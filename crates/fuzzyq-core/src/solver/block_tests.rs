@@ -118,7 +118,7 @@ fn reference<T: Real, M: Model<T> + Sync + ?Sized>(
     // Contract the box with the given rows (one row per block action for each block), the
     // blocks in gather order, with the scalar kernel's stage: `[k][r][p]` to `[r][a][p]`, so
     // the result is `[a_last]..[a_first]`.
-    let stage = select_real::<T>(Some(Kernel::Scalar)).unwrap().stage;
+    let kernels = select_real::<T>(Some(Kernel::Scalar)).unwrap();
     let contract_box = |rows: &dyn Fn(usize) -> (Vec<u32>, Vec<u32>, Vec<T>)| -> Vec<T> {
         let mut input = vbox.clone();
         let mut p = 1usize;
@@ -133,7 +133,7 @@ fn reference<T: Real, M: Model<T> + Sync + ?Sized>(
             let (ptr, col, weight) = rows(b);
             let mut out = vec![T::ZERO; r * a * p];
             let rows = Rows::checked(&ptr, &col, &weight, k).expect("memberships over the box");
-            stage(rows, 0, a, r, p, &input, &mut out);
+            kernels.stage(rows, 0, a, r, p, &input, &mut out);
             input = out;
             p *= a;
         }

@@ -18,16 +18,32 @@
 //! Blocks come in contraction order (the block of the largest grid strides first). Block
 //! cores are numbered row-major over the block's state variables. A block's support bound is
 //! the most block cores the rows of one state's active block cores reach; the decision's
-//! buffers ([`super::PolicyView::decision_scratch_len`]) are sized by it.
+//! buffers ([`super::PolicyView::decision_scratch_len`]) are sized by it and by each block's
+//! span bound (the widest range of block cores those rows reach, found when the tables are
+//! read).
+//!
+//! # `V` in decision order
+//! With the tables, the `V` section holds `V` in **decision order**: row-major over the
+//! blocks' cores, the blocks in contraction order (the first slowest). Core `(k_0, .., k_B-1)`
+//! (block cores) is at `sum_b k_b B_b`, `B_b` the product of the later blocks' core counts, so
+//! each block's cores lie at one stride and the last block's are contiguous.
+//! [`super::PolicyView::value_strides`] gives each state variable's stride in that order.
 //!
 //! # A decision
 //! Per block: the active block cores' rows are mixed into one row per block action (the
 //! memberships times the rows, summed over the active block cores in their order, entries in
-//! increasing block core); the box of `V` over the blocks' supports is gathered; the stages
-//! contract it a block at a time, every element a chain of fused multiply-adds from 0 over its
-//! row's entries in order; then `Q(x, u) = rho~(x) + gamma E[q_index[u]]` with `rho~` the
-//! rewards interpolated at `x`. With `std` the stages run on the solver's run-time selected
-//! kernels; without it, on scalar fused multiply-adds (`libm`): the same bits either way.
+//! increasing block core). Then the stages contract `V` with them a block at a time, in
+//! contraction order, every element a chain of fused multiply-adds from 0 over its row's
+//! entries in order, and `Q(x, u) = rho~(x) + gamma E[q_index[u]]` with `rho~` the rewards
+//! interpolated at `x`. The first stage reads `V` in place: its rows' columns are block cores
+//! at the first block's stride, its leading index runs over the range of block cores the
+//! second-to-last block's rows reach (at that block's stride) and its lanes over the range
+//! the last block's rows reach (contiguous); the blocks between are visited one support core
+//! at a time. So no box of `V` is gathered, and a block core inside a range but outside the
+//! rows' support costs a lane, not a copy. Each element is the sum the solver's
+//! `Operator::q_values` computes over its gathered box, term for term, so the bits are the
+//! same. With `std` the stages run on the solver's run-time selected kernels; without it, on
+//! scalar fused multiply-adds (`libm`): the same bits either way.
 
 use core::fmt;
 
@@ -47,6 +63,10 @@ pub enum DecideError {
     NoTables,
     /// The exported policy has no `V` (it was exported with `--no-values`).
     NoValues,
+    /// The export's `V` is in its decision tables' order, which the model's backup does not
+    /// read: take the decision from the tables ([`super::PolicyView::q_values`]), no model
+    /// needed.
+    DecisionOrder,
     /// The state, a buffer or the scratch has the wrong length, or the state is not finite.
     Eval(EvalError),
 }
@@ -68,6 +88,11 @@ impl fmt::Display for DecideError {
                 f,
                 "the exported policy has no V (it was exported with --no-values)"
             ),
+            Self::DecisionOrder => write!(
+                f,
+                "the exported policy's V is in its decision tables' order: take greedy decisions \
+                 from the tables (q_values, greedy_action), without the model"
+            ),
             Self::Eval(e) => write!(f, "{e}"),
         }
     }
@@ -81,7 +106,14 @@ impl std::error::Error for DecideError {}
 struct Block<'a, T> {
     dims: &'a [u32],
     n_actions: usize,
+    /// Block cores.
+    n_cores: usize,
+    /// The support bound (from the file).
     max_support: usize,
+    /// The span bound: the widest range of block cores one state's mixed rows reach.
+    max_span: usize,
+    /// Distance in `V` (decision order) between consecutive block cores.
+    stride: usize,
     ptr: &'a [u32],
     col: &'a [u32],
     weight: &'a [T],
@@ -91,11 +123,38 @@ impl<T> Block<'_, T> {
     const EMPTY: Self = Self {
         dims: &[],
         n_actions: 0,
+        n_cores: 0,
         max_support: 0,
+        max_span: 0,
+        stride: 0,
         ptr: &[],
         col: &[],
         weight: &[],
     };
+}
+
+/// How a block's mixed rows address the contraction (see the [module docs](self)).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Role {
+    /// The first block: columns are block cores, read from `V` at the block's stride.
+    First,
+    /// A block between the second and the second-to-last: columns are positions in the
+    /// rows' support, visited one support core at a time by the first stage.
+    Support,
+    /// The last two blocks: columns are positions in the range of block cores the rows
+    /// reach (the first stage's leading index, then its lanes).
+    Range,
+}
+
+/// The role of block `b` of `nb`.
+fn role(b: usize, nb: usize) -> Role {
+    if b == 0 {
+        Role::First
+    } else if b + 2 < nb {
+        Role::Support
+    } else {
+        Role::Range
+    }
 }
 
 /// Lengths of the scratch regions (elements).
@@ -111,23 +170,26 @@ struct Layout {
     ptr: usize,
     /// Most active block cores of a block.
     active: usize,
-    /// The box of `V`, padded.
-    vbox: usize,
     /// One stage buffer, padded.
     stage: usize,
+    /// The last stage's transposed input, padded.
+    last: usize,
+    /// Most active cores of a state (`2^E`).
+    cores: usize,
 }
 
 impl Layout {
     /// `(reals, u32s, u64s)` per region, in order.
-    fn regions(&self) -> ([usize; 6], [usize; 8], [usize; 1]) {
+    fn regions(&self) -> ([usize; 7], [usize; 8], [usize; 2]) {
         (
             [
                 self.max_cores,
                 self.mixed,
                 self.active,
-                self.vbox,
+                self.last,
                 self.stage,
                 self.stage,
+                self.cores,
             ],
             [
                 self.max_cores,
@@ -139,7 +201,7 @@ impl Layout {
                 self.mixed,
                 self.active,
             ],
-            [self.support],
+            [self.support, self.cores],
         )
     }
 
@@ -153,6 +215,38 @@ impl Layout {
             .chain(u64s)
             .sum()
     }
+
+    /// The stage buffers for `blocks` (`sizes[b]`: block `b`'s support bound for
+    /// [`Role::Support`], span bound for [`Role::Range`]), padded; `None` on overflow.
+    fn stages<T>(blocks: &[Block<'_, T>]) -> Option<(usize, usize)> {
+        let nb = blocks.len();
+        let a0 = blocks[0].n_actions;
+        if nb == 1 {
+            return Some((a0 + PAD, PAD));
+        }
+        let r = if nb >= 3 { blocks[nb - 2].max_span } else { 1 };
+        let p = blocks[nb - 1].max_span;
+        let tail = r.checked_mul(a0)?.checked_mul(p)?;
+        let inner = &blocks[1..nb.saturating_sub(2).max(1)];
+        let mut combos = 1usize;
+        for b in inner {
+            combos = combos.checked_mul(b.max_support)?;
+        }
+        let mut stage = combos.checked_mul(tail)?;
+        let mut lead = 1usize;
+        for b in inner {
+            combos /= b.max_support;
+            lead = lead.checked_mul(b.n_actions)?;
+            stage = stage.max(lead.checked_mul(combos)?.checked_mul(tail)?);
+        }
+        if nb >= 3 {
+            lead = lead.checked_mul(blocks[nb - 2].n_actions)?;
+            stage = stage.max(lead.checked_mul(a0)?.checked_mul(p)?);
+        }
+        let m = lead.checked_mul(a0)?;
+        stage = stage.max(m.checked_mul(blocks[nb - 1].n_actions)?);
+        Some((stage.checked_add(PAD)?, p.checked_mul(m)?.checked_add(PAD)?))
+    }
 }
 
 /// The decision tables of an exported policy, checked and borrowed in place.
@@ -164,11 +258,48 @@ pub(super) struct Decisions<'a, T> {
     gamma: T,
     rewards: &'a [T],
     layout: Layout,
+    /// Each state variable's stride in `V` (decision order).
+    value_strides: [usize; MAX_DIMS],
 }
 
 /// A header field or section of the decision tables is invalid.
 fn bad(what: &'static str) -> ViewError {
     ViewError::Header { what }
+}
+
+/// The widest range of block cores (last minus first, plus one) that the rows of one cell's
+/// corner cores reach over every action: the span bound of a block whose rows are
+/// `ptr`/`col` over the variables with core counts `counts` (row-major), `n_actions` rows per
+/// block core.
+fn span_bound(counts: &[usize], n_actions: usize, ptr: &[u32], col: &[u32]) -> usize {
+    let k = counts.len();
+    let n_cores: usize = counts.iter().product();
+    let mut best = 0;
+    for cell in 0..n_cores {
+        let (mut lo, mut hi) = (u32::MAX, 0u32);
+        for corner in 0..(1usize << k) {
+            let (mut c, mut stride, mut inside) = (0usize, 1usize, true);
+            for j in (0..k).rev() {
+                let lower = (cell / stride) % counts[j];
+                let i = lower + ((corner >> j) & 1);
+                inside &= i < counts[j];
+                c += i * stride;
+                stride *= counts[j];
+            }
+            if !inside {
+                continue;
+            }
+            let rows = c * n_actions..(c + 1) * n_actions;
+            for &s in &col[ptr[rows.start] as usize..ptr[rows.end] as usize] {
+                lo = lo.min(s);
+                hi = hi.max(s);
+            }
+        }
+        if lo <= hi {
+            best = best.max((hi - lo) as usize + 1);
+        }
+    }
+    best
 }
 
 impl<'a, T: ViewReal> Decisions<'a, T> {
@@ -195,12 +326,13 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
         let mut seen = [false; MAX_DIMS];
         let (mut at, mut product) = (0usize, 1usize);
         let mut layout = Layout::default();
-        let mut box_len = 1usize;
+        let big = || bad("decision buffers");
         for (b, s) in shapes.chunks_exact(4).enumerate() {
             let (k, n_actions, nnz, max_support) =
                 (s[0] as usize, s[1] as usize, s[2] as usize, s[3] as usize);
             let bd = &dims[at..at + k];
             at += k;
+            let mut counts = [0usize; MAX_DIMS];
             let mut n_cores = 1usize;
             for (j, &d) in bd.iter().enumerate() {
                 let d = d as usize;
@@ -208,8 +340,9 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                     return Err(bad("decision block state variables"));
                 }
                 seen[d] = true;
+                counts[j] = grid.dim(d).n_cores();
                 n_cores = n_cores
-                    .checked_mul(grid.dim(d).n_cores())
+                    .checked_mul(counts[j])
                     .ok_or(bad("decision block cores"))?;
             }
             if k == 0 || n_actions == 0 || max_support == 0 || max_support > n_cores {
@@ -238,30 +371,34 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
             blocks[b] = Block {
                 dims: bd,
                 n_actions,
+                n_cores,
                 max_support,
+                max_span: span_bound(&counts[..k], n_actions, ptr, col),
+                stride: 0,
                 ptr,
                 col,
                 weight,
             };
-            let big = || bad("decision buffers");
             layout.max_cores = layout.max_cores.max(n_cores);
             layout.mixed += n_actions.checked_mul(max_support).ok_or_else(big)?;
             layout.support += max_support;
             layout.ptr += n_actions + 1;
             layout.active = layout.active.max(1 << k);
-            box_len = box_len.checked_mul(max_support).ok_or_else(big)?;
         }
-        // Stage `l` writes `(prod_{j <= l} A_j) (prod_{j > l} S_j)` values.
-        let mut stage = 0usize;
-        let mut rest = box_len;
-        let mut p = 1usize;
-        for b in &blocks[..nb] {
-            rest /= b.max_support;
-            p *= b.n_actions;
-            stage = stage.max(p.checked_mul(rest).ok_or(bad("decision buffers"))?);
+        // Decision order: the strides of the blocks, then of each block's variables.
+        let mut value_strides = [0usize; MAX_DIMS];
+        let mut stride = 1usize;
+        for t in blocks[..nb].iter_mut().rev() {
+            t.stride = stride;
+            let mut s = stride;
+            for &d in t.dims.iter().rev() {
+                value_strides[d as usize] = s;
+                s *= grid.dim(d as usize).n_cores();
+            }
+            stride = stride.checked_mul(t.n_cores).ok_or_else(big)?;
         }
-        layout.vbox = box_len.checked_add(PAD).ok_or(bad("decision buffers"))?;
-        layout.stage = stage + PAD;
+        (layout.stage, layout.last) = Layout::stages(&blocks[..nb]).ok_or_else(big)?;
+        layout.cores = 1 << e;
         if q_index.iter().any(|&q| q as usize >= product) {
             return Err(bad("decision joint actions"));
         }
@@ -280,6 +417,7 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
             gamma,
             rewards,
             layout,
+            value_strides,
         })
     }
 
@@ -288,7 +426,12 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
         self.layout.words(core::mem::size_of::<T>())
     }
 
-    /// `out[u] = Q(x, u)` from `v` on `grid` (see the [module docs](self)).
+    /// Each state variable's stride in `V` (decision order).
+    pub(super) fn value_strides(&self) -> [usize; MAX_DIMS] {
+        self.value_strides
+    }
+
+    /// `out[u] = Q(x, u)` from `v` (decision order) on `grid` (see the [module docs](self)).
     pub(super) fn q_values(
         &self,
         grid: &ProductPartition<'a, T>,
@@ -311,9 +454,10 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
         let dense = take_real(reals[0]);
         let mixed_w = take_real(reals[1]);
         let mu = take_real(reals[2]);
-        let vbox = take_real(reals[3]);
+        let transposed = take_real(reals[3]);
         let mut s0 = take_real(reals[4]);
         let mut s1 = take_real(reals[5]);
+        let core_mu = take_real(reals[6]);
         let mut take_u32 = |n: usize| {
             let (a, b) = core::mem::take(&mut rest).split_at_mut(n.div_ceil(2));
             rest = b;
@@ -327,14 +471,18 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
         let mixed_ptr = take_u32(u32s[5]);
         let mixed_col = take_u32(u32s[6]);
         let act = take_u32(u32s[7]);
-        let offsets = &mut rest[..u64s[0]];
+        let (offsets, rest) = rest.split_at_mut(u64s[0]);
+        let core_index =
+            &mut bytemuck::cast_slice_mut::<u64, usize>(&mut rest[..u64s[1]])[..u64s[1]];
         touched.fill(0);
         in_support.fill(0);
 
-        // Per block: the mixed rows (entries in increasing block core, zeros left out), then
-        // their columns as positions in the block's support, and the support's grid offsets.
+        // Per block: the mixed rows (entries in increasing block core, zeros left out), their
+        // columns as the block's role numbers them, and (support blocks) the support's
+        // offsets in `V`.
         let nb = self.n_blocks;
         let mut sizes = [0usize; MAX_DIMS];
+        let mut first = [0usize; MAX_DIMS];
         let (mut at_s, mut at_m, mut at_p) = (0usize, 0usize, 0usize);
         let mut spans = [(0usize, 0usize, 0usize); MAX_DIMS];
         for (b, t) in self.blocks[..nb].iter().enumerate() {
@@ -361,6 +509,7 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
             });
             let sup = &mut support[at_s..at_s + t.max_support];
             let mut n_sup = 0;
+            let (mut lo, mut hi) = (u32::MAX, 0u32);
             let ptr = &mut mixed_ptr[at_p..at_p + t.n_actions + 1];
             let cols = &mut mixed_col[at_m..at_m + t.n_actions * t.max_support];
             let ws = &mut mixed_w[at_m..at_m + t.n_actions * t.max_support];
@@ -383,6 +532,10 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                     }
                 }
                 hit[..n_hit].sort_unstable();
+                if n_hit > 0 {
+                    lo = lo.min(hit[0]);
+                    hi = hi.max(hit[n_hit - 1]);
+                }
                 for &kc in &hit[..n_hit] {
                     let kc = kc as usize;
                     touched[kc] = 0;
@@ -406,141 +559,240 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                 ptr[a + 1] = nnz as u32;
             }
             let sup = &mut sup[..n_sup];
-            sup.sort_unstable();
-            let offs = &mut offsets[at_s..at_s + n_sup];
-            for (i, (&kc, o)) in sup.iter().zip(offs.iter_mut()).enumerate() {
+            for &kc in sup.iter() {
                 in_support[kc as usize] = 0;
-                local[kc as usize] = i as u32;
-                // The block core's grid offset: its variables' indices times their strides.
-                let mut c = kc as usize;
-                let mut g = 0usize;
-                for &d in t.dims.iter().rev() {
-                    let d = d as usize;
-                    let n = grid.dim(d).n_cores();
-                    g += (c % n) * grid.strides()[d];
-                    c /= n;
+            }
+            match role(b, nb) {
+                Role::First => sizes[b] = t.n_cores,
+                Role::Support => {
+                    sup.sort_unstable();
+                    let offs = &mut offsets[at_s..at_s + n_sup];
+                    for (i, (&kc, o)) in sup.iter().zip(offs.iter_mut()).enumerate() {
+                        local[kc as usize] = i as u32;
+                        *o = (kc as usize * t.stride) as u64;
+                    }
+                    for c in &mut cols[..nnz] {
+                        *c = local[*c as usize];
+                    }
+                    sizes[b] = n_sup;
                 }
-                *o = g as u64;
+                Role::Range => {
+                    // Every row holds an entry (checked when read), so the range is not empty.
+                    let span = (hi - lo) as usize + 1;
+                    if span > t.max_span {
+                        return Err(EvalError::OutOfRange {
+                            what: "decision block range",
+                            index: span,
+                            len: t.max_span,
+                        });
+                    }
+                    for c in &mut cols[..nnz] {
+                        *c -= lo;
+                    }
+                    sizes[b] = span;
+                    first[b] = lo as usize;
+                }
             }
-            for c in &mut cols[..nnz] {
-                *c = local[*c as usize];
-            }
-            sizes[b] = n_sup;
             spans[b] = (at_s, at_m, at_p);
             at_s += t.max_support;
             at_m += t.n_actions * t.max_support;
             at_p += t.n_actions + 1;
         }
+        let mixed = |b: usize| {
+            let (_, at_m, at_p) = spans[b];
+            let a = self.blocks[b].n_actions;
+            let ptr = &mixed_ptr[at_p..at_p + a + 1];
+            let nnz = ptr[a] as usize;
+            Mixed {
+                ptr,
+                col: &mixed_col[at_m..at_m + nnz],
+                weight: &mixed_w[at_m..at_m + nnz],
+                n_cols: sizes[b],
+            }
+        };
 
-        // The box of V over the supports, the first block slowest, copied an inner row at a
-        // time with the outer blocks' combinations visited like an odometer.
-        let box_len: usize = sizes[..nb].iter().product();
-        {
-            let inner = &offsets[spans[nb - 1].0..spans[nb - 1].0 + sizes[nb - 1]];
+        // The first stage, from `V` in place: `[S_1]..[S_B-3][R][a_0][P]` (support cores of
+        // the blocks between, the range `R` of block B-2's cores, block 0's actions, the
+        // range `P` of the last block's cores).
+        let a0 = self.blocks[0].n_actions;
+        let stride0 = self.blocks[0].stride;
+        // Output positions of the block actions after the last stage: `a_0` fastest, then
+        // the blocks between in order, the last block's slowest.
+        let mut place = [0usize; MAX_DIMS];
+        let ev: &[T] = if nb == 1 {
+            stage(mixed(0), 1, 1, (stride0, 0), v, &mut s0[..a0]);
+            place[0] = 1;
+            &s0[..a0]
+        } else {
+            let (r_len, r_stride) = if nb >= 3 {
+                (sizes[nb - 2], self.blocks[nb - 2].stride)
+            } else {
+                (1, 0)
+            };
+            let p_len = sizes[nb - 1];
+            let tail = first[nb - 1] + if nb >= 3 { first[nb - 2] * r_stride } else { 0 };
+            let chunk = r_len * a0 * p_len;
+            let inner = 1..nb.saturating_sub(2).max(1);
+            let offs = |b: usize, i: usize| offsets[spans[b].0 + i] as usize;
             let mut digit = [0usize; MAX_DIMS];
-            let offset = |b: usize, i: usize| offsets[spans[b].0 + i] as usize;
-            let mut g: usize = (0..nb - 1).map(|b| offset(b, 0)).sum();
-            'combos: for dst in vbox[..box_len].chunks_exact_mut(sizes[nb - 1]) {
-                for (d, &o) in dst.iter_mut().zip(inner) {
-                    *d = v[g + o as usize];
-                }
-                let mut l = nb - 1;
-                loop {
-                    if l == 0 {
-                        break 'combos;
-                    }
-                    l -= 1;
-                    g -= offset(l, digit[l]);
+            let mut g: usize = inner.clone().map(|b| offs(b, 0)).sum();
+            let combos: usize = sizes[inner.clone()].iter().product();
+            for o in s0[..combos * chunk].chunks_exact_mut(chunk) {
+                let here = g;
+                // The next combination, the last of the blocks between fastest.
+                for l in inner.clone().rev() {
+                    g -= offs(l, digit[l]);
                     digit[l] += 1;
                     if digit[l] < sizes[l] {
-                        g += offset(l, digit[l]);
+                        g += offs(l, digit[l]);
                         break;
                     }
                     digit[l] = 0;
-                    g += offset(l, 0);
+                    g += offs(l, 0);
+                }
+                stage(
+                    mixed(0),
+                    r_len,
+                    p_len,
+                    (stride0, r_stride),
+                    &v[here + tail..],
+                    o,
+                );
+            }
+            // The blocks between, then block B-2: `[lead][k][rest]` to `[lead][a][rest]`.
+            let mut lead = 1usize;
+            let mut rest = combos * chunk;
+            for b in 1..nb - 1 {
+                let (k, a) = (sizes[b], self.blocks[b].n_actions);
+                rest /= k;
+                for i in 0..lead {
+                    let o = &mut s1[i * a * rest..(i + 1) * a * rest];
+                    stage(mixed(b), 1, rest, (rest, rest), &s0[i * k * rest..], o);
+                }
+                lead *= a;
+                core::mem::swap(&mut s0, &mut s1);
+            }
+            // The last block contracts the lanes: `[m][P]` transposed to `[P][m]`, then one
+            // stage gives `[a_B-1][m]`.
+            let m = lead * a0;
+            for (i, row) in s0[..m * p_len].chunks_exact(p_len).enumerate() {
+                for (j, &y) in row.iter().enumerate() {
+                    transposed[j * m + i] = y;
                 }
             }
-        }
-
-        // The stages, `[p][k][r]` to `[p][a][r]`, a block at a time.
-        let mut r = box_len;
-        let mut p = 1usize;
-        let mut input_is_box = true;
-        for (b, t) in self.blocks[..nb].iter().enumerate() {
-            let (k, a) = (sizes[b], t.n_actions);
-            r /= k;
-            let (_, at_m, at_p) = spans[b];
-            let ptr = &mixed_ptr[at_p..at_p + a + 1];
-            let nnz = ptr[a] as usize;
-            let cols = &mixed_col[at_m..at_m + nnz];
-            let ws = &mixed_w[at_m..at_m + nnz];
-            let input: &[T] = if input_is_box { vbox } else { s1 };
-            stage(ptr, cols, ws, k, p, r, input, &mut s0[..p * a * r]);
-            p *= a;
+            let a_last = self.blocks[nb - 1].n_actions;
+            stage(
+                mixed(nb - 1),
+                1,
+                m,
+                (m, m),
+                transposed,
+                &mut s1[..a_last * m],
+            );
+            place[0] = 1;
+            let mut step = a0;
+            for b in (1..nb - 1).rev() {
+                place[b] = step;
+                step *= self.blocks[b].n_actions;
+            }
+            place[nb - 1] = m;
             core::mem::swap(&mut s0, &mut s1);
-            input_is_box = false;
-        }
-        let ev = &s1[..p];
+            &s0[..a_last * m]
+        };
 
-        // The interpolated reward, then Q.
+        // `E` in the tables' order (`[a_0][a_1]..`, the first slowest), visited like an
+        // odometer, then `Q`.
+        let n: usize = self.blocks[..nb].iter().map(|t| t.n_actions).product();
+        let by_q = &mut s1[..n];
+        let mut digit = [0usize; MAX_DIMS];
+        let mut pos = 0usize;
+        for y in by_q.iter_mut() {
+            *y = ev[pos];
+            for l in (0..nb).rev() {
+                digit[l] += 1;
+                pos += place[l];
+                if digit[l] < self.blocks[l].n_actions {
+                    break;
+                }
+                pos -= digit[l] * place[l];
+                digit[l] = 0;
+            }
+        }
+        // The active cores listed first (the weights of `for_each`, one product each), so
+        // that the rewards' loads overlap.
+        let n_active = active
+            .write_to(core_index, core_mu)
+            .ok_or(EvalError::Length {
+                what: "decision scratch (active cores)",
+                expected: active.len(),
+                found: core_index.len(),
+            })?;
         let mut reward = T::ZERO;
-        active.for_each(|d, m| reward += m * self.rewards[d]);
+        for (&d, &m) in core_index[..n_active].iter().zip(&core_mu[..n_active]) {
+            reward += m * self.rewards[d];
+        }
         for (o, &q) in out.iter_mut().zip(self.q_index) {
-            *o = reward + self.gamma * ev[q as usize];
+            *o = reward + self.gamma * by_q[q as usize];
         }
         Ok(())
     }
 }
 
-/// One stage for each of `p` leading indices `i`: `out[(i A + a) r + j] = sum_e w_e
-/// input[(i K + k_e) r + j]` over row `a`'s entries in order (`K = n_cols` columns), fused
-/// multiply-adds from 0: on the solver's run-time selected kernels with `std`, else on
-/// [`stage_scalar`] (the same bits).
-#[allow(clippy::too_many_arguments)] // a stage's shape and buffers, spelled out.
-fn stage<T: ViewReal>(
-    ptr: &[u32],
-    col: &[u32],
-    weight: &[T],
+/// A block's mixed rows: one per block action, `n_cols` columns.
+#[derive(Clone, Copy)]
+struct Mixed<'s, T> {
+    ptr: &'s [u32],
+    col: &'s [u32],
+    weight: &'s [T],
     n_cols: usize,
-    p: usize,
-    r: usize,
-    input: &[T],
-    out: &mut [T],
-) {
-    let a = ptr.len() - 1;
-    #[cfg(feature = "std")]
-    let (kernels, rows) = (
-        crate::solver::simd::select_real::<T>(None).expect("the scalar kernels exist"),
-        crate::solver::simd::Rows::checked(ptr, col, weight, n_cols)
-            .expect("mixed rows hold memberships over their support"),
-    );
-    for (i, o) in out.chunks_exact_mut(a * r).take(p).enumerate() {
-        // The chunk's input runs on into the next chunks' (or the padding).
-        let input = &input[i * n_cols * r..];
-        #[cfg(feature = "std")]
-        (kernels.stage)(rows, 0, a, 1, r, input, o);
-        #[cfg(not(feature = "std"))]
-        stage_scalar(ptr, col, weight, r, input, o);
-    }
 }
 
-/// One stage (one leading index) on scalar fused multiply-adds: the same bits as the solver's
-/// kernels (each element's chain in the same order, every step rounded once).
-#[cfg_attr(all(feature = "std", not(test)), allow(dead_code))]
-fn stage_scalar<T: ViewReal>(
-    ptr: &[u32],
-    col: &[u32],
-    weight: &[T],
-    r: usize,
+/// One stage, `out[(r A + a) P + p] = sum_e w_e input[k_e K + r S + p]` for `r < r_len`,
+/// `p < p_len` (`(K, S)` = `strides`) over row `a`'s entries in order, fused multiply-adds
+/// from 0: on the solver's run-time selected kernels with `std`, else on [`stage_scalar`]
+/// (the same bits).
+fn stage<T: ViewReal>(
+    rows: Mixed<'_, T>,
+    r_len: usize,
+    p_len: usize,
+    strides: (usize, usize),
     input: &[T],
     out: &mut [T],
 ) {
-    for (a, o) in out.chunks_exact_mut(r).enumerate() {
-        let (s, e) = (ptr[a] as usize, ptr[a + 1] as usize);
-        for (j, o) in o.iter_mut().enumerate() {
+    #[cfg(feature = "std")]
+    {
+        use crate::solver::simd::{Rows, Strides, select_real};
+        let kernels = select_real::<T>(None).expect("the scalar kernels exist");
+        let checked = Rows::checked(rows.ptr, rows.col, rows.weight, rows.n_cols)
+            .expect("mixed rows hold memberships over their columns");
+        let (k_stride, r_stride) = strides;
+        let a = rows.ptr.len() - 1;
+        let strides = Strides { k_stride, r_stride };
+        (kernels.stage_at)(checked, 0, a, r_len, p_len, strides, input, out);
+    }
+    #[cfg(not(feature = "std"))]
+    stage_scalar(rows, r_len, p_len, strides, input, out);
+}
+
+/// [`stage`] on scalar fused multiply-adds: the same bits as the solver's kernels (each
+/// element's chain in the same order, every step rounded once).
+#[cfg_attr(all(feature = "std", not(test)), allow(dead_code))]
+fn stage_scalar<T: ViewReal>(
+    rows: Mixed<'_, T>,
+    r_len: usize,
+    p_len: usize,
+    (k_stride, r_stride): (usize, usize),
+    input: &[T],
+    out: &mut [T],
+) {
+    let a = rows.ptr.len() - 1;
+    for (i, o) in out.chunks_exact_mut(p_len).take(r_len * a).enumerate() {
+        let (r, u) = (i / a, i % a);
+        let (s, e) = (rows.ptr[u] as usize, rows.ptr[u + 1] as usize);
+        for (p, o) in o.iter_mut().enumerate() {
             let mut acc = T::ZERO;
-            for (&k, &w) in col[s..e].iter().zip(&weight[s..e]) {
-                acc = T::fma(w, input[k as usize * r + j], acc);
+            for (&k, &w) in rows.col[s..e].iter().zip(&rows.weight[s..e]) {
+                acc = T::fma(w, input[k as usize * k_stride + r * r_stride + p], acc);
             }
             *o = acc;
         }
@@ -561,7 +813,17 @@ mod tests {
             s ^= s << 17;
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
-        for (n_cols, r, a) in [(3, 1, 2), (7, 5, 4), (12, 33, 5), (20, 100, 3)] {
+        // (columns, leading indices, lanes, actions, strides or dense)
+        for (n_cols, r_len, p_len, a, strides) in [
+            (3, 1, 1, 2, None),
+            (7, 1, 5, 4, None),
+            (12, 1, 33, 5, None),
+            (20, 1, 100, 3, None),
+            (9, 4, 17, 5, None),
+            (9, 4, 17, 5, Some((400, 23))),
+            (5, 3, 1, 2, Some((7, 2))),
+            (6, 1, 40, 3, Some((50, 0))),
+        ] {
             let (mut ptr, mut col, mut w) = (vec![0u32], Vec::new(), Vec::new());
             for _ in 0..a {
                 for k in 0..n_cols {
@@ -572,14 +834,30 @@ mod tests {
                 }
                 ptr.push(col.len() as u32);
             }
-            let input: Vec<f32> = (0..n_cols * r + PAD)
+            let strides = strides.unwrap_or((r_len * p_len, p_len));
+            let extent = (n_cols - 1) * strides.0 + (r_len - 1) * strides.1 + p_len;
+            let input: Vec<f32> = (0..extent + PAD)
                 .map(|_| (next() * 200.0 - 100.0) as f32)
                 .collect();
-            let (mut x, mut y) = (vec![0.0f32; a * r], vec![0.0f32; a * r]);
-            stage(&ptr, &col, &w, n_cols, 1, r, &input, &mut x);
-            stage_scalar(&ptr, &col, &w, r, &input, &mut y);
+            let rows = Mixed {
+                ptr: &ptr,
+                col: &col,
+                weight: &w,
+                n_cols,
+            };
+            let n = r_len * a * p_len;
+            let (mut x, mut y) = (vec![0.0f32; n], vec![0.0f32; n]);
+            // Unpadded (as `V` is read) and padded inputs.
+            stage(rows, r_len, p_len, strides, &input[..extent], &mut x);
+            stage_scalar(rows, r_len, p_len, strides, &input, &mut y);
             let bits = |v: &[f32]| v.iter().map(|f| f.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&x), bits(&y), "{n_cols} columns, r = {r}");
+            assert_eq!(
+                bits(&x),
+                bits(&y),
+                "{n_cols} columns, R = {r_len}, P = {p_len}"
+            );
+            stage(rows, r_len, p_len, strides, &input, &mut x);
+            assert_eq!(bits(&x), bits(&y), "padded");
         }
     }
 }

@@ -17,10 +17,10 @@
 //! | 28 | agents `N`, `u32` |
 //! | 32 | cores (the product of the core counts), `u64` |
 //! | 40 | whether `V` follows, `u32` (0 or 1) |
-//! | 44 | whether decision tables follow `V`, `u32` (0 or 1; see [`decide`]) |
+//! | 44 | decision tables: 0 none; 2 they follow `V`, and `V` is in their decision order (see [`decide`]); 1 (an earlier layout, `V` in grid order) is refused: export again, `u32` |
 //! | 48 | payload bytes (everything after this 64-byte header up to the checksum), `u64` |
 //! | 56 | 8 bytes of zeros |
-//! | 64 | payload: `E` core counts (`u32`), then `N` pairs (actions, components) (`u32`); the cores of every variable; the actions of every agent (action-major); the greedy joint action of every core (row-major core order); `V` per core if present; the decision tables if present. Each section padded with zeros to a multiple of 8 bytes |
+//! | 64 | payload: `E` core counts (`u32`), then `N` pairs (actions, components) (`u32`); the cores of every variable; the actions of every agent (action-major); the greedy joint action of every core (row-major core order); `V` per core if present (row-major core order, or decision order with decision tables); the decision tables if present. Each section padded with zeros to a multiple of 8 bytes |
 //! | 64 + payload | CRC-32 (ISO-HDLC, as zlib's) of every byte before it, `u32`, then 4 bytes of zeros |
 //!
 //! The view refuses, with a typed [`ViewError`], bytes that are not such a file, that are cut
@@ -228,6 +228,8 @@ pub struct PolicyView<'a, T> {
     joint: JointActions<'a, T>,
     greedy: Greedy<'a>,
     v: Option<&'a [T]>,
+    /// Each state variable's stride in `v`: the grid's, or the decision tables' order.
+    value_strides: [usize; MAX_DIMS],
     decisions: Option<Decisions<'a, T>>,
 }
 
@@ -345,7 +347,12 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         };
         let has_tables = match (has_tables, has_v) {
             (0, _) => false,
-            (1, true) => true,
+            (2, true) => true,
+            (1, true) => {
+                return Err(ViewError::Header {
+                    what: "decision tables flag (1: tables of an earlier layout; export the policy again)",
+                });
+            }
             _ => {
                 return Err(ViewError::Header {
                     what: "decision tables flag",
@@ -441,7 +448,10 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
             });
         }
         let mut view = Self::from_parts(grid, joint, greedy, v)?;
-        view.decisions = decisions;
+        if let Some(d) = decisions {
+            view.value_strides = d.value_strides();
+            view.decisions = Some(d);
+        }
         Ok(view)
     }
 
@@ -482,11 +492,14 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
                 len: n_joint,
             }));
         }
+        let mut value_strides = [0; MAX_DIMS];
+        value_strides[..grid.n_dims()].copy_from_slice(grid.strides());
         Ok(Self {
             grid,
             joint,
             greedy,
             v,
+            value_strides,
             decisions: None,
         })
     }
@@ -509,10 +522,20 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         self.greedy
     }
 
-    /// `V` per core, if it was exported.
+    /// `V` per core, if it was exported: row-major over the grid's cores, or, in an export
+    /// with decision tables, in their decision order; [`Self::value_strides`] says where
+    /// each core is.
     #[must_use]
     pub fn values(&self) -> Option<&'a [T]> {
         self.v
+    }
+
+    /// Each state variable's stride in [`Self::values`]: core `(i_0, .., i_E-1)` is at
+    /// `sum_d i_d strides[d]`. The grid's strides, except in an export with decision tables
+    /// (their decision order: see [`decide`]).
+    #[must_use]
+    pub fn value_strides(&self) -> &[usize] {
+        &self.value_strides[..self.grid.n_dims()]
     }
 
     /// The interpolated policy (eq 22) at state `x` into `out` (`joint().dim()` components):
@@ -578,6 +601,9 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         out: &mut [T],
     ) -> Result<(), DecideError> {
         let v = self.v.ok_or(DecideError::NoValues)?;
+        if self.decisions.is_some() {
+            return Err(DecideError::DecisionOrder);
+        }
         Ok(crate::backup::q_values_from_v(
             model,
             &self.grid,
@@ -591,10 +617,15 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         )?)
     }
 
-    /// `V` interpolated at `x` (`None` if `V` was not exported).
+    /// `V` interpolated at `x` (`None` if `V` was not exported): the bits of the
+    /// interpolation on the grid, in either order of `V`.
     pub fn value(&self, x: &[T]) -> Option<Result<T, EvalError>> {
-        self.v
-            .map(|v| self.grid.active(x).map(|a| a.interpolate(v)))
+        let strides = self.value_strides();
+        self.v.map(|v| {
+            self.grid
+                .active_with_strides(x, strides)
+                .map(|a| a.interpolate(v))
+        })
     }
 }
 

@@ -64,6 +64,42 @@ fn u32_bytes(v: impl IntoIterator<Item = u32>) -> Vec<u8> {
     v.into_iter().flat_map(u32::to_le_bytes).collect()
 }
 
+/// The little-endian bytes of `values`.
+fn le_bytes<T: Copy, const N: usize>(values: &[T], le: fn(T) -> [u8; N]) -> Vec<u8> {
+    values.iter().flat_map(|&x| le(x)).collect()
+}
+
+/// `v` (row-major over the grid's cores, `cores` per state variable) in the decision order of
+/// `t`: row-major over the blocks' cores, the blocks in contraction order.
+fn in_decision_order<T: Copy>(v: &[T], cores: &[Vec<f64>], t: &DecisionTables<T>) -> Vec<T> {
+    let counts: Vec<usize> = cores.iter().map(Vec::len).collect();
+    let mut strides = vec![0usize; counts.len()];
+    let mut s = 1usize;
+    for b in t.blocks.iter().rev() {
+        for &d in b.dims.iter().rev() {
+            strides[d as usize] = s;
+            s *= counts[d as usize];
+        }
+    }
+    let mut out = v.to_vec();
+    let mut idx = vec![0usize; counts.len()];
+    let mut j = 0usize;
+    for &x in v {
+        out[j] = x;
+        // The next grid core, the last variable fastest.
+        for d in (0..counts.len()).rev() {
+            idx[d] += 1;
+            j += strides[d];
+            if idx[d] < counts[d] {
+                break;
+            }
+            j -= idx[d] * strides[d];
+            idx[d] = 0;
+        }
+    }
+    out
+}
+
 /// The decision tables' sections (the format of `fuzzyq_core::view`'s `decide` module), values
 /// written by `real`.
 fn decision_sections<T: Real>(
@@ -205,23 +241,28 @@ pub fn export_bytes(
         _ => u32_bytes(artifact.greedy.iter().copied()),
     };
     section(&mut payload, &greedy);
-    if with_values {
-        let v: Vec<u8> = match &artifact.values {
-            Values::F32(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            Values::F64(v) => v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-        };
-        section(&mut payload, &v);
-    }
     if options.decisions {
-        let mut add = |b: &[u8]| section(&mut payload, b);
-        match artifact.values {
-            Values::F32(_) => {
-                decision_sections(&decision_tables::<f32>(&artifact.config)?, &real, &mut add)
+        // `V` in the tables' decision order, then the tables.
+        match &artifact.values {
+            Values::F32(v) => {
+                let t = decision_tables::<f32>(&artifact.config)?;
+                let v = in_decision_order(v, &parts.cores, &t);
+                section(&mut payload, le_bytes(&v, f32::to_le_bytes).as_slice());
+                decision_sections(&t, &real, &mut |b| section(&mut payload, b));
             }
-            Values::F64(_) => {
-                decision_sections(&decision_tables::<f64>(&artifact.config)?, &real, &mut add)
+            Values::F64(v) => {
+                let t = decision_tables::<f64>(&artifact.config)?;
+                let v = in_decision_order(v, &parts.cores, &t);
+                section(&mut payload, le_bytes(&v, f64::to_le_bytes).as_slice());
+                decision_sections(&t, &real, &mut |b| section(&mut payload, b));
             }
         }
+    } else if with_values {
+        let v: Vec<u8> = match &artifact.values {
+            Values::F32(v) => le_bytes(v, f32::to_le_bytes),
+            Values::F64(v) => le_bytes(v, f64::to_le_bytes),
+        };
+        section(&mut payload, &v);
     }
     let mut out = Vec::with_capacity(HEADER_LEN + payload.len() + 8);
     out.extend_from_slice(&MAGIC);
@@ -240,7 +281,8 @@ pub fn export_bytes(
     }
     out.extend_from_slice(&(artifact.greedy.len() as u64).to_le_bytes());
     out.extend_from_slice(&u32::from(with_values).to_le_bytes());
-    out.extend_from_slice(&u32::from(options.decisions).to_le_bytes());
+    // 2: decision tables with `V` in their order (1 was an earlier layout).
+    out.extend_from_slice(&(2 * u32::from(options.decisions)).to_le_bytes());
     out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
     out.extend_from_slice(&[0; 8]);
     out.extend_from_slice(&payload);

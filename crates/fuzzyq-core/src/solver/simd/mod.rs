@@ -3,7 +3,8 @@
 //! Two kernels carry nearly all of a sweep's arithmetic:
 //! - [`Kernels::stage`]: one contraction stage, `out[(r A + a) P + p] = sum_e w_e in[(k_e R + r) P + p]`
 //!   over the sparse rows of one block core (the same product as
-//!   [`crate::backup::contract`]);
+//!   [`crate::backup::contract`]); [`Kernels::stage_at`] reads its input at any strides
+//!   `in[k_e K + r S + p]` (the greedy decisions of `crate::view` read `V` in place);
 //! - [`Kernels::last`]: the last stage fused with the maximum over actions: for each core `c`
 //!   of the last block, `max_{a, p} sum_e w_e in[k_e P + p]` (or of its absolute value), so the
 //!   per-core row of 625 expected values is never written out; it can also return each core's
@@ -119,13 +120,39 @@ impl<'a, T> Rows<'a, T> {
     }
 }
 
-/// One stage: see the [module docs](self).
+/// Where a stage reads its input: entry column `k`, leading index `r` and lane `p` at
+/// `input[k * k_stride + r * r_stride + p]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Strides {
+    /// Elements between consecutive columns.
+    pub k_stride: usize,
+    /// Elements between consecutive leading indices.
+    pub r_stride: usize,
+}
+
+impl Strides {
+    /// The dense layout `in[(k R + r) P + p]` of `r_len` leading indices of `p_len` lanes.
+    #[inline]
+    #[must_use]
+    pub const fn dense(r_len: usize, p_len: usize) -> Self {
+        Self {
+            k_stride: r_len * p_len,
+            r_stride: p_len,
+        }
+    }
+}
+
+/// One stage at any input strides: `out[(r A + a) P + p] = sum_e w_e in[k_e K + r S + p]`
+/// (`K`, `S` = `strides`) over rows `first_row..first_row + A`, each sum in row order with
+/// fused multiply-adds from 0.
+#[allow(clippy::too_many_arguments)] // the stage's shape and buffers, spelled out
 pub type StageFn<T> = fn(
     rows: Rows<'_, T>,
     first_row: usize,
     n_actions: usize,
     r_len: usize,
     p_len: usize,
+    strides: Strides,
     input: &[T],
     out: &mut [T],
 );
@@ -212,8 +239,8 @@ pub struct Kernels<T> {
     pub(super) lanes: usize,
     /// The fused multiply-add throughput probe ([`super::fma_peak`]).
     pub(super) peak: PeakFn<T>,
-    /// One contraction stage.
-    pub(crate) stage: StageFn<T>,
+    /// One contraction stage at any input strides ([`Kernels::stage`] is the dense layout).
+    pub(crate) stage_at: StageFn<T>,
     /// The last stage fused with the maximum (and the lowest maximiser).
     pub(super) last: LastFn<T>,
     /// The last stage for one given action per core (policy evaluation).
@@ -222,18 +249,55 @@ pub struct Kernels<T> {
     pub(super) eval_pair: EvalPairFn<T>,
 }
 
+impl<T> Kernels<T> {
+    /// One contraction stage on the dense layout: `out[(r A + a) P + p] = sum_e w_e
+    /// in[(k_e R + r) P + p]` (see the [module docs](self)).
+    #[allow(clippy::too_many_arguments)] // the stage's shape and buffers, spelled out
+    #[inline]
+    pub(crate) fn stage(
+        &self,
+        rows: Rows<'_, T>,
+        first_row: usize,
+        n_actions: usize,
+        r_len: usize,
+        p_len: usize,
+        input: &[T],
+        out: &mut [T],
+    ) {
+        let strides = Strides::dense(r_len, p_len);
+        (self.stage_at)(
+            rows, first_row, n_actions, r_len, p_len, strides, input, out,
+        );
+    }
+}
+
+/// Elements a stage reads from its input (0 when it reads none): the last column's last
+/// leading index's last lane, plus one. Panics on overflow (no valid input is that long).
+fn stage_extent<T>(rows: &Rows<'_, T>, r_len: usize, p_len: usize, s: Strides) -> usize {
+    if rows.n_cols == 0 || r_len == 0 || p_len == 0 {
+        return 0;
+    }
+    (rows.n_cols - 1)
+        .checked_mul(s.k_stride)
+        .and_then(|k| k.checked_add((r_len - 1).checked_mul(s.r_stride)?))
+        .and_then(|k| k.checked_add(p_len))
+        .expect("stage input extent overflows")
+}
+
+#[allow(clippy::too_many_arguments)] // the stage's shape and buffers, spelled out
 fn check_stage<T>(
     rows: &Rows<'_, T>,
     first_row: usize,
     na: usize,
     r_len: usize,
     p_len: usize,
+    strides: Strides,
     input: &[T],
     out: &[T],
 ) {
     assert!(first_row + na <= rows.n_rows(), "stage rows out of range");
     assert!(
-        rows.n_cols * r_len * p_len <= input.len(),
+        stage_extent(rows, r_len, p_len, strides) <= input.len(),
         "stage input too short"
     );
     assert!(r_len * na * p_len <= out.len(), "stage output too short");
@@ -354,6 +418,37 @@ unsafe fn accumulate_any<T: Copy, I: Isa<T>, const NV: usize>(
     }
 }
 
+/// [`accumulate_any`] for `NR` consecutive leading indices (`r_stride` apart) at once: one
+/// chain per index and vector, each summing the entries in order.
+#[inline(always)]
+unsafe fn accumulate_any_rows<T: Copy, I: Isa<T>, const NV: usize, const NR: usize>(
+    cols: &[u32],
+    ws: &[T],
+    base: *const T,
+    (k_stride, r_stride): (usize, usize),
+    m: I::M,
+) -> [[I::V; NV]; NR] {
+    unsafe {
+        let mut acc = [[I::zero(); NV]; NR];
+        for (&k, &w) in cols.iter().zip(ws) {
+            let wv = I::splat(w);
+            let x = base.add(k as usize * k_stride);
+            for (i, row) in acc.iter_mut().enumerate() {
+                for (j, a) in row.iter_mut().enumerate() {
+                    let p = x.add(i * r_stride + j * I::LANES);
+                    let v = if j + 1 == NV {
+                        I::load_part(p, m)
+                    } else {
+                        I::load(p)
+                    };
+                    *a = I::fma(wv, v, *a);
+                }
+            }
+        }
+        acc
+    }
+}
+
 /// Stores one register block (the last vector masked).
 #[inline(always)]
 unsafe fn store_block<T: Copy, I: Isa<T>, const NV: usize>(
@@ -415,8 +510,8 @@ unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
     rows: &Rows<'_, T>,
     first_row: usize,
     na: usize,
-    r_len: usize,
-    p_len: usize,
+    (r_len, p_len): (usize, usize),
+    strides: Strides,
     p0: usize,
     m: I::M,
     tail: usize,
@@ -424,8 +519,39 @@ unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
     out: *mut T,
 ) {
     unsafe {
-        let k_stride = r_len * p_len;
+        let Strides { k_stride, r_stride } = strides;
         let out_step = na * p_len;
+        // Narrow rows: several leading indices at a time (8 chains in all, enough to hide
+        // the fused multiply-add's latency), every action's row on them before the next
+        // (their inputs stay in the first-level cache).
+        if NV == 1 && r_len >= 8 {
+            return stage_narrow::<T, I, NV, 8>(
+                rows,
+                first_row,
+                na,
+                (r_len, p_len),
+                strides,
+                p0,
+                m,
+                tail,
+                input,
+                out,
+            );
+        }
+        if NV == 2 && r_len >= 4 {
+            return stage_narrow::<T, I, NV, 4>(
+                rows,
+                first_row,
+                na,
+                (r_len, p_len),
+                strides,
+                p0,
+                m,
+                tail,
+                input,
+                out,
+            );
+        }
         for a in 0..na {
             let (cols, ws) = rows.row(first_row + a);
             let inp = input.add(p0);
@@ -438,25 +564,71 @@ unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
                     }
                 }
                 1 => stage_rows::<T, I, NV, 1>(
-                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                    cols, ws, inp, k_stride, r_stride, r_len, o, out_step, m, tail,
                 ),
                 2 => stage_rows::<T, I, NV, 2>(
-                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                    cols, ws, inp, k_stride, r_stride, r_len, o, out_step, m, tail,
                 ),
                 3 => stage_rows::<T, I, NV, 3>(
-                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                    cols, ws, inp, k_stride, r_stride, r_len, o, out_step, m, tail,
                 ),
                 4 => stage_rows::<T, I, NV, 4>(
-                    cols, ws, inp, k_stride, p_len, r_len, o, out_step, m, tail,
+                    cols, ws, inp, k_stride, r_stride, r_len, o, out_step, m, tail,
                 ),
                 _ => {
                     for r in 0..r_len {
-                        let acc =
-                            accumulate_any::<T, I, NV>(cols, ws, inp.add(r * p_len), k_stride, m);
+                        let acc = accumulate_any::<T, I, NV>(
+                            cols,
+                            ws,
+                            inp.add(r * r_stride),
+                            k_stride,
+                            m,
+                        );
                         store_block::<T, I, NV>(o.add(r * out_step), &acc, m, tail);
                     }
                 }
             }
+        }
+    }
+}
+
+/// [`stage_block`] for narrow rows, `NR` leading indices at a time (`r_len >= NR`): the last
+/// `NR` end at `r_len`, computing a few rows twice (the same values).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR: usize>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    na: usize,
+    (r_len, p_len): (usize, usize),
+    strides: Strides,
+    p0: usize,
+    m: I::M,
+    tail: usize,
+    input: *const T,
+    out: *mut T,
+) {
+    unsafe {
+        let Strides { k_stride, r_stride } = strides;
+        let out_step = na * p_len;
+        let mut r = 0;
+        while r < r_len {
+            let at = r.min(r_len - NR);
+            for a in 0..na {
+                let (cols, ws) = rows.row(first_row + a);
+                let accs = accumulate_any_rows::<T, I, NV, NR>(
+                    cols,
+                    ws,
+                    input.add(p0 + at * r_stride),
+                    (k_stride, r_stride),
+                    m,
+                );
+                let o = out.add(a * p_len + p0);
+                for (i, acc) in accs.iter().enumerate() {
+                    store_block::<T, I, NV>(o.add((at + i) * out_step), acc, m, tail);
+                }
+            }
+            r = at + NR;
         }
     }
 }
@@ -501,18 +673,21 @@ impl Iterator for Blocks {
 }
 
 #[inline(always)]
+#[allow(clippy::too_many_arguments)] // the stage's shape and buffers, spelled out
 unsafe fn stage_impl<T: Real, I: Isa<T>>(
     rows: Rows<'_, T>,
     first_row: usize,
     na: usize,
     r_len: usize,
     p_len: usize,
+    strides: Strides,
     input: &[T],
     out: &mut [T],
 ) {
-    check_stage(&rows, first_row, na, r_len, p_len, input, out);
+    check_stage(&rows, first_row, na, r_len, p_len, strides, input, out);
     let ip = input.as_ptr();
     let op = out.as_mut_ptr();
+    let Strides { k_stride, r_stride } = strides;
     unsafe {
         if p_len == 1 {
             // Rows of one value (the first stage): scalar fused multiply-adds along `r`.
@@ -521,21 +696,35 @@ unsafe fn stage_impl<T: Real, I: Isa<T>>(
                 for r in 0..r_len {
                     let mut acc = T::ZERO;
                     for (&k, &w) in cols.iter().zip(ws) {
-                        acc = I::fma1(w, *ip.add(k as usize * r_len + r), acc);
+                        acc = I::fma1(w, *ip.add(k as usize * k_stride + r * r_stride), acc);
                     }
                     *op.add(r * na + a) = acc;
                 }
             }
             return;
         }
-        if I::OVERREAD > 0 && input.len() < rows.n_cols * r_len * p_len + I::OVERREAD {
+        if I::OVERREAD > 0 && input.len() < stage_extent(&rows, r_len, p_len, strides) + I::OVERREAD
+        {
             // Vector loads on an unpadded input (the first stage reads `V` this way): the
             // instance's exact variant (rows of one value, above, never load vectors).
-            return stage_impl::<T, I::Exact>(rows, first_row, na, r_len, p_len, input, out);
+            return stage_impl::<T, I::Exact>(
+                rows, first_row, na, r_len, p_len, strides, input, out,
+            );
         }
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
             let m = I::mask(tail);
-            let args = (&rows, first_row, na, r_len, p_len, p0, m, tail, ip, op);
+            let args = (
+                &rows,
+                first_row,
+                na,
+                (r_len, p_len),
+                strides,
+                p0,
+                m,
+                tail,
+                ip,
+                op,
+            );
             match nv {
                 1 => stage_block::<T, I, 1>(
                     args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8, args.9,
@@ -1200,31 +1389,39 @@ macro_rules! instance {
         mod $module {
             use super::*;
 
-            fn stage(
+            #[allow(clippy::too_many_arguments)] // the kernel's signature
+            fn stage_at(
                 rows: Rows<'_, $t>,
                 first_row: usize,
                 na: usize,
                 r_len: usize,
                 p_len: usize,
+                strides: Strides,
                 input: &[$t],
                 out: &mut [$t],
             ) {
                 $(#[target_feature(enable = $features)])?
+                #[allow(clippy::too_many_arguments)] // the kernel's signature
                 unsafe fn inner(
                     rows: Rows<'_, $t>,
                     first_row: usize,
                     na: usize,
                     r_len: usize,
                     p_len: usize,
+                    strides: Strides,
                     input: &[$t],
                     out: &mut [$t],
                 ) {
-                    unsafe { stage_impl::<$t, $isa>(rows, first_row, na, r_len, p_len, input, out) }
+                    unsafe {
+                        stage_impl::<$t, $isa>(
+                            rows, first_row, na, r_len, p_len, strides, input, out,
+                        )
+                    }
                 }
                 assert!($detect, "CPU features missing for this kernel");
                 // SAFETY: the features were just detected; `stage_impl` checks every bound its
                 // pointer arithmetic relies on (`check_stage`, and the rows' column bound).
-                unsafe { inner(rows, first_row, na, r_len, p_len, input, out) }
+                unsafe { inner(rows, first_row, na, r_len, p_len, strides, input, out) }
             }
 
             #[allow(clippy::too_many_arguments)] // the kernel's signature
@@ -1339,7 +1536,7 @@ macro_rules! instance {
                 name: $label,
                 lanes: <$isa as Isa<$t>>::LANES,
                 peak,
-                stage,
+                stage_at,
                 last,
                 eval,
                 eval_pair,

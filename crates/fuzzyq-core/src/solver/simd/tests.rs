@@ -59,6 +59,42 @@ fn shape() -> impl Strategy<Value = (usize, usize, usize, usize, usize)> {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
+    /// A stage at any strides (the view reads `V` in place this way) equals, on every
+    /// instance, the chain `fma(w_e, in[k_e K + r S + p], acc)` from 0 in row order.
+    #[test]
+    fn strided_stages_sum_each_row_in_order_on_every_instance(
+        ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
+            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
+        }),
+        (k_extra, r_gap) in (0usize..50, 0usize..20),
+        seed in any::<u64>(),
+    ) {
+        let r_stride = p_len + r_gap;
+        let k_stride = r_len * r_stride + k_extra;
+        let strides = Strides { k_stride, r_stride };
+        let extent = (n_k - 1) * k_stride + (r_len - 1) * r_stride + p_len;
+        let input = values(extent, seed);
+        for k in f32::available() {
+            for c in 0..n_c {
+                let mut a = vec![0.0f32; r_len * na * p_len];
+                (k.stage_at)(rows.view(), c * na, na, r_len, p_len, strides, &input, &mut a);
+                for r in 0..r_len {
+                    for u in 0..na {
+                        let (cols, ws) = rows.view().row(c * na + u);
+                        for p in 0..p_len {
+                            let mut acc = 0.0f32;
+                            for (&kc, &w) in cols.iter().zip(ws) {
+                                acc = w.mul_add(input[kc as usize * k_stride + r * r_stride + p], acc);
+                            }
+                            let got = a[(r * na + u) * p_len + p];
+                            prop_assert_eq!(got.to_bits(), acc.to_bits(), "{} kernels", k.name);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn every_instance_matches_the_scalar_one_bit_for_bit(
         ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
@@ -76,11 +112,11 @@ proptest! {
             for c in 0..n_c {
                 let mut a = vec![0.0f32; r_len * na * p_len];
                 let mut b = vec![0.0f32; r_len * na * p_len];
-                (k.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut a);
-                (scalar.stage)(rows.view(), c * na, na, r_len, p_len, &input, &mut b);
+                k.stage(rows.view(), c * na, na, r_len, p_len, &input, &mut a);
+                scalar.stage(rows.view(), c * na, na, r_len, p_len, &input, &mut b);
                 prop_assert_eq!(&a, &b, "stage, {} kernels", k.name);
                 // Padded input (NaN past the tensor): over-reading instances discard it.
-                (k.stage)(rows.view(), c * na, na, r_len, p_len, &padded(&input), &mut a);
+                k.stage(rows.view(), c * na, na, r_len, p_len, &padded(&input), &mut a);
                 prop_assert_eq!(&a, &b, "stage on padded input, {} kernels", k.name);
 
                 // The unfused reference agrees to rounding.
@@ -119,7 +155,7 @@ proptest! {
                 // Pruned maxima equal the maxima of the full stage output.
                 for c in 0..n_c {
                     let mut full = vec![0.0f32; na * p_len];
-                    (k.stage)(rows.view(), c * na, na, 1, p_len, last_in, &mut full);
+                    k.stage(rows.view(), c * na, na, 1, p_len, last_in, &mut full);
                     let want = full
                         .iter()
                         .map(|&x| if abs { x.abs() } else { x })
@@ -164,7 +200,7 @@ fn evaluating_two_stages_matches_the_full_stages() {
         for k in f32::available() {
             for c in 0..3 {
                 let mut staged = vec![0.0f32; r_len * 2 * p_len];
-                (k.stage)(block.view(), c * 2, 2, r_len, p_len, &input, &mut staged);
+                k.stage(block.view(), c * 2, 2, r_len, p_len, &input, &mut staged);
                 let mut bounds = vec![0.0f32; last_scratch_len(r_len, 2 * p_len)];
                 let (mut m, mut args) = (vec![0.0f32; r_len], vec![0u32; r_len]);
                 (k.last)(
@@ -234,8 +270,8 @@ fn f64_instances_match_too() {
         let scalar = select::<f64>(Some(super::super::Kernel::Scalar)).unwrap();
         for k in f64::available() {
             let (mut a, mut b) = (vec![0.0; 2 * 3 * p_len], vec![0.0; 2 * 3 * p_len]);
-            (k.stage)(rows.view(), 0, 3, 2, p_len, &input, &mut a);
-            (scalar.stage)(rows.view(), 0, 3, 2, p_len, &input, &mut b);
+            k.stage(rows.view(), 0, 3, 2, p_len, &input, &mut a);
+            scalar.stage(rows.view(), 0, 3, 2, p_len, &input, &mut b);
             assert_eq!(a, b, "{} p_len {p_len}", k.name);
         }
     }
