@@ -852,8 +852,9 @@ unsafe fn row_bound<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
     m: I::M,
 ) -> T {
     unsafe {
-        let all = I::mask(I::LANES);
-        let mut out = None;
+        // The lanes' maxima in a vector, then one horizontal reduction (the maximum is exact
+        // in any order); the masked-off lanes of the last vector are minus infinity.
+        let mut top = I::neg_inf();
         for j in 0..NV {
             let last = j + 1 == NV;
             let v = if last {
@@ -862,13 +863,9 @@ unsafe fn row_bound<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
                 I::load(x.add(j * I::LANES))
             };
             let v = if ABS { I::abs(v) } else { v };
-            let r = I::reduce_max(v, if last { m } else { all });
-            out = Some(match out {
-                Some(o) => I::max1(o, r),
-                None => r,
-            });
+            top = I::max(top, if last { I::load_part_from(v, m) } else { v });
         }
-        out.expect("NV >= 1")
+        I::reduce_max(top, I::mask(I::LANES))
     }
 }
 
