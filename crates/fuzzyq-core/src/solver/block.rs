@@ -37,7 +37,7 @@ use std::boxed::Box;
 use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
-use super::simd::{INPUT_PAD, Kernels, Rows, RowsBuf, last_scratch_len};
+use super::simd::{INPUT_PAD, Kernels, PairScratch, Rows, RowsBuf, Strides, last_scratch_len};
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
 use crate::model::Model;
@@ -114,6 +114,10 @@ struct Extra<T> {
     args: Vec<u32>,
     /// Row bounds of the pruned last stage.
     bounds: Vec<T>,
+    /// The evaluation's shared second-to-last stages ([`PairScratch`]).
+    pair_inner: Vec<T>,
+    /// Their rows by (block action, prior actions).
+    pair_slots: Vec<u32>,
 }
 
 pub(super) struct BlockOperator<T: 'static> {
@@ -685,6 +689,17 @@ impl<T: Real> BlockOperator<T> {
     fn work<M: Model<T> + Sync + ?Sized>(&self, op: &Operator<'_, T, M>) -> Work<T> {
         let last = self.tables.last().expect("at least one block");
         let nb = self.tables.len();
+        let (pair_inner, pair_slots) = if nb >= 3 {
+            let block = &self.tables[nb - 2];
+            PairScratch::<T>::lens(
+                last.n_cores,
+                block.n_actions,
+                self.p_len[nb - 2],
+                last.n_cores,
+            )
+        } else {
+            (0, 0)
+        };
         Work {
             stages: self
                 .tables
@@ -698,6 +713,8 @@ impl<T: Real> BlockOperator<T> {
                 maxima: vec![T::ZERO; last.n_cores],
                 args: vec![0; last.n_cores],
                 bounds: vec![T::ZERO; last_scratch_len(last.n_cores, self.p_len[nb - 1])],
+                pair_inner: vec![T::ZERO; pair_inner],
+                pair_slots: vec![0; pair_slots],
             },
             reduce: op.reduce_work(),
         }
@@ -812,22 +829,36 @@ impl<T: Real> BlockOperator<T> {
             let rows = self.rows(rows0, level);
             self.kernels
                 .stage(rows, c * na, na, 1, rp, input, &mut out[..na * rp]);
-            let (block, next) = (&self.tables[level + 1], &self.tables[level + 2]);
-            let n = next.n_cores;
-            for c2 in 0..block.n_cores {
-                let first = (local * block.n_cores + c2) * n;
-                let m = &mut extra.maxima[..n];
-                (self.kernels.eval_pair)(
-                    block.rows.view(),
-                    c2,
-                    next.rows.view(),
-                    (block.n_actions, next.n_actions),
-                    (self.p_len[level + 1], self.p_len[level]),
-                    out,
-                    pol(first, n),
-                    m,
-                );
-                emit(first, Out::Max(m));
+            let prior = (self.p_len[level + 1], self.p_len[level]);
+            self.eval_pairs(level, out, prior, extra, local, policy, emit);
+            return;
+        }
+        if last == Last::Eval && level + 4 == nb && self.p_len[level] == 1 {
+            // The first stage action by action (`[a][r]`, as the transposed first stage
+            // computes it), then the stage before the last two for each of the next block's
+            // cores with the prior actions outermost, `[a'][a][r']`: the last block's
+            // successors are then contiguous, and the last two stages share each
+            // (block action, prior actions) pair's contraction among the cores that take it.
+            // The same sums in the same order, so the same bits.
+            let t = &self.tables[level];
+            let (na, r) = (t.n_actions, self.r_len[level]);
+            let rows = self.rows(rows0, level);
+            self.kernels
+                .stage(rows, c * na, na, 1, r, input, &mut out[..na * r]);
+            let next = &self.tables[level + 1];
+            let (na1, r1) = (next.n_actions, self.r_len[level + 1]);
+            let out1 = deeper.first_mut().expect("one buffer per stage");
+            let strides = Strides {
+                k_stride: r1,
+                r_stride: next.n_cores * r1,
+            };
+            let rows1 = next.rows.view();
+            for c1 in 0..next.n_cores {
+                for (a1, o) in out1[..na1 * na * r1].chunks_exact_mut(na * r1).enumerate() {
+                    (self.kernels.stage_at)(rows1, c1 * na1 + a1, 1, na, r1, strides, out, o);
+                }
+                let local1 = local * next.n_cores + c1;
+                self.eval_pairs(level + 1, out1, (na1 * na, 1), extra, local1, policy, emit);
             }
             return;
         }
@@ -856,6 +887,51 @@ impl<T: Real> BlockOperator<T> {
                 policy,
                 emit,
             );
+        }
+    }
+
+    /// The last two stages for the given actions of the cores under block core `local` of
+    /// block `level` (every core of block `level + 1`, then of the last block), from `input`,
+    /// the stage before them in the layout `prior = (P, P_in)` says (see
+    /// [`super::simd::EvalPairFn`]).
+    #[allow(clippy::too_many_arguments)] // recursion state, spelled out
+    fn eval_pairs<E: FnMut(usize, Out<'_, T>)>(
+        &self,
+        level: usize,
+        input: &[T],
+        prior: (usize, usize),
+        extra: &mut Extra<T>,
+        local: usize,
+        policy: &[u32],
+        emit: &mut E,
+    ) {
+        let (block, next) = (&self.tables[level + 1], &self.tables[level + 2]);
+        let n = next.n_cores;
+        let Extra {
+            maxima,
+            pair_inner,
+            pair_slots,
+            ..
+        } = extra;
+        for c2 in 0..block.n_cores {
+            let first = (local * block.n_cores + c2) * n;
+            let m = &mut maxima[..n];
+            let scratch = PairScratch {
+                inner: pair_inner,
+                slots: pair_slots,
+            };
+            (self.kernels.eval_pair)(
+                block.rows.view(),
+                c2,
+                next.rows.view(),
+                (block.n_actions, next.n_actions),
+                prior,
+                input,
+                &policy[first..first + n],
+                m,
+                scratch,
+            );
+            emit(first, Out::Max(m));
         }
     }
 

@@ -211,6 +211,13 @@ pub type EvalFn<T> = fn(
 /// without computing the stage for every action. `P_in = P` is the stage kernel's layout
 /// (`in[(j R + k) P + p]`); a smaller `P_in` reads the earlier stage's actions `q` as the
 /// outermost index, the layout of a stage computed action by action along whole rows.
+///
+/// With `P_in = 1` (the input `[q][j][k]`, the last block's successors contiguous), the cores'
+/// second-to-last stages are shared: each distinct (block action, `q`) pair of the cores'
+/// actions is contracted once over every successor core `k` in vectors (the same chains, in
+/// `scratch`), then each core sums its last row over it. `scratch` must hold
+/// [`PairScratch::lens`] elements for this; with less, or `P_in > 1`, every core sums its own
+/// products (the same bits).
 pub type EvalPairFn<T> = fn(
     block: Rows<'_, T>,
     core_b: usize,
@@ -220,7 +227,25 @@ pub type EvalPairFn<T> = fn(
     input: &[T],
     policy: &[u32],
     out: &mut [T],
+    scratch: PairScratch<'_, T>,
 );
+
+/// Scratch of [`EvalPairFn`]'s shared path.
+pub struct PairScratch<'a, T> {
+    /// The shared second-to-last stages, one row of successor cores each.
+    pub inner: &'a mut [T],
+    /// Per (block action, `q`): its row in `inner`, or `u32::MAX`.
+    pub slots: &'a mut [u32],
+}
+
+impl<T> PairScratch<'_, T> {
+    /// `(inner, slots)` lengths for `n` cores, `na_b` block actions, `p_len` prior actions and
+    /// `r_len` successor cores of the last block.
+    pub(crate) fn lens(n: usize, na_b: usize, p_len: usize, r_len: usize) -> (usize, usize) {
+        let keys = na_b * p_len;
+        (keys.min(n) * r_len, keys)
+    }
+}
 
 /// The throughput probe: `iters` rounds of [`PEAK_CHAINS`] independent vector chains
 /// `x = fma(x, a, b)` from `x = seed` (kept in registers, no memory traffic); returns the
@@ -1227,6 +1252,7 @@ unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
     input: &[T],
     policy: &[u32],
     out: &mut [T],
+    scratch: PairScratch<'_, T>,
 ) {
     let r_len = last.n_cols;
     let n = out.len();
@@ -1246,6 +1272,53 @@ unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
         "stage input too short"
     );
     let q_stride = block.n_cols * r_len;
+    let (inner_len, keys) = PairScratch::<T>::lens(n, na_b, p_len, r_len);
+    if p_in == 1 && scratch.inner.len() >= inner_len && scratch.slots.len() >= keys {
+        // Shared: each (block action, q) once over every successor core, in vectors.
+        let PairScratch { inner, slots } = scratch;
+        slots[..keys].fill(u32::MAX);
+        let mut n_shared = 0usize;
+        for (c, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+            let u = u as usize;
+            assert!(
+                u < na_last * keys,
+                "policy action beyond the product action set"
+            );
+            let (a_last, key) = (u / keys, u % keys);
+            let mut slot = slots[key] as usize;
+            if slot == u32::MAX as usize {
+                slot = n_shared;
+                slots[key] = slot as u32;
+                n_shared += 1;
+                let (a_b, q) = (key / p_len, key % p_len);
+                // `inner[slot][k] = sum_j v_j input[(q J + j) R + k]`: the stage kernel's
+                // chain for every `k` at once.
+                unsafe {
+                    stage_impl::<T, I>(
+                        block,
+                        core_b * na_b + a_b,
+                        1,
+                        1,
+                        r_len,
+                        Strides {
+                            k_stride: r_len,
+                            r_stride: r_len,
+                        },
+                        &input[q * q_stride..],
+                        &mut inner[slot * r_len..(slot + 1) * r_len],
+                    );
+                }
+            }
+            let row = &inner[slot * r_len..(slot + 1) * r_len];
+            let (cols, ws) = last.row(c * na_last + a_last);
+            let mut acc = T::ZERO;
+            for (&k, &w) in cols.iter().zip(ws) {
+                acc = unsafe { I::fma1(w, row[k as usize], acc) };
+            }
+            *o = acc;
+        }
+        return;
+    }
     for (c, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
         let u = u as usize;
         assert!(
@@ -1495,6 +1568,7 @@ macro_rules! instance {
                 input: &[$t],
                 policy: &[u32],
                 out: &mut [$t],
+                scratch: PairScratch<'_, $t>,
             ) {
                 $(#[target_feature(enable = $features)])?
                 #[allow(clippy::too_many_arguments)] // the kernel's signature
@@ -1507,16 +1581,19 @@ macro_rules! instance {
                     input: &[$t],
                     policy: &[u32],
                     out: &mut [$t],
+                    scratch: PairScratch<'_, $t>,
                 ) {
                     unsafe {
                         eval_pair_impl::<$t, $isa>(
-                            block, core_b, last, n_actions, prior, input, policy, out,
+                            block, core_b, last, n_actions, prior, input, policy, out, scratch,
                         )
                     }
                 }
                 assert!($detect, "CPU features missing for this kernel");
                 // SAFETY: as above; `eval_pair_impl` checks the actions and the lengths.
-                unsafe { inner(block, core_b, last, n_actions, prior, input, policy, out) }
+                unsafe {
+                    inner(block, core_b, last, n_actions, prior, input, policy, out, scratch)
+                }
             }
 
             fn peak(iters: usize, seed: $t, a: $t, b: $t) -> $t {

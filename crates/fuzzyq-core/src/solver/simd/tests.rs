@@ -223,22 +223,31 @@ fn evaluating_two_stages_matches_the_full_stages() {
                         let (q, pi) = (p / p_in, p % p_in);
                         moved[(q * 4 * r_len + jk) * p_in + pi] = x;
                     }
-                    let mut ev = vec![0.0f32; r_len];
-                    (k.eval_pair)(
-                        block.view(),
-                        c,
-                        last.view(),
-                        (2, 3),
-                        (p_len, p_in),
-                        &moved,
-                        &args,
-                        &mut ev,
-                    );
-                    assert_eq!(
-                        ev, m,
-                        "{} kernels, r {r_len}, p {p_len} ({p_in} inner), core {c}",
-                        k.name
-                    );
+                    // With the shared path's scratch (used when `p_in` is 1) and without.
+                    let (inner, slots) = PairScratch::<f32>::lens(r_len, 2, p_len, r_len);
+                    for lens in [(inner, slots), (0, 0)] {
+                        let mut ev = vec![0.0f32; r_len];
+                        let (mut inner, mut slots) = (vec![f32::NAN; lens.0], vec![7u32; lens.1]);
+                        (k.eval_pair)(
+                            block.view(),
+                            c,
+                            last.view(),
+                            (2, 3),
+                            (p_len, p_in),
+                            &moved,
+                            &args,
+                            &mut ev,
+                            PairScratch {
+                                inner: &mut inner,
+                                slots: &mut slots,
+                            },
+                        );
+                        assert_eq!(
+                            ev, m,
+                            "{} kernels, r {r_len}, p {p_len} ({p_in} inner), core {c}, scratch {lens:?}",
+                            k.name
+                        );
+                    }
                 }
             }
         }
