@@ -184,7 +184,10 @@ fn bench_view<T: ViewReal>(
     let (m, d) = (view.joint().n_joint(), view.joint().dim());
     let (mut q, mut u) = (vec![T::ZERO; m], vec![T::ZERO; d]);
     let mut i = 0usize;
-    g.bench_function(format!("interpolated_{name}"), |b| {
+    // With decision tables, this one runs on 4 KiB pages (a plain buffer) and the one below
+    // as a controller with std loads the export.
+    let small = if tables { "_small_pages" } else { "" };
+    g.bench_function(format!("interpolated_{name}{small}"), |b| {
         b.iter(|| {
             i = (i + 1) % STATES;
             view.interpolated_action(black_box(&states[i]), &mut u)
@@ -199,6 +202,23 @@ fn bench_view<T: ViewReal>(
         let loaded = ExportedBytes::copy_of(&bytes).unwrap();
         let huge = PolicyView::<T>::parse(loaded.bytes()).unwrap();
         for (suffix, v) in [("_small_pages", &view), ("", &huge)] {
+            if suffix.is_empty() {
+                g.bench_function(format!("interpolated_{name}_same_state"), |b| {
+                    b.iter(|| {
+                        v.interpolated_action(black_box(&states[7]), &mut u)
+                            .unwrap();
+                        black_box(u[0])
+                    })
+                });
+                g.bench_function(format!("interpolated_{name}"), |b| {
+                    b.iter(|| {
+                        i = (i + 1) % STATES;
+                        v.interpolated_action(black_box(&states[i]), &mut u)
+                            .unwrap();
+                        black_box(u[0])
+                    })
+                });
+            }
             g.bench_function(format!("greedy_{name}{suffix}"), |b| {
                 b.iter(|| {
                     i = (i + 1) % STATES;

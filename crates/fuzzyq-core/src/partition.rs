@@ -557,8 +557,11 @@ impl<T: Real> ActiveCores<T> {
                 self.split_upper[j],
             );
             // Core `i` of the first `2^j` becomes cores `2i` (lower) and `2i + 1` (upper):
-            // split variable 0 ends up the most significant bit, as in `for_each`.
-            for i in (0..1usize << j).rev() {
+            // split variable 0 ends up the most significant bit, as in `for_each`. (Sliced to
+            // `2^(j+1)` first, so that the indexing below needs no bounds checks.)
+            let m = 1usize << j;
+            let (index, weight) = (&mut index[..2 * m], &mut weight[..2 * m]);
+            for i in (0..m).rev() {
                 let (d, w) = (index[i], weight[i]);
                 index[2 * i + 1] = d + stride;
                 weight[2 * i + 1] = w * hi;

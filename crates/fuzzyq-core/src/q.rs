@@ -117,6 +117,17 @@ pub trait GreedyTable {
     }
     /// The greedy joint action of core `core` (`core < len()`).
     fn action(&self, core: usize) -> u32;
+    /// `out[k] = action(cores[k])` for every `k` (`out.len() >= cores.len()`), returning the
+    /// largest (0 for no cores). One pass with nothing else in flight, so that the loads'
+    /// cache misses overlap.
+    fn gather(&self, cores: &[usize], out: &mut [u32]) -> u32 {
+        let mut top = 0;
+        for (a, &d) in out.iter_mut().zip(cores) {
+            *a = self.action(d);
+            top = top.max(*a);
+        }
+        top
+    }
 }
 
 macro_rules! greedy_table {
@@ -157,13 +168,11 @@ pub fn interpolated_action_in<T: Real, G: GreedyTable + ?Sized>(
         // The greedy actions are loaded in a pass of their own: with nothing else in flight,
         // all their cache misses overlap (loading them inside the sums measured 30% slower).
         let mut action = [0u32; FAST];
-        for (a, &d) in action[..n].iter_mut().zip(&index[..n]) {
-            *a = greedy.action(d);
+        let top = greedy.gather(&index[..n], &mut action);
+        if top as usize >= joint.n_joint() {
+            return Err(greedy_out_of_range(joint, top));
         }
         let action = &action[..n];
-        if let Some(&bad) = action.iter().find(|&&u| u as usize >= joint.n_joint()) {
-            return Err(greedy_out_of_range(joint, bad));
-        }
         if !sum_actions_in_registers(joint, action, weight, out) {
             out.fill(T::ZERO);
             // Agent by agent, the components summed in registers (in core order, as below).
@@ -205,22 +214,54 @@ pub fn interpolated_action_in<T: Real, G: GreedyTable + ?Sized>(
     }
     for i in 0..joint.n_agents() {
         let set = joint.agent(i);
-        let off = joint.agent_offset(i);
-        for (k, o) in out[off..off + set.dim()].iter_mut().enumerate() {
-            let (mut lo, mut hi) = (set.action(0)[k], set.action(0)[k]);
-            for j in 1..set.n_actions() {
-                let c = set.action(j)[k];
-                lo = if c < lo { c } else { lo };
-                hi = if c > hi { c } else { hi };
-            }
-            if *o > hi {
-                *o = hi;
-            } else if *o < lo {
-                *o = lo;
+        let o = &mut out[joint.agent_offset(i)..][..set.dim()];
+        match set.dim() {
+            1 => clamp_into_actions::<T, 1>(set.values(), o),
+            2 => clamp_into_actions::<T, 2>(set.values(), o),
+            _ => {
+                for (k, o) in o.iter_mut().enumerate() {
+                    let (mut lo, mut hi) = (set.action(0)[k], set.action(0)[k]);
+                    for j in 1..set.n_actions() {
+                        let c = set.action(j)[k];
+                        lo = if c < lo { c } else { lo };
+                        hi = if c > hi { c } else { hi };
+                    }
+                    clamp(o, lo, hi);
+                }
             }
         }
     }
     Ok(())
+}
+
+/// Clamps each of the `D` components `out` into that component's range over the actions
+/// `values` (action-major, `D` components each), in one pass over the actions.
+#[inline(always)]
+fn clamp_into_actions<T: Real, const D: usize>(values: &[T], out: &mut [T]) {
+    let (rows, _) = values.as_chunks::<D>();
+    let Some((first, rest)) = rows.split_first() else {
+        return;
+    };
+    for (k, o) in out.iter_mut().enumerate().take(D) {
+        // Component by component: two independent scalar chains each (the values are
+        // finite, so comparisons need no NaN handling).
+        let (mut lo, mut hi) = (first[k], first[k]);
+        for a in rest {
+            lo = if a[k] < lo { a[k] } else { lo };
+            hi = if a[k] > hi { a[k] } else { hi };
+        }
+        clamp(o, lo, hi);
+    }
+}
+
+/// `o` clamped into `[lo, hi]` (left alone if NaN).
+#[inline(always)]
+fn clamp<T: Real>(o: &mut T, lo: T, hi: T) {
+    if *o > hi {
+        *o = hi;
+    } else if *o < lo {
+        *o = lo;
+    }
 }
 
 /// The error for a greedy table entry `u` that names no joint action.
@@ -273,16 +314,16 @@ fn sum_uniform<T: Real, const N: usize, const D: usize>(
     weight: &[T],
     out: &mut [T],
 ) {
-    let mut values = [&[][..]; N];
+    // Each agent's actions as `[T; D]` rows: one bounds check per agent and core.
+    let mut values: [&[[T; D]]; N] = [&[]; N];
     for (i, v) in values.iter_mut().enumerate() {
-        *v = joint.agent(i).values();
+        *v = joint.agent(i).values().as_chunks::<D>().0;
     }
     let mut acc = [[T::ZERO; D]; N];
     for (&u, &w) in action.iter().zip(weight) {
         let digits = joint.agent_indices_in_range::<N>(u);
         for ((sum, vals), &j) in acc.iter_mut().zip(&values).zip(&digits) {
-            let a = &vals[j * D..][..D];
-            for (y, &c) in sum.iter_mut().zip(a) {
+            for (y, &c) in sum.iter_mut().zip(&vals[j]) {
                 *y += w * c;
             }
         }
@@ -342,7 +383,14 @@ mod tests {
         interpolated_action(&g, &j, &[0, 2], &[0.25], &mut out).unwrap();
         assert!((out[0] - (0.75 * -2.0 + 0.25 * 2.0)).abs() < 1e-12);
         out[0] = 7.0;
-        assert!(interpolated_action(&g, &j, &[0, 3], &[0.25], &mut out).is_err());
+        assert_eq!(
+            interpolated_action(&g, &j, &[0, 3], &[0.25], &mut out),
+            Err(EvalError::OutOfRange {
+                what: "greedy action",
+                index: 3,
+                len: 3
+            })
+        );
         assert_eq!(
             out[0], 7.0,
             "a refused greedy table leaves the output alone"

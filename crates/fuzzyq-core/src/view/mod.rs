@@ -182,6 +182,15 @@ impl GreedyTable for Greedy<'_> {
             Self::U32(g) => g[core],
         }
     }
+
+    /// The width chosen once, not per core.
+    fn gather(&self, cores: &[usize], out: &mut [u32]) -> u32 {
+        match self {
+            Self::U8(g) => g.gather(cores, out),
+            Self::U16(g) => g.gather(cores, out),
+            Self::U32(g) => g.gather(cores, out),
+        }
+    }
 }
 
 /// Bytes at an 8-byte boundary, as [`PolicyView::parse`] needs them: `include_bytes!` gives
