@@ -1061,6 +1061,38 @@ impl<T: Real> BlockOperator<T> {
         );
     }
 
+    /// [`Self::each_core`] (with `policy`: [`Self::evaluate`]), also returning the range of
+    /// `value(out[i]) - v[i]` over every core ([`super::sweeps::diff_range`]), taken slab by
+    /// slab while the slab's results are still in cache: the pass over both buffers that the
+    /// iteration drivers' change statistics would otherwise need.
+    #[allow(clippy::too_many_arguments)] // each_core's arguments, and the value to compare
+    pub(super) fn each_core_range<U: Send, M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        policy: Option<&[u32]>,
+        out: &mut [U],
+        kind: Reduce,
+        pick: impl Fn((T, u32)) -> U + Sync + Send,
+        value: impl Fn(&U) -> T + Sync + Send,
+    ) -> (f64, f64) {
+        let slab = self.slab_len();
+        par::map_reduce_chunks_mut(
+            out,
+            slab,
+            || self.work(op),
+            |w, c0, chunk| {
+                let first = c0 * slab;
+                let pol = policy.map(|p| &p[first..first + chunk.len()]);
+                let rows0 = self.tables[0].rows.view();
+                self.slab_into(op, rows0, v, kind, pol, c0, w, chunk, &pick);
+                super::sweeps::diff_range_by(chunk, &v[first..first + chunk.len()], &value)
+            },
+            (f64::INFINITY, f64::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        )
+    }
+
     /// Reduces every core of slab `c0` against `v` into `chunk` (one entry per slab core).
     /// With `policy` (the slab's actions), evaluates them instead ([`Last::Eval`]).
     #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out

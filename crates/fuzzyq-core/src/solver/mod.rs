@@ -1112,6 +1112,27 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         }
     }
 
+    /// [`Self::each_core`] (with `policy`: [`Self::evaluate`]), also returning the range of
+    /// `value(out[i]) - v[i]` where the block path can take it while the results are in cache
+    /// (`None` on the generic path, whose callers take it in a pass of their own).
+    fn each_core_range<U: Send>(
+        &self,
+        v: &[T],
+        policy: Option<&[u32]>,
+        out: &mut [U],
+        kind: Reduce,
+        pick: impl Fn((T, u32)) -> U + Sync + Send,
+        value: impl Fn(&U) -> T + Sync + Send,
+    ) -> Result<Option<(f64, f64)>, SolveError> {
+        match &self.path {
+            Path::Block(b) => Ok(Some(
+                b.each_core_range(self, v, policy, out, kind, pick, value),
+            )),
+            Path::Generic(_) if policy.is_some() => unreachable!("checked by can_evaluate"),
+            Path::Generic(g) => g.each_core(self, v, out, kind, pick).map(|()| None),
+        }
+    }
+
     /// One asynchronous sweep in place; returns `||V_new - V_old||_inf`.
     fn sweep_async(&self, v: &mut [T]) -> Result<f64, SolveError> {
         match &self.path {

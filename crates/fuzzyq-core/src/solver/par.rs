@@ -27,6 +27,39 @@ where
     }
 }
 
+/// [`for_each_chunk_mut`] where each chunk also gives a result, combined by `reduce` from
+/// `identity` in a grouping that depends on the split (see [`map_reduce`]).
+pub(super) fn map_reduce_chunks_mut<U, S, R, I, F, G>(
+    out: &mut [U],
+    chunk: usize,
+    init: I,
+    f: F,
+    identity: R,
+    reduce: G,
+) -> R
+where
+    U: Send,
+    R: Copy + Send + Sync,
+    I: Fn() -> S + Sync + Send,
+    F: Fn(&mut S, usize, &mut [U]) -> R + Sync + Send,
+    G: Fn(R, R) -> R + Sync + Send,
+{
+    #[cfg(feature = "parallel")]
+    {
+        out.par_chunks_mut(chunk)
+            .enumerate()
+            .map_init(init, |s, (i, c)| f(s, i, c))
+            .reduce(|| identity, &reduce)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut s = init();
+        out.chunks_mut(chunk)
+            .enumerate()
+            .fold(identity, |r, (i, c)| reduce(r, f(&mut s, i, c)))
+    }
+}
+
 /// `(0..n).map(f)` collected in order; `min_len` items at least per task.
 pub(super) fn map_indexed<R, S, I, F>(n: usize, min_len: usize, init: I, f: F) -> Vec<R>
 where

@@ -54,7 +54,8 @@ impl DiffStats {
 }
 
 /// [`DiffStats`] of `a` against `b` (equal lengths; extra values of either are ignored) with
-/// shift `s`: maxima and minima in `f64`, the same bits for any split of the cores.
+/// shift `s`: maxima and minima in `f64`, the same bits for any split of the cores. (NaN
+/// differences are skipped.)
 pub fn diff_stats<T: Real>(a: &[T], b: &[T], s: T) -> DiffStats {
     let s = s.to_f64();
     par::map_reduce(
@@ -62,20 +63,63 @@ pub fn diff_stats<T: Real>(a: &[T], b: &[T], s: T) -> DiffStats {
         PASS_CHUNK,
         DiffStats::EMPTY,
         |r| {
-            a[r.clone()]
-                .iter()
-                .zip(&b[r])
-                .fold(DiffStats::EMPTY, |m, (&x, &y)| {
-                    let d = x.to_f64() - y.to_f64();
-                    DiffStats {
-                        change: m.change.max((d + s).abs()),
-                        lo: m.lo.min(d),
-                        hi: m.hi.max(d),
-                    }
-                })
+            let (lo, hi) = diff_range(&a[r.clone()], &b[r]);
+            DiffStats::of_range(lo, hi, s)
         },
         DiffStats::merge,
     )
+}
+
+impl DiffStats {
+    /// The statistics of differences whose range is `[lo, hi]` (`lo > hi`: none) after a
+    /// shift `s`. Rounding `d + s` is monotone in `d`, so `max |d + s|` is taken at an end of
+    /// the range: the same bits as the maximum over every difference.
+    pub(super) fn of_range(lo: f64, hi: f64, s: f64) -> Self {
+        if lo > hi {
+            return Self::EMPTY;
+        }
+        // A zero bound's sign depends on which lane met which zero first: `+ 0.0` makes every
+        // zero `+0`, so the bits do not depend on the split either.
+        let (lo, hi) = (lo + 0.0, hi + 0.0);
+        Self {
+            change: (lo + s).abs().max((hi + s).abs()),
+            lo,
+            hi,
+        }
+    }
+}
+
+/// `(min, max)` of `a[i] - b[i]` in `f64` (`(inf, -inf)` for none; NaN differences skipped).
+fn diff_range<T: Real>(a: &[T], b: &[T]) -> (f64, f64) {
+    diff_range_by(a, b, &|&x: &T| x)
+}
+
+/// [`diff_range`] of `value(a[i])` against `b[i]`, over eight independent lanes so that the
+/// comparisons do not wait on each other. Exact minima and maxima, so any split of the cores
+/// combined by `min` and `max` gives the same range.
+pub(super) fn diff_range_by<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (f64, f64) {
+    const LANES: usize = 8;
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let (mut lo, mut hi) = ([f64::INFINITY; LANES], [f64::NEG_INFINITY; LANES]);
+    let (ac, at) = a.as_chunks::<LANES>();
+    let (bc, bt) = b.as_chunks::<LANES>();
+    for (x, y) in ac.iter().zip(bc) {
+        for k in 0..LANES {
+            let d = value(&x[k]).to_f64() - y[k].to_f64();
+            // Written so that a NaN `d` keeps the bound (the comparison is false).
+            lo[k] = if d < lo[k] { d } else { lo[k] };
+            hi[k] = if d > hi[k] { d } else { hi[k] };
+        }
+    }
+    for (k, (x, y)) in at.iter().zip(bt).enumerate() {
+        let d = value(x).to_f64() - y.to_f64();
+        lo[k] = if d < lo[k] { d } else { lo[k] };
+        hi[k] = if d > hi[k] { d } else { hi[k] };
+    }
+    let lo = lo.iter().fold(f64::INFINITY, |m, &x| m.min(x));
+    let hi = hi.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x));
+    (lo, hi)
 }
 
 /// Adds `s` to every value of `v` (in `T`: the extrapolation's shift).
@@ -141,6 +185,9 @@ pub struct Local<'o, 'a, T: Real, M: ?Sized> {
     bufs: [Vec<T>; 3],
     policy: Vec<u32>,
     pairs: Vec<(T, u32)>,
+    /// `(out, v, range of out - v)` of the last sweep, taken while it ran, for as long as
+    /// neither buffer has changed since: [`Sweeps::diff_stats`] of that pair needs no pass.
+    range: Option<(Buf, Buf, (f64, f64))>,
 }
 
 impl<'o, 'a, T: Real, M: Model<T> + Sync + ?Sized> Local<'o, 'a, T, M> {
@@ -152,6 +199,7 @@ impl<'o, 'a, T: Real, M: Model<T> + Sync + ?Sized> Local<'o, 'a, T, M> {
             bufs: [Vec::new(), Vec::new(), Vec::new()],
             policy: Vec::new(),
             pairs: Vec::new(),
+            range: None,
         }
     }
 
@@ -193,56 +241,88 @@ impl<'o, 'a, T: Real, M: Model<T> + Sync + ?Sized> Local<'o, 'a, T, M> {
 impl<T: Real, M: Model<T> + Sync + ?Sized> Sweeps<T> for Local<'_, '_, T, M> {
     type Error = SolveError;
 
-    fn backup(&mut self, v: Buf, out: Buf) -> Result<(), SolveError> {
+    fn backup(&mut self, v_buf: Buf, out_buf: Buf) -> Result<(), SolveError> {
         let op = self.op;
-        let (v, out) = self.pair(v, out);
-        op.each_core(v, out, Reduce::Max, |r| r.0)
+        self.range = None;
+        let (v, out) = self.pair(v_buf, out_buf);
+        let range = op.each_core_range(v, None, out, Reduce::Max, |r| r.0, |&x| x)?;
+        self.range = range.map(|r| (out_buf, v_buf, r));
+        Ok(())
     }
 
-    fn backup_greedy(&mut self, v: Buf, out: Buf) -> Result<(), SolveError> {
+    fn backup_greedy(&mut self, v_buf: Buf, out_buf: Buf) -> Result<(), SolveError> {
         let (op, n) = (self.op, self.op.n_cores());
+        self.range = None;
         let mut pairs = core::mem::take(&mut self.pairs);
         pairs.resize(n, (T::ZERO, 0));
-        op.each_core(&self.buf(v)[..], &mut pairs, Reduce::Argmax, |r| r)?;
-        for (o, &(x, _)) in self.buf(out).iter_mut().zip(&pairs) {
-            *o = x;
-        }
-        for (p, &(_, u)) in self.policy_buf().iter_mut().zip(&pairs) {
-            *p = u;
-        }
+        let v = &self.buf(v_buf)[..];
+        let range = op.each_core_range(v, None, &mut pairs, Reduce::Argmax, |r| r, |p| p.0)?;
+        par::for_each_chunk_mut(
+            self.buf(out_buf),
+            PASS_CHUNK,
+            || (),
+            |_, i, c| {
+                for (o, &(x, _)) in c.iter_mut().zip(&pairs[i * PASS_CHUNK..]) {
+                    *o = x;
+                }
+            },
+        );
+        par::for_each_chunk_mut(
+            self.policy_buf(),
+            PASS_CHUNK,
+            || (),
+            |_, i, c| {
+                for (p, &(_, u)) in c.iter_mut().zip(&pairs[i * PASS_CHUNK..]) {
+                    *p = u;
+                }
+            },
+        );
         self.pairs = pairs;
+        self.range = range.map(|r| (out_buf, v_buf, r));
         Ok(())
     }
 
     fn rewards(&mut self, out: Buf) -> Result<(), SolveError> {
         let op = self.op;
+        self.range = None;
         for (i, o) in self.buf(out).iter_mut().enumerate() {
             *o = op.finish_max(i, T::ZERO);
         }
         Ok(())
     }
 
-    fn evaluate(&mut self, v: Buf, out: Buf) -> Result<(), SolveError> {
+    fn evaluate(&mut self, v_buf: Buf, out_buf: Buf) -> Result<(), SolveError> {
         let op = self.op;
+        self.range = None;
         self.policy_buf();
         let policy = core::mem::take(&mut self.policy);
-        let (v, out) = self.pair(v, out);
-        op.evaluate(v, &policy, out);
+        let (v, out) = self.pair(v_buf, out_buf);
+        let range = op.each_core_range(v, Some(&policy), out, Reduce::Max, |r| r.0, |&x| x);
         self.policy = policy;
+        self.range = range?.map(|r| (out_buf, v_buf, r));
         Ok(())
     }
 
     fn sweep_async(&mut self, v: Buf) -> Result<f64, SolveError> {
         let op = self.op;
+        self.range = None;
         op.sweep_async(self.buf(v))
     }
 
     fn diff_stats(&mut self, a: Buf, b: Buf, s: T) -> Result<DiffStats, SolveError> {
+        if let Some((x, y, (lo, hi))) = self.range
+            && (x, y) == (a, b)
+        {
+            return Ok(DiffStats::of_range(lo, hi, s.to_f64()));
+        }
         let (a, b) = self.pair(a, b);
         Ok(diff_stats(a, b, s))
     }
 
     fn shift(&mut self, v: Buf, s: T) -> Result<(), SolveError> {
+        if s != T::ZERO {
+            self.range = None;
+        }
         shift(self.buf(v), s);
         Ok(())
     }
@@ -265,6 +345,7 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Sweeps<T> for Local<'_, '_, T, M> {
 
     fn load(&mut self, v: Buf, values: &[T]) -> Result<(), SolveError> {
         crate::error::check_len("V", self.op.n_cores(), values.len())?;
+        self.range = None;
         self.buf(v).copy_from_slice(values);
         Ok(())
     }
@@ -290,5 +371,87 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Sweeps<T> for Local<'_, '_, T, M> {
         } else {
             Cow::Borrowed(&self.policy[..])
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::vec::Vec;
+
+    /// The definition: every difference in turn.
+    fn naive<T: Real>(a: &[T], b: &[T], s: T) -> DiffStats {
+        let s = s.to_f64();
+        a.iter().zip(b).fold(DiffStats::EMPTY, |m, (&x, &y)| {
+            let d = x.to_f64() - y.to_f64();
+            DiffStats {
+                change: m.change.max((d + s).abs()),
+                lo: m.lo.min(d) + 0.0,
+                hi: m.hi.max(d) + 0.0,
+            }
+        })
+    }
+
+    fn bits(d: DiffStats) -> [u64; 3] {
+        [d.change.to_bits(), d.lo.to_bits(), d.hi.to_bits()]
+    }
+
+    /// The lane-wise range and the change taken at its ends give the definition's bits, for
+    /// lengths around the lane count and the pass chunk, shifts of either sign, ties, zeros
+    /// of both signs and NaN differences.
+    #[test]
+    fn diff_stats_match_the_definition_bit_for_bit() {
+        let mut r: u64 = 0x2545_F491_4F6C_DD1D;
+        let mut next = move || {
+            r ^= r << 13;
+            r ^= r >> 7;
+            r ^= r << 17;
+            r
+        };
+        for n in [0usize, 1, 7, 8, 9, 31, PASS_CHUNK + 5] {
+            for case in 0..4 {
+                let mut a: Vec<f32> = (0..n)
+                    .map(|_| (next() % 2001) as f32 / 100.0 - 10.0)
+                    .collect();
+                let mut b: Vec<f32> = (0..n)
+                    .map(|_| (next() % 2001) as f32 / 100.0 - 10.0)
+                    .collect();
+                match case {
+                    1 => b.clone_from(&a),
+                    2 => {
+                        for (i, (x, y)) in a.iter_mut().zip(&mut b).enumerate() {
+                            (*x, *y) = if i % 2 == 0 { (-0.0, 0.0) } else { (0.0, -0.0) };
+                        }
+                    }
+                    3 if n > 2 => {
+                        a[n / 2] = f32::NAN;
+                        b[1] = f32::NAN;
+                    }
+                    _ => {}
+                }
+                for s in [0.0f32, 0.37, -1.25, -12.5] {
+                    let want = naive(&a, &b, s);
+                    assert_eq!(
+                        bits(diff_stats(&a, &b, s)),
+                        bits(want),
+                        "n {n}, case {case}, s {s}"
+                    );
+                    let (a64, b64): (Vec<f64>, Vec<f64>) = a
+                        .iter()
+                        .zip(&b)
+                        .map(|(&x, &y)| (f64::from(x) * 1.1, f64::from(y) * 0.9))
+                        .unzip();
+                    let s64 = f64::from(s);
+                    assert_eq!(
+                        bits(diff_stats(&a64, &b64, s64)),
+                        bits(naive(&a64, &b64, s64))
+                    );
+                }
+            }
+        }
+        assert_eq!(
+            bits(diff_stats::<f32>(&[], &[], 1.0)),
+            bits(DiffStats::EMPTY)
+        );
     }
 }
