@@ -1,0 +1,571 @@
+//! The last stage of the instances: fused with the maximum over actions (pruned by row
+//! bounds, optionally keeping the lowest maximiser: [`super::Kernels::last`]), and for one given
+//! action per core, alone or with the stage before it ([`super::Kernels::eval`],
+//! [`super::Kernels::eval_pair`]).
+
+use super::*;
+
+/// The expected values of one (core, action) row for one register block.
+#[inline(always)]
+pub(super) unsafe fn row_block<T: Copy, I: Isa<T>, const NV: usize>(
+    cols: &[u32],
+    ws: &[T],
+    input: *const T,
+    p_len: usize,
+    m: I::M,
+) -> [I::V; NV] {
+    macro_rules! fixed {
+        ($ne:literal) => {{
+            let mut xs = [input; $ne];
+            let mut wv = [I::zero(); $ne];
+            for e in 0..$ne {
+                xs[e] = input.add(cols[e] as usize * p_len);
+                wv[e] = I::splat(ws[e]);
+            }
+            accumulate::<T, I, NV, $ne>(&xs, &wv, m)
+        }};
+    }
+    unsafe {
+        match cols.len() {
+            1 => fixed!(1),
+            2 => fixed!(2),
+            3 => fixed!(3),
+            4 => fixed!(4),
+            _ => accumulate_any::<T, I, NV>(cols, ws, input, p_len, m),
+        }
+    }
+}
+
+/// Last-stage body for one register block: the running maximum over every action's row.
+#[inline(always)]
+pub(super) unsafe fn last_block<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+) -> T {
+    unsafe {
+        let mut best = [I::neg_inf(); NV];
+        for a in 0..na {
+            let (cols, ws) = rows.row(c * na + a);
+            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+            for (b, &v) in best.iter_mut().zip(&acc) {
+                *b = I::max(*b, if ABS { I::abs(v) } else { v });
+            }
+        }
+        let all = I::mask(I::LANES);
+        let mut out = I::reduce_max(best[NV - 1], m);
+        for &b in &best[..NV - 1] {
+            out = I::max1(out, I::reduce_max(b, all));
+        }
+        out
+    }
+}
+
+/// The lowest `a * p_len + p` whose expected value equals `target` in one register block,
+/// scanning actions in order (`None` if no lane matches).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+pub(super) unsafe fn argmax_block<T: Copy, I: Isa<T>, const NV: usize>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    a: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+    target: T,
+) -> Option<usize> {
+    unsafe {
+        let (cols, ws) = rows.row(c * na + a);
+        let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+        let all = I::mask(I::LANES);
+        for (j, &v) in acc.iter().enumerate() {
+            let mask = if j + 1 == NV { m } else { all };
+            if let Some(lane) = I::first_equal(v, target, mask) {
+                return Some(a * p_len + p0 + j * I::LANES + lane);
+            }
+        }
+        None
+    }
+}
+
+/// The maximum (of the absolute value if `ABS`) over the valid lanes of one register block of
+/// one input row.
+#[inline(always)]
+pub(super) unsafe fn row_bound<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    x: *const T,
+    m: I::M,
+) -> T {
+    unsafe {
+        // The lanes' maxima in a vector, then one horizontal reduction (the maximum is exact
+        // in any order); the masked-off lanes of the last vector are minus infinity.
+        let mut top = I::neg_inf();
+        for j in 0..NV {
+            let last = j + 1 == NV;
+            let v = if last {
+                I::load_part(x.add(j * I::LANES), m)
+            } else {
+                I::load(x.add(j * I::LANES))
+            };
+            let v = if ABS { I::abs(v) } else { v };
+            top = I::max(top, if last { I::load_part_from(v, m) } else { v });
+        }
+        I::reduce_max(top, I::mask(I::LANES))
+    }
+}
+
+/// The maximum over the valid lanes of one (core, action) row in one register block.
+#[inline(always)]
+pub(super) unsafe fn row_max<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    cols: &[u32],
+    ws: &[T],
+    input: *const T,
+    p_len: usize,
+    m: I::M,
+) -> T {
+    unsafe {
+        let acc = row_block::<T, I, NV>(cols, ws, input, p_len, m);
+        let all = I::mask(I::LANES);
+        let mut best = I::neg_inf();
+        for (j, &v) in acc.iter().enumerate() {
+            let v = if ABS { I::abs(v) } else { v };
+            if j + 1 == NV {
+                best = I::max(best, I::load_part_from(v, m));
+            } else {
+                best = I::max(best, v);
+            }
+        }
+        I::reduce_max(best, all)
+    }
+}
+
+/// One register block of the last stage for core `c`, pruned: rows are visited in decreasing
+/// order of an upper bound of their values, and the visit stops at the first row whose bound
+/// does not exceed the best value found. Memberships are non-negative and fused multiply-add rounds
+/// monotonically, so `fma(w_e, bound_e, ...)` (the same chain as the row's) bounds every
+/// computed value of the row: the result is bit-identical to visiting every row.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+pub(super) unsafe fn last_block_pruned<T: Real, I: Isa<T>, const NV: usize, const ABS: bool>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+    bounds: &[T],
+    mut best: T,
+) -> T {
+    unsafe {
+        let mut ub = [T::ZERO; PRUNE_MAX_ACTIONS];
+        let mut order = [0u8; PRUNE_MAX_ACTIONS];
+        for a in 0..na {
+            let (cols, ws) = rows.row(c * na + a);
+            let mut b = T::ZERO;
+            for (&k, &w) in cols.iter().zip(ws) {
+                b = I::fma1(w, bounds[k as usize], b);
+            }
+            // Insertion into `order`, by decreasing bound.
+            let mut i = a;
+            while i > 0 && ub[order[i - 1] as usize] < b {
+                order[i] = order[i - 1];
+                i -= 1;
+            }
+            order[i] = a as u8;
+            ub[a] = b;
+        }
+        for &a in &order[..na] {
+            let a = a as usize;
+            // A row whose bound does not exceed the best cannot raise the maximum.
+            if ub[a] <= best {
+                break;
+            }
+            let (cols, ws) = rows.row(c * na + a);
+            let v = row_max::<T, I, NV, ABS>(cols, ws, input.add(p0), p_len, m);
+            best = I::max1(best, v);
+        }
+        best
+    }
+}
+
+/// [`last_block_pruned`] that also keeps the lowest index `a * p_len + p` holding the
+/// maximum (`best_idx`, `usize::MAX` before any). Rows whose bound equals the best so far are
+/// still visited (they may tie at a lower index); rows whose bound is below it cannot hold the
+/// maximum. The maximum is the same bits as [`last_block_pruned`]'s, and the index the one
+/// [`argmax_impl`] finds.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    p_len: usize,
+    p0: usize,
+    m: I::M,
+    input: *const T,
+    bounds: &[T],
+    (mut best, mut best_idx): (T, usize),
+) -> (T, usize) {
+    unsafe {
+        let mut ub = [T::ZERO; PRUNE_MAX_ACTIONS];
+        let mut order = [0u8; PRUNE_MAX_ACTIONS];
+        for a in 0..na {
+            let (cols, ws) = rows.row(c * na + a);
+            let mut b = T::ZERO;
+            for (&k, &w) in cols.iter().zip(ws) {
+                b = I::fma1(w, bounds[k as usize], b);
+            }
+            let mut i = a;
+            while i > 0 && ub[order[i - 1] as usize] < b {
+                order[i] = order[i - 1];
+                i -= 1;
+            }
+            order[i] = a as u8;
+            ub[a] = b;
+        }
+        let all = I::mask(I::LANES);
+        for &a in &order[..na] {
+            let a = a as usize;
+            if ub[a] < best {
+                break;
+            }
+            let (cols, ws) = rows.row(c * na + a);
+            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+            let mut top = I::neg_inf();
+            for (j, &v) in acc.iter().enumerate() {
+                top = I::max(
+                    top,
+                    if j + 1 == NV {
+                        I::load_part_from(v, m)
+                    } else {
+                        v
+                    },
+                );
+            }
+            let v = I::reduce_max(top, all);
+            if v < best {
+                continue;
+            }
+            let mut idx = usize::MAX;
+            for (j, &x) in acc.iter().enumerate() {
+                let mask = if j + 1 == NV { m } else { all };
+                if let Some(lane) = I::first_equal(x, v, mask) {
+                    idx = a * p_len + p0 + j * I::LANES + lane;
+                    break;
+                }
+            }
+            if v > best || idx < best_idx {
+                best = v;
+                best_idx = idx;
+            }
+        }
+        (best, best_idx)
+    }
+}
+
+macro_rules! by_nv {
+    ($nv:expr, $f:ident::<$t:ty, $i:ty, _ $(, $c:ident)*>($($arg:expr),* $(,)?)) => {
+        match $nv {
+            1 => $f::<$t, $i, 1 $(, $c)*>($($arg),*),
+            2 => $f::<$t, $i, 2 $(, $c)*>($($arg),*),
+            3 => $f::<$t, $i, 3 $(, $c)*>($($arg),*),
+            4 => $f::<$t, $i, 4 $(, $c)*>($($arg),*),
+            5 => $f::<$t, $i, 5 $(, $c)*>($($arg),*),
+            6 => $f::<$t, $i, 6 $(, $c)*>($($arg),*),
+            7 => $f::<$t, $i, 7 $(, $c)*>($($arg),*),
+            _ => $f::<$t, $i, 8 $(, $c)*>($($arg),*),
+        }
+    };
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape and scratch, spelled out
+pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    out: &mut [T],
+    bounds: &mut [T],
+    mut args: Option<&mut [u32]>,
+) {
+    check_last(&rows, first_core, na, p_len, input, out);
+    if let Some(a) = &args {
+        assert_eq!(a.len(), out.len(), "one action per core");
+    }
+    if I::OVERREAD > 0 && input.len() < rows.n_cols * p_len + I::OVERREAD {
+        return (scalar::<T>().last)(rows, first_core, na, p_len, ABS, input, out, bounds, args);
+    }
+    let ip = input.as_ptr();
+    let n_cols = rows.n_cols;
+    let prune = na <= PRUNE_MAX_ACTIONS;
+    if prune {
+        let n_blocks = Blocks::new(p_len, I::LANES, I::BLOCK).count();
+        assert!(
+            bounds.len() >= n_cols * n_blocks,
+            "last-stage scratch too short"
+        );
+    }
+    unsafe {
+        if prune {
+            for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                let m = I::mask(tail);
+                for k in 0..n_cols {
+                    let x = ip.add(k * p_len + p0);
+                    bounds[bi * n_cols + k] = by_nv!(nv, row_bound::<T, I, _, ABS>(x, m));
+                }
+            }
+        }
+        if let Some(args) = args.as_deref_mut().filter(|_| prune && !ABS) {
+            for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
+                let c = first_core + i;
+                let mut best = (T::from_f64(f64::NEG_INFINITY), usize::MAX);
+                for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                    let m = I::mask(tail);
+                    let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+                    best = by_nv!(
+                        nv,
+                        last_block_pruned_arg::<T, I, _>(&rows, c, na, p_len, p0, m, ip, b, best)
+                    );
+                }
+                *o = best.0;
+                // Every row was computed by the same arithmetic, so some lane holds the maximum.
+                *arg = if best.1 == usize::MAX {
+                    0
+                } else {
+                    best.1 as u32
+                };
+            }
+            return;
+        }
+        for (i, o) in out.iter_mut().enumerate() {
+            let c = first_core + i;
+            let mut best = T::from_f64(f64::NEG_INFINITY);
+            for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                let m = I::mask(tail);
+                best = if prune {
+                    let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+                    by_nv!(
+                        nv,
+                        last_block_pruned::<T, I, _, ABS>(&rows, c, na, p_len, p0, m, ip, b, best)
+                    )
+                } else {
+                    let v = by_nv!(
+                        nv,
+                        last_block::<T, I, _, ABS>(&rows, c, na, p_len, p0, m, ip)
+                    );
+                    I::max1(best, v)
+                };
+            }
+            *o = best;
+        }
+    }
+    if let Some(args) = args {
+        // Without pruning (more actions than the stack arrays hold): a separate scan.
+        unsafe { argmax_impl::<T, I>(rows, first_core, na, p_len, input, out, args) };
+    }
+}
+
+#[inline(always)]
+pub(super) unsafe fn argmax_impl<T: Real, I: Isa<T>>(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    maxima: &[T],
+    out: &mut [u32],
+) {
+    assert_eq!(maxima.len(), out.len(), "one maximum per core");
+    check_last(&rows, first_core, na, p_len, input, maxima);
+    let ip = input.as_ptr();
+    unsafe {
+        for (i, o) in out.iter_mut().enumerate() {
+            let c = first_core + i;
+            let target = maxima[i];
+            let mut found = None;
+            'actions: for a in 0..na {
+                let mut hit = None;
+                for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
+                    let m = I::mask(tail);
+                    let args = (&rows, c, a, na, p_len, p0, m, ip, target);
+                    hit = match nv {
+                        1 => argmax_block::<T, I, 1>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        2 => argmax_block::<T, I, 2>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        3 => argmax_block::<T, I, 3>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        4 => argmax_block::<T, I, 4>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        5 => argmax_block::<T, I, 5>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        6 => argmax_block::<T, I, 6>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        7 => argmax_block::<T, I, 7>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                        _ => argmax_block::<T, I, 8>(
+                            args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
+                        ),
+                    };
+                    if hit.is_some() {
+                        break;
+                    }
+                }
+                if hit.is_some() {
+                    found = hit;
+                    break 'actions;
+                }
+            }
+            // The maximum was computed by the same arithmetic, so it is always found.
+            *o = found.unwrap_or(0) as u32;
+        }
+    }
+}
+
+#[inline(always)]
+pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
+    rows: Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    p_len: usize,
+    input: &[T],
+    policy: &[u32],
+    out: &mut [T],
+) {
+    assert_eq!(policy.len(), out.len(), "one action per core");
+    check_last(&rows, first_core, na, p_len, input, out);
+    for (i, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+        let u = u as usize;
+        assert!(
+            u < na * p_len,
+            "policy action beyond the product action set"
+        );
+        let (cols, ws) = rows.row((first_core + i) * na + u / p_len);
+        let p = u % p_len;
+        let mut acc = T::ZERO;
+        for (&k, &w) in cols.iter().zip(ws) {
+            // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
+            acc = unsafe { I::fma1(w, *input.get_unchecked(k as usize * p_len + p), acc) };
+        }
+        *o = acc;
+    }
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the kernel's signature
+pub(super) unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
+    block: Rows<'_, T>,
+    core_b: usize,
+    last: Rows<'_, T>,
+    (na_b, na_last): (usize, usize),
+    (p_len, p_in): (usize, usize),
+    input: &[T],
+    policy: &[u32],
+    out: &mut [T],
+    scratch: PairScratch<'_, T>,
+) {
+    let r_len = last.n_cols;
+    let n = out.len();
+    assert_eq!(policy.len(), n, "one action per core");
+    assert!(
+        (core_b + 1) * na_b <= block.n_rows(),
+        "block rows out of range"
+    );
+    assert!(n * na_last <= last.n_rows(), "last-stage rows out of range");
+    assert!(p_len > 0, "empty rows");
+    assert!(
+        p_in > 0 && p_len.is_multiple_of(p_in),
+        "inner prior actions must divide the prior actions"
+    );
+    assert!(
+        block.n_cols * r_len * p_len <= input.len(),
+        "stage input too short"
+    );
+    let q_stride = block.n_cols * r_len;
+    let (inner_len, keys) = PairScratch::<T>::lens(n, na_b, p_len, r_len);
+    if p_in == 1 && scratch.inner.len() >= inner_len && scratch.slots.len() >= keys {
+        // Shared: each (block action, q) once over every successor core, in vectors.
+        let PairScratch { inner, slots } = scratch;
+        slots[..keys].fill(u32::MAX);
+        let mut n_shared = 0usize;
+        for (c, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+            let u = u as usize;
+            assert!(
+                u < na_last * keys,
+                "policy action beyond the product action set"
+            );
+            let (a_last, key) = (u / keys, u % keys);
+            let mut slot = slots[key] as usize;
+            if slot == u32::MAX as usize {
+                slot = n_shared;
+                slots[key] = slot as u32;
+                n_shared += 1;
+                let (a_b, q) = (key / p_len, key % p_len);
+                // `inner[slot][k] = sum_j v_j input[(q J + j) R + k]`: the stage kernel's
+                // chain for every `k` at once.
+                unsafe {
+                    stage_impl::<T, I>(
+                        block,
+                        core_b * na_b + a_b,
+                        1,
+                        1,
+                        r_len,
+                        Strides {
+                            k_stride: r_len,
+                            r_stride: r_len,
+                        },
+                        &input[q * q_stride..],
+                        &mut inner[slot * r_len..(slot + 1) * r_len],
+                    );
+                }
+            }
+            let row = &inner[slot * r_len..(slot + 1) * r_len];
+            let (cols, ws) = last.row(c * na_last + a_last);
+            let mut acc = T::ZERO;
+            for (&k, &w) in cols.iter().zip(ws) {
+                acc = unsafe { I::fma1(w, row[k as usize], acc) };
+            }
+            *o = acc;
+        }
+        return;
+    }
+    for (c, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+        let u = u as usize;
+        assert!(
+            u < na_last * na_b * p_len,
+            "policy action beyond the product action set"
+        );
+        let (a_last, rest) = (u / (na_b * p_len), u % (na_b * p_len));
+        let (a_b, p) = (rest / p_len, rest % p_len);
+        let (q, p) = (p / p_in, p % p_in);
+        let (cols_b, ws_b) = block.row(core_b * na_b + a_b);
+        let (cols, ws) = last.row(c * na_last + a_last);
+        let mut acc = T::ZERO;
+        for (&k, &w) in cols.iter().zip(ws) {
+            let mut inner = T::ZERO;
+            for (&j, &v) in cols_b.iter().zip(ws_b) {
+                let at = ((q * q_stride + j as usize * r_len) + k as usize) * p_in + p;
+                // SAFETY: `q < p_len / p_in`, `j < block.n_cols` and `k < r_len` (the rows'
+                // column bounds), so `at` is below the input length checked above.
+                inner = unsafe { I::fma1(v, *input.get_unchecked(at), inner) };
+            }
+            acc = unsafe { I::fma1(w, inner, acc) };
+        }
+        *o = acc;
+    }
+}
