@@ -184,51 +184,45 @@ fn bench_view<T: ViewReal>(
     let (m, d) = (view.joint().n_joint(), view.joint().dim());
     let (mut q, mut u) = (vec![T::ZERO; m], vec![T::ZERO; d]);
     let mut i = 0usize;
-    // With decision tables, this one runs on 4 KiB pages (a plain buffer) and the one below
-    // as a controller with std loads the export.
-    let small = if tables { "_small_pages" } else { "" };
-    g.bench_function(format!("interpolated_{name}{small}"), |b| {
-        b.iter(|| {
-            i = (i + 1) % STATES;
-            view.interpolated_action(black_box(&states[i]), &mut u)
-                .unwrap();
-            black_box(u[0])
-        })
-    });
-    if tables {
-        let mut scratch = vec![0u64; view.decision_scratch_len().unwrap()];
-        // On 4 KiB pages (a plain buffer), then as a controller with std loads it
-        // (`ExportedBytes`: advised into transparent huge pages).
-        let loaded = ExportedBytes::copy_of(&bytes).unwrap();
-        let huge = PolicyView::<T>::parse(loaded.bytes()).unwrap();
-        for (suffix, v) in [("_small_pages", &view), ("", &huge)] {
-            if suffix.is_empty() {
-                g.bench_function(format!("interpolated_{name}_same_state"), |b| {
-                    b.iter(|| {
-                        v.interpolated_action(black_box(&states[7]), &mut u)
-                            .unwrap();
-                        black_box(u[0])
-                    })
-                });
-                g.bench_function(format!("interpolated_{name}"), |b| {
-                    b.iter(|| {
-                        i = (i + 1) % STATES;
-                        v.interpolated_action(black_box(&states[i]), &mut u)
-                            .unwrap();
-                        black_box(u[0])
-                    })
-                });
-            }
+    // With decision tables, on 4 KiB pages (a plain buffer) and as a controller with std
+    // loads the export (`ExportedBytes`: advised into transparent huge pages).
+    let loaded = ExportedBytes::copy_of(&bytes).unwrap();
+    let huge = PolicyView::<T>::parse(loaded.bytes()).unwrap();
+    let views = if tables {
+        vec![("_small_pages", &view), ("", &huge)]
+    } else {
+        vec![("", &view)]
+    };
+    let mut scratch = view.decision_scratch_len().map(|n| vec![0u64; n]);
+    for (suffix, v) in views {
+        g.bench_function(format!("interpolated_{name}{suffix}"), |b| {
+            b.iter(|| {
+                i = (i + 1) % STATES;
+                v.interpolated_action(black_box(&states[i]), &mut u)
+                    .unwrap();
+                black_box(u[0])
+            })
+        });
+        if let Some(scratch) = scratch.as_mut() {
             g.bench_function(format!("greedy_{name}{suffix}"), |b| {
                 b.iter(|| {
                     i = (i + 1) % STATES;
                     black_box(
-                        v.greedy_action(black_box(&states[i]), &mut scratch, &mut q, &mut u)
+                        v.greedy_action(black_box(&states[i]), scratch, &mut q, &mut u)
                             .unwrap(),
                     )
                 })
             });
         }
+    }
+    if let Some(mut scratch) = scratch {
+        g.bench_function(format!("interpolated_{name}_same_state"), |b| {
+            b.iter(|| {
+                huge.interpolated_action(black_box(&states[7]), &mut u)
+                    .unwrap();
+                black_box(u[0])
+            })
+        });
         // One state again and again: `V`'s lines stay in the caches, so this is the decision's
         // arithmetic without the memory latency the random states pay.
         g.bench_function(format!("greedy_{name}_same_state"), |b| {

@@ -35,6 +35,19 @@ pub fn with_threads<R: Send>(n: usize, f: impl FnOnce() -> R + Send) -> R {
 }
 
 /// A point-mass model with `agents` agents and the paper's parameters otherwise.
+/// Friction 1 everywhere but a patch of friction 3 (radius 1.5) around `(-2, -2)`: a
+/// position-dependent model.
+pub fn friction_patch() -> fuzzyq_sim::model::pointmass::FrictionConfig {
+    fuzzyq_sim::model::pointmass::FrictionConfig::Patches {
+        base: 1.0,
+        patches: vec![fuzzyq_sim::model::pointmass::FrictionPatch {
+            center: [-2.0, -2.0],
+            radius: 1.5,
+            eta: 3.0,
+        }],
+    }
+}
+
 pub fn point_mass(agents: usize) -> PointMass {
     PointMass::new(PointMassConfig {
         agents,

@@ -35,14 +35,7 @@ fn trained_on(
         p.agents = agents;
         if patches {
             p.integrator = fuzzyq_sim::model::pointmass::Integrator::Rk4;
-            p.friction = fuzzyq_sim::model::pointmass::FrictionConfig::Patches {
-                base: 1.0,
-                patches: vec![fuzzyq_sim::model::pointmass::FrictionPatch {
-                    center: [-2.0, -2.0],
-                    radius: 1.5,
-                    eta: 3.0,
-                }],
-            };
+            p.friction = fuzzyq_tests::friction_patch();
         }
     }
     let mut cores = Vec::new();

@@ -117,14 +117,7 @@ fn position_dependent_friction_trains_with_rk4() {
         };
         p.agents = 1;
         p.integrator = Integrator::Rk4;
-        p.friction = fuzzyq_sim::model::pointmass::FrictionConfig::Patches {
-            base: 1.0,
-            patches: vec![fuzzyq_sim::model::pointmass::FrictionPatch {
-                center: [-2.0, -2.0],
-                radius: 1.5,
-                eta: 3.0,
-            }],
-        };
+        p.friction = fuzzyq_tests::friction_patch();
     }
     let a = train(&c);
     assert!(a.summary.converged);

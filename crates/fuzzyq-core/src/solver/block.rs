@@ -1061,10 +1061,14 @@ impl<T: Real> BlockOperator<T> {
         );
     }
 
-    /// [`Self::each_core`] (with `policy`: [`Self::evaluate`]), also returning the range of
-    /// `value(out[i]) - v[i]` over every core ([`super::sweeps::diff_range`]), taken slab by
-    /// slab while the slab's results are still in cache: the pass over both buffers that the
-    /// iteration drivers' change statistics would otherwise need.
+    /// [`Self::each_core`], or with `policy` one policy-evaluation sweep
+    /// `out[i] = rho_i + gamma (P_{policy[i]} v)_i` (`policy` holds joint actions, which equal
+    /// product actions where [`Self::can_evaluate`] holds: the early stages run as in a full
+    /// backup, the one before the last two action by action along whole rows, and the last two
+    /// compute one row per core); either way also the range of `value(out[i]) - v[i]` over
+    /// every core ([`super::sweeps::diff_range_by`]), taken slab by slab while the slab's
+    /// results are still in cache: the pass over both buffers that the iteration drivers'
+    /// change statistics would otherwise need.
     #[allow(clippy::too_many_arguments)] // each_core's arguments, and the value to compare
     pub(super) fn each_core_range<U: Send, M: Model<T> + Sync + ?Sized>(
         &self,
@@ -1076,6 +1080,7 @@ impl<T: Real> BlockOperator<T> {
         pick: impl Fn((T, u32)) -> U + Sync + Send,
         value: impl Fn(&U) -> T + Sync + Send,
     ) -> (f64, f64) {
+        debug_assert!(policy.is_none() || self.can_evaluate(op));
         let slab = self.slab_len();
         par::map_reduce_chunks_mut(
             out,
@@ -1215,41 +1220,6 @@ impl<T: Real> BlockOperator<T> {
         op: &Operator<'_, T, M>,
     ) -> bool {
         self.fused(op, Reduce::Max).is_some() && self.terminals.is_none()
-    }
-
-    /// One policy-evaluation sweep: `out[i] = rho_i + gamma (P_{policy[i]} v)_i` for every core
-    /// (internal order; `policy` holds joint actions, which equal product actions here). The
-    /// early stages run as in a full backup, the one before the last two action by action
-    /// along whole rows, and the last two (the last alone for two blocks) compute one row per
-    /// core.
-    pub(super) fn evaluate<M: Model<T> + Sync + ?Sized>(
-        &self,
-        op: &Operator<'_, T, M>,
-        v: &[T],
-        policy: &[u32],
-        out: &mut [T],
-    ) {
-        debug_assert!(self.can_evaluate(op));
-        let slab = self.slab_len();
-        par::for_each_chunk_mut(
-            out,
-            slab,
-            || self.work(op),
-            |w, c0, chunk| {
-                let pol = &policy[c0 * slab..c0 * slab + chunk.len()];
-                self.slab_into(
-                    op,
-                    self.tables[0].rows.view(),
-                    v,
-                    Reduce::Max,
-                    Some(pol),
-                    c0,
-                    w,
-                    chunk,
-                    &|r: (T, u32)| r.0,
-                );
-            },
-        );
     }
 
     pub(super) fn sweep_async<M: Model<T> + Sync + ?Sized>(

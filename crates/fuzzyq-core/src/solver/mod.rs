@@ -964,8 +964,8 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         !self.goal.is_empty() && self.goal[internal]
     }
 
-    /// Reduces core `internal`'s expected successor values `ev` (one per joint action, in
-    /// joint order; see [`Self::ev_index`] for the block path's order).
+    /// Reduces core `internal`'s expected successor values `ev` (one per joint action: joint
+    /// action `u` at `ev[map[u]]` with the block path's map, [`Self::ev_map`], else at `ev[u]`).
     fn reduce(
         &self,
         internal: usize,
@@ -1112,7 +1112,8 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         }
     }
 
-    /// [`Self::each_core`] (with `policy`: [`Self::evaluate`]), also returning the range of
+    /// [`Self::each_core`], or with `policy` one policy-evaluation sweep (`out = rho + gamma
+    /// P_policy v`; only where [`Self::can_evaluate`] holds), also returning the range of
     /// `value(out[i]) - v[i]` where the block path can take it while the results are in cache
     /// (`None` on the generic path, whose callers take it in a pass of their own).
     fn each_core_range<U: Send>(
@@ -1168,7 +1169,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         self.check_policy(policy)?;
         let (vi, pi) = (self.to_internal(v), self.to_internal(policy));
         let mut out = self.zeros();
-        self.evaluate(&vi, &pi, &mut out);
+        self.each_core_range(&vi, Some(&pi), &mut out, Reduce::Max, |r| r.0, |&x| x)?;
         Ok(self.to_grid(&out))
     }
 
@@ -1195,14 +1196,6 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         match &self.path {
             Path::Block(b) => self.goal.is_empty() && b.can_evaluate(self),
             Path::Generic(_) => false,
-        }
-    }
-
-    /// One policy-evaluation sweep, internal order: `out = rho + gamma P_policy v`.
-    fn evaluate(&self, v: &[T], policy: &[u32], out: &mut [T]) {
-        match &self.path {
-            Path::Block(b) => b.evaluate(self, v, policy, out),
-            Path::Generic(_) => unreachable!("checked by can_evaluate"),
         }
     }
 
