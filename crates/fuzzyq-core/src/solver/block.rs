@@ -37,7 +37,9 @@ use std::boxed::Box;
 use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
-use super::simd::{INPUT_PAD, Kernels, PairScratch, Rows, RowsBuf, Strides, last_scratch_len};
+use super::simd::{
+    INPUT_PAD, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides, last_scratch_len,
+};
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
 use crate::model::Model;
@@ -852,11 +854,15 @@ impl<T: Real> BlockOperator<T> {
                 k_stride: r1,
                 r_stride: next.n_cores * r1,
             };
+            // Every action of the next block in one call (their rows merged), into `[a'][a][r']`.
+            let out_strides = OutStrides {
+                r_stride: r1,
+                a_stride: na * r1,
+            };
             let rows1 = next.rows.view();
             for c1 in 0..next.n_cores {
-                for (a1, o) in out1[..na1 * na * r1].chunks_exact_mut(na * r1).enumerate() {
-                    (self.kernels.stage_at)(rows1, c1 * na1 + a1, 1, na, r1, strides, out, o);
-                }
+                let o = &mut out1[..na1 * na * r1];
+                (self.kernels.stage_at)(rows1, c1 * na1, na1, na, r1, strides, out_strides, out, o);
                 let local1 = local * next.n_cores + c1;
                 self.eval_pairs(level + 1, out1, (na1 * na, 1), extra, local1, policy, emit);
             }

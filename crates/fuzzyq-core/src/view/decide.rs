@@ -761,14 +761,15 @@ fn stage<T: ViewReal>(
 ) {
     #[cfg(feature = "std")]
     {
-        use crate::solver::simd::{Rows, Strides, select_real};
+        use crate::solver::simd::{OutStrides, Rows, Strides, select_real};
         let kernels = select_real::<T>(None).expect("the scalar kernels exist");
         let checked = Rows::checked(rows.ptr, rows.col, rows.weight, rows.n_cols)
             .expect("mixed rows hold memberships over their columns");
         let (k_stride, r_stride) = strides;
         let a = rows.ptr.len() - 1;
         let strides = Strides { k_stride, r_stride };
-        (kernels.stage_at)(checked, 0, a, r_len, p_len, strides, input, out);
+        let dense = OutStrides::dense(a, p_len);
+        (kernels.stage_at)(checked, 0, a, r_len, p_len, strides, dense, input, out);
     }
     #[cfg(not(feature = "std"))]
     stage_scalar(rows, r_len, p_len, strides, input, out);

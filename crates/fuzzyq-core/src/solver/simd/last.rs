@@ -523,12 +523,12 @@ pub(super) unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
                         block,
                         core_b * na_b + a_b,
                         1,
-                        1,
-                        r_len,
+                        (1, r_len),
                         Strides {
                             k_stride: r_len,
                             r_stride: r_len,
                         },
+                        OutStrides::dense(1, r_len),
                         &input[q * q_stride..],
                         &mut inner[slot * r_len..(slot + 1) * r_len],
                     );

@@ -142,9 +142,31 @@ impl Strides {
     }
 }
 
-/// One stage at any input strides: `out[(r A + a) P + p] = sum_e w_e in[k_e K + r S + p]`
-/// (`K`, `S` = `strides`) over rows `first_row..first_row + A`, each sum in row order with
-/// fused multiply-adds from 0.
+/// Where a stage writes its output: leading index `r`, action `a` and lane `p` at
+/// `out[r * r_stride + a * a_stride + p]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OutStrides {
+    /// Elements between consecutive leading indices.
+    pub r_stride: usize,
+    /// Elements between consecutive actions.
+    pub a_stride: usize,
+}
+
+impl OutStrides {
+    /// The dense layout `out[(r A + a) P + p]` of `n_actions` actions of `p_len` lanes.
+    #[inline]
+    #[must_use]
+    pub const fn dense(n_actions: usize, p_len: usize) -> Self {
+        Self {
+            r_stride: n_actions * p_len,
+            a_stride: p_len,
+        }
+    }
+}
+
+/// One stage at any strides: `out[r R' + a A' + p] = sum_e w_e in[k_e K + r S + p]` (`K`, `S`
+/// = `strides`, `R'`, `A'` = `out_strides`) over rows `first_row..first_row + A`, each sum in
+/// row order with fused multiply-adds from 0.
 #[allow(clippy::too_many_arguments)] // the stage's shape and buffers, spelled out
 pub type StageFn<T> = fn(
     rows: Rows<'_, T>,
@@ -153,6 +175,7 @@ pub type StageFn<T> = fn(
     r_len: usize,
     p_len: usize,
     strides: Strides,
+    out_strides: OutStrides,
     input: &[T],
     out: &mut [T],
 );
@@ -290,8 +313,17 @@ impl<T> Kernels<T> {
         out: &mut [T],
     ) {
         let strides = Strides::dense(r_len, p_len);
+        let out_strides = OutStrides::dense(n_actions, p_len);
         (self.stage_at)(
-            rows, first_row, n_actions, r_len, p_len, strides, input, out,
+            rows,
+            first_row,
+            n_actions,
+            r_len,
+            p_len,
+            strides,
+            out_strides,
+            input,
+            out,
         );
     }
 }
@@ -317,6 +349,7 @@ fn check_stage<T>(
     r_len: usize,
     p_len: usize,
     strides: Strides,
+    out_strides: OutStrides,
     input: &[T],
     out: &[T],
 ) {
@@ -325,7 +358,16 @@ fn check_stage<T>(
         stage_extent(rows, r_len, p_len, strides) <= input.len(),
         "stage input too short"
     );
-    assert!(r_len * na * p_len <= out.len(), "stage output too short");
+    let out_extent = if r_len == 0 || na == 0 || p_len == 0 {
+        0
+    } else {
+        (r_len - 1)
+            .checked_mul(out_strides.r_stride)
+            .and_then(|x| x.checked_add((na - 1).checked_mul(out_strides.a_stride)?))
+            .and_then(|x| x.checked_add(p_len))
+            .expect("stage output extent overflows")
+    };
+    assert!(out_extent <= out.len(), "stage output too short");
 }
 
 fn check_last<T>(
@@ -357,6 +399,9 @@ trait Isa<T: Copy> {
     const LANES: usize;
     /// Vectors per register block.
     const BLOCK: usize;
+    /// Vectors per action's register block in a merged stage (`stage::Merged`): up to six
+    /// actions' blocks and one step's input stay in registers.
+    const MERGED: usize;
     /// Elements past a tensor's end that [`Isa::load_part`] may read (and discard): 0 for
     /// instances with masked loads. The kernels run such an instance only on inputs that
     /// long ([`INPUT_PAD`] covers every instance): the stage kernel runs [`Isa::Exact`] on
@@ -424,6 +469,7 @@ macro_rules! scalar_isa {
             type M = bool;
             const LANES: usize = 1;
             const BLOCK: usize = 4;
+            const MERGED: usize = 2;
             const OVERREAD: usize = 0;
             type Exact = Self;
             #[inline(always)]
@@ -518,6 +564,7 @@ macro_rules! instance {
                 r_len: usize,
                 p_len: usize,
                 strides: Strides,
+                out_strides: OutStrides,
                 input: &[$t],
                 out: &mut [$t],
             ) {
@@ -530,19 +577,20 @@ macro_rules! instance {
                     r_len: usize,
                     p_len: usize,
                     strides: Strides,
+                    out_strides: OutStrides,
                     input: &[$t],
                     out: &mut [$t],
                 ) {
                     unsafe {
                         stage_impl::<$t, $isa>(
-                            rows, first_row, na, r_len, p_len, strides, input, out,
+                            rows, first_row, na, (r_len, p_len), strides, out_strides, input, out,
                         )
                     }
                 }
                 assert!($detect, "CPU features missing for this kernel");
                 // SAFETY: the features were just detected; `stage_impl` checks every bound its
                 // pointer arithmetic relies on (`check_stage`, and the rows' column bound).
-                unsafe { inner(rows, first_row, na, r_len, p_len, strides, input, out) }
+                unsafe { inner(rows, first_row, na, r_len, p_len, strides, out_strides, input, out) }
             }
 
             #[allow(clippy::too_many_arguments)] // the kernel's signature

@@ -38,6 +38,7 @@ macro_rules! portable_isa {
             type M = usize;
             const LANES: usize = $n;
             const BLOCK: usize = 8;
+            const MERGED: usize = 2;
             const OVERREAD: usize = if PADDED { $n } else { 0 };
             type Exact = Portable<false>;
             #[inline(always)]

@@ -1,6 +1,17 @@
 //! The contraction stage of the instances ([`super::Kernels::stage`] and
 //! [`super::Kernels::stage_at`]): register blocks of a row accumulated entry by entry, narrow
 //! rows several leading indices at a time, and the split of a row into register blocks.
+//!
+//! # Merged actions
+//! Row by row, a stage loads one input vector per fused multiply-add: every entry of every
+//! row loads its input, so loads (many of them across two cache lines), not multiply-adds,
+//! bound it. The rows of one block core's actions mostly share their columns (the successors
+//! of nearby actions overlap: on the paper's blocks 18.3 entries per core fall on 8.1
+//! distinct columns), so [`Merged`] lists the rows' entries as steps by column, each step
+//! naming the actions that take it, and [`stage_merged`] loads each step's input once for
+//! all of them, with one register block per action. Each action's entries still run in row
+//! order from zero, one fused multiply-add each, so the sums are the ones [`accumulate`]
+//! forms: the same bits.
 
 use super::*;
 
@@ -150,7 +161,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
     first_row: usize,
     na: usize,
     (r_len, p_len): (usize, usize),
-    strides: Strides,
+    (strides, os): (Strides, OutStrides),
     p0: usize,
     m: I::M,
     tail: usize,
@@ -159,7 +170,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
 ) {
     unsafe {
         let Strides { k_stride, r_stride } = strides;
-        let out_step = na * p_len;
+        let out_step = os.r_stride;
         // Narrow rows: several leading indices at a time (8 chains in all, enough to hide
         // the fused multiply-add's latency), every action's row on them before the next
         // (their inputs stay in the first-level cache).
@@ -169,7 +180,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
                 first_row,
                 na,
                 (r_len, p_len),
-                strides,
+                (strides, os),
                 p0,
                 m,
                 tail,
@@ -183,7 +194,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
                 first_row,
                 na,
                 (r_len, p_len),
-                strides,
+                (strides, os),
                 p0,
                 m,
                 tail,
@@ -194,7 +205,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
         for a in 0..na {
             let (cols, ws) = rows.row(first_row + a);
             let inp = input.add(p0);
-            let o = out.add(a * p_len + p0);
+            let o = out.add(a * os.a_stride + p0);
             match cols.len() {
                 0 => {
                     let zero = [I::zero(); NV];
@@ -239,8 +250,8 @@ pub(super) unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR:
     rows: &Rows<'_, T>,
     first_row: usize,
     na: usize,
-    (r_len, p_len): (usize, usize),
-    strides: Strides,
+    (r_len, _p_len): (usize, usize),
+    (strides, os): (Strides, OutStrides),
     p0: usize,
     m: I::M,
     tail: usize,
@@ -249,7 +260,7 @@ pub(super) unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR:
 ) {
     unsafe {
         let Strides { k_stride, r_stride } = strides;
-        let out_step = na * p_len;
+        let out_step = os.r_stride;
         let mut r = 0;
         while r < r_len {
             let at = r.min(r_len - NR);
@@ -262,12 +273,211 @@ pub(super) unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR:
                     (k_stride, r_stride),
                     m,
                 );
-                let o = out.add(a * p_len + p0);
+                let o = out.add(a * os.a_stride + p0);
                 for (i, acc) in accs.iter().enumerate() {
                     store_block::<T, I, NV>(o.add((at + i) * out_step), acc, m, tail);
                 }
             }
             r = at + NR;
+        }
+    }
+}
+
+/// Most steps of a [`Merged`] group (longer groups take the row-by-row path).
+const MAX_STEPS: usize = 32;
+
+/// Most actions in a [`Merged`] group (one register block each).
+const MAX_MERGED: usize = 6;
+
+/// The rows of `NA` consecutive actions merged by column: step `s` reads column `cols[s]`
+/// for the actions whose bit is set in `masks[s]`, with weights `ws[s]`. Built by taking, at
+/// each step, the smallest column among the rows' next entries, so every row's entries
+/// appear in their order (rows sorted by column share every common column).
+pub(super) struct Merged<T, const NA: usize> {
+    pub(super) n: usize,
+    pub(super) cols: [u32; MAX_STEPS],
+    pub(super) masks: [u8; MAX_STEPS],
+    pub(super) ws: [[T; NA]; MAX_STEPS],
+}
+
+impl<T: Real, const NA: usize> Merged<T, NA> {
+    /// Merges rows `first_row .. first_row + NA`; `None` past [`MAX_STEPS`] steps.
+    #[inline(always)]
+    pub(super) fn new(rows: &Rows<'_, T>, first_row: usize) -> Option<Self> {
+        let mut m = Self {
+            n: 0,
+            cols: [0; MAX_STEPS],
+            masks: [0; MAX_STEPS],
+            ws: [[T::ZERO; NA]; MAX_STEPS],
+        };
+        let entries: [(&[u32], &[T]); NA] = core::array::from_fn(|a| rows.row(first_row + a));
+        let mut heads = [0usize; NA];
+        loop {
+            let mut next = u32::MAX;
+            for (a, &(cols, _)) in entries.iter().enumerate() {
+                if let Some(&k) = cols.get(heads[a]) {
+                    next = next.min(k);
+                }
+            }
+            if next == u32::MAX {
+                return Some(m);
+            }
+            if m.n == MAX_STEPS {
+                return None;
+            }
+            for (a, &(cols, ws)) in entries.iter().enumerate() {
+                if cols.get(heads[a]) == Some(&next) {
+                    m.masks[m.n] |= 1 << a;
+                    m.ws[m.n][a] = ws[heads[a]];
+                    heads[a] += 1;
+                }
+            }
+            m.cols[m.n] = next;
+            m.n += 1;
+        }
+    }
+}
+
+/// A stage over merged actions for one register block of `NV` vectors at offset `p0` of
+/// every output row, `NR` leading indices at a time (the last `NR` end at `r_len`, computing
+/// a few rows twice: the same values): each step's inputs loaded once and added into the
+/// register block of every action that takes it.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+pub(super) unsafe fn stage_merged<
+    T: Real,
+    I: Isa<T>,
+    const NA: usize,
+    const NV: usize,
+    const NR: usize,
+>(
+    merged: &Merged<T, NA>,
+    (r_len, p_len): (usize, usize),
+    (strides, os): (Strides, OutStrides),
+    p0: usize,
+    m: I::M,
+    tail: usize,
+    input: *const T,
+    out: *mut T,
+) {
+    unsafe {
+        if NR > 1 && r_len < NR {
+            let shape = (r_len, p_len);
+            let strides = (strides, os);
+            return stage_merged::<T, I, NA, NV, 1>(
+                merged, shape, strides, p0, m, tail, input, out,
+            );
+        }
+        let Strides { k_stride, r_stride } = strides;
+        let mut r = 0;
+        while r < r_len {
+            let at = r.min(r_len - NR);
+            let base = input.add(at * r_stride + p0);
+            let mut acc = [[[I::zero(); NV]; NR]; NA];
+            for s in 0..merged.n {
+                let x = base.add(merged.cols[s] as usize * k_stride);
+                let mut xv = [[I::zero(); NV]; NR];
+                for (i, row) in xv.iter_mut().enumerate() {
+                    for (j, v) in row.iter_mut().enumerate() {
+                        let p = x.add(i * r_stride + j * I::LANES);
+                        *v = if j + 1 == NV {
+                            I::load_part(p, m)
+                        } else {
+                            I::load(p)
+                        };
+                    }
+                }
+                let bits = merged.masks[s];
+                for (a, blocks) in acc.iter_mut().enumerate() {
+                    if bits & (1 << a) != 0 {
+                        let w = I::splat(merged.ws[s][a]);
+                        for (block, xs) in blocks.iter_mut().zip(&xv) {
+                            for (acc, &v) in block.iter_mut().zip(xs) {
+                                *acc = I::fma(w, v, *acc);
+                            }
+                        }
+                    }
+                }
+            }
+            for (a, blocks) in acc.iter().enumerate() {
+                for (i, block) in blocks.iter().enumerate() {
+                    let o = out.add((at + i) * os.r_stride + a * os.a_stride + p0);
+                    store_block::<T, I, NV>(o, block, m, tail);
+                }
+            }
+            r = at + NR;
+        }
+    }
+}
+
+/// [`stage_merged`] over every register block of the rows, for `NA` actions; `false` when
+/// the rows do not merge into [`MAX_STEPS`] steps (nothing written then).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn stage_merged_rows<T: Real, I: Isa<T>, const NA: usize>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    (r_len, p_len): (usize, usize),
+    strides: (Strides, OutStrides),
+    input: *const T,
+    out: *mut T,
+) -> bool {
+    let Some(merged) = Merged::<T, NA>::new(rows, first_row) else {
+        return false;
+    };
+    unsafe {
+        for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::MERGED) {
+            let m = I::mask(tail);
+            let shape = (r_len, p_len);
+            let args = (&merged, shape, strides, p0, m, tail, input, out);
+            // `NV * NR` vectors per action: `I::MERGED` of them.
+            match (nv, I::MERGED) {
+                (1, 4) => stage_merged::<T, I, NA, 1, 4>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                ),
+                (1, _) => stage_merged::<T, I, NA, 1, 2>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                ),
+                (2, 4) => stage_merged::<T, I, NA, 2, 2>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                ),
+                (2, _) => stage_merged::<T, I, NA, 2, 1>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                ),
+                (3, _) => stage_merged::<T, I, NA, 3, 1>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                ),
+                _ => stage_merged::<T, I, NA, 4, 1>(
+                    args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7,
+                ),
+            }
+        }
+    }
+    true
+}
+
+/// The merged stage for `na` actions, if it applies (2 to [`MAX_MERGED`] actions whose rows
+/// merge into [`MAX_STEPS`] steps); `false` when the caller must run the rows one by one.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn try_stage_merged<T: Real, I: Isa<T>>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    na: usize,
+    shape: (usize, usize),
+    strides: (Strides, OutStrides),
+    input: *const T,
+    out: *mut T,
+) -> bool {
+    const { assert!(MAX_MERGED <= 8, "action masks are u8") };
+    unsafe {
+        match na {
+            2 => stage_merged_rows::<T, I, 2>(rows, first_row, shape, strides, input, out),
+            3 => stage_merged_rows::<T, I, 3>(rows, first_row, shape, strides, input, out),
+            4 => stage_merged_rows::<T, I, 4>(rows, first_row, shape, strides, input, out),
+            5 => stage_merged_rows::<T, I, 5>(rows, first_row, shape, strides, input, out),
+            6 => stage_merged_rows::<T, I, 6>(rows, first_row, shape, strides, input, out),
+            _ => false,
         }
     }
 }
@@ -317,13 +527,24 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
     rows: Rows<'_, T>,
     first_row: usize,
     na: usize,
-    r_len: usize,
-    p_len: usize,
+    (r_len, p_len): (usize, usize),
     strides: Strides,
+    out_strides: OutStrides,
     input: &[T],
     out: &mut [T],
 ) {
-    check_stage(&rows, first_row, na, r_len, p_len, strides, input, out);
+    check_stage(
+        &rows,
+        first_row,
+        na,
+        r_len,
+        p_len,
+        strides,
+        out_strides,
+        input,
+        out,
+    );
+    let os = out_strides;
     let ip = input.as_ptr();
     let op = out.as_mut_ptr();
     let Strides { k_stride, r_stride } = strides;
@@ -337,7 +558,7 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
                     for (&k, &w) in cols.iter().zip(ws) {
                         acc = I::fma1(w, *ip.add(k as usize * k_stride + r * r_stride), acc);
                     }
-                    *op.add(r * na + a) = acc;
+                    *op.add(r * os.r_stride + a * os.a_stride) = acc;
                 }
             }
             return;
@@ -346,9 +567,11 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
         {
             // Vector loads on an unpadded input (the first stage reads `V` this way): the
             // instance's exact variant (rows of one value, above, never load vectors).
-            return stage_impl::<T, I::Exact>(
-                rows, first_row, na, r_len, p_len, strides, input, out,
-            );
+            let shape = (r_len, p_len);
+            return stage_impl::<T, I::Exact>(rows, first_row, na, shape, strides, os, input, out);
+        }
+        if try_stage_merged::<T, I>(&rows, first_row, na, (r_len, p_len), (strides, os), ip, op) {
+            return;
         }
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
             let m = I::mask(tail);
@@ -357,7 +580,7 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
                 first_row,
                 na,
                 (r_len, p_len),
-                strides,
+                (strides, os),
                 p0,
                 m,
                 tail,

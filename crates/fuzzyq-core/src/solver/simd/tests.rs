@@ -67,6 +67,7 @@ proptest! {
             (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
         }),
         (k_extra, r_gap) in (0usize..50, 0usize..20),
+        (a_gap, action_outer) in (0usize..9, any::<bool>()),
         seed in any::<u64>(),
     ) {
         let r_stride = p_len + r_gap;
@@ -74,10 +75,17 @@ proptest! {
         let strides = Strides { k_stride, r_stride };
         let extent = (n_k - 1) * k_stride + (r_len - 1) * r_stride + p_len;
         let input = values(extent, seed);
+        // Output at any strides too: actions inside or outside the leading index, with gaps.
+        let os = if action_outer {
+            OutStrides { r_stride: p_len + a_gap, a_stride: r_len * (p_len + a_gap) + a_gap }
+        } else {
+            OutStrides { r_stride: na * (p_len + a_gap) + a_gap, a_stride: p_len + a_gap }
+        };
+        let out_len = (r_len - 1) * os.r_stride + (na - 1) * os.a_stride + p_len;
         for k in f32::available() {
             for c in 0..n_c {
-                let mut a = vec![0.0f32; r_len * na * p_len];
-                (k.stage_at)(rows.view(), c * na, na, r_len, p_len, strides, &input, &mut a);
+                let mut a = vec![0.0f32; out_len];
+                (k.stage_at)(rows.view(), c * na, na, r_len, p_len, strides, os, &input, &mut a);
                 for r in 0..r_len {
                     for u in 0..na {
                         let (cols, ws) = rows.view().row(c * na + u);
@@ -86,7 +94,7 @@ proptest! {
                             for (&kc, &w) in cols.iter().zip(ws) {
                                 acc = w.mul_add(input[kc as usize * k_stride + r * r_stride + p], acc);
                             }
-                            let got = a[(r * na + u) * p_len + p];
+                            let got = a[r * os.r_stride + u * os.a_stride + p];
                             prop_assert_eq!(got.to_bits(), acc.to_bits(), "{} kernels", k.name);
                         }
                     }
@@ -282,6 +290,71 @@ fn f64_instances_match_too() {
             k.stage(rows.view(), 0, 3, 2, p_len, &input, &mut a);
             scalar.stage(rows.view(), 0, 3, 2, p_len, &input, &mut b);
             assert_eq!(a, b, "{} p_len {p_len}", k.name);
+        }
+    }
+}
+
+/// Rows from `(column, weight)` lists.
+fn rows_of(rows: &[&[(u32, f32)]], n_cols: usize) -> RowsBuf<f32> {
+    let mut ptr = vec![0u32];
+    let (mut col, mut weight) = (Vec::new(), Vec::new());
+    for r in rows {
+        for &(k, w) in r.iter() {
+            col.push(k);
+            weight.push(w);
+        }
+        ptr.push(col.len() as u32);
+    }
+    RowsBuf::new(ptr, col, weight, n_cols).expect("valid rows")
+}
+
+#[test]
+fn merged_actions_share_columns_and_keep_each_rows_order() {
+    // Unsorted, a repeated column, an empty row.
+    let rows = rows_of(
+        &[&[(3, 0.1), (5, 0.2)], &[(5, 0.3), (3, 0.4), (5, 0.5)], &[]],
+        6,
+    );
+    let m = stage::Merged::<f32, 3>::new(&rows.view(), 0).expect("few steps");
+    let steps: Vec<_> = (0..m.n).map(|s| (m.cols[s], m.masks[s], m.ws[s])).collect();
+    assert_eq!(
+        steps,
+        [
+            (3, 0b001, [0.1, 0.0, 0.0]),
+            (5, 0b011, [0.2, 0.3, 0.0]),
+            (3, 0b010, [0.0, 0.4, 0.0]),
+            (5, 0b010, [0.0, 0.5, 0.0]),
+        ]
+    );
+}
+
+#[test]
+fn rows_too_long_to_merge_take_the_row_by_row_path_with_the_same_sums() {
+    // Six actions of six distinct columns each: 36 steps, past the merged stage's 32.
+    let (na, n_k, r_len, p_len) = (6usize, 40usize, 3usize, 37usize);
+    let lists: Vec<Vec<(u32, f32)>> = (0..na)
+        .map(|a| {
+            (0..6)
+                .map(|e| ((a * 6 + e) as u32, 0.1 + 0.01 * e as f32))
+                .collect()
+        })
+        .collect();
+    let refs: Vec<&[(u32, f32)]> = lists.iter().map(Vec::as_slice).collect();
+    let rows = rows_of(&refs, n_k);
+    assert!(stage::Merged::<f32, 6>::new(&rows.view(), 0).is_none());
+    let input = values(n_k * r_len * p_len, 11);
+    for k in f32::available() {
+        let mut out = vec![0.0f32; r_len * na * p_len];
+        k.stage(rows.view(), 0, na, r_len, p_len, &padded(&input), &mut out);
+        for r in 0..r_len {
+            for (a, list) in lists.iter().enumerate() {
+                for p in 0..p_len {
+                    let want = list.iter().fold(0.0f32, |acc, &(c, w)| {
+                        w.mul_add(input[(c as usize * r_len + r) * p_len + p], acc)
+                    });
+                    assert_eq!(out[(r * na + a) * p_len + p].to_bits(), want.to_bits());
+                }
+            }
         }
     }
 }

@@ -15,6 +15,7 @@ impl Isa<f32> for Avx512 {
     type M = __mmask16;
     const LANES: usize = 16;
     const BLOCK: usize = 8;
+    const MERGED: usize = 4;
     const OVERREAD: usize = 0;
     type Exact = Self;
     #[inline(always)]
@@ -89,6 +90,7 @@ impl Isa<f64> for Avx512 {
     type M = __mmask8;
     const LANES: usize = 8;
     const BLOCK: usize = 8;
+    const MERGED: usize = 4;
     const OVERREAD: usize = 0;
     type Exact = Self;
     #[inline(always)]
@@ -167,6 +169,7 @@ impl Isa<f32> for Avx2 {
     type M = __m256i;
     const LANES: usize = 8;
     const BLOCK: usize = 8;
+    const MERGED: usize = 2;
     const OVERREAD: usize = 0;
     type Exact = Self;
     #[inline(always)]
@@ -274,6 +277,7 @@ impl Isa<f64> for Avx2 {
     type M = __m256i;
     const LANES: usize = 4;
     const BLOCK: usize = 6;
+    const MERGED: usize = 2;
     const OVERREAD: usize = 0;
     type Exact = Self;
     #[inline(always)]
