@@ -6,8 +6,7 @@
 //! Row by row, a stage loads one input vector per fused multiply-add: every entry of every
 //! row loads its input, so loads (many of them across two cache lines), not multiply-adds,
 //! bound it. The rows of one block core's actions mostly share their columns (the successors
-//! of nearby actions overlap: on the paper's blocks 18.3 entries per core fall on 8.1
-//! distinct columns), so [`Merged`] lists the rows' entries as steps by column, each step
+//! of nearby actions overlap), so [`Merged`] lists the rows' entries as steps by column, each step
 //! naming the actions that take it, and [`stage_merged`] loads each step's input once for
 //! all of them, with one register block per action. Each action's entries still run in row
 //! order from zero, one fused multiply-add each, so the sums are the ones [`accumulate`]
@@ -160,7 +159,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
     rows: &Rows<'_, T>,
     first_row: usize,
     na: usize,
-    (r_len, p_len): (usize, usize),
+    r_len: usize,
     (strides, os): (Strides, OutStrides),
     p0: usize,
     m: I::M,
@@ -179,7 +178,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
                 rows,
                 first_row,
                 na,
-                (r_len, p_len),
+                r_len,
                 (strides, os),
                 p0,
                 m,
@@ -193,7 +192,7 @@ pub(super) unsafe fn stage_block<T: Copy, I: Isa<T>, const NV: usize>(
                 rows,
                 first_row,
                 na,
-                (r_len, p_len),
+                r_len,
                 (strides, os),
                 p0,
                 m,
@@ -250,7 +249,7 @@ pub(super) unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR:
     rows: &Rows<'_, T>,
     first_row: usize,
     na: usize,
-    (r_len, _p_len): (usize, usize),
+    r_len: usize,
     (strides, os): (Strides, OutStrides),
     p0: usize,
     m: I::M,
@@ -286,9 +285,6 @@ pub(super) unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR:
 /// Most steps of a [`Merged`] group (longer groups take the row-by-row path).
 const MAX_STEPS: usize = 32;
 
-/// Most actions in a [`Merged`] group (one register block each).
-const MAX_MERGED: usize = 6;
-
 /// The rows of `NA` consecutive actions merged by column: step `s` reads column `cols[s]`
 /// for the actions whose bit is set in `masks[s]`, with weights `ws[s]`. Built by taking, at
 /// each step, the smallest column among the rows' next entries, so every row's entries
@@ -304,6 +300,7 @@ impl<T: Real, const NA: usize> Merged<T, NA> {
     /// Merges rows `first_row .. first_row + NA`; `None` past [`MAX_STEPS`] steps.
     #[inline(always)]
     pub(super) fn new(rows: &Rows<'_, T>, first_row: usize) -> Option<Self> {
+        const { assert!(NA <= 8, "action masks are u8") };
         let mut m = Self {
             n: 0,
             cols: [0; MAX_STEPS],
@@ -352,7 +349,7 @@ pub(super) unsafe fn stage_merged<
     const NR: usize,
 >(
     merged: &Merged<T, NA>,
-    (r_len, p_len): (usize, usize),
+    r_len: usize,
     (strides, os): (Strides, OutStrides),
     p0: usize,
     m: I::M,
@@ -362,10 +359,9 @@ pub(super) unsafe fn stage_merged<
 ) {
     unsafe {
         if NR > 1 && r_len < NR {
-            let shape = (r_len, p_len);
             let strides = (strides, os);
             return stage_merged::<T, I, NA, NV, 1>(
-                merged, shape, strides, p0, m, tail, input, out,
+                merged, r_len, strides, p0, m, tail, input, out,
             );
         }
         let Strides { k_stride, r_stride } = strides;
@@ -428,8 +424,7 @@ unsafe fn stage_merged_rows<T: Real, I: Isa<T>, const NA: usize>(
     unsafe {
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::MERGED) {
             let m = I::mask(tail);
-            let shape = (r_len, p_len);
-            let args = (&merged, shape, strides, p0, m, tail, input, out);
+            let args = (&merged, r_len, strides, p0, m, tail, input, out);
             // `NV * NR` vectors per action: `I::MERGED` of them.
             match (nv, I::MERGED) {
                 (1, 4) => stage_merged::<T, I, NA, 1, 4>(
@@ -456,8 +451,9 @@ unsafe fn stage_merged_rows<T: Real, I: Isa<T>, const NA: usize>(
     true
 }
 
-/// The merged stage for `na` actions, if it applies (2 to [`MAX_MERGED`] actions whose rows
-/// merge into [`MAX_STEPS`] steps); `false` when the caller must run the rows one by one.
+/// The merged stage for `na` actions, if it applies (2 to 6 actions, one register block
+/// each, whose rows merge into [`MAX_STEPS`] steps); `false` when the caller must run the
+/// rows one by one.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
 unsafe fn try_stage_merged<T: Real, I: Isa<T>>(
@@ -469,7 +465,6 @@ unsafe fn try_stage_merged<T: Real, I: Isa<T>>(
     input: *const T,
     out: *mut T,
 ) -> bool {
-    const { assert!(MAX_MERGED <= 8, "action masks are u8") };
     unsafe {
         match na {
             2 => stage_merged_rows::<T, I, 2>(rows, first_row, shape, strides, input, out),
@@ -579,7 +574,7 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
                 &rows,
                 first_row,
                 na,
-                (r_len, p_len),
+                r_len,
                 (strides, os),
                 p0,
                 m,
