@@ -38,13 +38,16 @@ use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
 use super::simd::{
-    INPUT_PAD, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides, last_scratch_len,
+    INPUT_PAD, InRows, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides, last_scratch_len,
 };
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
 use crate::model::Model;
 use crate::partition::{MAX_DIMS, Partition, ProductPartition, Segment};
 use crate::real::Real;
+
+/// Bytes per cache line on the CPUs the kernels target (x86-64; most ARM cores).
+const CACHE_LINE: usize = 64;
 
 /// One block's sparse transition table.
 struct BlockTable<T> {
@@ -676,6 +679,34 @@ impl<T: Real> BlockOperator<T> {
         self.r_len[b] * self.tables[b].n_actions * self.p_len[b]
     }
 
+    /// The fused last stage's input rows when the stage before it computes them (`None` for
+    /// a single block, whose last stage reads `V`): each successor core's row of prior
+    /// actions padded to whole cache lines, so that the last stage, which loads every
+    /// vector of a row once per entry of a core's rows, never loads across two lines.
+    fn last_in(&self) -> Option<InRows> {
+        let nb = self.tables.len();
+        let p_len = self.p_len[nb - 1];
+        let line = (CACHE_LINE / core::mem::size_of::<T>()).max(1);
+        (nb >= 2).then(|| InRows {
+            p_len,
+            stride: p_len.next_multiple_of(line),
+        })
+    }
+
+    /// Length of the buffer of stage `b`'s output: its own, padded past the end for the
+    /// kernels' fastest loads, and for the stage before the fused last one, the padded
+    /// rows of [`Self::last_in`] and room to start them on a cache line.
+    fn stage_buffer_len(&self, b: usize) -> usize {
+        let own = self.stage_len(b);
+        match self.last_in() {
+            Some(shape) if b + 2 == self.tables.len() => {
+                let lanes = CACHE_LINE / core::mem::size_of::<T>();
+                own.max(shape.extent(self.r_len[b])) + INPUT_PAD + lanes
+            }
+            _ => own + INPUT_PAD,
+        }
+    }
+
     /// The rows of stage `level`: `rows0` for the first (the block's own rows, or those rows
     /// with their columns renumbered into a halo of input slabs), the block's own otherwise.
     #[inline]
@@ -707,8 +738,7 @@ impl<T: Real> BlockOperator<T> {
                 .tables
                 .iter()
                 .enumerate()
-                // Padded so that every kernel instance reads them with its fastest loads.
-                .map(|(b, _)| vec![T::ZERO; self.stage_len(b) + INPUT_PAD])
+                .map(|(b, _)| vec![T::ZERO; self.stage_buffer_len(b)])
                 .collect(),
             extra: Extra {
                 scratch: vec![T::ZERO; self.r_len[0] * self.tables[0].n_actions],
@@ -724,6 +754,7 @@ impl<T: Real> BlockOperator<T> {
 
     /// Stage `level` for block core `c`: `out = T_level[c] x input`. A stage over rows of one
     /// value (the first stage) runs transposed, as `n_actions` long rows, then interleaves.
+    /// Its output rows (one per core of the later blocks) are `r_stride` elements apart.
     #[allow(clippy::too_many_arguments)] // the stage's context, spelled out
     fn stage(
         &self,
@@ -731,24 +762,27 @@ impl<T: Real> BlockOperator<T> {
         level: usize,
         c: usize,
         input: &[T],
-        out: &mut [T],
+        (out, r_stride): (&mut [T], usize),
         scratch: &mut [T],
     ) {
         let t = &self.tables[level];
         let rows = self.rows(rows0, level);
-        let (r, p) = (self.r_len[level], self.p_len[level]);
-        if p == 1 && r > 1 && t.n_actions > 1 {
-            let na = t.n_actions;
+        let (r, p, na) = (self.r_len[level], self.p_len[level], t.n_actions);
+        if p == 1 && r > 1 && na > 1 {
             self.kernels
                 .stage(rows, c * na, na, 1, r, input, &mut scratch[..na * r]);
-            for (ri, o) in out[..r * na].chunks_exact_mut(na).enumerate() {
-                for (a, x) in o.iter_mut().enumerate() {
+            for (ri, o) in out.chunks_mut(r_stride).take(r).enumerate() {
+                for (a, x) in o[..na].iter_mut().enumerate() {
                     *x = scratch[a * r + ri];
                 }
             }
         } else {
-            self.kernels
-                .stage(rows, c * t.n_actions, t.n_actions, r, p, input, out);
+            let out_strides = OutStrides {
+                r_stride,
+                a_stride: p,
+            };
+            let strides = Strides::dense(r, p);
+            (self.kernels.stage_at)(rows, c * na, na, r, p, strides, out_strides, input, out);
         }
     }
 
@@ -761,27 +795,28 @@ impl<T: Real> BlockOperator<T> {
         level: usize,
         first: usize,
         n: usize,
-        input: &[T],
+        (input, shape): (&[T], InRows),
         last: Last,
         extra: &'w mut Extra<T>,
         policy: &[u32],
     ) -> Out<'w, T> {
         let t = &self.tables[level];
-        let (rows, na, p) = (self.rows(rows0, level), t.n_actions, self.p_len[level]);
+        let (rows, na) = (self.rows(rows0, level), t.n_actions);
         let m = &mut extra.maxima[..n];
         let bounds = &mut extra.bounds;
         match last {
             Last::Max { abs } => {
-                (self.kernels.last)(rows, first, na, p, abs, input, m, bounds, None);
+                (self.kernels.last)(rows, first, na, shape, abs, input, m, bounds, None);
                 Out::Max(m)
             }
             Last::Argmax => {
                 let a = &mut extra.args[..n];
-                (self.kernels.last)(rows, first, na, p, false, input, m, bounds, Some(&mut *a));
+                let args = Some(&mut *a);
+                (self.kernels.last)(rows, first, na, shape, false, input, m, bounds, args);
                 Out::Arg(m, a)
             }
             Last::Eval => {
-                (self.kernels.eval)(rows, first, na, p, input, &policy[..n], m);
+                (self.kernels.eval)(rows, first, na, shape, input, &policy[..n], m);
                 Out::Max(m)
             }
             Last::Rows => unreachable!("rows are not fused"),
@@ -816,6 +851,7 @@ impl<T: Real> BlockOperator<T> {
         };
         if last != Last::Rows && level + 1 == nb {
             // A single block: this stage is the last one, for core `c` alone.
+            let input = (input, InRows::dense(self.p_len[level]));
             let out = self.last_stage(rows0, level, c, 1, input, last, extra, pol(local, 1));
             emit(local, out);
             return;
@@ -868,18 +904,43 @@ impl<T: Real> BlockOperator<T> {
             }
             return;
         }
-        self.stage(rows0, level, c, input, out, &mut extra.scratch);
+        if let Some(shape) = self
+            .last_in()
+            .filter(|_| last != Last::Rows && level + 2 == nb)
+        {
+            // Into the padded rows the fused last stage reads, from a cache line on.
+            let start = out.as_ptr().align_offset(CACHE_LINE);
+            let out = &mut out[start..];
+            self.stage(
+                rows0,
+                level,
+                c,
+                input,
+                (out, shape.stride),
+                &mut extra.scratch,
+            );
+            let n = self.tables[level + 1].n_cores;
+            let input = (&*out, shape);
+            let out = self.last_stage(
+                rows0,
+                level + 1,
+                0,
+                n,
+                input,
+                last,
+                extra,
+                pol(local * n, n),
+            );
+            emit(local * n, out);
+            return;
+        }
+        let dense = self.tables[level].n_actions * self.p_len[level];
+        self.stage(rows0, level, c, input, (out, dense), &mut extra.scratch);
         if level + 1 == nb {
             emit(local, Out::Row(&out[..self.stage_len(level)]));
             return;
         }
         let next = &self.tables[level + 1];
-        if last != Last::Rows && level + 2 == nb {
-            let n = next.n_cores;
-            let out = self.last_stage(rows0, level + 1, 0, n, out, last, extra, pol(local * n, n));
-            emit(local * n, out);
-            return;
-        }
         for c2 in 0..next.n_cores {
             self.run(
                 rows0,
@@ -1263,7 +1324,8 @@ impl<T: Real> BlockOperator<T> {
                 // output, so they run in parallel over the second block's cores.
                 let (w0, _) = w.stages.split_first_mut().expect("one buffer per stage");
                 let rows0 = self.tables[0].rows.view();
-                self.stage(rows0, 0, c0, v, w0, &mut w.extra.scratch);
+                let dense = self.tables[0].n_actions * self.p_len[0];
+                self.stage(rows0, 0, c0, v, (w0, dense), &mut w.extra.scratch);
                 let w0 = &w.stages[0];
                 let chunk_len = self.r_len[1];
                 par::for_each_chunk_mut(

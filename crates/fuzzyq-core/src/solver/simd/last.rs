@@ -11,7 +11,7 @@ pub(super) unsafe fn row_block<T: Copy, I: Isa<T>, const NV: usize>(
     cols: &[u32],
     ws: &[T],
     input: *const T,
-    p_len: usize,
+    stride: usize,
     m: I::M,
 ) -> [I::V; NV] {
     macro_rules! fixed {
@@ -19,7 +19,7 @@ pub(super) unsafe fn row_block<T: Copy, I: Isa<T>, const NV: usize>(
             let mut xs = [input; $ne];
             let mut wv = [I::zero(); $ne];
             for e in 0..$ne {
-                xs[e] = input.add(cols[e] as usize * p_len);
+                xs[e] = input.add(cols[e] as usize * stride);
                 wv[e] = I::splat(ws[e]);
             }
             accumulate::<T, I, NV, $ne>(&xs, &wv, m)
@@ -31,7 +31,7 @@ pub(super) unsafe fn row_block<T: Copy, I: Isa<T>, const NV: usize>(
             2 => fixed!(2),
             3 => fixed!(3),
             4 => fixed!(4),
-            _ => accumulate_any::<T, I, NV>(cols, ws, input, p_len, m),
+            _ => accumulate_any::<T, I, NV>(cols, ws, input, stride, m),
         }
     }
 }
@@ -42,7 +42,7 @@ pub(super) unsafe fn last_block<T: Copy, I: Isa<T>, const NV: usize, const ABS: 
     rows: &Rows<'_, T>,
     c: usize,
     na: usize,
-    p_len: usize,
+    stride: usize,
     p0: usize,
     m: I::M,
     input: *const T,
@@ -51,7 +51,7 @@ pub(super) unsafe fn last_block<T: Copy, I: Isa<T>, const NV: usize, const ABS: 
         let mut best = [I::neg_inf(); NV];
         for a in 0..na {
             let (cols, ws) = rows.row(c * na + a);
-            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
+            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), stride, m);
             for (b, &v) in best.iter_mut().zip(&acc) {
                 *b = I::max(*b, if ABS { I::abs(v) } else { v });
             }
@@ -65,6 +65,24 @@ pub(super) unsafe fn last_block<T: Copy, I: Isa<T>, const NV: usize, const ABS: 
     }
 }
 
+/// The lowest valid lane `j * LANES + lane` of a register block equal to `t`: the lanes'
+/// equalities gathered into one bit mask, without a branch per vector.
+#[inline(always)]
+pub(super) unsafe fn first_equal<T: Copy, I: Isa<T>, const NV: usize>(
+    acc: &[I::V; NV],
+    t: T,
+    m: I::M,
+) -> Option<usize> {
+    const { assert!(NV * I::LANES <= 128, "a register block's lanes fit a u128") };
+    let all = unsafe { I::mask(I::LANES) };
+    let mut bits = 0u128;
+    for (j, &x) in acc.iter().enumerate() {
+        let mask = if j + 1 == NV { m } else { all };
+        bits |= u128::from(unsafe { I::equal_bits(x, t, mask) }) << (j * I::LANES);
+    }
+    (bits != 0).then(|| bits.trailing_zeros() as usize)
+}
+
 /// The lowest `a * p_len + p` whose expected value equals `target` in one register block,
 /// scanning actions in order (`None` if no lane matches).
 #[inline(always)]
@@ -74,7 +92,7 @@ pub(super) unsafe fn argmax_block<T: Copy, I: Isa<T>, const NV: usize>(
     c: usize,
     a: usize,
     na: usize,
-    p_len: usize,
+    (p_len, stride): (usize, usize),
     p0: usize,
     m: I::M,
     input: *const T,
@@ -82,15 +100,8 @@ pub(super) unsafe fn argmax_block<T: Copy, I: Isa<T>, const NV: usize>(
 ) -> Option<usize> {
     unsafe {
         let (cols, ws) = rows.row(c * na + a);
-        let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
-        let all = I::mask(I::LANES);
-        for (j, &v) in acc.iter().enumerate() {
-            let mask = if j + 1 == NV { m } else { all };
-            if let Some(lane) = I::first_equal(v, target, mask) {
-                return Some(a * p_len + p0 + j * I::LANES + lane);
-            }
-        }
-        None
+        let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), stride, m);
+        first_equal::<T, I, NV>(&acc, target, m).map(|i| a * p_len + p0 + i)
     }
 }
 
@@ -119,43 +130,117 @@ pub(super) unsafe fn row_bound<T: Copy, I: Isa<T>, const NV: usize, const ABS: b
     }
 }
 
+/// The lane-wise maximum of a register block's vectors (of their absolute values if `ABS`),
+/// the last vector's masked-off lanes minus infinity: a pairwise tree, whose depth, not the
+/// vector count, sets the latency (the maximum is exact in any order).
+#[inline(always)]
+pub(super) unsafe fn block_max<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
+    acc: &[I::V; NV],
+    m: I::M,
+) -> I::V {
+    unsafe {
+        let mut v = *acc;
+        for (j, x) in v.iter_mut().enumerate() {
+            if ABS {
+                *x = I::abs(*x);
+            }
+            if j + 1 == NV {
+                *x = I::load_part_from(*x, m);
+            }
+        }
+        let mut n = NV;
+        while n > 1 {
+            let half = n / 2;
+            for j in 0..half {
+                v[j] = I::max(v[j], v[j + n - half]);
+            }
+            n -= half;
+        }
+        v[0]
+    }
+}
+
 /// The maximum over the valid lanes of one (core, action) row in one register block.
 #[inline(always)]
 pub(super) unsafe fn row_max<T: Copy, I: Isa<T>, const NV: usize, const ABS: bool>(
     cols: &[u32],
     ws: &[T],
     input: *const T,
-    p_len: usize,
+    stride: usize,
     m: I::M,
 ) -> T {
     unsafe {
-        let acc = row_block::<T, I, NV>(cols, ws, input, p_len, m);
-        let all = I::mask(I::LANES);
-        let mut best = I::neg_inf();
-        for (j, &v) in acc.iter().enumerate() {
-            let v = if ABS { I::abs(v) } else { v };
-            if j + 1 == NV {
-                best = I::max(best, I::load_part_from(v, m));
-            } else {
-                best = I::max(best, v);
-            }
-        }
-        I::reduce_max(best, all)
+        let acc = row_block::<T, I, NV>(cols, ws, input, stride, m);
+        I::reduce_max(block_max::<T, I, NV, ABS>(&acc, m), I::mask(I::LANES))
     }
 }
 
-/// One register block of the last stage for core `c`, pruned: rows are visited in decreasing
-/// order of an upper bound of their values, and the visit stops at the first row whose bound
-/// does not exceed the best value found. Memberships are non-negative and fused multiply-add rounds
-/// monotonically, so `fma(w_e, bound_e, ...)` (the same chain as the row's) bounds every
-/// computed value of the row: the result is bit-identical to visiting every row.
+/// The `i`-th row a pruned core visits: `top` (the largest bound) first, then the others in
+/// order.
+#[inline(always)]
+fn visit_order(i: usize, top: usize) -> usize {
+    match i {
+        0 => top,
+        _ if i <= top => i - 1,
+        _ => i,
+    }
+}
+
+/// The upper bounds of the rows of core `c`'s actions (`ub[a]`, see [`last_block_pruned`])
+/// and the action of the largest (the lowest on ties).
+#[inline(always)]
+unsafe fn row_bounds<T: Real, I: Isa<T>>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    bounds: &[T],
+    ub: &mut [T; PRUNE_MAX_ACTIONS],
+) -> usize {
+    // Every row's chain first (independent, so they overlap), then the largest without
+    // branches on the data.
+    for (a, u) in ub[..na].iter_mut().enumerate() {
+        let (cols, ws) = rows.row(c * na + a);
+        let mut b = T::ZERO;
+        macro_rules! fixed {
+            ($ne:literal) => {{
+                for e in 0..$ne {
+                    b = unsafe { I::fma1(ws[e], bounds[cols[e] as usize], b) };
+                }
+            }};
+        }
+        match cols.len() {
+            4 => fixed!(4),
+            2 => fixed!(2),
+            _ => {
+                for (&k, &w) in cols.iter().zip(ws) {
+                    b = unsafe { I::fma1(w, bounds[k as usize], b) };
+                }
+            }
+        }
+        *u = b;
+    }
+    let mut top = 0;
+    for a in 1..na {
+        top = if ub[a] > ub[top] { a } else { top };
+    }
+    top
+}
+
+/// One register block of the last stage for core `c`, pruned: each row gets an upper bound of
+/// its values, the row of the largest bound is visited first, and every other row only if its
+/// bound exceeds the best value found by then (once the values have settled, one row per core
+/// is visited). Memberships are non-negative and fused multiply-add rounds monotonically, so
+/// `fma(w_e, bound_e, ...)` (the same chain as the row's) bounds every computed value of the
+/// row: the result is bit-identical to visiting every row. There is no sort: the order of the
+/// other rows does not change the maximum, and a sort's data-dependent branches cost more than
+/// the rare extra visit they would save.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
 pub(super) unsafe fn last_block_pruned<T: Real, I: Isa<T>, const NV: usize, const ABS: bool>(
     rows: &Rows<'_, T>,
     c: usize,
     na: usize,
-    p_len: usize,
+    stride: usize,
     p0: usize,
     m: I::M,
     input: *const T,
@@ -164,30 +249,19 @@ pub(super) unsafe fn last_block_pruned<T: Real, I: Isa<T>, const NV: usize, cons
 ) -> T {
     unsafe {
         let mut ub = [T::ZERO; PRUNE_MAX_ACTIONS];
-        let mut order = [0u8; PRUNE_MAX_ACTIONS];
-        for a in 0..na {
-            let (cols, ws) = rows.row(c * na + a);
-            let mut b = T::ZERO;
-            for (&k, &w) in cols.iter().zip(ws) {
-                b = I::fma1(w, bounds[k as usize], b);
-            }
-            // Insertion into `order`, by decreasing bound.
-            let mut i = a;
-            while i > 0 && ub[order[i - 1] as usize] < b {
-                order[i] = order[i - 1];
-                i -= 1;
-            }
-            order[i] = a as u8;
-            ub[a] = b;
-        }
-        for &a in &order[..na] {
-            let a = a as usize;
-            // A row whose bound does not exceed the best cannot raise the maximum.
+        let top = row_bounds::<T, I>(rows, c, na, bounds, &mut ub);
+        // The row of the largest bound first, then the others whose bound exceeds the best
+        // by then: a row whose bound does not exceed the best cannot raise the maximum.
+        for i in 0..na {
+            let a = visit_order(i, top);
             if ub[a] <= best {
-                break;
+                if i == 0 {
+                    break;
+                }
+                continue;
             }
             let (cols, ws) = rows.row(c * na + a);
-            let v = row_max::<T, I, NV, ABS>(cols, ws, input.add(p0), p_len, m);
+            let v = row_max::<T, I, NV, ABS>(cols, ws, input.add(p0), stride, m);
             best = I::max1(best, v);
         }
         best
@@ -205,7 +279,7 @@ pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
     rows: &Rows<'_, T>,
     c: usize,
     na: usize,
-    p_len: usize,
+    (p_len, stride): (usize, usize),
     p0: usize,
     m: I::M,
     input: *const T,
@@ -214,52 +288,26 @@ pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
 ) -> (T, usize) {
     unsafe {
         let mut ub = [T::ZERO; PRUNE_MAX_ACTIONS];
-        let mut order = [0u8; PRUNE_MAX_ACTIONS];
-        for a in 0..na {
-            let (cols, ws) = rows.row(c * na + a);
-            let mut b = T::ZERO;
-            for (&k, &w) in cols.iter().zip(ws) {
-                b = I::fma1(w, bounds[k as usize], b);
-            }
-            let mut i = a;
-            while i > 0 && ub[order[i - 1] as usize] < b {
-                order[i] = order[i - 1];
-                i -= 1;
-            }
-            order[i] = a as u8;
-            ub[a] = b;
-        }
+        let top = row_bounds::<T, I>(rows, c, na, bounds, &mut ub);
         let all = I::mask(I::LANES);
-        for &a in &order[..na] {
-            let a = a as usize;
+        // As in `last_block_pruned` (no closure: it would not inherit the kernel's target
+        // features).
+        for i in 0..na {
+            let a = visit_order(i, top);
             if ub[a] < best {
-                break;
+                if i == 0 {
+                    break;
+                }
+                continue;
             }
             let (cols, ws) = rows.row(c * na + a);
-            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), p_len, m);
-            let mut top = I::neg_inf();
-            for (j, &v) in acc.iter().enumerate() {
-                top = I::max(
-                    top,
-                    if j + 1 == NV {
-                        I::load_part_from(v, m)
-                    } else {
-                        v
-                    },
-                );
-            }
-            let v = I::reduce_max(top, all);
+            let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), stride, m);
+            let v = I::reduce_max(block_max::<T, I, NV, false>(&acc, m), all);
             if v < best {
                 continue;
             }
-            let mut idx = usize::MAX;
-            for (j, &x) in acc.iter().enumerate() {
-                let mask = if j + 1 == NV { m } else { all };
-                if let Some(lane) = I::first_equal(x, v, mask) {
-                    idx = a * p_len + p0 + j * I::LANES + lane;
-                    break;
-                }
-            }
+            let idx =
+                first_equal::<T, I, NV>(&acc, v, m).map_or(usize::MAX, |i| a * p_len + p0 + i);
             if v > best || idx < best_idx {
                 best = v;
                 best_idx = idx;
@@ -290,18 +338,19 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     rows: Rows<'_, T>,
     first_core: usize,
     na: usize,
-    p_len: usize,
+    shape: InRows,
     input: &[T],
     out: &mut [T],
     bounds: &mut [T],
     mut args: Option<&mut [u32]>,
 ) {
-    check_last(&rows, first_core, na, p_len, input, out);
+    check_last(&rows, first_core, na, shape, input, out);
+    let InRows { p_len, stride } = shape;
     if let Some(a) = &args {
         assert_eq!(a.len(), out.len(), "one action per core");
     }
-    if I::OVERREAD > 0 && input.len() < rows.n_cols * p_len + I::OVERREAD {
-        return (scalar::<T>().last)(rows, first_core, na, p_len, ABS, input, out, bounds, args);
+    if I::OVERREAD > 0 && input.len() < shape.extent(rows.n_cols) + I::OVERREAD {
+        return (scalar::<T>().last)(rows, first_core, na, shape, ABS, input, out, bounds, args);
     }
     let ip = input.as_ptr();
     let n_cols = rows.n_cols;
@@ -318,7 +367,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
             for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
                 let m = I::mask(tail);
                 for k in 0..n_cols {
-                    let x = ip.add(k * p_len + p0);
+                    let x = ip.add(k * stride + p0);
                     bounds[bi * n_cols + k] = by_nv!(nv, row_bound::<T, I, _, ABS>(x, m));
                 }
             }
@@ -332,7 +381,17 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                     let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
                     best = by_nv!(
                         nv,
-                        last_block_pruned_arg::<T, I, _>(&rows, c, na, p_len, p0, m, ip, b, best)
+                        last_block_pruned_arg::<T, I, _>(
+                            &rows,
+                            c,
+                            na,
+                            (p_len, stride),
+                            p0,
+                            m,
+                            ip,
+                            b,
+                            best
+                        )
                     );
                 }
                 *o = best.0;
@@ -354,12 +413,12 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                     let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
                     by_nv!(
                         nv,
-                        last_block_pruned::<T, I, _, ABS>(&rows, c, na, p_len, p0, m, ip, b, best)
+                        last_block_pruned::<T, I, _, ABS>(&rows, c, na, stride, p0, m, ip, b, best)
                     )
                 } else {
                     let v = by_nv!(
                         nv,
-                        last_block::<T, I, _, ABS>(&rows, c, na, p_len, p0, m, ip)
+                        last_block::<T, I, _, ABS>(&rows, c, na, stride, p0, m, ip)
                     );
                     I::max1(best, v)
                 };
@@ -369,7 +428,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     }
     if let Some(args) = args {
         // Without pruning (more actions than the stack arrays hold): a separate scan.
-        unsafe { argmax_impl::<T, I>(rows, first_core, na, p_len, input, out, args) };
+        unsafe { argmax_impl::<T, I>(rows, first_core, na, shape, input, out, args) };
     }
 }
 
@@ -378,13 +437,14 @@ pub(super) unsafe fn argmax_impl<T: Real, I: Isa<T>>(
     rows: Rows<'_, T>,
     first_core: usize,
     na: usize,
-    p_len: usize,
+    shape: InRows,
     input: &[T],
     maxima: &[T],
     out: &mut [u32],
 ) {
     assert_eq!(maxima.len(), out.len(), "one maximum per core");
-    check_last(&rows, first_core, na, p_len, input, maxima);
+    check_last(&rows, first_core, na, shape, input, maxima);
+    let p_len = shape.p_len;
     let ip = input.as_ptr();
     unsafe {
         for (i, o) in out.iter_mut().enumerate() {
@@ -395,7 +455,7 @@ pub(super) unsafe fn argmax_impl<T: Real, I: Isa<T>>(
                 let mut hit = None;
                 for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
                     let m = I::mask(tail);
-                    let args = (&rows, c, a, na, p_len, p0, m, ip, target);
+                    let args = (&rows, c, a, na, (p_len, shape.stride), p0, m, ip, target);
                     hit = match nv {
                         1 => argmax_block::<T, I, 1>(
                             args.0, args.1, args.2, args.3, args.4, args.5, args.6, args.7, args.8,
@@ -442,13 +502,14 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
     rows: Rows<'_, T>,
     first_core: usize,
     na: usize,
-    p_len: usize,
+    shape: InRows,
     input: &[T],
     policy: &[u32],
     out: &mut [T],
 ) {
     assert_eq!(policy.len(), out.len(), "one action per core");
-    check_last(&rows, first_core, na, p_len, input, out);
+    check_last(&rows, first_core, na, shape, input, out);
+    let InRows { p_len, stride } = shape;
     for (i, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
         let u = u as usize;
         assert!(
@@ -460,7 +521,7 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
         let mut acc = T::ZERO;
         for (&k, &w) in cols.iter().zip(ws) {
             // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
-            acc = unsafe { I::fma1(w, *input.get_unchecked(k as usize * p_len + p), acc) };
+            acc = unsafe { I::fma1(w, *input.get_unchecked(k as usize * stride + p), acc) };
         }
         *o = acc;
     }

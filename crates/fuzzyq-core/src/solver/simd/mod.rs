@@ -180,7 +180,33 @@ pub type StageFn<T> = fn(
     out: &mut [T],
 );
 
-/// The fused last stage: `out[i] = max_{a,p} (|.| if `abs`) sum_e w_e in[k_e P + p]` over the
+/// The last stage's input: one row of `p_len` lanes (the earlier blocks' actions) per
+/// successor core, `stride` elements apart: `in[k S + p]`. A stride past `p_len` pads each row
+/// (to whole cache lines, say); the padding is never read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InRows {
+    /// Lanes per row.
+    pub p_len: usize,
+    /// Elements from one row to the next (`>= p_len`).
+    pub stride: usize,
+}
+
+impl InRows {
+    /// Rows of `p_len` lanes, back to back.
+    pub const fn dense(p_len: usize) -> Self {
+        Self {
+            p_len,
+            stride: p_len,
+        }
+    }
+
+    /// Elements that `n_rows` rows span (the last one unpadded).
+    pub(crate) fn extent(self, n_rows: usize) -> usize {
+        n_rows.saturating_sub(1) * self.stride + self.p_len
+    }
+}
+
+/// The fused last stage: `out[i] = max_{a,p} (|.| if `abs`) sum_e w_e in[k_e S + p]` over the
 /// rows `(first_core + i) A + a`; with `args` (and not `abs`), also each core's lowest
 /// `a P + p` whose expected value equals its maximum (the greedy product action).
 ///
@@ -189,7 +215,7 @@ pub type LastFn<T> = fn(
     rows: Rows<'_, T>,
     first_core: usize,
     n_actions: usize,
-    p_len: usize,
+    shape: InRows,
     abs: bool,
     input: &[T],
     out: &mut [T],
@@ -212,7 +238,7 @@ pub(super) const INPUT_PAD: usize = 16;
 /// Largest block action count for which the last stage prunes rows (a stack array).
 const PRUNE_MAX_ACTIONS: usize = 64;
 
-/// The last stage for one given action per core: `out[i] = sum_e w_e in[k_e P + p]` over the
+/// The last stage for one given action per core: `out[i] = sum_e w_e in[k_e S + p]` over the
 /// row `(first_core + i) A + a`, where `policy[i] = a P + p` is the core's product action.
 /// Entries are summed in the row's order with fused multiply-adds from 0, as [`LastFn`] does,
 /// so for the greedy action the value is bit-identical to the core's maximum.
@@ -220,7 +246,7 @@ pub type EvalFn<T> = fn(
     rows: Rows<'_, T>,
     first_core: usize,
     n_actions: usize,
-    p_len: usize,
+    shape: InRows,
     input: &[T],
     policy: &[u32],
     out: &mut [T],
@@ -374,7 +400,7 @@ fn check_last<T>(
     rows: &Rows<'_, T>,
     first_core: usize,
     na: usize,
-    p_len: usize,
+    shape: InRows,
     input: &[T],
     out: &[T],
 ) {
@@ -382,11 +408,12 @@ fn check_last<T>(
         (first_core + out.len()) * na <= rows.n_rows(),
         "last-stage rows out of range"
     );
+    assert!(shape.p_len > 0, "empty rows");
+    assert!(shape.stride >= shape.p_len, "last-stage rows overlap");
     assert!(
-        rows.n_cols * p_len <= input.len(),
+        shape.extent(rows.n_cols) <= input.len(),
         "last-stage input too short"
     );
-    assert!(p_len > 0, "empty rows");
 }
 
 /// The vector operations the kernels need. All methods are `unsafe`: they require the CPU
@@ -422,7 +449,8 @@ trait Isa<T: Copy> {
     /// Stores the masked lanes only (the first `n`, which `m` selects).
     unsafe fn store_part(p: *mut T, v: Self::V, m: Self::M, n: usize);
     /// The first masked lane equal to `t`.
-    unsafe fn first_equal(v: Self::V, t: T, m: Self::M) -> Option<usize>;
+    /// Bit `i` set for each masked lane `i` equal to `t`.
+    unsafe fn equal_bits(v: Self::V, t: T, m: Self::M) -> u64;
     unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
     unsafe fn max(a: Self::V, b: Self::V) -> Self::V;
     unsafe fn abs(a: Self::V) -> Self::V;
@@ -507,8 +535,8 @@ macro_rules! scalar_isa {
                 }
             }
             #[inline(always)]
-            unsafe fn first_equal(v: $t, t: $t, m: bool) -> Option<usize> {
-                (m && v == t).then_some(0)
+            unsafe fn equal_bits(v: $t, t: $t, m: bool) -> u64 {
+                u64::from(m && v == t)
             }
             #[inline(always)]
             unsafe fn fma(a: $t, b: $t, c: $t) -> $t {
@@ -598,7 +626,7 @@ macro_rules! instance {
                 rows: Rows<'_, $t>,
                 first_core: usize,
                 na: usize,
-                p_len: usize,
+                shape: InRows,
                 abs: bool,
                 input: &[$t],
                 out: &mut [$t],
@@ -611,7 +639,7 @@ macro_rules! instance {
                     rows: Rows<'_, $t>,
                     first_core: usize,
                     na: usize,
-                    p_len: usize,
+                    shape: InRows,
                     abs: bool,
                     input: &[$t],
                     out: &mut [$t],
@@ -620,22 +648,22 @@ macro_rules! instance {
                 ) {
                     unsafe {
                         if abs {
-                            last_impl::<$t, $isa, true>(rows, first_core, na, p_len, input, out, bounds, args)
+                            last_impl::<$t, $isa, true>(rows, first_core, na, shape, input, out, bounds, args)
                         } else {
-                            last_impl::<$t, $isa, false>(rows, first_core, na, p_len, input, out, bounds, args)
+                            last_impl::<$t, $isa, false>(rows, first_core, na, shape, input, out, bounds, args)
                         }
                     }
                 }
                 assert!($detect, "CPU features missing for this kernel");
                 // SAFETY: as above, with `check_last` and the scratch length check.
-                unsafe { inner(rows, first_core, na, p_len, abs, input, out, bounds, args) }
+                unsafe { inner(rows, first_core, na, shape, abs, input, out, bounds, args) }
             }
 
             fn eval(
                 rows: Rows<'_, $t>,
                 first_core: usize,
                 na: usize,
-                p_len: usize,
+                shape: InRows,
                 input: &[$t],
                 policy: &[u32],
                 out: &mut [$t],
@@ -645,16 +673,16 @@ macro_rules! instance {
                     rows: Rows<'_, $t>,
                     first_core: usize,
                     na: usize,
-                    p_len: usize,
+                    shape: InRows,
                     input: &[$t],
                     policy: &[u32],
                     out: &mut [$t],
                 ) {
-                    unsafe { eval_impl::<$t, $isa>(rows, first_core, na, p_len, input, policy, out) }
+                    unsafe { eval_impl::<$t, $isa>(rows, first_core, na, shape, input, policy, out) }
                 }
                 assert!($detect, "CPU features missing for this kernel");
                 // SAFETY: as above; `eval_impl` checks the policy's actions and the lengths.
-                unsafe { inner(rows, first_core, na, p_len, input, policy, out) }
+                unsafe { inner(rows, first_core, na, shape, input, policy, out) }
             }
 
             #[allow(clippy::too_many_arguments)] // the kernel's signature

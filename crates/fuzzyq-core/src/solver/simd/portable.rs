@@ -99,8 +99,12 @@ macro_rules! portable_isa {
                 }
             }
             #[inline(always)]
-            unsafe fn first_equal(v: [$t; $n], t: $t, m: usize) -> Option<usize> {
-                v.iter().take(m).position(|&x| x == t)
+            unsafe fn equal_bits(v: [$t; $n], t: $t, m: usize) -> u64 {
+                let mut bits = 0u64;
+                for (i, &x) in v.iter().enumerate() {
+                    bits |= u64::from(i < m && x == t) << i;
+                }
+                bits
             }
             #[inline(always)]
             unsafe fn fma(a: [$t; $n], b: [$t; $n], c: [$t; $n]) -> [$t; $n] {

@@ -137,28 +137,44 @@ proptest! {
             }
             // The last stage over rows of length p_len (r_len = 1).
             let last_in = &input[..n_k * p_len];
+            let dense = InRows::dense(p_len);
+            // The same rows padded to whole cache lines plus a few (NaN in the padding, which
+            // must never be read), as the block path lays out the stage before the last.
+            let padded_rows = InRows { p_len, stride: p_len.next_multiple_of(16) + seed as usize % 3 };
+            let mut spread = vec![f32::NAN; padded_rows.extent(n_k) + INPUT_PAD];
+            for (kc, row) in last_in.chunks_exact(p_len).enumerate() {
+                spread[kc * padded_rows.stride..][..p_len].copy_from_slice(row);
+            }
             let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
             for abs in [false, true] {
                 let mut m = vec![0.0f32; n_c];
                 let mut ms = vec![0.0f32; n_c];
-                (k.last)(rows.view(), 0, na, p_len, abs, last_in, &mut m, &mut bounds, None);
-                (scalar.last)(rows.view(), 0, na, p_len, abs, last_in, &mut ms, &mut bounds, None);
+                (k.last)(rows.view(), 0, na, dense, abs, last_in, &mut m, &mut bounds, None);
+                (scalar.last)(rows.view(), 0, na, dense, abs, last_in, &mut ms, &mut bounds, None);
                 prop_assert_eq!(&m, &ms, "last, {} kernels", k.name);
                 let mut mp = vec![0.0f32; n_c];
                 let mut ap = vec![0u32; n_c];
                 let args_p = (!abs).then_some(&mut ap[..]);
-                (k.last)(rows.view(), 0, na, p_len, abs, &padded(last_in), &mut mp, &mut bounds, args_p);
+                (k.last)(rows.view(), 0, na, dense, abs, &padded(last_in), &mut mp, &mut bounds, args_p);
                 prop_assert_eq!(&mp, &ms, "last on padded input, {} kernels", k.name);
+                let mut mr = vec![0.0f32; n_c];
+                let mut ar = vec![0u32; n_c];
+                let args_r = (!abs).then_some(&mut ar[..]);
+                (k.last)(rows.view(), 0, na, padded_rows, abs, &spread, &mut mr, &mut bounds, args_r);
+                prop_assert_eq!(&mr, &ms, "last on padded rows, {} kernels", k.name);
                 let mut args = vec![0u32; n_c];
                 if !abs {
                     let mut ma = vec![0.0f32; n_c];
-                    (k.last)(rows.view(), 0, na, p_len, false, last_in, &mut ma, &mut bounds, Some(&mut args));
+                    (k.last)(rows.view(), 0, na, dense, false, last_in, &mut ma, &mut bounds, Some(&mut args));
                     prop_assert_eq!(&ma, &m, "last with actions, {} kernels", k.name);
                     prop_assert_eq!(&ap, &args, "actions on padded input, {} kernels", k.name);
+                    prop_assert_eq!(&ar, &args, "actions on padded rows, {} kernels", k.name);
                     // Evaluating the greedy actions gives the maxima, bit for bit.
                     let mut ev = vec![0.0f32; n_c];
-                    (k.eval)(rows.view(), 0, na, p_len, last_in, &args, &mut ev);
+                    (k.eval)(rows.view(), 0, na, dense, last_in, &args, &mut ev);
                     prop_assert_eq!(&ev, &m, "evaluation of the greedy actions, {} kernels", k.name);
+                    (k.eval)(rows.view(), 0, na, padded_rows, &spread, &args, &mut ev);
+                    prop_assert_eq!(&ev, &m, "evaluation on padded rows, {} kernels", k.name);
                 }
                 // Pruned maxima equal the maxima of the full stage output.
                 for c in 0..n_c {
@@ -215,7 +231,7 @@ fn evaluating_two_stages_matches_the_full_stages() {
                     last.view(),
                     0,
                     3,
-                    2 * p_len,
+                    InRows::dense(2 * p_len),
                     false,
                     &staged,
                     &mut m,

@@ -51,9 +51,8 @@ impl Isa<f32> for Avx512 {
         unsafe { _mm512_mask_storeu_ps(p, m, v) }
     }
     #[inline(always)]
-    unsafe fn first_equal(v: __m512, t: f32, m: __mmask16) -> Option<usize> {
-        let k = unsafe { _mm512_mask_cmpeq_ps_mask(m, v, _mm512_set1_ps(t)) };
-        (k != 0).then(|| k.trailing_zeros() as usize)
+    unsafe fn equal_bits(v: __m512, t: f32, m: __mmask16) -> u64 {
+        (unsafe { _mm512_mask_cmpeq_ps_mask(m, v, _mm512_set1_ps(t)) }) as u64
     }
     #[inline(always)]
     unsafe fn fma(a: __m512, b: __m512, c: __m512) -> __m512 {
@@ -126,9 +125,8 @@ impl Isa<f64> for Avx512 {
         unsafe { _mm512_mask_storeu_pd(p, m, v) }
     }
     #[inline(always)]
-    unsafe fn first_equal(v: __m512d, t: f64, m: __mmask8) -> Option<usize> {
-        let k = unsafe { _mm512_mask_cmpeq_pd_mask(m, v, _mm512_set1_pd(t)) };
-        (k != 0).then(|| k.trailing_zeros() as usize)
+    unsafe fn equal_bits(v: __m512d, t: f64, m: __mmask8) -> u64 {
+        (unsafe { _mm512_mask_cmpeq_pd_mask(m, v, _mm512_set1_pd(t)) }) as u64
     }
     #[inline(always)]
     unsafe fn fma(a: __m512d, b: __m512d, c: __m512d) -> __m512d {
@@ -229,12 +227,12 @@ impl Isa<f32> for Avx2 {
         }
     }
     #[inline(always)]
-    unsafe fn first_equal(v: __m256, t: f32, m: __m256i) -> Option<usize> {
+    unsafe fn equal_bits(v: __m256, t: f32, m: __m256i) -> u64 {
         let bits = unsafe {
             let c = _mm256_cmp_ps::<_CMP_EQ_OQ>(v, _mm256_set1_ps(t));
             _mm256_movemask_ps(c) & _mm256_movemask_ps(_mm256_castsi256_ps(m))
         };
-        (bits != 0).then(|| bits.trailing_zeros() as usize)
+        bits as u32 as u64
     }
     #[inline(always)]
     unsafe fn fma(a: __m256, b: __m256, c: __m256) -> __m256 {
@@ -330,12 +328,12 @@ impl Isa<f64> for Avx2 {
         }
     }
     #[inline(always)]
-    unsafe fn first_equal(v: __m256d, t: f64, m: __m256i) -> Option<usize> {
+    unsafe fn equal_bits(v: __m256d, t: f64, m: __m256i) -> u64 {
         let bits = unsafe {
             let c = _mm256_cmp_pd::<_CMP_EQ_OQ>(v, _mm256_set1_pd(t));
             _mm256_movemask_pd(c) & _mm256_movemask_pd(_mm256_castsi256_pd(m))
         };
-        (bits != 0).then(|| bits.trailing_zeros() as usize)
+        bits as u32 as u64
     }
     #[inline(always)]
     unsafe fn fma(a: __m256d, b: __m256d, c: __m256d) -> __m256d {
