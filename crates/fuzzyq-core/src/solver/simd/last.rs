@@ -175,6 +175,31 @@ pub(super) unsafe fn row_max<T: Copy, I: Isa<T>, const NV: usize, const ABS: boo
     }
 }
 
+/// `sum_e w_e x[k_e]` over one row, in the row's order with fused multiply-adds from 0. Rows
+/// of 4 and 2 entries (most of the paper's) run unrolled: a loop whose trip count changes
+/// from row to row mispredicts its exit about once a row.
+#[inline(always)]
+pub(super) unsafe fn row_dot<T: Real, I: Isa<T>>(cols: &[u32], ws: &[T], x: &[T]) -> T {
+    let mut acc = T::ZERO;
+    macro_rules! fixed {
+        ($ne:literal) => {{
+            for e in 0..$ne {
+                acc = unsafe { I::fma1(ws[e], x[cols[e] as usize], acc) };
+            }
+        }};
+    }
+    match cols.len() {
+        4 => fixed!(4),
+        2 => fixed!(2),
+        _ => {
+            for (&k, &w) in cols.iter().zip(ws) {
+                acc = unsafe { I::fma1(w, x[k as usize], acc) };
+            }
+        }
+    }
+    acc
+}
+
 /// The `i`-th row a pruned core visits: `top` (the largest bound) first, then the others in
 /// order.
 #[inline(always)]
@@ -200,24 +225,7 @@ unsafe fn row_bounds<T: Real, I: Isa<T>>(
     // branches on the data.
     for (a, u) in ub[..na].iter_mut().enumerate() {
         let (cols, ws) = rows.row(c * na + a);
-        let mut b = T::ZERO;
-        macro_rules! fixed {
-            ($ne:literal) => {{
-                for e in 0..$ne {
-                    b = unsafe { I::fma1(ws[e], bounds[cols[e] as usize], b) };
-                }
-            }};
-        }
-        match cols.len() {
-            4 => fixed!(4),
-            2 => fixed!(2),
-            _ => {
-                for (&k, &w) in cols.iter().zip(ws) {
-                    b = unsafe { I::fma1(w, bounds[k as usize], b) };
-                }
-            }
-        }
-        *u = b;
+        *u = unsafe { row_dot::<T, I>(cols, ws, bounds) };
     }
     let mut top = 0;
     for a in 1..na {
@@ -597,11 +605,7 @@ pub(super) unsafe fn eval_pair_impl<T: Real, I: Isa<T>>(
             }
             let row = &inner[slot * r_len..(slot + 1) * r_len];
             let (cols, ws) = last.row(c * na_last + a_last);
-            let mut acc = T::ZERO;
-            for (&k, &w) in cols.iter().zip(ws) {
-                acc = unsafe { I::fma1(w, row[k as usize], acc) };
-            }
-            *o = acc;
+            *o = unsafe { row_dot::<T, I>(cols, ws, row) };
         }
         return;
     }
