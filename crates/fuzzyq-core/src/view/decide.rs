@@ -744,6 +744,8 @@ struct Mixed<'s, T> {
     ptr: &'s [u32],
     col: &'s [u32],
     weight: &'s [T],
+    /// Read by the run-time selected kernels' row check (`std` only).
+    #[cfg_attr(not(feature = "std"), allow(dead_code))]
     n_cols: usize,
 }
 

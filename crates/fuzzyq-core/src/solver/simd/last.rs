@@ -113,20 +113,17 @@ pub(super) unsafe fn row_bound<T: Copy, I: Isa<T>, const NV: usize, const ABS: b
     m: I::M,
 ) -> T {
     unsafe {
-        // The lanes' maxima in a vector, then one horizontal reduction (the maximum is exact
-        // in any order); the masked-off lanes of the last vector are minus infinity.
-        let mut top = I::neg_inf();
-        for j in 0..NV {
-            let last = j + 1 == NV;
-            let v = if last {
+        // The lanes' maxima in a vector (a tree), then one horizontal reduction (the maximum
+        // is exact in any order); the masked-off lanes of the last vector are minus infinity.
+        let mut v = [I::neg_inf(); NV];
+        for (j, x_j) in v.iter_mut().enumerate() {
+            *x_j = if j + 1 == NV {
                 I::load_part(x.add(j * I::LANES), m)
             } else {
                 I::load(x.add(j * I::LANES))
             };
-            let v = if ABS { I::abs(v) } else { v };
-            top = I::max(top, if last { I::load_part_from(v, m) } else { v });
         }
-        I::reduce_max(top, I::mask(I::LANES))
+        I::reduce_max(block_max::<T, I, NV, ABS>(&v, m), I::mask(I::LANES))
     }
 }
 
