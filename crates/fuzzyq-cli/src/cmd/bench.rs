@@ -199,8 +199,8 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
         }
     );
     eprintln!(
-        "(the last stage skips the most rows on these early sweeps; full backups of a nearly \
-         converged V can take longer: see BENCHMARKS.md)"
+        "(early sweeps from V = 0; full backups of a nearly converged V can take longer: see \
+         BENCHMARKS.md)"
     );
     eprintln!(
         "(run {:.1} s including set-up and the final greedy pass)",
