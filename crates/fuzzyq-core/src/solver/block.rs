@@ -49,6 +49,11 @@ use crate::real::Real;
 /// Bytes per cache line on the CPUs the kernels target (x86-64; most ARM cores).
 const CACHE_LINE: usize = 64;
 
+/// Elements of `T` per cache line.
+const fn line_len<T>() -> usize {
+    CACHE_LINE / core::mem::size_of::<T>()
+}
+
 /// One block's sparse transition table.
 struct BlockTable<T> {
     /// The block's state variables (grid dimensions).
@@ -686,10 +691,9 @@ impl<T: Real> BlockOperator<T> {
     fn last_in(&self) -> Option<InRows> {
         let nb = self.tables.len();
         let p_len = self.p_len[nb - 1];
-        let line = (CACHE_LINE / core::mem::size_of::<T>()).max(1);
         (nb >= 2).then(|| InRows {
             p_len,
-            stride: p_len.next_multiple_of(line),
+            stride: p_len.next_multiple_of(line_len::<T>()),
         })
     }
 
@@ -697,13 +701,12 @@ impl<T: Real> BlockOperator<T> {
     /// kernels' fastest loads, and for the stage before the fused last one, the padded
     /// rows of [`Self::last_in`] and room to start them on a cache line.
     fn stage_buffer_len(&self, b: usize) -> usize {
-        let own = self.stage_len(b);
         match self.last_in() {
+            // (The padded rows span at least the dense ones.)
             Some(shape) if b + 2 == self.tables.len() => {
-                let lanes = CACHE_LINE / core::mem::size_of::<T>();
-                own.max(shape.extent(self.r_len[b])) + INPUT_PAD + lanes
+                shape.extent(self.r_len[b]) + INPUT_PAD + line_len::<T>()
             }
-            _ => own + INPUT_PAD,
+            _ => self.stage_len(b) + INPUT_PAD,
         }
     }
 
@@ -908,8 +911,13 @@ impl<T: Real> BlockOperator<T> {
             .last_in()
             .filter(|_| last != Last::Rows && level + 2 == nb)
         {
-            // Into the padded rows the fused last stage reads, from a cache line on.
-            let start = out.as_ptr().align_offset(CACHE_LINE);
+            // Into the padded rows the fused last stage reads, from a cache line on (the
+            // buffer has a line's room for it; `align_offset` may decline, which only costs
+            // speed).
+            let start = match out.as_ptr().align_offset(CACHE_LINE) {
+                s if s <= line_len::<T>() => s,
+                _ => 0,
+            };
             let out = &mut out[start..];
             self.stage(
                 rows0,
