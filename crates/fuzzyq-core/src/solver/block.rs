@@ -54,6 +54,34 @@ const fn line_len<T>() -> usize {
     CACHE_LINE / core::mem::size_of::<T>()
 }
 
+/// Writes `na` rows of `r` values (`[a][r]`) as `r` rows of `na` values (`[r][a]`), the output
+/// rows `r_stride` apart. Two, three and four rows back to back (the common first stages)
+/// run with the row count fixed, which the compiler turns into vector shuffles.
+fn interleave<T: Copy>(src: &[T], na: usize, (out, r_stride): (&mut [T], usize)) {
+    fn fixed<T: Copy, const NA: usize>(src: &[T], out: &mut [T]) {
+        let r = src.len() / NA;
+        let rows: [&[T]; NA] = core::array::from_fn(|a| &src[a * r..(a + 1) * r]);
+        for (ri, o) in out.as_chunks_mut::<NA>().0[..r].iter_mut().enumerate() {
+            for (x, row) in o.iter_mut().zip(&rows) {
+                *x = row[ri];
+            }
+        }
+    }
+    match (na, r_stride) {
+        (2, 2) => fixed::<T, 2>(src, out),
+        (3, 3) => fixed::<T, 3>(src, out),
+        (4, 4) => fixed::<T, 4>(src, out),
+        _ => {
+            let r = src.len() / na;
+            for (ri, o) in out.chunks_mut(r_stride).take(r).enumerate() {
+                for (a, x) in o[..na].iter_mut().enumerate() {
+                    *x = src[a * r + ri];
+                }
+            }
+        }
+    }
+}
+
 /// One block's sparse transition table.
 struct BlockTable<T> {
     /// The block's state variables (grid dimensions).
@@ -686,15 +714,19 @@ impl<T: Real> BlockOperator<T> {
 
     /// The fused last stage's input rows when the stage before it computes them (`None` for
     /// a single block, whose last stage reads `V`): each successor core's row of prior
-    /// actions padded to whole cache lines, so that the last stage, which loads every
-    /// vector of a row once per entry of a core's rows, never loads across two lines.
+    /// actions padded so that the last stage, which loads every vector of a row once per
+    /// entry of a core's rows, never loads across two cache lines. A row longer than a line
+    /// is padded to whole lines; a shorter one to a power of two, which divides the line,
+    /// so rows of four values stay four values apart (the input stays small).
     fn last_in(&self) -> Option<InRows> {
         let nb = self.tables.len();
         let p_len = self.p_len[nb - 1];
-        (nb >= 2).then(|| InRows {
-            p_len,
-            stride: p_len.next_multiple_of(line_len::<T>()),
-        })
+        let stride = if p_len <= line_len::<T>() {
+            p_len.next_power_of_two()
+        } else {
+            p_len.next_multiple_of(line_len::<T>())
+        };
+        (nb >= 2).then_some(InRows { p_len, stride })
     }
 
     /// Length of the buffer of stage `b`'s output: its own, padded past the end for the
@@ -774,11 +806,7 @@ impl<T: Real> BlockOperator<T> {
         if p == 1 && r > 1 && na > 1 {
             self.kernels
                 .stage(rows, c * na, na, 1, r, input, &mut scratch[..na * r]);
-            for (ri, o) in out.chunks_mut(r_stride).take(r).enumerate() {
-                for (a, x) in o[..na].iter_mut().enumerate() {
-                    *x = scratch[a * r + ri];
-                }
-            }
+            interleave(&scratch[..na * r], na, (out, r_stride));
         } else {
             let out_strides = OutStrides {
                 r_stride,

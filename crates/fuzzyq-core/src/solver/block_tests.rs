@@ -468,3 +468,26 @@ fn q_values_match_the_reference_bit_for_bit() {
         }
     }
 }
+
+/// The first stage's `[a][r]` rows interleave into `[r][a]` at any output stride, on the
+/// fixed-count paths (2 to 4 rows back to back) and the general one; padding is untouched.
+#[test]
+fn interleave_writes_every_value_once_in_place() {
+    for na in 1..7 {
+        for r in [1, 5, 37] {
+            for r_stride in [na, na + 3, 16] {
+                if r_stride < na {
+                    continue;
+                }
+                let src: Vec<f32> = (0..na * r).map(|i| i as f32).collect();
+                let mut out = vec![-1.0f32; r * r_stride];
+                super::interleave(&src, na, (&mut out, r_stride));
+                for (i, &x) in out.iter().enumerate() {
+                    let (ri, a) = (i / r_stride, i % r_stride);
+                    let want = if a < na { (a * r + ri) as f32 } else { -1.0 };
+                    assert_eq!(x, want, "na {na}, r {r}, stride {r_stride}, at {i}");
+                }
+            }
+        }
+    }
+}

@@ -172,25 +172,45 @@ pub(super) unsafe fn row_max<T: Copy, I: Isa<T>, const NV: usize, const ABS: boo
     }
 }
 
-/// `sum_e w_e x[k_e]` over one row, in the row's order with fused multiply-adds from 0. Rows
-/// of 4 and 2 entries (most of the paper's) run unrolled: a loop whose trip count changes
-/// from row to row mispredicts its exit about once a row.
+/// `sum_e w_e x[k_e]` over one row, in the row's order with fused multiply-adds from 0: the
+/// columns must index `x` (the rows' columns are below their `n_cols`, which is `x`'s length
+/// at every caller).
 #[inline(always)]
 pub(super) unsafe fn row_dot<T: Real, I: Isa<T>>(cols: &[u32], ws: &[T], x: &[T]) -> T {
+    debug_assert!(cols.iter().all(|&k| (k as usize) < x.len()));
+    // SAFETY: every column indexes `x` (above).
+    unsafe { row_dot_strided::<T, I>(cols, ws, x.as_ptr(), 1) }
+}
+
+/// `sum_e w_e x[k_e S]` over one row (`S` the input's row stride), in the row's order with
+/// fused multiply-adds from 0. Rows of 8, 4 and 2 entries (the cube or square of two
+/// memberships per variable) run unrolled: a loop whose trip count changes from row to row
+/// mispredicts its exit about once a row.
+///
+/// # Safety
+/// `x.add(k * stride)` must be readable for every column `k` of the row.
+#[inline(always)]
+pub(super) unsafe fn row_dot_strided<T: Real, I: Isa<T>>(
+    cols: &[u32],
+    ws: &[T],
+    x: *const T,
+    stride: usize,
+) -> T {
     let mut acc = T::ZERO;
     macro_rules! fixed {
         ($ne:literal) => {{
             for e in 0..$ne {
-                acc = unsafe { I::fma1(ws[e], x[cols[e] as usize], acc) };
+                acc = unsafe { I::fma1(ws[e], *x.add(cols[e] as usize * stride), acc) };
             }
         }};
     }
     match cols.len() {
+        8 => fixed!(8),
         4 => fixed!(4),
         2 => fixed!(2),
         _ => {
             for (&k, &w) in cols.iter().zip(ws) {
-                acc = unsafe { I::fma1(w, x[k as usize], acc) };
+                acc = unsafe { I::fma1(w, *x.add(k as usize * stride), acc) };
             }
         }
     }
@@ -322,6 +342,44 @@ pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
     }
 }
 
+/// Most block actions [`last_narrow_arg`] keeps one vector for.
+const NARROW_MAX_ACTIONS: usize = 8;
+
+/// The maximum of core `c`'s rows when a row fits one vector (`p_len <= LANES`, mask `m`), and
+/// the lowest index `a * p_len + p` holding it: every row is computed once and kept, the
+/// maximum taken lane-wise and then across lanes, and the rows compared with it in order.
+/// The same values as [`last_block`]'s and the index [`argmax_impl`] finds.
+#[inline(always)]
+unsafe fn last_narrow_arg<T: Real, I: Isa<T>>(
+    rows: &Rows<'_, T>,
+    c: usize,
+    na: usize,
+    InRows { p_len, stride }: InRows,
+    m: I::M,
+    input: *const T,
+) -> (T, u32) {
+    debug_assert!(na <= NARROW_MAX_ACTIONS && p_len <= I::LANES);
+    unsafe {
+        let mut accs = [core::mem::MaybeUninit::<I::V>::uninit(); NARROW_MAX_ACTIONS];
+        let mut lanes = I::neg_inf();
+        for (a, slot) in accs[..na].iter_mut().enumerate() {
+            let (cols, ws) = rows.row(c * na + a);
+            let [acc] = row_block::<T, I, 1>(cols, ws, input, stride, m);
+            lanes = I::max(lanes, I::load_part_from(acc, m));
+            slot.write(acc);
+        }
+        let best = I::reduce_max(lanes, I::mask(I::LANES));
+        for (a, slot) in accs[..na].iter().enumerate() {
+            let bits = I::equal_bits(slot.assume_init(), best, m);
+            if bits != 0 {
+                return (best, (a * p_len) as u32 + bits.trailing_zeros());
+            }
+        }
+        // Only a NaN maximum matches no lane.
+        (best, 0)
+    }
+}
+
 macro_rules! by_nv {
     ($nv:expr, $f:ident::<$t:ty, $i:ty, _ $(, $c:ident)*>($($arg:expr),* $(,)?)) => {
         match $nv {
@@ -359,7 +417,9 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     }
     let ip = input.as_ptr();
     let n_cols = rows.n_cols;
-    let prune = na <= PRUNE_MAX_ACTIONS;
+    // A row's bound costs one scalar multiply-add per entry, as much as the row itself when
+    // the row fits one vector: prune only rows of several vectors.
+    let prune = na <= PRUNE_MAX_ACTIONS && p_len > I::LANES;
     if prune {
         let n_blocks = Blocks::new(p_len, I::LANES, I::BLOCK).count();
         assert!(
@@ -376,6 +436,18 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                     bounds[bi * n_cols + k] = by_nv!(nv, row_bound::<T, I, _, ABS>(x, m));
                 }
             }
+        }
+        if let Some(args) = args
+            .as_deref_mut()
+            .filter(|_| !ABS && !prune && p_len <= I::LANES && na <= NARROW_MAX_ACTIONS)
+        {
+            let m = I::mask(p_len);
+            for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
+                let (v, idx) = last_narrow_arg::<T, I>(&rows, first_core + i, na, shape, m, ip);
+                *o = v;
+                *arg = idx;
+            }
+            return;
         }
         if let Some(args) = args.as_deref_mut().filter(|_| prune && !ABS) {
             for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
@@ -522,13 +594,8 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
             "policy action beyond the product action set"
         );
         let (cols, ws) = rows.row((first_core + i) * na + u / p_len);
-        let p = u % p_len;
-        let mut acc = T::ZERO;
-        for (&k, &w) in cols.iter().zip(ws) {
-            // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
-            acc = unsafe { I::fma1(w, *input.get_unchecked(k as usize * stride + p), acc) };
-        }
-        *o = acc;
+        // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
+        *o = unsafe { row_dot_strided::<T, I>(cols, ws, input.as_ptr().add(u % p_len), stride) };
     }
 }
 
