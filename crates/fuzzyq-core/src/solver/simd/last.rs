@@ -342,9 +342,6 @@ pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
     }
 }
 
-/// Most block actions [`last_narrow_arg`] keeps one vector for.
-const NARROW_MAX_ACTIONS: usize = 8;
-
 /// The maximum of core `c`'s rows when a row fits one vector (`p_len <= LANES`, mask `m`), and
 /// the lowest index `a * p_len + p` holding it: every row is computed once and kept, the
 /// maximum taken lane-wise and then across lanes, and the rows compared with it in order.
@@ -358,9 +355,9 @@ unsafe fn last_narrow_arg<T: Real, I: Isa<T>>(
     m: I::M,
     input: *const T,
 ) -> (T, u32) {
-    debug_assert!(na <= NARROW_MAX_ACTIONS && p_len <= I::LANES);
+    debug_assert!(na <= PRUNE_MAX_ACTIONS && p_len <= I::LANES);
     unsafe {
-        let mut accs = [core::mem::MaybeUninit::<I::V>::uninit(); NARROW_MAX_ACTIONS];
+        let mut accs = [core::mem::MaybeUninit::<I::V>::uninit(); PRUNE_MAX_ACTIONS];
         let mut lanes = I::neg_inf();
         for (a, slot) in accs[..na].iter_mut().enumerate() {
             let (cols, ws) = rows.row(c * na + a);
@@ -439,7 +436,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
         }
         if let Some(args) = args
             .as_deref_mut()
-            .filter(|_| !ABS && !prune && p_len <= I::LANES && na <= NARROW_MAX_ACTIONS)
+            .filter(|_| !ABS && !prune && p_len <= I::LANES && na <= PRUNE_MAX_ACTIONS)
         {
             let m = I::mask(p_len);
             for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {

@@ -235,7 +235,8 @@ pub(super) fn last_scratch_len(n_cols: usize, p_len: usize) -> usize {
 /// extra lanes). Inputs without them are still correct, on exact loads ([`Isa::OVERREAD`]).
 pub(super) const INPUT_PAD: usize = 16;
 
-/// Largest block action count for which the last stage prunes rows (a stack array).
+/// Largest block action count for which the last stage prunes rows, or keeps every row of
+/// one vector to find the maximiser in one pass (stack arrays).
 const PRUNE_MAX_ACTIONS: usize = 64;
 
 /// The last stage for one given action per core: `out[i] = sum_e w_e in[k_e S + p]` over the
