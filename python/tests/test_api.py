@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import _thread
 import os
+import signal
 import threading
 import time
 from pathlib import Path
@@ -302,6 +303,9 @@ def test_callback_sees_every_sweep_and_can_stop(one_agent: tuple[fuzzyq.PointMas
 def test_ctrl_c_interrupts_a_long_solve_promptly() -> None:
     model = fuzzyq.PointMass(agents=2)
     grid = model.paper_grid()
+    # Python's own Ctrl-C handler: a library imported by another test may have installed
+    # one that does not raise, and `interrupt_main` calls whichever is installed.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(1.5, _thread.interrupt_main)
     start = time.monotonic()
     timer.start()
@@ -313,6 +317,7 @@ def test_ctrl_c_interrupts_a_long_solve_promptly() -> None:
             fuzzyq.solve(model, grid, extrapolate=False, evaluation_sweeps=0, xi=1e-6)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
     assert time.monotonic() - start < 5.0
 
 
