@@ -415,8 +415,9 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     let ip = input.as_ptr();
     let n_cols = rows.n_cols;
     // A row's bound costs one scalar multiply-add per entry, as much as the row itself when
-    // the row fits one vector: prune only rows of several vectors.
-    let prune = na <= PRUNE_MAX_ACTIONS && p_len > I::LANES;
+    // the row fits one vector: prune only rows of several vectors; rows of one are all kept.
+    let narrow = na <= PRUNE_MAX_ACTIONS && p_len <= I::LANES;
+    let prune = na <= PRUNE_MAX_ACTIONS && !narrow;
     if prune {
         let n_blocks = Blocks::new(p_len, I::LANES, I::BLOCK).count();
         assert!(
@@ -434,10 +435,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                 }
             }
         }
-        if let Some(args) = args
-            .as_deref_mut()
-            .filter(|_| !ABS && !prune && p_len <= I::LANES && na <= PRUNE_MAX_ACTIONS)
-        {
+        if let Some(args) = args.as_deref_mut().filter(|_| narrow && !ABS) {
             let m = I::mask(p_len);
             for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
                 let (v, idx) = last_narrow_arg::<T, I>(&rows, first_core + i, na, shape, m, ip);
