@@ -121,6 +121,38 @@ fn block_and_generic_backups_agree_on_two_agents() {
     assert!(differ < g.n_cores() / 100, "{differ} cores differ");
 }
 
+/// With absorbing goals, a goal core's backup is its reward whatever `V` is, and its greedy
+/// action is 0, on the block path as on the generic one (the block path finishes whole runs
+/// of cores at once, goal cores among them).
+#[test]
+fn absorbing_goal_cores_take_action_zero_on_both_paths() {
+    let (m, g) = small_two_agent::<f64>();
+    let backup = Backup {
+        gamma: 0.96,
+        absorbing_goal: true,
+    };
+    let block = Operator::new(&m, g.view(), backup, BackupPath::Block).unwrap();
+    let generic = Operator::new(&m, g.view(), backup, BackupPath::Generic).unwrap();
+    let v = values::<f64>(g.n_cores(), 7, -50.0, 120.0);
+    let w = values::<f64>(g.n_cores(), 11, 300.0, 900.0);
+    let (tb, tg) = (block.apply(&v).unwrap(), generic.apply(&v).unwrap());
+    assert_close(&tb, &tg, 1e-9);
+    let (gb, gg) = (block.greedy(&v).unwrap(), generic.greedy(&v).unwrap());
+    // Goal cores: the backup does not depend on `V`.
+    let tw = block.apply(&w).unwrap();
+    let goals: Vec<usize> = (0..g.n_cores()).filter(|&d| tb[d] == tw[d]).collect();
+    assert!(
+        !goals.is_empty() && goals.len() < g.n_cores() / 2,
+        "{} goal cores",
+        goals.len()
+    );
+    for &d in &goals {
+        assert_eq!((gb[d], gg[d]), (0, 0), "goal core {d}");
+    }
+    // Elsewhere the greedy actions are mostly not 0 (so the check above can fail).
+    assert!(gb.iter().filter(|&&u| u != 0).count() > g.n_cores() / 2);
+}
+
 #[test]
 fn decisions_agree_between_paths_at_any_state() {
     let (m, g) = small_two_agent::<f64>();

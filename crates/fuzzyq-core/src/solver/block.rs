@@ -1120,25 +1120,15 @@ impl<T: Real> BlockOperator<T> {
                 };
                 out[at] = pick(r);
             }
+            Out::Max(m) if kind != Reduce::AbsMax => {
+                op.finish_run(base + first, (m, &[]), &mut out[at..], pick);
+            }
             Out::Max(m) => {
-                let abs = kind == Reduce::AbsMax;
                 for (i, &x) in m.iter().enumerate() {
-                    let core = base + first + i;
-                    let v = if abs {
-                        op.finish_abs(core, x)
-                    } else {
-                        op.finish_max(core, x)
-                    };
-                    out[at + i] = pick((v, 0));
+                    out[at + i] = pick((op.finish_abs(base + first + i, x), 0));
                 }
             }
-            Out::Arg(m, a) => {
-                for (i, (&x, &u)) in m.iter().zip(a).enumerate() {
-                    let core = base + first + i;
-                    let u = if op.is_goal(core) { 0 } else { u };
-                    out[at + i] = pick((op.finish_max(core, x), u));
-                }
-            }
+            Out::Arg(m, a) => op.finish_run(base + first, (m, a), &mut out[at..], pick),
         }
     }
 

@@ -1060,6 +1060,43 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         }
     }
 
+    /// [`Self::finish_max`] of the run of cores from `first`, one per maximum in `m`, each
+    /// with its action in `args` (0 for all when `args` is empty; 0 at goal cores), written
+    /// to `out` through `pick`: slices zipped, without an index check per core on this pass
+    /// over every core of every sweep.
+    #[inline]
+    fn finish_run<U>(
+        &self,
+        first: usize,
+        (m, args): (&[T], &[u32]),
+        out: &mut [U],
+        pick: impl Fn((T, u32)) -> U,
+    ) {
+        let span = first..first + m.len();
+        let r = &self.rewards.as_ref().expect("state-only reward")[span.clone()];
+        let out = &mut out[..m.len()];
+        let gamma = self.gamma;
+        match (self.goal.is_empty(), args.is_empty()) {
+            (true, true) => {
+                for ((o, &r), &x) in out.iter_mut().zip(r).zip(m) {
+                    *o = pick((r + gamma * x, 0));
+                }
+            }
+            (true, false) => {
+                for (((o, &r), &x), &u) in out.iter_mut().zip(r).zip(m).zip(&args[..m.len()]) {
+                    *o = pick((r + gamma * x, u));
+                }
+            }
+            (false, _) => {
+                let goal = &self.goal[span];
+                for (i, (((o, &r), &x), &g)) in out.iter_mut().zip(r).zip(m).zip(goal).enumerate() {
+                    let u = if g || args.is_empty() { 0 } else { args[i] };
+                    *o = pick((if g { r } else { r + gamma * x }, u));
+                }
+            }
+        }
+    }
+
     /// The theta change of a core from the maximum `m` of its |expected value changes|.
     fn finish_abs(&self, internal: usize, m: T) -> T {
         if self.is_goal(internal) {

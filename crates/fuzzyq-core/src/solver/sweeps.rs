@@ -94,33 +94,7 @@ fn diff_range<T: Real>(a: &[T], b: &[T]) -> (f64, f64) {
     diff_range_by(a, b, &|&x: &T| x)
 }
 
-/// [`diff_range`] of `value(a[i])` against `b[i]`, over eight independent lanes so that the
-/// comparisons do not wait on each other. Exact minima and maxima, so any split of the cores
-/// combined by `min` and `max` gives the same range.
-pub(super) fn diff_range_by<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (f64, f64) {
-    const LANES: usize = 8;
-    let n = a.len().min(b.len());
-    let (a, b) = (&a[..n], &b[..n]);
-    let (mut lo, mut hi) = ([f64::INFINITY; LANES], [f64::NEG_INFINITY; LANES]);
-    let (ac, at) = a.as_chunks::<LANES>();
-    let (bc, bt) = b.as_chunks::<LANES>();
-    for (x, y) in ac.iter().zip(bc) {
-        for k in 0..LANES {
-            let d = value(&x[k]).to_f64() - y[k].to_f64();
-            // Written so that a NaN `d` keeps the bound (the comparison is false).
-            lo[k] = if d < lo[k] { d } else { lo[k] };
-            hi[k] = if d > hi[k] { d } else { hi[k] };
-        }
-    }
-    for (k, (x, y)) in at.iter().zip(bt).enumerate() {
-        let d = value(x).to_f64() - y.to_f64();
-        lo[k] = if d < lo[k] { d } else { lo[k] };
-        hi[k] = if d > hi[k] { d } else { hi[k] };
-    }
-    let lo = lo.iter().fold(f64::INFINITY, |m, &x| m.min(x));
-    let hi = hi.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x));
-    (lo, hi)
-}
+pub(super) use super::simd::diff_range_by;
 
 /// Adds `s` to every value of `v` (in `T`: the extrapolation's shift).
 pub fn shift<T: Real>(v: &mut [T], s: T) {

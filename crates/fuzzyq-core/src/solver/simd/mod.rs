@@ -12,6 +12,9 @@
 //! - [`Kernels::eval`] and [`Kernels::eval_pair`]: the last stage, or the last two, for one given
 //!   action per core (the evaluation sweeps of modified policy iteration).
 //!
+//! The one pass of every sweep that runs outside them over every core, the range of the
+//! changes ([`diff_range_by`]), is here too: it is compiled for AVX2 where the CPU has it.
+//!
 //! Both are written once, generic over a small [`Isa`] trait (vector type, masked loads and
 //! stores, fused multiply-add, maximum), and instantiated for AVX-512F, AVX2 + FMA, portable
 //! arrays the compiler vectorises (`portable`, no intrinsics: the fast path off x86-64) and
@@ -745,6 +748,72 @@ macro_rules! instance {
             };
         }
     };
+}
+
+/// The range `(min, max)` of `value(a[i]) - b[i]` in `f64` (`(inf, -inf)` for none; NaN
+/// differences skipped), for the iteration drivers' change statistics: over eight
+/// independent lanes so that the comparisons do not wait on each other. Exact minima and
+/// maxima, so any split of the cores combined by `min` and `max` gives the same range.
+///
+/// It runs once per slab of every sweep, over every core: on x86-64 with AVX2 it is compiled
+/// for AVX2 (the crate's baseline is SSE2, two `f64` lanes per instruction). The same
+/// operations lane by lane, so the same range either way.
+pub(in crate::solver) fn diff_range_by<T: Real, U>(
+    a: &[U],
+    b: &[T],
+    value: &impl Fn(&U) -> T,
+) -> (f64, f64) {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        #[target_feature(enable = "avx2")]
+        fn avx2<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (f64, f64) {
+            diff_range_lanes(a, b, value)
+        }
+        // SAFETY: the CPU has AVX2 (checked above).
+        return unsafe { avx2(a, b, value) };
+    }
+    diff_range_lanes(a, b, value)
+}
+
+/// [`diff_range_by`]'s loop, inlined into each of its compilations: eight lanes, each a
+/// separate pair of running bounds (an array of them vectorises into mask shuffles; separate
+/// scalars into plain vector minima and maxima).
+#[inline(always)]
+fn diff_range_lanes<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (f64, f64) {
+    // Written so that a NaN `d` keeps the bound (the comparison is false).
+    #[inline(always)]
+    fn lane(lo: &mut f64, hi: &mut f64, d: f64) {
+        *lo = if d < *lo { d } else { *lo };
+        *hi = if d > *hi { d } else { *hi };
+    }
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let d = |x: &U, y: &T| value(x).to_f64() - y.to_f64();
+    let inf = f64::INFINITY;
+    let (mut l0, mut l1, mut l2, mut l3) = (inf, inf, inf, inf);
+    let (mut l4, mut l5, mut l6, mut l7) = (inf, inf, inf, inf);
+    let (mut h0, mut h1, mut h2, mut h3) = (-inf, -inf, -inf, -inf);
+    let (mut h4, mut h5, mut h6, mut h7) = (-inf, -inf, -inf, -inf);
+    let (ac, at) = a.as_chunks::<8>();
+    let (bc, bt) = b.as_chunks::<8>();
+    for (x, y) in ac.iter().zip(bc) {
+        lane(&mut l0, &mut h0, d(&x[0], &y[0]));
+        lane(&mut l1, &mut h1, d(&x[1], &y[1]));
+        lane(&mut l2, &mut h2, d(&x[2], &y[2]));
+        lane(&mut l3, &mut h3, d(&x[3], &y[3]));
+        lane(&mut l4, &mut h4, d(&x[4], &y[4]));
+        lane(&mut l5, &mut h5, d(&x[5], &y[5]));
+        lane(&mut l6, &mut h6, d(&x[6], &y[6]));
+        lane(&mut l7, &mut h7, d(&x[7], &y[7]));
+    }
+    for (x, y) in at.iter().zip(bt) {
+        lane(&mut l0, &mut h0, d(x, y));
+    }
+    let lo = [l0, l1, l2, l3, l4, l5, l6, l7];
+    let hi = [h0, h1, h2, h3, h4, h5, h6, h7];
+    let lo = lo.iter().fold(inf, |m, &x| m.min(x));
+    let hi = hi.iter().fold(-inf, |m, &x| m.max(x));
+    (lo, hi)
 }
 
 #[cfg(target_arch = "x86_64")]
