@@ -12,8 +12,8 @@
 //! - [`Kernels::eval`] and [`Kernels::eval_pair`]: the last stage, or the last two, for one given
 //!   action per core (the evaluation sweeps of modified policy iteration).
 //!
-//! The one pass of every sweep that runs outside them over every core, the range of the
-//! changes ([`diff_range_by`]), is here too: it is compiled for AVX2 where the CPU has it.
+//! The range of a sweep's changes ([`diff_range_by`]), a pass over every core outside these
+//! kernels, is here too, so that it can be compiled for AVX2 where the CPU has it.
 //!
 //! Both are written once, generic over a small [`Isa`] trait (vector type, masked loads and
 //! stores, fused multiply-add, maximum), and instantiated for AVX-512F, AVX2 + FMA, portable

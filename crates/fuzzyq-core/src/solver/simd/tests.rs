@@ -381,29 +381,27 @@ fn rows_too_long_to_merge_take_the_row_by_row_path_with_the_same_sums() {
     }
 }
 
-/// The change statistics' range: the lanes, and the AVX2 compilation where the CPU has one,
-/// give the plain minimum and maximum of the differences, NaN differences skipped.
-#[test]
-fn diff_range_is_the_plain_minimum_and_maximum() {
-    let mut x = 0x2545_f491_4f6c_dd1du64;
-    let mut next = move || {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        x
-    };
-    for n in 0..70 {
-        let a: Vec<f32> = (0..n)
-            .map(|i| match next() % 11 {
-                0 if i % 3 == 0 => f32::NAN,
-                1 => 0.0,
-                2 => -0.0,
-                _ => (next() % 2001) as f32 / 10.0 - 100.0,
-            })
-            .collect();
-        let b: Vec<f32> = (0..n)
-            .map(|_| (next() % 2001) as f32 / 7.0 - 140.0)
-            .collect();
+/// One value of a change-range test: mostly ordinary, some NaN and zeros of either sign.
+fn range_value() -> impl Strategy<Value = f32> {
+    prop_oneof![
+        8 => -200.0f32..200.0,
+        1 => Just(f32::NAN),
+        1 => Just(0.0f32),
+        1 => Just(-0.0f32),
+    ]
+}
+
+proptest! {
+    /// The change statistics' range: the lanes, and the AVX2 compilation where the CPU has
+    /// one, give the plain minimum and maximum of the differences, NaN differences skipped,
+    /// for values and for (value, action) pairs.
+    #[test]
+    fn diff_range_is_the_plain_minimum_and_maximum(
+        (a, b) in (0usize..70).prop_flat_map(|n| (
+            prop::collection::vec(range_value(), n),
+            prop::collection::vec(-200.0f32..200.0, n),
+        )),
+    ) {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for (&p, &q) in a.iter().zip(&b) {
             let d = f64::from(p) - f64::from(q);
@@ -413,15 +411,11 @@ fn diff_range_is_the_plain_minimum_and_maximum() {
             }
         }
         let got = diff_range_by(&a, &b, &|&v: &f32| v);
-        assert_eq!((got.0 + 0.0, got.1 + 0.0), (lo + 0.0, hi + 0.0), "n = {n}");
+        prop_assert_eq!((got.0 + 0.0, got.1 + 0.0), (lo + 0.0, hi + 0.0));
         let pairs: Vec<(f32, u32)> = a.iter().map(|&v| (v, 7)).collect();
         let got = diff_range_by(&pairs, &b, &|p: &(f32, u32)| p.0);
-        assert_eq!(
-            (got.0 + 0.0, got.1 + 0.0),
-            (lo + 0.0, hi + 0.0),
-            "pairs, n = {n}"
-        );
-        assert_eq!(
+        prop_assert_eq!((got.0 + 0.0, got.1 + 0.0), (lo + 0.0, hi + 0.0));
+        prop_assert_eq!(
             diff_range_lanes(&a, &b, &|&v: &f32| v),
             diff_range_by(&a, &b, &|&v: &f32| v)
         );
