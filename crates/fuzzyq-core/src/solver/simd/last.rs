@@ -366,6 +366,17 @@ unsafe fn last_narrow_arg<T: Real, I: Isa<T>>(
             slot.write(acc);
         }
         let best = I::reduce_max(lanes, I::mask(I::LANES));
+        if na * p_len <= 64 {
+            // Every row's matching lanes at its index `a * p_len + p` in one word: the lowest
+            // set bit is the maximiser, found without a branch on which row holds it (a
+            // mispredicted branch per core would keep the next core's rows from starting).
+            let mut all = 0u64;
+            for (a, slot) in accs[..na].iter().enumerate() {
+                all |= I::equal_bits(slot.assume_init(), best, m) << (a * p_len);
+            }
+            // Only a NaN maximum matches no lane.
+            return (best, if all == 0 { 0 } else { all.trailing_zeros() });
+        }
         for (a, slot) in accs[..na].iter().enumerate() {
             let bits = I::equal_bits(slot.assume_init(), best, m);
             if bits != 0 {

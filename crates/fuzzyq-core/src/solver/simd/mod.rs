@@ -452,7 +452,6 @@ trait Isa<T: Copy> {
     unsafe fn store(p: *mut T, v: Self::V);
     /// Stores the masked lanes only (the first `n`, which `m` selects).
     unsafe fn store_part(p: *mut T, v: Self::V, m: Self::M, n: usize);
-    /// The first masked lane equal to `t`.
     /// Bit `i` set for each masked lane `i` equal to `t`.
     unsafe fn equal_bits(v: Self::V, t: T, m: Self::M) -> u64;
     unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
