@@ -285,6 +285,30 @@ fn given_rows<T: Real>(
     Ok((rows, offsets))
 }
 
+/// Calls `f(i, g)` for every index `i` of the product of `tables`' cores (the first table
+/// slowest) with `g` the sum of their grid offsets, stepping the cores like an odometer (no
+/// divisions).
+fn odometer<T>(tables: &[BlockTable<T>], mut f: impl FnMut(usize, usize)) {
+    let nb = tables.len();
+    let mut digit = vec![0usize; nb];
+    let mut g: usize = tables.iter().map(|t| t.grid_offset[0]).sum();
+    let n: usize = tables.iter().map(|t| t.n_cores).product();
+    for i in 0..n {
+        f(i, g);
+        for b in (0..nb).rev() {
+            let t = &tables[b];
+            g -= t.grid_offset[digit[b]];
+            digit[b] += 1;
+            if digit[b] < t.n_cores {
+                g += t.grid_offset[digit[b]];
+                break;
+            }
+            digit[b] = 0;
+            g += t.grid_offset[0];
+        }
+    }
+}
+
 /// The values of `dims` in `x`.
 fn x_block<T: Real>(x: &[T], dims: &[usize]) -> Vec<T> {
     dims.iter().map(|&d| x[d]).collect()
@@ -652,25 +676,61 @@ impl<T: Real> BlockOperator<T> {
 
     /// Calls `f(internal, grid)` for every core in internal order, stepping the block cores
     /// like an odometer (no divisions).
-    pub(super) fn for_each_grid_index(&self, mut f: impl FnMut(usize, usize)) {
-        let nb = self.tables.len();
-        let mut digit = vec![0usize; nb];
-        let mut g: usize = self.tables.iter().map(|t| t.grid_offset[0]).sum();
-        let n: usize = self.tables.iter().map(|t| t.n_cores).product();
-        for i in 0..n {
-            f(i, g);
-            for b in (0..nb).rev() {
-                let t = &self.tables[b];
-                g -= t.grid_offset[digit[b]];
-                digit[b] += 1;
-                if digit[b] < t.n_cores {
-                    g += t.grid_offset[digit[b]];
-                    break;
+    pub(super) fn for_each_grid_index(&self, f: impl FnMut(usize, usize)) {
+        odometer(&self.tables, f);
+    }
+
+    /// `v` from internal to grid order (`to_grid`), or back.
+    ///
+    /// Internal index `c0 * slab_len + j` (`c0` a core of the first contracted block, `j`
+    /// the odometer over the others) is grid index `grid_offset[c0] + rest[j]`. The first
+    /// contracted block is the grid's *fastest* variables, so the conversion is a transpose
+    /// (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
+    /// each stay within a few cache lines, instead of one strided write per core. The
+    /// gather (to internal order) runs on every thread, a band of first-block cores each.
+    pub(super) fn reorder<U: Copy + Default + Send + Sync>(
+        &self,
+        v: &[U],
+        to_grid: bool,
+    ) -> Vec<U> {
+        /// Side of a tile.
+        const TILE: usize = 64;
+        let slab_len = self.slab_len();
+        let (first, rest) = self.tables.split_first().expect("at least one block");
+        let g0 = &first.grid_offset;
+        let mut g_rest = Vec::with_capacity(slab_len);
+        odometer(rest, |_, g| g_rest.push(g));
+        let mut out = vec![U::default(); v.len()];
+        let tiles = |n: usize| (0..n).step_by(TILE).map(move |t| t..n.min(t + TILE));
+        if to_grid {
+            for band in tiles(first.n_cores) {
+                for js in tiles(slab_len) {
+                    for c0 in band.clone() {
+                        let src = &v[c0 * slab_len..(c0 + 1) * slab_len];
+                        for j in js.clone() {
+                            out[g0[c0] + g_rest[j]] = src[j];
+                        }
+                    }
                 }
-                digit[b] = 0;
-                g += t.grid_offset[0];
             }
+        } else {
+            super::par::for_each_chunk_mut(
+                &mut out,
+                TILE * slab_len,
+                || (),
+                |_, t, band| {
+                    for js in tiles(slab_len) {
+                        for (k, row) in band.chunks_mut(slab_len).enumerate() {
+                            let g = g0[t * TILE + k];
+                            for j in js.clone() {
+                                row[j] = v[g + g_rest[j]];
+                            }
+                        }
+                    }
+                },
+            );
         }
+        out
     }
 
     /// Internal index (contraction order, first block slowest) -> row-major grid index.

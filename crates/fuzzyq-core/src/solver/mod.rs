@@ -901,6 +901,8 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     }
 
     fn prepare_rewards(&mut self) -> Result<(), SolveError> {
+        /// Cores per task of the reward pass.
+        const REWARD_CHUNK: usize = 4096;
         let n = self.n_cores();
         let e = self.state_dim();
         let a = self.joint.dim();
@@ -922,40 +924,75 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             return Ok(());
         }
         let depends = self.model.reward_depends_on_action();
-        // Per core: (reward if state-only, goal flag, max |rho| over actions).
+        // Straight into the per-core reward vector (state-only rewards; none otherwise, only
+        // the bound), each task reducing its own bound and finiteness: no per-core tuples
+        // (24 bytes a core, 0.9 GB on the robots' 37.7M cores).
         let this = &*self;
-        let per_core = par::map_indexed(
-            n,
-            4096,
-            || (vec![T::ZERO; e], vec![T::ZERO; a]),
-            |(x, u), i| {
-                this.core_state(i, x);
-                let goal = absorbing && this.model.is_goal(x);
-                let mut rmax = 0.0f64;
-                let mut first = T::ZERO;
-                let mut finite = true;
-                let m = if depends { this.joint.n_joint() } else { 1 };
-                for j in 0..m {
-                    this.joint.vector_unchecked(j, u);
-                    let r = this.model.reward(x, u);
-                    finite &= r.is_finite();
-                    if j == 0 {
-                        first = r;
-                    }
-                    rmax = rmax.max(r.to_f64().abs());
+        let mut rewards = vec![T::ZERO; if depends { 0 } else { n }];
+        let reward_of = |(x, u): &mut (Vec<T>, Vec<T>), i: usize| {
+            this.core_state(i, x);
+            let m = if depends { this.joint.n_joint() } else { 1 };
+            let (mut rmax, mut finite, mut first) = (0.0f64, true, T::ZERO);
+            for j in 0..m {
+                this.joint.vector_unchecked(j, u);
+                let r = this.model.reward(x, u);
+                finite &= r.is_finite();
+                if j == 0 {
+                    first = r;
                 }
-                (first, goal, rmax, finite)
-            },
-        );
-        if per_core.iter().any(|c| !c.3) {
+                rmax = rmax.max(r.to_f64().abs());
+            }
+            (first, (rmax, finite))
+        };
+        let init = || (vec![T::ZERO; e], vec![T::ZERO; a]);
+        let both = |l: (f64, bool), r: (f64, bool)| (l.0.max(r.0), l.1 && r.1);
+        let (bound, finite) = if depends {
+            par::map_reduce(
+                n,
+                REWARD_CHUNK,
+                (0.0, true),
+                |range| {
+                    let mut w = init();
+                    range.fold((0.0, true), |acc, i| both(acc, reward_of(&mut w, i).1))
+                },
+                both,
+            )
+        } else {
+            par::map_reduce_chunks_mut(
+                &mut rewards,
+                REWARD_CHUNK,
+                init,
+                |w, ci, chunk| {
+                    let mut acc = (0.0, true);
+                    for (j, out) in chunk.iter_mut().enumerate() {
+                        let (r, b) = reward_of(w, ci * REWARD_CHUNK + j);
+                        *out = r;
+                        acc = both(acc, b);
+                    }
+                    acc
+                },
+                (0.0, true),
+                both,
+            )
+        };
+        if !finite {
             return Err(SolveError::NonFinite { what: "reward" });
         }
-        self.reward_bound = per_core.iter().fold(0.0, |m, c| m.max(c.2));
+        self.reward_bound = bound;
         if !depends {
-            self.rewards = Some(per_core.iter().map(|c| c.0).collect());
+            self.rewards = Some(rewards);
         }
         if absorbing {
-            self.goal = per_core.iter().map(|c| c.1).collect();
+            let this = &*self;
+            self.goal = par::map_indexed(
+                n,
+                REWARD_CHUNK,
+                || vec![T::ZERO; e],
+                |x, i| {
+                    this.core_state(i, x);
+                    this.model.is_goal(x)
+                },
+            );
         }
         Ok(())
     }
@@ -1237,26 +1274,18 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     }
 
     /// Row-major grid order -> internal order.
-    fn to_internal<U: Copy + Default>(&self, v: &[U]) -> Vec<U> {
+    fn to_internal<U: Copy + Default + Send + Sync>(&self, v: &[U]) -> Vec<U> {
         match &self.path {
             Path::Generic(_) => v.to_vec(),
-            Path::Block(b) => {
-                let mut out = vec![U::default(); v.len()];
-                b.for_each_grid_index(|i, g| out[i] = v[g]);
-                out
-            }
+            Path::Block(b) => b.reorder(v, false),
         }
     }
 
     /// Internal order -> row-major grid order.
-    fn to_grid<U: Copy + Default>(&self, v: &[U]) -> Vec<U> {
+    fn to_grid<U: Copy + Default + Send + Sync>(&self, v: &[U]) -> Vec<U> {
         match &self.path {
             Path::Generic(_) => v.to_vec(),
-            Path::Block(b) => {
-                let mut out = vec![U::default(); v.len()];
-                b.for_each_grid_index(|i, g| out[g] = v[i]);
-                out
-            }
+            Path::Block(b) => b.reorder(v, true),
         }
     }
 

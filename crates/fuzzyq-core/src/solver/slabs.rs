@@ -196,13 +196,19 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
     }
 
     /// `v` (one value per core, row-major grid order) in the internal order of the slabs.
-    pub fn to_internal_order<U: Copy + Default>(&self, v: &[U]) -> Result<Vec<U>, SolveError> {
+    pub fn to_internal_order<U: Copy + Default + Send + Sync>(
+        &self,
+        v: &[U],
+    ) -> Result<Vec<U>, SolveError> {
         check_len("values", self.n_cores(), v.len())?;
         Ok(self.to_internal(v))
     }
 
     /// `v` (one value per core, internal order) in row-major grid order.
-    pub fn to_grid_order<U: Copy + Default>(&self, v: &[U]) -> Result<Vec<U>, SolveError> {
+    pub fn to_grid_order<U: Copy + Default + Send + Sync>(
+        &self,
+        v: &[U],
+    ) -> Result<Vec<U>, SolveError> {
         check_len("values", self.n_cores(), v.len())?;
         Ok(self.to_grid(v))
     }
