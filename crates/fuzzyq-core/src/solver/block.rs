@@ -733,6 +733,65 @@ impl<T: Real> BlockOperator<T> {
         out
     }
 
+    /// Every block core's coordinates on its block's variables (`n_cores x dims.len()` per
+    /// block), read from `state_of(g, x)`, the state of grid core `g`.
+    pub(super) fn block_coords(
+        &self,
+        n_dims: usize,
+        mut state_of: impl FnMut(usize, &mut [T]),
+    ) -> Vec<Vec<T>> {
+        let mut x = vec![T::ZERO; n_dims];
+        self.tables
+            .iter()
+            .map(|t| {
+                let mut coords = Vec::with_capacity(t.n_cores * t.dims.len());
+                for &g in &t.grid_offset {
+                    state_of(g, &mut x);
+                    coords.extend(t.dims.iter().map(|&d| x[d]));
+                }
+                coords
+            })
+            .collect()
+    }
+
+    /// Calls `f(i, x)` with the state `x` of every internal core `i` in `range`, in order,
+    /// stepping the block cores like an odometer and copying each new block core's
+    /// coordinates (`coords` from [`Self::block_coords`]): no division per core.
+    pub(super) fn for_each_core_state(
+        &self,
+        coords: &[Vec<T>],
+        range: core::ops::Range<usize>,
+        x: &mut [T],
+        mut f: impl FnMut(usize, &[T]),
+    ) {
+        let place = |b: usize, c: usize, x: &mut [T]| {
+            let dims = &self.tables[b].dims;
+            for (&d, &v) in dims.iter().zip(&coords[b][c * dims.len()..]) {
+                x[d] = v;
+            }
+        };
+        let mut digit: Vec<usize> = (0..self.tables.len())
+            .map(|b| (range.start / self.r_len[b]) % self.tables[b].n_cores)
+            .collect();
+        for (b, &c) in digit.iter().enumerate() {
+            place(b, c, x);
+        }
+        for i in range {
+            f(i, x);
+            for b in (0..digit.len()).rev() {
+                digit[b] += 1;
+                let carry = digit[b] == self.tables[b].n_cores;
+                if carry {
+                    digit[b] = 0;
+                }
+                place(b, digit[b], x);
+                if !carry {
+                    break;
+                }
+            }
+        }
+    }
+
     /// Internal index (contraction order, first block slowest) -> row-major grid index.
     pub(super) fn to_grid_index(&self, internal: usize) -> usize {
         let mut g = 0;

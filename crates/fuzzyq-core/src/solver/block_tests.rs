@@ -488,3 +488,43 @@ fn interleave_writes_every_value_once_in_place() {
         }
     }
 }
+
+/// The odometer's core states (`for_each_core_state`, from any first core) are the states
+/// of `core_state`, and the tiled reorder agrees with the per-core index map both ways: two
+/// agents (four blocks, one core per dimension pair), blocks in and out of the radix order.
+#[test]
+fn core_states_and_reorders_match_the_per_core_maps() {
+    for reversed in [false, true] {
+        let m = Masses::<f64>::new(2, reversed);
+        let cores = m.grid();
+        let views: Vec<&[f64]> = cores.iter().map(Vec::as_slice).collect();
+        let grid = ProductPartition::try_new(&views).unwrap();
+        let backup = Backup {
+            gamma: 0.9,
+            absorbing_goal: false,
+        };
+        let op = Operator::new(&m, grid, backup, BackupPath::Block).unwrap();
+        let Path::Block(blk) = &op.path else {
+            panic!("the block path")
+        };
+        let n = op.n_cores();
+        let coords = op.block_coords();
+        let mut want = vec![0.0; grid.n_dims()];
+        for start in [0, 1, 14, 15, 224, n / 3, n - 1] {
+            let mut x = vec![f64::NAN; grid.n_dims()];
+            let mut next = start;
+            op.for_each_core_state(&coords, start..n.min(start + 700), &mut x, |i, x| {
+                assert_eq!(i, next);
+                next += 1;
+                op.core_state(i, &mut want);
+                assert_eq!(x, &want[..], "core {i} from {start}, reversed {reversed}");
+            });
+        }
+        let v: Vec<u32> = (0..n as u32).collect();
+        let g = blk.reorder(&v, true);
+        for (i, &x) in v.iter().enumerate() {
+            assert_eq!(g[blk.to_grid_index(i)], x, "to grid, core {i}");
+        }
+        assert_eq!(blk.reorder(&g, false), v, "back to internal order");
+    }
+}

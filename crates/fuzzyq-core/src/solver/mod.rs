@@ -900,6 +900,37 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let _ = self.grid.core_state(self.to_grid_index(internal), out);
     }
 
+    /// Calls `f(i, x)` with the state `x` of every internal core `i` in `range`, in order
+    /// (`coords` from [`Self::block_coords`]; on the block path, no division per core).
+    fn for_each_core_state(
+        &self,
+        coords: &[Vec<T>],
+        range: core::ops::Range<usize>,
+        x: &mut [T],
+        mut f: impl FnMut(usize, &[T]),
+    ) {
+        match &self.path {
+            Path::Block(b) => b.for_each_core_state(coords, range, x, f),
+            Path::Generic(_) => {
+                for i in range {
+                    self.core_state(i, x);
+                    f(i, x);
+                }
+            }
+        }
+    }
+
+    /// The block path's per-block core coordinates for [`Self::for_each_core_state`] (empty
+    /// on the generic path).
+    fn block_coords(&self) -> Vec<Vec<T>> {
+        match &self.path {
+            Path::Block(b) => b.block_coords(self.state_dim(), |g, x| {
+                let _ = self.grid.core_state(g, x);
+            }),
+            Path::Generic(_) => Vec::new(),
+        }
+    }
+
     fn prepare_rewards(&mut self) -> Result<(), SolveError> {
         /// Cores per task of the reward pass.
         const REWARD_CHUNK: usize = 4096;
@@ -928,21 +959,30 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         // the bound), each task reducing its own bound and finiteness: no per-core tuples
         // (24 bytes a core, 0.9 GB on the robots' 37.7M cores).
         let this = &*self;
+        let coords = self.block_coords();
         let mut rewards = vec![T::ZERO; if depends { 0 } else { n }];
-        let reward_of = |(x, u): &mut (Vec<T>, Vec<T>), i: usize| {
-            this.core_state(i, x);
-            let m = if depends { this.joint.n_joint() } else { 1 };
-            let (mut rmax, mut finite, mut first) = (0.0f64, true, T::ZERO);
-            for j in 0..m {
-                this.joint.vector_unchecked(j, u);
-                let r = this.model.reward(x, u);
-                finite &= r.is_finite();
-                if j == 0 {
-                    first = r;
+        // The rewards of the cores `range` to `out` (if given), and their bound and finiteness.
+        let rewards_of = |(x, u): &mut (Vec<T>, Vec<T>),
+                          range: core::ops::Range<usize>,
+                          out: Option<&mut [T]>| {
+            let (mut rmax, mut finite) = (0.0f64, true);
+            let first = range.start;
+            let mut out = out;
+            this.for_each_core_state(&coords, range, x, |i, x| {
+                let m = if depends { this.joint.n_joint() } else { 1 };
+                for j in 0..m {
+                    this.joint.vector_unchecked(j, u);
+                    let r = this.model.reward(x, u);
+                    finite &= r.is_finite();
+                    if j == 0
+                        && let Some(o) = out.as_deref_mut()
+                    {
+                        o[i - first] = r;
+                    }
+                    rmax = rmax.max(r.to_f64().abs());
                 }
-                rmax = rmax.max(r.to_f64().abs());
-            }
-            (first, (rmax, finite))
+            });
+            (rmax, finite)
         };
         let init = || (vec![T::ZERO; e], vec![T::ZERO; a]);
         let both = |l: (f64, bool), r: (f64, bool)| (l.0.max(r.0), l.1 && r.1);
@@ -951,10 +991,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                 n,
                 REWARD_CHUNK,
                 (0.0, true),
-                |range| {
-                    let mut w = init();
-                    range.fold((0.0, true), |acc, i| both(acc, reward_of(&mut w, i).1))
-                },
+                |range| rewards_of(&mut init(), range, None),
                 both,
             )
         } else {
@@ -963,36 +1000,34 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                 REWARD_CHUNK,
                 init,
                 |w, ci, chunk| {
-                    let mut acc = (0.0, true);
-                    for (j, out) in chunk.iter_mut().enumerate() {
-                        let (r, b) = reward_of(w, ci * REWARD_CHUNK + j);
-                        *out = r;
-                        acc = both(acc, b);
-                    }
-                    acc
+                    let range = ci * REWARD_CHUNK..ci * REWARD_CHUNK + chunk.len();
+                    rewards_of(w, range, Some(chunk))
                 },
                 (0.0, true),
                 both,
             )
         };
+        let mut goal = vec![false; if absorbing { n } else { 0 }];
+        if absorbing {
+            par::for_each_chunk_mut(
+                &mut goal,
+                REWARD_CHUNK,
+                || vec![T::ZERO; e],
+                |x, ci, chunk| {
+                    let first = ci * REWARD_CHUNK;
+                    this.for_each_core_state(&coords, first..first + chunk.len(), x, |i, x| {
+                        chunk[i - first] = this.model.is_goal(x);
+                    });
+                },
+            );
+        }
         if !finite {
             return Err(SolveError::NonFinite { what: "reward" });
         }
         self.reward_bound = bound;
+        self.goal = goal;
         if !depends {
             self.rewards = Some(rewards);
-        }
-        if absorbing {
-            let this = &*self;
-            self.goal = par::map_indexed(
-                n,
-                REWARD_CHUNK,
-                || vec![T::ZERO; e],
-                |x, i| {
-                    this.core_state(i, x);
-                    this.model.is_goal(x)
-                },
-            );
         }
         Ok(())
     }
