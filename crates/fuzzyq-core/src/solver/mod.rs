@@ -747,6 +747,9 @@ enum Path<T: 'static> {
     Block(BlockOperator<T>),
 }
 
+/// Cores per task of the passes over every core's state (rewards, goals).
+const STATE_CHUNK: usize = 4096;
+
 impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     /// Prepares the operator: validates the model against the grid, builds the block tables
     /// (if the path is `Block`, or `Auto` with declared blocks), evaluates per-core rewards.
@@ -931,9 +934,26 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         }
     }
 
+    /// Whether each core (internal order) is a goal, on every thread (`coords` from
+    /// [`Self::block_coords`]).
+    fn goal_flags(&self, coords: &[Vec<T>]) -> Vec<bool> {
+        let e = self.state_dim();
+        let mut goal = vec![false; self.n_cores()];
+        par::for_each_chunk_mut(
+            &mut goal,
+            STATE_CHUNK,
+            || vec![T::ZERO; e],
+            |x, ci, chunk| {
+                let first = ci * STATE_CHUNK;
+                self.for_each_core_state(coords, first..first + chunk.len(), x, |i, x| {
+                    chunk[i - first] = self.model.is_goal(x);
+                });
+            },
+        );
+        goal
+    }
+
     fn prepare_rewards(&mut self) -> Result<(), SolveError> {
-        /// Cores per task of the reward pass.
-        const REWARD_CHUNK: usize = 4096;
         let n = self.n_cores();
         let e = self.state_dim();
         let a = self.joint.dim();
@@ -944,13 +964,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             }
             self.reward_bound = t.iter().fold(0.0, |m, r| m.max(r.to_f64().abs()));
             if absorbing {
-                let mut x = vec![T::ZERO; e];
-                self.goal = (0..n)
-                    .map(|i| {
-                        self.core_state(i, &mut x);
-                        self.model.is_goal(&x)
-                    })
-                    .collect();
+                self.goal = self.goal_flags(&self.block_coords());
             }
             return Ok(());
         }
@@ -961,15 +975,14 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let this = &*self;
         let coords = self.block_coords();
         let mut rewards = vec![T::ZERO; if depends { 0 } else { n }];
+        let m = if depends { self.joint.n_joint() } else { 1 };
         // The rewards of the cores `range` to `out` (if given), and their bound and finiteness.
         let rewards_of = |(x, u): &mut (Vec<T>, Vec<T>),
                           range: core::ops::Range<usize>,
-                          out: Option<&mut [T]>| {
+                          mut out: Option<&mut [T]>| {
             let (mut rmax, mut finite) = (0.0f64, true);
             let first = range.start;
-            let mut out = out;
             this.for_each_core_state(&coords, range, x, |i, x| {
-                let m = if depends { this.joint.n_joint() } else { 1 };
                 for j in 0..m {
                     this.joint.vector_unchecked(j, u);
                     let r = this.model.reward(x, u);
@@ -989,7 +1002,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let (bound, finite) = if depends {
             par::map_reduce(
                 n,
-                REWARD_CHUNK,
+                STATE_CHUNK,
                 (0.0, true),
                 |range| rewards_of(&mut init(), range, None),
                 both,
@@ -997,30 +1010,21 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         } else {
             par::map_reduce_chunks_mut(
                 &mut rewards,
-                REWARD_CHUNK,
+                STATE_CHUNK,
                 init,
                 |w, ci, chunk| {
-                    let range = ci * REWARD_CHUNK..ci * REWARD_CHUNK + chunk.len();
+                    let range = ci * STATE_CHUNK..ci * STATE_CHUNK + chunk.len();
                     rewards_of(w, range, Some(chunk))
                 },
                 (0.0, true),
                 both,
             )
         };
-        let mut goal = vec![false; if absorbing { n } else { 0 }];
-        if absorbing {
-            par::for_each_chunk_mut(
-                &mut goal,
-                REWARD_CHUNK,
-                || vec![T::ZERO; e],
-                |x, ci, chunk| {
-                    let first = ci * REWARD_CHUNK;
-                    this.for_each_core_state(&coords, first..first + chunk.len(), x, |i, x| {
-                        chunk[i - first] = this.model.is_goal(x);
-                    });
-                },
-            );
-        }
+        let goal = if absorbing {
+            self.goal_flags(&coords)
+        } else {
+            Vec::new()
+        };
         if !finite {
             return Err(SolveError::NonFinite { what: "reward" });
         }
