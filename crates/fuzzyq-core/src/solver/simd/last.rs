@@ -65,24 +65,6 @@ pub(super) unsafe fn last_block<T: Copy, I: Isa<T>, const NV: usize, const ABS: 
     }
 }
 
-/// The lowest valid lane `j * LANES + lane` of a register block equal to `t`: the lanes'
-/// equalities gathered into one bit mask, without a branch per vector.
-#[inline(always)]
-pub(super) unsafe fn first_equal<T: Copy, I: Isa<T>, const NV: usize>(
-    acc: &[I::V; NV],
-    t: T,
-    m: I::M,
-) -> Option<usize> {
-    const { assert!(NV * I::LANES <= 128, "a register block's lanes fit a u128") };
-    let all = unsafe { I::mask(I::LANES) };
-    let mut bits = 0u128;
-    for (j, &x) in acc.iter().enumerate() {
-        let mask = if j + 1 == NV { m } else { all };
-        bits |= u128::from(unsafe { I::equal_bits(x, t, mask) }) << (j * I::LANES);
-    }
-    (bits != 0).then(|| bits.trailing_zeros() as usize)
-}
-
 /// The lowest `a * p_len + p` whose expected value equals `target` in one register block,
 /// scanning actions in order (`None` if no lane matches).
 #[inline(always)]
@@ -101,7 +83,7 @@ pub(super) unsafe fn argmax_block<T: Copy, I: Isa<T>, const NV: usize>(
     unsafe {
         let (cols, ws) = rows.row(c * na + a);
         let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), stride, m);
-        first_equal::<T, I, NV>(&acc, target, m).map(|i| a * p_len + p0 + i)
+        I::first_equal::<NV>(&acc, target, m).map(|i| a * p_len + p0 + i)
     }
 }
 
@@ -331,8 +313,7 @@ pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
             if v < best {
                 continue;
             }
-            let idx =
-                first_equal::<T, I, NV>(&acc, v, m).map_or(usize::MAX, |i| a * p_len + p0 + i);
+            let idx = I::first_equal::<NV>(&acc, v, m).map_or(usize::MAX, |i| a * p_len + p0 + i);
             if v > best || idx < best_idx {
                 best = v;
                 best_idx = idx;

@@ -447,13 +447,34 @@ trait Isa<T: Copy> {
     /// Mask of the first `n` lanes (`1 <= n <= LANES`).
     unsafe fn mask(n: usize) -> Self::M;
     unsafe fn load(p: *const T) -> Self::V;
-    /// Loads the masked lanes; the others are zero and their memory is not read.
+    /// Loads the masked lanes. The others are zero and their memory is not read, except in
+    /// an instance that over-reads ([`Isa::OVERREAD`]), where they hold the memory past the
+    /// lanes: every caller masks them out again before they reach a result.
     unsafe fn load_part(p: *const T, m: Self::M) -> Self::V;
     unsafe fn store(p: *mut T, v: Self::V);
     /// Stores the masked lanes only (the first `n`, which `m` selects).
     unsafe fn store_part(p: *mut T, v: Self::V, m: Self::M, n: usize);
     /// Bit `i` set for each masked lane `i` equal to `t`.
     unsafe fn equal_bits(v: Self::V, t: T, m: Self::M) -> u64;
+    /// The lowest valid lane `j * LANES + lane` of a register block equal to `t` (the last
+    /// vector's lanes masked by `m`). By default the lanes' equalities gathered into one bit
+    /// mask ([`Isa::equal_bits`]), without a branch per vector.
+    #[inline(always)]
+    unsafe fn first_equal<const NV: usize>(acc: &[Self::V; NV], t: T, m: Self::M) -> Option<usize> {
+        const {
+            assert!(
+                NV * Self::LANES <= 128,
+                "a register block's lanes fit a u128"
+            )
+        };
+        let all = unsafe { Self::mask(Self::LANES) };
+        let mut bits = 0u128;
+        for (j, &x) in acc.iter().enumerate() {
+            let mask = if j + 1 == NV { m } else { all };
+            bits |= u128::from(unsafe { Self::equal_bits(x, t, mask) }) << (j * Self::LANES);
+        }
+        (bits != 0).then(|| bits.trailing_zeros() as usize)
+    }
     unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
     unsafe fn max(a: Self::V, b: Self::V) -> Self::V;
     unsafe fn abs(a: Self::V) -> Self::V;

@@ -11,12 +11,15 @@
 //! Partial vectors (a row's tail) are where portable code loses most: a variable-length loop
 //! becomes a call to `memcpy` and the accumulators leave registers, and even fixed-size copies
 //! (one per length) break the vectoriser's lanes apart (the instance ran at 31% and 69% of the
-//! AVX2 one that way). So a partial load reads the whole vector and zeroes the extra lanes,
-//! which needs the input to extend a vector past the tensor: the block path pads its stage
-//! buffers by [`super::INPUT_PAD`]; on unpadded inputs (`V` itself, read by the first stage)
-//! the stage kernel runs `Portable<false>`, whose partial loads copy one fixed-size head per
-//! length, and the last stage the scalar instance (same bits). Partial stores copy one
-//! fixed-size head per length (they must not write past the row).
+//! AVX2 one that way). So a partial load reads the whole vector and leaves the extra lanes as
+//! they are (every caller masks them out again; zeroing them with a select made the vectoriser
+//! assemble each load from pieces), which needs the input to extend a vector past the tensor:
+//! the block path pads its stage buffers by [`super::INPUT_PAD`]; on unpadded inputs (`V`
+//! itself, read by the first stage) the stage kernel runs `Portable<false>`, whose partial
+//! loads copy one fixed-size head per length, and the last stage the scalar instance (same
+//! bits). Partial stores copy one fixed-size head per length (they must not write past the
+//! row). The maximiser's search is the instance's own ([`Isa::first_equal`]): lane-wise minima
+//! of the matching indices, where the default's bit mask would be widened lane by lane.
 //!
 //! On x86-64 the instance is compiled with AVX2 + FMA enabled (see `instance!` in the parent
 //! module), which is how the tests and benchmarks compare it with the hand-written AVX2
@@ -73,15 +76,11 @@ macro_rules! portable_isa {
                         }
                     };
                 }
-                // A whole-vector load and a select: two vector instructions.
+                // The whole vector: the lanes past `m` hold whatever follows the row, which
+                // every caller masks out again. (Zeroing them with a select made the
+                // vectoriser assemble each load from four pieces.)
                 // SAFETY: the kernels checked that the whole vector is in bounds.
-                let v = unsafe { Self::load(p) };
-                let mut r = [0.0; $n];
-                #[allow(clippy::needless_range_loop)] // this form vectorises; iterators did not
-                for i in 0..$n {
-                    r[i] = if i < m { v[i] } else { 0.0 };
-                }
-                r
+                unsafe { Self::load(p) }
             }
             #[inline(always)]
             unsafe fn store(p: *mut $t, v: [$t; $n]) {
@@ -100,11 +99,46 @@ macro_rules! portable_isa {
             }
             #[inline(always)]
             unsafe fn equal_bits(v: [$t; $n], t: $t, m: usize) -> u64 {
+                // `&` on the two tests, not `&&`: no branch per lane, so the loop becomes a
+                // vector compare and a move of its sign bits.
                 let mut bits = 0u64;
                 for (i, &x) in v.iter().enumerate() {
-                    bits |= u64::from(i < m && x == t) << i;
+                    bits |= u64::from((i < m) & (x == t)) << i;
                 }
                 bits
+            }
+            /// The lowest matching index by a lane-wise minimum over the vectors, then one
+            /// across the lanes: vector compares, blends and minima. (The default's bit mask
+            /// has no vector form here: the vectoriser widened every lane's bit to 64 bits.)
+            #[inline(always)]
+            unsafe fn first_equal<const NV: usize>(
+                acc: &[[$t; $n]; NV],
+                t: $t,
+                m: usize,
+            ) -> Option<usize> {
+                let mut low = [u32::MAX; $n];
+                // Lanes past `m` in the last vector: all ones, so they never win the minimum.
+                let mut past = [0u32; $n];
+                #[allow(clippy::needless_range_loop)] // this form vectorises
+                for i in 0..$n {
+                    past[i] = if (i as u32) < m as u32 { 0 } else { u32::MAX };
+                }
+                for (j, x) in acc.iter().enumerate() {
+                    let off = if j + 1 == NV { past } else { [0; $n] };
+                    #[allow(clippy::needless_range_loop)] // this form vectorises
+                    for i in 0..$n {
+                        let idx = (j * $n + i) as u32 | off[i];
+                        low[i] = low[i].min(if x[i] == t { idx } else { u32::MAX });
+                    }
+                }
+                let mut half = $n / 2;
+                while half > 0 {
+                    for i in 0..half {
+                        low[i] = low[i].min(low[i + half]);
+                    }
+                    half /= 2;
+                }
+                (low[0] != u32::MAX).then_some(low[0] as usize)
             }
             #[inline(always)]
             unsafe fn fma(a: [$t; $n], b: [$t; $n], c: [$t; $n]) -> [$t; $n] {
@@ -147,9 +181,12 @@ macro_rules! portable_isa {
             }
             #[inline(always)]
             unsafe fn load_part_from(v: [$t; $n], m: usize) -> [$t; $n] {
+                // A select on the lane index (a compare and a blend), as in `load_part`: a
+                // loop from `m` stored lane by lane to the stack and stalled the reload.
                 let mut r = v;
-                for x in r.iter_mut().skip(m) {
-                    *x = <$t>::NEG_INFINITY;
+                #[allow(clippy::needless_range_loop)] // this form vectorises; iterators did not
+                for i in 0..$n {
+                    r[i] = if i < m { v[i] } else { <$t>::NEG_INFINITY };
                 }
                 r
             }

@@ -421,3 +421,55 @@ proptest! {
         );
     }
 }
+
+/// [`Isa::first_equal`] of register blocks of `NV` vectors read from `lanes`, the last vector's
+/// first `valid` lanes valid.
+fn first_equal_of<I: Isa<f32>, const NV: usize>(
+    lanes: &[f32],
+    t: f32,
+    valid: usize,
+) -> Option<usize> {
+    assert!(lanes.len() >= NV * I::LANES);
+    // SAFETY: every vector read is inside `lanes`; `1 <= valid <= LANES`.
+    unsafe {
+        let acc: [I::V; NV] = core::array::from_fn(|j| I::load(lanes.as_ptr().add(j * I::LANES)));
+        I::first_equal::<NV>(&acc, t, I::mask(valid))
+    }
+}
+
+#[test]
+fn first_equal_takes_the_lowest_valid_lane_and_skips_the_masked_ones() {
+    // Three vectors of the portable instance (24 lanes of f32), the last with `valid` lanes
+    // valid: the instance's own search (lane-wise minima) against a plain scan.
+    const NV: usize = 3;
+    let lanes = <portable::Portable<true> as Isa<f32>>::LANES;
+    for valid in 1..=lanes {
+        let n_valid = (NV - 1) * lanes + valid;
+        for hit in [
+            None,
+            Some(0),
+            Some(lanes - 1),
+            Some(lanes),
+            Some(n_valid - 1),
+        ] {
+            // Every lane 1 except the hit (7) and the masked lanes (7 too: a masked lane
+            // that matches must not be found).
+            let mut v = vec![1.0f32; NV * lanes];
+            v[n_valid..].fill(7.0);
+            if let Some(h) = hit {
+                v[h] = 7.0;
+                v[n_valid - 1] = if h == n_valid - 1 { 7.0 } else { 1.0 };
+            }
+            let found = first_equal_of::<portable::Portable<true>, NV>(&v, 7.0, valid);
+            assert_eq!(found, hit, "valid {valid}, hit {hit:?}");
+            assert_eq!(
+                v[..n_valid].iter().position(|&x| x == 7.0),
+                hit,
+                "the case itself"
+            );
+            // The default search (bit masks) on the scalar instance, one lane per vector.
+            let scalar = first_equal_of::<Scalar, 24>(&v, 7.0, 1);
+            assert_eq!(scalar.filter(|&i| i < n_valid), hit, "scalar instance");
+        }
+    }
+}
