@@ -347,25 +347,13 @@ unsafe fn last_narrow_arg<T: Real, I: Isa<T>>(
             slot.write(acc);
         }
         let best = I::reduce_max(lanes, I::mask(I::LANES));
-        if na * p_len <= 64 {
-            // Every row's matching lanes at its index `a * p_len + p` in one word: the lowest
-            // set bit is the maximiser, found without a branch on which row holds it (a
-            // mispredicted branch per core would keep the next core's rows from starting).
-            let mut all = 0u64;
-            for (a, slot) in accs[..na].iter().enumerate() {
-                all |= I::equal_bits(slot.assume_init(), best, m) << (a * p_len);
-            }
-            // Only a NaN maximum matches no lane.
-            return (best, if all == 0 { 0 } else { all.trailing_zeros() });
-        }
-        for (a, slot) in accs[..na].iter().enumerate() {
-            let bits = I::equal_bits(slot.assume_init(), best, m);
-            if bits != 0 {
-                return (best, (a * p_len) as u32 + bits.trailing_zeros());
-            }
-        }
+        // SAFETY: the first `na` slots were written above.
+        let rows = core::slice::from_raw_parts(accs.as_ptr().cast::<I::V>(), na);
         // Only a NaN maximum matches no lane.
-        (best, 0)
+        (
+            best,
+            I::first_equal_rows(rows, best, m, p_len).unwrap_or(0) as u32,
+        )
     }
 }
 

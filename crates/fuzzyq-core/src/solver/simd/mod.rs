@@ -475,6 +475,34 @@ trait Isa<T: Copy> {
         }
         (bits != 0).then(|| bits.trailing_zeros() as usize)
     }
+    /// The lowest `r * row_len + lane` over rows of one vector each (`row_len` lanes, those
+    /// `m` selects) whose lane equals `t`. By default every row's matching lanes at their
+    /// index in one word when all fit 64 bits (the lowest set bit, without a branch on which
+    /// row holds it: a mispredicted branch per core would keep the next core's rows from
+    /// starting), else row by row.
+    #[inline(always)]
+    unsafe fn first_equal_rows(
+        rows: &[Self::V],
+        t: T,
+        m: Self::M,
+        row_len: usize,
+    ) -> Option<usize> {
+        if rows.len() * row_len <= 64 {
+            let mut all = 0u64;
+            for (r, &x) in rows.iter().enumerate() {
+                all |= unsafe { Self::equal_bits(x, t, m) } << (r * row_len);
+            }
+            return (all != 0).then(|| all.trailing_zeros() as usize);
+        }
+        // A loop, not a closure: a closure would not inherit the kernel's target features.
+        for (r, &x) in rows.iter().enumerate() {
+            let bits = unsafe { Self::equal_bits(x, t, m) };
+            if bits != 0 {
+                return Some(r * row_len + bits.trailing_zeros() as usize);
+            }
+        }
+        None
+    }
     unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
     unsafe fn max(a: Self::V, b: Self::V) -> Self::V;
     unsafe fn abs(a: Self::V) -> Self::V;

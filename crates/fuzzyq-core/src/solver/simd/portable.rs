@@ -131,14 +131,32 @@ macro_rules! portable_isa {
                         low[i] = low[i].min(if x[i] == t { idx } else { u32::MAX });
                     }
                 }
-                let mut half = $n / 2;
-                while half > 0 {
-                    for i in 0..half {
-                        low[i] = low[i].min(low[i + half]);
-                    }
-                    half /= 2;
+                lowest(low)
+            }
+            /// As [`Isa::first_equal`]: lane-wise minima of the matching indices over the
+            /// rows, then one across the lanes.
+            #[inline(always)]
+            unsafe fn first_equal_rows(
+                rows: &[[$t; $n]],
+                t: $t,
+                m: usize,
+                row_len: usize,
+            ) -> Option<usize> {
+                let mut low = [u32::MAX; $n];
+                let mut idx = [0u32; $n];
+                #[allow(clippy::needless_range_loop)] // this form vectorises
+                for i in 0..$n {
+                    // Lanes past `m`: all ones, so they never win the minimum.
+                    idx[i] = if (i as u32) < m as u32 { i as u32 } else { u32::MAX };
                 }
-                (low[0] != u32::MAX).then_some(low[0] as usize)
+                for x in rows {
+                    #[allow(clippy::needless_range_loop)] // this form vectorises
+                    for i in 0..$n {
+                        low[i] = low[i].min(if x[i] == t { idx[i] } else { u32::MAX });
+                        idx[i] = idx[i].saturating_add(row_len as u32);
+                    }
+                }
+                lowest(low)
             }
             #[inline(always)]
             unsafe fn fma(a: [$t; $n], b: [$t; $n], c: [$t; $n]) -> [$t; $n] {
@@ -203,6 +221,20 @@ macro_rules! portable_isa {
 }
 portable_isa!(f32, 8, [1, 2, 3, 4, 5, 6, 7]);
 portable_isa!(f64, 4, [1, 2, 3]);
+
+/// The least of the lane-wise minima `low` (a tree of vector minima), `None` if every lane
+/// is all ones (no match).
+#[inline(always)]
+fn lowest<const N: usize>(mut low: [u32; N]) -> Option<usize> {
+    let mut half = N / 2;
+    while half > 0 {
+        for i in 0..half {
+            low[i] = low[i].min(low[i + half]);
+        }
+        half /= 2;
+    }
+    (low[0] != u32::MAX).then_some(low[0] as usize)
+}
 
 /// The first `K` lanes from `p`, the others zero.
 ///

@@ -473,3 +473,40 @@ fn first_equal_takes_the_lowest_valid_lane_and_skips_the_masked_ones() {
         }
     }
 }
+
+#[test]
+fn first_equal_rows_takes_the_lowest_valid_lane_of_the_lowest_row() {
+    // Rows of one portable vector, the first `row_len` lanes valid, the others matching: the
+    // instance's search (lane-wise minima) against a plain scan of the valid lanes.
+    type P = portable::Portable<true>;
+    let lanes = <P as Isa<f32>>::LANES;
+    for row_len in 1..=lanes {
+        for n_rows in 1..=3 {
+            let n_valid = n_rows * row_len;
+            for hit in [
+                None,
+                Some(0),
+                Some(row_len - 1),
+                Some(n_valid - 1),
+                Some(n_valid / 2),
+            ] {
+                let mut v = vec![7.0f32; n_rows * lanes];
+                for r in 0..n_rows {
+                    v[r * lanes..r * lanes + row_len].fill(1.0);
+                }
+                if let Some(h) = hit {
+                    v[(h / row_len) * lanes + h % row_len] = 7.0;
+                }
+                // SAFETY: every vector read is inside `v`; `1 <= row_len <= LANES`.
+                let found = unsafe {
+                    let rows: Vec<[f32; 8]> = (0..n_rows)
+                        .map(|r| P::load(v.as_ptr().add(r * lanes)))
+                        .collect();
+                    let m = <P as Isa<f32>>::mask(row_len);
+                    <P as Isa<f32>>::first_equal_rows(&rows, 7.0, m, row_len)
+                };
+                assert_eq!(found, hit, "rows of {row_len}, {n_rows} rows");
+            }
+        }
+    }
+}
