@@ -116,22 +116,7 @@ macro_rules! portable_isa {
                 t: $t,
                 m: usize,
             ) -> Option<usize> {
-                let mut low = [u32::MAX; $n];
-                // Lanes past `m` in the last vector: all ones, so they never win the minimum.
-                let mut past = [0u32; $n];
-                #[allow(clippy::needless_range_loop)] // this form vectorises
-                for i in 0..$n {
-                    past[i] = if (i as u32) < m as u32 { 0 } else { u32::MAX };
-                }
-                for (j, x) in acc.iter().enumerate() {
-                    let off = if j + 1 == NV { past } else { [0; $n] };
-                    #[allow(clippy::needless_range_loop)] // this form vectorises
-                    for i in 0..$n {
-                        let idx = (j * $n + i) as u32 | off[i];
-                        low[i] = low[i].min(if x[i] == t { idx } else { u32::MAX });
-                    }
-                }
-                lowest(low)
+                first_equal_block(acc, t, m)
             }
             /// As [`Isa::first_equal`]: lane-wise minima of the matching indices over the
             /// rows, then one across the lanes.
@@ -142,21 +127,7 @@ macro_rules! portable_isa {
                 m: usize,
                 row_len: usize,
             ) -> Option<usize> {
-                let mut low = [u32::MAX; $n];
-                let mut idx = [0u32; $n];
-                #[allow(clippy::needless_range_loop)] // this form vectorises
-                for i in 0..$n {
-                    // Lanes past `m`: all ones, so they never win the minimum.
-                    idx[i] = if (i as u32) < m as u32 { i as u32 } else { u32::MAX };
-                }
-                for x in rows {
-                    #[allow(clippy::needless_range_loop)] // this form vectorises
-                    for i in 0..$n {
-                        low[i] = low[i].min(if x[i] == t { idx[i] } else { u32::MAX });
-                        idx[i] = idx[i].saturating_add(row_len as u32);
-                    }
-                }
-                lowest(low)
+                first_equal_in_rows(rows, t, m, row_len)
             }
             #[inline(always)]
             unsafe fn fma(a: [$t; $n], b: [$t; $n], c: [$t; $n]) -> [$t; $n] {
@@ -221,6 +192,89 @@ macro_rules! portable_isa {
 }
 portable_isa!(f32, 8, [1, 2, 3, 4, 5, 6, 7]);
 portable_isa!(f64, 4, [1, 2, 3]);
+
+/// [`Isa::first_equal`] of the portable instance: lane-wise minima of the matching indices
+/// over the block's vectors (the last vector's lanes from `m` on never match), then one across
+/// the lanes.
+#[inline(always)]
+fn first_equal_block<T: Copy + PartialEq, const N: usize, const NV: usize>(
+    acc: &[[T; N]; NV],
+    t: T,
+    m: usize,
+) -> Option<usize> {
+    let mut low = [u32::MAX; N];
+    // Lanes past `m` in the last vector never match.
+    let past = past_lanes::<N>(m);
+    // The vectors one by one, unrolled by hand: as a loop, the vectoriser kept the block in
+    // memory (the loop's scalar body was too large to unroll).
+    macro_rules! vectors {
+        ($($j:literal)*) => {$(
+            if $j < NV {
+                let off = if $j + 1 == NV { past } else { [0; N] };
+                min_step(&mut low, &acc[$j], t, ($j * N) as u32, &off);
+            }
+        )*};
+    }
+    vectors!(0 1 2 3 4 5 6 7);
+    for j in 8..NV {
+        let off = if j + 1 == NV { past } else { [0; N] };
+        min_step(&mut low, &acc[j], t, (j * N) as u32, &off);
+    }
+    lowest(low)
+}
+
+/// [`Isa::first_equal_rows`] of the portable instance: as [`first_equal_block`], every row's
+/// lanes from `m` on never matching; the first eight rows unrolled (each behind a test of the
+/// row count, the same for every core of a run).
+#[inline(always)]
+fn first_equal_in_rows<T: Copy + PartialEq, const N: usize>(
+    rows: &[[T; N]],
+    t: T,
+    m: usize,
+    row_len: usize,
+) -> Option<usize> {
+    let mut low = [u32::MAX; N];
+    let past = past_lanes::<N>(m);
+    macro_rules! rows {
+        ($($r:literal)*) => {$(
+            if $r < rows.len() {
+                min_step(&mut low, &rows[$r], t, ($r * row_len) as u32, &past);
+            }
+        )*};
+    }
+    rows!(0 1 2 3 4 5 6 7);
+    for (r, x) in rows.iter().enumerate().skip(8) {
+        min_step(&mut low, x, t, (r * row_len) as u32, &past);
+    }
+    lowest(low)
+}
+
+/// All ones in the lanes from `m` on (or-ed into their indices, they never win a minimum),
+/// zero below.
+#[inline(always)]
+fn past_lanes<const N: usize>(m: usize) -> [u32; N] {
+    let mut past = [0u32; N];
+    for (i, p) in past.iter_mut().enumerate() {
+        *p = if (i as u32) < m as u32 { 0 } else { u32::MAX };
+    }
+    past
+}
+
+/// Lane `i` of `x` equal to `t` offers index `base + i`, or-ed with `off[i]` (all ones for a
+/// lane that must not match), to the lane-wise minima `low`.
+#[inline(always)]
+fn min_step<T: Copy + PartialEq, const N: usize>(
+    low: &mut [u32; N],
+    x: &[T; N],
+    t: T,
+    base: u32,
+    off: &[u32; N],
+) {
+    for i in 0..N {
+        let idx = (base + i as u32) | off[i];
+        low[i] = low[i].min(if x[i] == t { idx } else { u32::MAX });
+    }
+}
 
 /// The least of the lane-wise minima `low` (a tree of vector minima), `None` if every lane
 /// is all ones (no match).
