@@ -18,8 +18,9 @@
 //! itself, read by the first stage) the stage kernel runs `Portable<false>`, whose partial
 //! loads copy one fixed-size head per length, and the last stage the scalar instance (same
 //! bits). Partial stores copy one fixed-size head per length (they must not write past the
-//! row). The maximiser's search is the instance's own ([`Isa::first_equal`]): lane-wise minima
-//! of the matching indices, where the default's bit mask would be widened lane by lane.
+//! row). The maximiser's searches are the instance's own ([`Isa::first_equal`],
+//! [`Isa::first_equal_rows`]): lane-wise minima of the matching indices, where the defaults'
+//! bit masks would be widened lane by lane.
 //!
 //! On x86-64 the instance is compiled with AVX2 + FMA enabled (see `instance!` in the parent
 //! module), which is how the tests and benchmarks compare it with the hand-written AVX2
@@ -99,8 +100,8 @@ macro_rules! portable_isa {
             }
             #[inline(always)]
             unsafe fn equal_bits(v: [$t; $n], t: $t, m: usize) -> u64 {
-                // `&` on the two tests, not `&&`: no branch per lane, so the loop becomes a
-                // vector compare and a move of its sign bits.
+                // `&` on the two tests, not `&&`: no branch per lane. (Only the default
+                // searches call this, and the instance overrides both.)
                 let mut bits = 0u64;
                 for (i, &x) in v.iter().enumerate() {
                     bits |= u64::from((i < m) & (x == t)) << i;
