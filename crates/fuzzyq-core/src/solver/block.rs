@@ -54,9 +54,16 @@ const fn line_len<T>() -> usize {
     CACHE_LINE / core::mem::size_of::<T>()
 }
 
+/// Leading indices per piece of a first stage whose rows hold one value (see
+/// [`BlockOperator::stage`]): 2,048 of them keep each piece's input stretches (one per
+/// successor) and its `[a][r]` output in the second-level cache of any CPU the kernels
+/// target, and far from the first level's limits of the rows' bookkeeping. The unit tests'
+/// small grids use pieces of 7, so that they run several pieces and a shorter last one.
+const FIRST_STAGE_PIECE: usize = if cfg!(test) { 7 } else { 2048 };
+
 /// Writes `na` rows of `r` values (`[a][r]`) as `r` rows of `na` values (`[r][a]`), the output
-/// rows `r_stride` apart. Two, three and four rows back to back (the common first stages)
-/// run with the row count fixed, which the compiler turns into vector shuffles.
+/// rows `r_stride` apart. Two to eight rows back to back (the first stages of every model
+/// here) run with the row count fixed, which the compiler turns into vector shuffles.
 fn interleave<T: Copy>(src: &[T], na: usize, (out, r_stride): (&mut [T], usize)) {
     fn fixed<T: Copy, const NA: usize>(src: &[T], out: &mut [T]) {
         let r = src.len() / NA;
@@ -71,6 +78,10 @@ fn interleave<T: Copy>(src: &[T], na: usize, (out, r_stride): (&mut [T], usize))
         (2, 2) => fixed::<T, 2>(src, out),
         (3, 3) => fixed::<T, 3>(src, out),
         (4, 4) => fixed::<T, 4>(src, out),
+        (5, 5) => fixed::<T, 5>(src, out),
+        (6, 6) => fixed::<T, 6>(src, out),
+        (7, 7) => fixed::<T, 7>(src, out),
+        (8, 8) => fixed::<T, 8>(src, out),
         _ => {
             let r = src.len() / na;
             for (ri, o) in out.chunks_mut(r_stride).take(r).enumerate() {
@@ -771,9 +782,24 @@ impl<T: Real> BlockOperator<T> {
         let rows = self.rows(rows0, level);
         let (r, p, na) = (self.r_len[level], self.p_len[level], t.n_actions);
         if p == 1 && r > 1 && na > 1 {
-            self.kernels
-                .stage(rows, c * na, na, 1, r, input, &mut scratch[..na * r]);
-            interleave(&scratch[..na * r], na, (out, r_stride));
+            // Rows of one value: each action's row along `r` in whole vectors (`[a][r]`), then
+            // interleaved to `[r][a]`, a piece of `r` at a time so that the actions reread
+            // their input and the interleave rereads their output from cache (the same sums).
+            let strides = Strides {
+                k_stride: r,
+                r_stride: 0,
+            };
+            for r0 in (0..r).step_by(FIRST_STAGE_PIECE) {
+                let n = FIRST_STAGE_PIECE.min(r - r0);
+                let piece = &mut scratch[..na * n];
+                let out_strides = OutStrides {
+                    r_stride: 0,
+                    a_stride: n,
+                };
+                let input = &input[r0..];
+                (self.kernels.stage_at)(rows, c * na, na, 1, n, strides, out_strides, input, piece);
+                interleave(piece, na, (&mut out[r0 * r_stride..], r_stride));
+            }
         } else {
             let out_strides = OutStrides {
                 r_stride,

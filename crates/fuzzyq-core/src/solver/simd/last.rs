@@ -562,15 +562,37 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
     assert_eq!(policy.len(), out.len(), "one action per core");
     check_last(&rows, first_core, na, shape, input, out);
     let InRows { p_len, stride } = shape;
-    for (i, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
-        let u = u as usize;
-        assert!(
-            u < na * p_len,
-            "policy action beyond the product action set"
-        );
-        let (cols, ws) = rows.row((first_core + i) * na + u / p_len);
-        // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
-        *o = unsafe { row_dot_strided::<T, I>(cols, ws, input.as_ptr().add(u % p_len), stride) };
+    #[inline(always)]
+    unsafe fn each<T: Real, I: Isa<T>>(
+        (rows, first_core, na, stride): (Rows<'_, T>, usize, usize, usize),
+        input: &[T],
+        policy: &[u32],
+        out: &mut [T],
+        p_len: usize,
+        split: impl Fn(usize) -> (usize, usize),
+    ) {
+        for (i, (o, &u)) in out.iter_mut().zip(policy).enumerate() {
+            let u = u as usize;
+            assert!(
+                u < na * p_len,
+                "policy action beyond the product action set"
+            );
+            let (a, p) = split(u);
+            let (cols, ws) = rows.row((first_core + i) * na + a);
+            // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
+            *o = unsafe { row_dot_strided::<T, I>(cols, ws, input.as_ptr().add(p), stride) };
+        }
+    }
+    let args = (rows, first_core, na, stride);
+    // A power of two (the robots' 4 prior actions) splits the action by a shift and a mask,
+    // not a division on every core's chain of dependent loads.
+    unsafe {
+        if p_len.is_power_of_two() {
+            let (shift, mask) = (p_len.trailing_zeros(), p_len - 1);
+            each::<T, I>(args, input, policy, out, p_len, |u| (u >> shift, u & mask));
+        } else {
+            each::<T, I>(args, input, policy, out, p_len, |u| (u / p_len, u % p_len));
+        }
     }
 }
 
