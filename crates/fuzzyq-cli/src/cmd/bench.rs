@@ -127,7 +127,7 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
     println!(
         "features   {}",
         if features.is_empty() {
-            "none of avx512f, avx2, fma".to_string()
+            "none of avx512f, avx512vl, avx2, fma".to_string()
         } else {
             features.join(" ")
         }
@@ -263,6 +263,9 @@ fn features() -> Vec<&'static str> {
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             out.push("avx512f");
+        }
+        if std::arch::is_x86_feature_detected!("avx512vl") {
+            out.push("avx512vl");
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             out.push("avx2");

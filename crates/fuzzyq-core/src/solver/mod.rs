@@ -62,7 +62,7 @@
 //! `k <= log_gamma(xi (1 - gamma) / (R (1 + gamma)))` with `R = max |rho|`, is reported.
 //!
 //! # Kernels
-//! The block products run in kernels chosen at run time from the CPU's features (AVX-512F,
+//! The block products run in kernels chosen at run time from the CPU's features (AVX-512F + VL,
 //! AVX2 + FMA, or portable scalar code; [`Kernel`] forces one). They are register-blocked, and
 //! the last stage is fused with the maximum over actions: it bounds each action's row first
 //! and skips rows that provably cannot raise the maximum. Every instance sums in the same order
@@ -216,8 +216,8 @@ crate::named_option! {
     /// instance computes bit-identical results; they differ only in speed. [`NamedOption::ALL`](crate::NamedOption::ALL)
     /// lists them fastest first.
     pub enum Kernel: "kernel" {
-        /// x86-64 AVX-512F.
-        Avx512 = "avx512" => "x86-64 AVX-512F",
+        /// x86-64 AVX-512F with AVX-512VL (its 256-bit masked operations) and FMA.
+        Avx512 = "avx512" => "x86-64 AVX-512F + VL",
         /// x86-64 AVX2 with FMA.
         Avx2 = "avx2" => "x86-64 AVX2 with FMA",
         /// Portable code the compiler vectorises (no intrinsics); on x86-64 built for AVX2

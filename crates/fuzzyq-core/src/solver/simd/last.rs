@@ -397,6 +397,12 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     // A row's bound costs one scalar multiply-add per entry, as much as the row itself when
     // the row fits one vector: prune only rows of several vectors; rows of one are all kept.
     let narrow = na <= PRUNE_MAX_ACTIONS && p_len <= I::LANES;
+    if narrow && p_len <= <I::Narrow as Isa<T>>::LANES && <I::Narrow as Isa<T>>::LANES < I::LANES {
+        // Rows that fit the narrower instance's vectors: the same sums in fewer lanes.
+        return unsafe {
+            last_impl::<T, I::Narrow, ABS>(rows, first_core, na, shape, input, out, bounds, args)
+        };
+    }
     let prune = na <= PRUNE_MAX_ACTIONS && !narrow;
     if prune {
         let n_blocks = Blocks::new(p_len, I::LANES, I::BLOCK).count();

@@ -13,10 +13,10 @@
 //!   action per core (the evaluation sweeps of modified policy iteration).
 //!
 //! The range of a sweep's changes ([`diff_range_by`]), a pass over every core outside these
-//! kernels, is here too, so that it can be compiled for AVX2 where the CPU has it.
+//! kernels, is here too, so that it can run in AVX2 where the CPU has it.
 //!
 //! Both are written once, generic over a small [`Isa`] trait (vector type, masked loads and
-//! stores, fused multiply-add, maximum), and instantiated for AVX-512F, AVX2 + FMA, portable
+//! stores, fused multiply-add, maximum), and instantiated for AVX-512F (+ VL), AVX2 + FMA, portable
 //! arrays the compiler vectorises (`portable`, no intrinsics: the fast path off x86-64) and
 //! scalar code, in `f32` and `f64`. The instance is chosen at run time from the CPU's features (a
 //! distributed binary cannot assume the build machine's CPU); [`super::Kernel`] forces one,
@@ -441,6 +441,11 @@ trait Isa<T: Copy> {
     const OVERREAD: usize;
     /// The instance's variant without over-reads (`Self` where `OVERREAD` is 0).
     type Exact: Isa<T>;
+    /// The instance the last stage runs rows of at most its `LANES` lanes on, when that is
+    /// fewer than this instance's: AVX2 under AVX-512 (whose CPUs all have it), so that the
+    /// robots' rows of 4 lanes fill half a vector, not a quarter; `Self` elsewhere. Every
+    /// instance gives the same bits.
+    type Narrow: Isa<T>;
     unsafe fn zero() -> Self::V;
     unsafe fn neg_inf() -> Self::V;
     unsafe fn splat(x: T) -> Self::V;
@@ -552,6 +557,7 @@ macro_rules! scalar_isa {
             const MERGED: usize = 2;
             const OVERREAD: usize = 0;
             type Exact = Self;
+            type Narrow = Self;
             #[inline(always)]
             unsafe fn zero() -> $t {
                 0.0
@@ -914,7 +920,9 @@ fn diff_range_lanes<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (
 
 #[cfg(target_arch = "x86_64")]
 fn has_avx512() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("fma")
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("fma")
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -931,7 +939,7 @@ instance!(
     "avx512",
     f32,
     x86::Avx512,
-    ["avx512f,fma"],
+    ["avx512f,avx512vl,fma"],
     has_avx512()
 );
 #[cfg(target_arch = "x86_64")]
@@ -940,7 +948,7 @@ instance!(
     "avx512",
     f64,
     x86::Avx512,
-    ["avx512f,fma"],
+    ["avx512f,avx512vl,fma"],
     has_avx512()
 );
 #[cfg(target_arch = "x86_64")]

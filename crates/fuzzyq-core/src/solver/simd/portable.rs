@@ -45,6 +45,7 @@ macro_rules! portable_isa {
             const MERGED: usize = 2;
             const OVERREAD: usize = if PADDED { $n } else { 0 };
             type Exact = Portable<false>;
+            type Narrow = Self;
             #[inline(always)]
             unsafe fn zero() -> [$t; $n] {
                 [0.0; $n]

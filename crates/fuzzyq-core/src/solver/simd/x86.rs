@@ -1,11 +1,12 @@
-//! The x86-64 instances of [`Isa`]: AVX-512F and AVX2 + FMA, in `f32` and `f64`.
+//! The x86-64 instances of [`Isa`]: AVX-512F (with VL, for the narrow rows it runs in AVX2) and
+//! AVX2 + FMA, in `f32` and `f64`.
 #![allow(unsafe_code)] // SIMD intrinsics: unaligned loads and stores through raw pointers.
 
 use core::arch::x86_64::*;
 
 use super::Isa;
 
-/// AVX-512F instance.
+/// AVX-512F instance (compiled with AVX-512VL too).
 pub(super) struct Avx512;
 /// AVX2 + FMA instance.
 pub(super) struct Avx2;
@@ -18,6 +19,7 @@ impl Isa<f32> for Avx512 {
     const MERGED: usize = 4;
     const OVERREAD: usize = 0;
     type Exact = Self;
+    type Narrow = Avx2;
     #[inline(always)]
     unsafe fn zero() -> __m512 {
         unsafe { _mm512_setzero_ps() }
@@ -92,6 +94,7 @@ impl Isa<f64> for Avx512 {
     const MERGED: usize = 4;
     const OVERREAD: usize = 0;
     type Exact = Self;
+    type Narrow = Avx2;
     #[inline(always)]
     unsafe fn zero() -> __m512d {
         unsafe { _mm512_setzero_pd() }
@@ -170,6 +173,7 @@ impl Isa<f32> for Avx2 {
     const MERGED: usize = 2;
     const OVERREAD: usize = 0;
     type Exact = Self;
+    type Narrow = Self;
     #[inline(always)]
     unsafe fn zero() -> __m256 {
         unsafe { _mm256_setzero_ps() }
@@ -278,6 +282,7 @@ impl Isa<f64> for Avx2 {
     const MERGED: usize = 2;
     const OVERREAD: usize = 0;
     type Exact = Self;
+    type Narrow = Self;
     #[inline(always)]
     unsafe fn zero() -> __m256d {
         unsafe { _mm256_setzero_pd() }
