@@ -541,7 +541,8 @@ fn extrapolation_stops_within_the_same_bound_in_fewer_sweeps() {
 }
 
 /// A policy-evaluation sweep under the greedy actions of `V` is the full backup of `V`, bit for
-/// bit, on every kernel instance: two and three agents (4 and 6 blocks, so the stage before
+/// bit, on every kernel instance: one agent (2 blocks: the first stage action-major, the last
+/// stage reading it transposed), two and three agents (4 and 6 blocks, so the stage before
 /// the last two runs action-major from a middle stage), `V` from 30 sweeps. Operators that
 /// cannot evaluate say so, and bad policies are refused.
 #[test]
@@ -552,7 +553,17 @@ fn evaluating_the_greedy_policy_gives_the_full_backup() {
         ..PointMassConfig::default()
     })
     .unwrap();
+    let one = PointMass::new(PointMassConfig {
+        agents: 1,
+        ..PointMassConfig::default()
+    })
+    .unwrap();
+    let pos = [-6.0, -4.0, -2.0, -0.5, 0.0, 0.5, 2.0, 4.0, 6.0];
     let problems = [
+        (
+            one,
+            fuzzyq_tests::grid::<f32>(1, &pos, &[-3.0, -1.0, 0.0, 1.0, 3.0]),
+        ),
         (medium_two_agent::<f32>().0, medium_two_agent::<f32>().1),
         (
             three,

@@ -38,7 +38,8 @@ use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
 use super::simd::{
-    INPUT_PAD, InRows, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides, last_scratch_len,
+    EvalIn, INPUT_PAD, InRows, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides,
+    last_scratch_len,
 };
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
@@ -840,7 +841,7 @@ impl<T: Real> BlockOperator<T> {
                 Out::Arg(m, a)
             }
             Last::Eval => {
-                (self.kernels.eval)(rows, first, na, shape, input, &policy[..n], m);
+                (self.kernels.eval)(rows, first, na, shape.into(), input, &policy[..n], m);
                 Out::Max(m)
             }
             Last::Rows => unreachable!("rows are not fused"),
@@ -926,6 +927,24 @@ impl<T: Real> BlockOperator<T> {
                 let local1 = local * next.n_cores + c1;
                 self.eval_pairs(level + 1, out1, (na1 * na, 1), extra, local1, policy, emit);
             }
+            return;
+        }
+        if last == Last::Eval && level + 2 == nb && self.p_len[level] == 1 {
+            // Two blocks: the first stage action by action along whole rows (`[a][r]`, as its
+            // pieces compute it) and the last stage reading each core's action from that
+            // layout (no interleave). The same sums in the same order, so the same bits.
+            let t = &self.tables[level];
+            let (na, r) = (t.n_actions, self.r_len[level]);
+            let rows = self.rows(rows0, level);
+            let staged = &mut out[..na * r];
+            self.kernels.stage(rows, c * na, na, 1, r, input, staged);
+            let next = &self.tables[level + 1];
+            let n = next.n_cores;
+            let m = &mut extra.maxima[..n];
+            let shape = EvalIn::transposed(na, r);
+            let rows = self.rows(rows0, level + 1);
+            (self.kernels.eval)(rows, 0, next.n_actions, shape, staged, pol(local * n, n), m);
+            emit(local * n, Out::Max(m));
             return;
         }
         if let Some(shape) = self

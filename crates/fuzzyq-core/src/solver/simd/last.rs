@@ -560,17 +560,29 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
     rows: Rows<'_, T>,
     first_core: usize,
     na: usize,
-    shape: InRows,
+    shape: EvalIn,
     input: &[T],
     policy: &[u32],
     out: &mut [T],
 ) {
     assert_eq!(policy.len(), out.len(), "one action per core");
-    check_last(&rows, first_core, na, shape, input, out);
-    let InRows { p_len, stride } = shape;
+    assert!(
+        (first_core + out.len()) * na <= rows.n_rows(),
+        "last-stage rows out of range"
+    );
+    assert!(shape.p_len > 0, "empty rows");
+    assert!(
+        shape.extent(rows.n_cols) <= input.len(),
+        "evaluation input too short"
+    );
+    let EvalIn {
+        p_len,
+        stride,
+        lane,
+    } = shape;
     #[inline(always)]
     unsafe fn each<T: Real, I: Isa<T>>(
-        (rows, first_core, na, stride): (Rows<'_, T>, usize, usize, usize),
+        (rows, first_core, na, stride, lane): (Rows<'_, T>, usize, usize, usize, usize),
         input: &[T],
         policy: &[u32],
         out: &mut [T],
@@ -585,11 +597,12 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
             );
             let (a, p) = split(u);
             let (cols, ws) = rows.row((first_core + i) * na + a);
-            // SAFETY: `check_last` bounds every column's row of `p_len` values in `input`.
-            *o = unsafe { row_dot_strided::<T, I>(cols, ws, input.as_ptr().add(p), stride) };
+            // SAFETY: the extent check above bounds lane `p < p_len` of every column's row.
+            let x = unsafe { input.as_ptr().add(p * lane) };
+            *o = unsafe { row_dot_strided::<T, I>(cols, ws, x, stride) };
         }
     }
-    let args = (rows, first_core, na, stride);
+    let args = (rows, first_core, na, stride, lane);
     // A power of two (the robots' 4 prior actions) splits the action by a shift and a mask,
     // not a division on every core's chain of dependent loads.
     unsafe {

@@ -209,6 +209,52 @@ impl InRows {
     }
 }
 
+/// The evaluation kernel's input ([`EvalFn`]): lane `p` of successor core `k`'s row at
+/// `in[k S + p L]`. [`InRows`] is the case `L = 1`; `S = 1, L = R` reads the stage before
+/// computed action by action along whole rows (`[p][k]`, `R` successor cores).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EvalIn {
+    /// Lanes per row.
+    pub p_len: usize,
+    /// Elements from one successor core to the next (`S`).
+    pub stride: usize,
+    /// Elements from one lane to the next (`L`).
+    pub lane: usize,
+}
+
+impl EvalIn {
+    /// The layout `[p][k]` of `p_len` rows of `n_k` successor cores each.
+    pub const fn transposed(p_len: usize, n_k: usize) -> Self {
+        Self {
+            p_len,
+            stride: 1,
+            lane: n_k,
+        }
+    }
+
+    /// The last element the rows over `n_k` successor cores read, plus one (0 for none).
+    fn extent(self, n_k: usize) -> usize {
+        if n_k == 0 || self.p_len == 0 {
+            return 0;
+        }
+        (n_k - 1)
+            .checked_mul(self.stride)
+            .and_then(|x| x.checked_add((self.p_len - 1).checked_mul(self.lane)?))
+            .and_then(|x| x.checked_add(1))
+            .expect("evaluation input extent overflows")
+    }
+}
+
+impl From<InRows> for EvalIn {
+    fn from(r: InRows) -> Self {
+        Self {
+            p_len: r.p_len,
+            stride: r.stride,
+            lane: 1,
+        }
+    }
+}
+
 /// The fused last stage: `out[i] = max_{a,p} (|.| if `abs`) sum_e w_e in[k_e S + p]` over the
 /// rows `(first_core + i) A + a`; with `args` (and not `abs`), also each core's lowest
 /// `a P + p` whose expected value equals its maximum (the greedy product action).
@@ -242,15 +288,16 @@ pub(super) const INPUT_PAD: usize = 16;
 /// one vector to find the maximiser in one pass (stack arrays).
 const PRUNE_MAX_ACTIONS: usize = 64;
 
-/// The last stage for one given action per core: `out[i] = sum_e w_e in[k_e S + p]` over the
-/// row `(first_core + i) A + a`, where `policy[i] = a P + p` is the core's product action.
+/// The last stage for one given action per core: `out[i] = sum_e w_e in[k_e S + p L]` over the
+/// row `(first_core + i) A + a`, where `policy[i] = a P + p` is the core's product action
+/// ([`EvalIn`]: `L = 1` for the fused last stage's layout).
 /// Entries are summed in the row's order with fused multiply-adds from 0, as [`LastFn`] does,
 /// so for the greedy action the value is bit-identical to the core's maximum.
 pub type EvalFn<T> = fn(
     rows: Rows<'_, T>,
     first_core: usize,
     n_actions: usize,
-    shape: InRows,
+    shape: EvalIn,
     input: &[T],
     policy: &[u32],
     out: &mut [T],
@@ -721,7 +768,7 @@ macro_rules! instance {
                 rows: Rows<'_, $t>,
                 first_core: usize,
                 na: usize,
-                shape: InRows,
+                shape: EvalIn,
                 input: &[$t],
                 policy: &[u32],
                 out: &mut [$t],
@@ -731,7 +778,7 @@ macro_rules! instance {
                     rows: Rows<'_, $t>,
                     first_core: usize,
                     na: usize,
-                    shape: InRows,
+                    shape: EvalIn,
                     input: &[$t],
                     policy: &[u32],
                     out: &mut [$t],

@@ -177,10 +177,20 @@ proptest! {
                     prop_assert_eq!(&ar, &args, "actions on padded rows, {} kernels", k.name);
                     // Evaluating the greedy actions gives the maxima, bit for bit.
                     let mut ev = vec![0.0f32; n_c];
-                    (k.eval)(rows.view(), 0, na, dense, last_in, &args, &mut ev);
+                    (k.eval)(rows.view(), 0, na, dense.into(), last_in, &args, &mut ev);
                     prop_assert_eq!(&ev, &m, "evaluation of the greedy actions, {} kernels", k.name);
-                    (k.eval)(rows.view(), 0, na, padded_rows, &spread, &args, &mut ev);
+                    (k.eval)(rows.view(), 0, na, padded_rows.into(), &spread, &args, &mut ev);
                     prop_assert_eq!(&ev, &m, "evaluation on padded rows, {} kernels", k.name);
+                    // The same rows transposed (`[p][k]`, the two-block evaluation's layout).
+                    let mut tr = vec![f32::NAN; p_len * n_k];
+                    for (kc, row) in last_in.chunks_exact(p_len).enumerate().take(n_k) {
+                        for (p, &x) in row.iter().enumerate() {
+                            tr[p * n_k + kc] = x;
+                        }
+                    }
+                    let shape = EvalIn::transposed(p_len, n_k);
+                    (k.eval)(rows.view(), 0, na, shape, &tr, &args, &mut ev);
+                    prop_assert_eq!(&ev, &m, "evaluation on transposed rows, {} kernels", k.name);
                 }
                 // Pruned maxima equal the maxima of the full stage output.
                 for c in 0..n_c {
