@@ -875,8 +875,8 @@ pub(in crate::solver) fn diff_range_by<T: Real, U>(
 /// [`diff_range_lanes`] in AVX2 intrinsics: element `i` in lane `i % 8` of two vectors of
 /// four, each lane's bound updated by `vminpd(d, lo)` (`d < lo ? d : lo`, the lanes'
 /// comparison exactly, NaN and signed zeros included), the tail and the final fold as there.
-/// Left to the compiler, the eight lanes' comparisons came out as mask shuffles: about a
-/// cycle per element, a tenth of a Khepera run.
+/// Left to the compiler, the eight lanes' comparisons came out as mask shuffles: 3-4 cycles
+/// per element, a tenth of a Khepera run.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn diff_range_avx2<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (f64, f64) {
