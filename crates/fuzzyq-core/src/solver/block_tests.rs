@@ -406,7 +406,12 @@ fn states<T: Real>(cores: &[Vec<T>], n: usize, seed: u64) -> Vec<Vec<T>> {
         .collect()
 }
 
-fn check<T: Real>(m: &Masses<T>, absorbing: bool, seed: u64) {
+/// Runs `f` on `m`'s grid and its block-path operator (`gamma = 0.9`).
+fn on_block_path<T: Real, R>(
+    m: &Masses<T>,
+    absorbing: bool,
+    f: impl FnOnce(ProductPartition<'_, T>, &Operator<'_, T, Masses<T>>) -> R,
+) -> R {
     let cores = m.grid();
     let views: Vec<&[T]> = cores.iter().map(Vec::as_slice).collect();
     let grid = ProductPartition::try_new(&views).unwrap();
@@ -415,35 +420,42 @@ fn check<T: Real>(m: &Masses<T>, absorbing: bool, seed: u64) {
         absorbing_goal: absorbing,
     };
     let op = Operator::new(m, grid, backup, BackupPath::Block).unwrap();
-    let Path::Block(blk) = &op.path else {
-        panic!("the block path")
-    };
-    let mj = op.joint().n_joint();
-    let v: Vec<T> = draws(grid.n_cores(), seed, -20.0, 100.0)
-        .into_iter()
-        .map(T::from_f64)
-        .collect();
-    let (mut fast, mut slow) = (vec![T::ZERO; mj], vec![T::ZERO; mj]);
-    for x in states(&cores, 150, seed ^ 0x5DEE_CE66) {
-        op.q_values(&v, &x, &mut fast).unwrap();
-        reference(blk, &op, &v, &x, &mut slow).unwrap();
-        for (u, (a, b)) in fast.iter().zip(&slow).enumerate() {
-            assert_eq!(
-                a.to_f64().to_bits(),
-                b.to_f64().to_bits(),
-                "{} agents, absorbing {absorbing}, action {u} at {x:?}: {a} vs {b}",
-                m.agents
-            );
+    f(grid, &op)
+}
+
+fn check<T: Real>(m: &Masses<T>, absorbing: bool, seed: u64) {
+    on_block_path(m, absorbing, |grid, op| {
+        let cores = m.grid();
+        let Path::Block(blk) = &op.path else {
+            panic!("the block path")
+        };
+        let mj = op.joint().n_joint();
+        let v: Vec<T> = draws(grid.n_cores(), seed, -20.0, 100.0)
+            .into_iter()
+            .map(T::from_f64)
+            .collect();
+        let (mut fast, mut slow) = (vec![T::ZERO; mj], vec![T::ZERO; mj]);
+        for x in states(&cores, 150, seed ^ 0x5DEE_CE66) {
+            op.q_values(&v, &x, &mut fast).unwrap();
+            reference(blk, op, &v, &x, &mut slow).unwrap();
+            for (u, (a, b)) in fast.iter().zip(&slow).enumerate() {
+                assert_eq!(
+                    a.to_f64().to_bits(),
+                    b.to_f64().to_bits(),
+                    "{} agents, absorbing {absorbing}, action {u} at {x:?}: {a} vs {b}",
+                    m.agents
+                );
+            }
         }
-    }
-    assert!(
-        op.q_values(
-            &v,
-            &cores.iter().map(|_| T::ZERO).collect::<Vec<_>>()[1..],
-            &mut fast
-        )
-        .is_err()
-    );
+        assert!(
+            op.q_values(
+                &v,
+                &cores.iter().map(|_| T::ZERO).collect::<Vec<_>>()[1..],
+                &mut fast
+            )
+            .is_err()
+        );
+    });
 }
 
 /// The buffered `q_values` (gathered and contracted a row at a time, on the detected kernel)
@@ -479,27 +491,21 @@ fn full_backups_in_first_stage_pieces_match_the_q_rows() {
     for agents in [1, 2] {
         for reversed in [false, true] {
             let m = Masses::<f64>::new(agents, reversed);
-            let cores = m.grid();
-            let views: Vec<&[f64]> = cores.iter().map(Vec::as_slice).collect();
-            let grid = ProductPartition::try_new(&views).unwrap();
-            let backup = Backup {
-                gamma: 0.9,
-                absorbing_goal: false,
-            };
-            let op = Operator::new(&m, grid, backup, BackupPath::Block).unwrap();
-            let v = draws(grid.n_cores(), 29 + agents as u64, -20.0, 100.0);
-            let t = op.apply(&v).unwrap();
-            let mut q = vec![0.0; op.joint().n_joint()];
-            let mut x = vec![0.0; grid.n_dims()];
-            for (i, &ti) in t.iter().enumerate() {
-                grid.core_state(i, &mut x).unwrap();
-                op.q_values(&v, &x, &mut q).unwrap();
-                let best = q.iter().fold(f64::NEG_INFINITY, |m, &y| m.max(y));
-                assert!(
-                    (ti - best).abs() <= 1e-9 * (1.0 + best.abs()),
-                    "{agents} agents, reversed {reversed}, core {i}: {ti} vs {best}"
-                );
-            }
+            on_block_path(&m, false, |grid, op| {
+                let v = draws(grid.n_cores(), 29 + agents as u64, -20.0, 100.0);
+                let t = op.apply(&v).unwrap();
+                let mut q = vec![0.0; op.joint().n_joint()];
+                let mut x = vec![0.0; grid.n_dims()];
+                for (i, &ti) in t.iter().enumerate() {
+                    grid.core_state(i, &mut x).unwrap();
+                    op.q_values(&v, &x, &mut q).unwrap();
+                    let best = q.iter().fold(f64::NEG_INFINITY, |m, &y| m.max(y));
+                    assert!(
+                        (ti - best).abs() <= 1e-9 * (1.0 + best.abs()),
+                        "{agents} agents, reversed {reversed}, core {i}: {ti} vs {best}"
+                    );
+                }
+            });
         }
     }
 }
@@ -531,35 +537,29 @@ fn interleave_writes_every_value_once_in_place() {
 fn core_states_and_reorders_match_the_per_core_maps() {
     for reversed in [false, true] {
         let m = Masses::<f64>::new(2, reversed);
-        let cores = m.grid();
-        let views: Vec<&[f64]> = cores.iter().map(Vec::as_slice).collect();
-        let grid = ProductPartition::try_new(&views).unwrap();
-        let backup = Backup {
-            gamma: 0.9,
-            absorbing_goal: false,
-        };
-        let op = Operator::new(&m, grid, backup, BackupPath::Block).unwrap();
-        let Path::Block(blk) = &op.path else {
-            panic!("the block path")
-        };
-        let n = op.n_cores();
-        let coords = op.block_coords();
-        let mut want = vec![0.0; grid.n_dims()];
-        for start in [0, 1, 14, 15, 224, n / 3, n - 1] {
-            let mut x = vec![f64::NAN; grid.n_dims()];
-            let mut next = start;
-            op.for_each_core_state(&coords, start..n.min(start + 700), &mut x, |i, x| {
-                assert_eq!(i, next);
-                next += 1;
-                op.core_state(i, &mut want);
-                assert_eq!(x, &want[..], "core {i} from {start}, reversed {reversed}");
-            });
-        }
-        let v: Vec<u32> = (0..n as u32).collect();
-        let g = blk.reorder(&v, true);
-        for (i, &x) in v.iter().enumerate() {
-            assert_eq!(g[blk.to_grid_index(i)], x, "to grid, core {i}");
-        }
-        assert_eq!(blk.reorder(&g, false), v, "back to internal order");
+        on_block_path(&m, false, |grid, op| {
+            let Path::Block(blk) = &op.path else {
+                panic!("the block path")
+            };
+            let n = op.n_cores();
+            let coords = op.block_coords();
+            let mut want = vec![0.0; grid.n_dims()];
+            for start in [0, 1, 14, 15, 224, n / 3, n - 1] {
+                let mut x = vec![f64::NAN; grid.n_dims()];
+                let mut next = start;
+                op.for_each_core_state(&coords, start..n.min(start + 700), &mut x, |i, x| {
+                    assert_eq!(i, next);
+                    next += 1;
+                    op.core_state(i, &mut want);
+                    assert_eq!(x, &want[..], "core {i} from {start}, reversed {reversed}");
+                });
+            }
+            let v: Vec<u32> = (0..n as u32).collect();
+            let g = blk.reorder(&v, true);
+            for (i, &x) in v.iter().enumerate() {
+                assert_eq!(g[blk.to_grid_index(i)], x, "to grid, core {i}");
+            }
+            assert_eq!(blk.reorder(&g, false), v, "back to internal order");
+        });
     }
 }
