@@ -982,9 +982,13 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
                           mut out: Option<&mut [T]>| {
             let (mut rmax, mut finite) = (0.0f64, true);
             let first = range.start;
+            // A state-only reward sees joint action 0, set once.
+            this.joint.vector_unchecked(0, u);
             this.for_each_core_state(&coords, range, x, |i, x| {
                 for j in 0..m {
-                    this.joint.vector_unchecked(j, u);
+                    if depends {
+                        this.joint.vector_unchecked(j, u);
+                    }
                     let r = this.model.reward(x, u);
                     finite &= r.is_finite();
                     if j == 0

@@ -87,8 +87,7 @@ impl Checkpoint<'_> {
     #[must_use]
     pub fn to_bytes(&self) -> Vec<u8> {
         // Postcard cannot fail on these types (no maps, no unsized sequences).
-        let payload = postcard::to_stdvec(self).unwrap_or_default();
-        container::encode(&MAGIC, FORMAT_VERSION, &payload)
+        container::encode_postcard(&MAGIC, FORMAT_VERSION, self).unwrap_or_default()
     }
 
     /// Writes the checkpoint atomically (a temporary file beside `path`, then a rename).

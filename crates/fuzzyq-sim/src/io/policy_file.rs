@@ -698,9 +698,8 @@ impl PolicyFile {
                 }))
             }
         };
-        let payload = postcard::to_stdvec(&payload).expect("a policy always serialises");
-        let out = super::container::encode(&MAGIC, version, &payload);
-        Ok(out)
+        Ok(super::container::encode_postcard(&MAGIC, version, &payload)
+            .expect("a policy always serialises"))
     }
 
     /// Writes the policy file atomically (a temporary file in the same directory, then a

@@ -39,7 +39,7 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, non_negative, positive, require};
-use crate::model::arena::Arena;
+use crate::model::arena::{Arena, norm_clearly_below};
 use crate::model::{ActionTable, BlockSpec, F64Model};
 
 /// Optional sensor and actuator noise (the paper's future work: stochastic dynamics).
@@ -345,7 +345,8 @@ pub fn goal_polar(pose: [f64; 3], goal: [f64; 2]) -> (f64, f64) {
 /// Whether two robots of radius `r` at the given positions overlap.
 #[must_use]
 pub fn robots_overlap(a: [f64; 2], b: [f64; 2], r: f64) -> bool {
-    (a[0] - b[0]).hypot(a[1] - b[1]) < 2.0 * r
+    let d = [a[0] - b[0], a[1] - b[1]];
+    norm_clearly_below(d[0], d[1], 2.0 * r).unwrap_or_else(|| d[0].hypot(d[1]) < 2.0 * r)
 }
 
 /// The Khepera model for fuzzy Q-iteration: exact kinematics of every robot in the arena

@@ -604,11 +604,18 @@ pub(super) unsafe fn eval_impl<T: Real, I: Isa<T>>(
     }
     let args = (rows, first_core, na, stride, lane);
     // A power of two (the robots' 4 prior actions) splits the action by a shift and a mask,
-    // not a division on every core's chain of dependent loads.
+    // not a division on every core's chain of dependent loads; a unit stride (the robots'
+    // action-major input) takes no multiply per entry either.
     unsafe {
         if p_len.is_power_of_two() {
             let (shift, mask) = (p_len.trailing_zeros(), p_len - 1);
-            each::<T, I>(args, input, policy, out, p_len, |u| (u >> shift, u & mask));
+            let split = |u| (u >> shift, u & mask);
+            if stride == 1 {
+                let args = (rows, first_core, na, 1, lane);
+                each::<T, I>(args, input, policy, out, p_len, split);
+            } else {
+                each::<T, I>(args, input, policy, out, p_len, split);
+            }
         } else {
             each::<T, I>(args, input, policy, out, p_len, |u| (u / p_len, u % p_len));
         }
