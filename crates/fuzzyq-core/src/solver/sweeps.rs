@@ -259,9 +259,16 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Sweeps<T> for Local<'_, '_, T, M> {
     fn rewards(&mut self, out: Buf) -> Result<(), SolveError> {
         let op = self.op;
         self.range = None;
-        for (i, o) in self.buf(out).iter_mut().enumerate() {
-            *o = op.finish_max(i, T::ZERO);
-        }
+        par::for_each_chunk_mut(
+            self.buf(out),
+            PASS_CHUNK,
+            || (),
+            |_, i, c| {
+                for (k, o) in c.iter_mut().enumerate() {
+                    *o = op.finish_max(i * PASS_CHUNK + k, T::ZERO);
+                }
+            },
+        );
         Ok(())
     }
 
