@@ -1203,6 +1203,38 @@ impl<T: Real> BlockOperator<T> {
         )
     }
 
+    /// A full backup of `v` into `values` with every core's greedy joint action in `actions`,
+    /// and the range of `values - v`: [`Self::each_core_range`] with [`Reduce::Argmax`],
+    /// each slab's (value, action) pairs kept in a slab-sized scratch and split into the two
+    /// outputs while still in cache, instead of a buffer of pairs over every core.
+    pub(super) fn each_core_greedy<M: Model<T> + Sync + ?Sized>(
+        &self,
+        op: &Operator<'_, T, M>,
+        v: &[T],
+        values: &mut [T],
+        actions: &mut [u32],
+    ) -> (f64, f64) {
+        let slab = self.slab_len();
+        par::map_reduce_chunks_mut2(
+            (values, actions),
+            slab,
+            || (self.work(op), Vec::new()),
+            |(w, pairs), c0, vs, us| {
+                pairs.clear();
+                pairs.resize(vs.len(), (T::ZERO, 0));
+                let rows0 = self.tables[0].rows.view();
+                self.slab_into(op, rows0, v, Reduce::Argmax, None, c0, w, pairs, &|r| r);
+                for ((x, u), &(px, pu)) in vs.iter_mut().zip(us.iter_mut()).zip(pairs.iter()) {
+                    (*x, *u) = (px, pu);
+                }
+                let first = c0 * slab;
+                super::sweeps::diff_range_by(vs, &v[first..first + vs.len()], &|&x: &T| x)
+            },
+            (f64::INFINITY, f64::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        )
+    }
+
     /// Reduces every core of slab `c0` against `v` into `chunk` (one entry per slab core).
     /// With `policy` (the slab's actions), evaluates them instead ([`Last::Eval`]).
     #[allow(clippy::too_many_arguments)] // the reduction's context, spelled out

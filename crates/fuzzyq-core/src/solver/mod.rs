@@ -1251,6 +1251,28 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         }
     }
 
+    /// A full backup of `v` into `values` with every core's greedy joint action in `actions`
+    /// (internal order), and the range of `values - v` where the block path takes it (`None`
+    /// on the generic path, which reduces into `pairs` and splits them).
+    fn each_core_greedy(
+        &self,
+        v: &[T],
+        (values, actions): (&mut [T], &mut [u32]),
+        pairs: &mut Vec<(T, u32)>,
+    ) -> Result<Option<(f64, f64)>, SolveError> {
+        match &self.path {
+            Path::Block(b) => Ok(Some(b.each_core_greedy(self, v, values, actions))),
+            Path::Generic(g) => {
+                pairs.resize(v.len(), (T::ZERO, 0));
+                g.each_core(self, v, pairs, Reduce::Argmax, |r| r)?;
+                for ((x, u), &(px, pu)) in values.iter_mut().zip(actions.iter_mut()).zip(&*pairs) {
+                    (*x, *u) = (px, pu);
+                }
+                Ok(None)
+            }
+        }
+    }
+
     /// One asynchronous sweep in place; returns `||V_new - V_old||_inf`.
     fn sweep_async(&self, v: &mut [T]) -> Result<f64, SolveError> {
         match &self.path {

@@ -60,6 +60,43 @@ where
     }
 }
 
+/// [`map_reduce_chunks_mut`] over two slices of equal length at once: `f(state, chunk_index,
+/// a_chunk, b_chunk)`.
+pub(super) fn map_reduce_chunks_mut2<A, B, S, R, I, F, G>(
+    (a, b): (&mut [A], &mut [B]),
+    chunk: usize,
+    init: I,
+    f: F,
+    identity: R,
+    reduce: G,
+) -> R
+where
+    A: Send,
+    B: Send,
+    R: Copy + Send + Sync,
+    I: Fn() -> S + Sync + Send,
+    F: Fn(&mut S, usize, &mut [A], &mut [B]) -> R + Sync + Send,
+    G: Fn(R, R) -> R + Sync + Send,
+{
+    assert_eq!(a.len(), b.len(), "slices of equal length");
+    #[cfg(feature = "parallel")]
+    {
+        a.par_chunks_mut(chunk)
+            .zip(b.par_chunks_mut(chunk))
+            .enumerate()
+            .map_init(init, |s, (i, (x, y))| f(s, i, x, y))
+            .reduce(|| identity, &reduce)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        let mut s = init();
+        a.chunks_mut(chunk)
+            .zip(b.chunks_mut(chunk))
+            .enumerate()
+            .fold(identity, |r, (i, (x, y))| reduce(r, f(&mut s, i, x, y)))
+    }
+}
+
 /// `(0..n).map(f)` collected in order; `min_len` items at least per task.
 pub(super) fn map_indexed<R, S, I, F>(n: usize, min_len: usize, init: I, f: F) -> Vec<R>
 where

@@ -158,6 +158,7 @@ pub struct Local<'o, 'a, T: Real, M: ?Sized> {
     op: &'o Operator<'a, T, M>,
     bufs: [Vec<T>; 3],
     policy: Vec<u32>,
+    /// The generic path's (value, action) pairs of a greedy backup, kept between sweeps.
     pairs: Vec<(T, u32)>,
     /// `(out, v, range of out - v)` of the last sweep, taken while it ran, for as long as
     /// neither buffer has changed since: [`Sweeps::diff_stats`] of that pair needs no pass.
@@ -225,34 +226,17 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Sweeps<T> for Local<'_, '_, T, M> {
     }
 
     fn backup_greedy(&mut self, v_buf: Buf, out_buf: Buf) -> Result<(), SolveError> {
-        let (op, n) = (self.op, self.op.n_cores());
+        let op = self.op;
         self.range = None;
-        let mut pairs = core::mem::take(&mut self.pairs);
-        pairs.resize(n, (T::ZERO, 0));
-        let v = &self.buf(v_buf)[..];
-        let range = op.each_core_range(v, None, &mut pairs, Reduce::Argmax, |r| r, |p| p.0)?;
-        par::for_each_chunk_mut(
-            self.buf(out_buf),
-            PASS_CHUNK,
-            || (),
-            |_, i, c| {
-                for (o, &(x, _)) in c.iter_mut().zip(&pairs[i * PASS_CHUNK..]) {
-                    *o = x;
-                }
-            },
+        self.policy_buf();
+        let (mut policy, mut pairs) = (
+            core::mem::take(&mut self.policy),
+            core::mem::take(&mut self.pairs),
         );
-        par::for_each_chunk_mut(
-            self.policy_buf(),
-            PASS_CHUNK,
-            || (),
-            |_, i, c| {
-                for (p, &(_, u)) in c.iter_mut().zip(&pairs[i * PASS_CHUNK..]) {
-                    *p = u;
-                }
-            },
-        );
-        self.pairs = pairs;
-        self.range = range.map(|r| (out_buf, v_buf, r));
+        let (v, out) = self.pair(v_buf, out_buf);
+        let range = op.each_core_greedy(v, (out, &mut policy), &mut pairs);
+        (self.policy, self.pairs) = (policy, pairs);
+        self.range = range?.map(|r| (out_buf, v_buf, r));
         Ok(())
     }
 
