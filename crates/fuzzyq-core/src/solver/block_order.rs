@@ -43,7 +43,9 @@ impl<T: Real> BlockOperator<T> {
     /// contracted block is the grid's *fastest* variables, so the conversion is a transpose
     /// (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
     /// each stay within a few cache lines, instead of one strided write per core. The
-    /// gather (to internal order) runs on every thread, a band of first-block cores each.
+    /// gather (to internal order) runs on every thread, a band of first-block cores each; so
+    /// does the scatter (to grid order) where each grid row holds one `j` (the usual layout),
+    /// a band of rows each.
     pub(in crate::solver) fn reorder<U: Copy + Default + Send + Sync>(
         &self,
         v: &[U],
@@ -58,7 +60,29 @@ impl<T: Real> BlockOperator<T> {
         odometer(rest, |_, g| g_rest.push(g));
         let mut out = vec![U::default(); v.len()];
         let tiles = |n: usize| (0..n).step_by(TILE).map(move |t| t..n.min(t + TILE));
-        if to_grid {
+        let n0 = first.n_cores;
+        // The usual layout (the robots', the point masses'): the first block's offsets lie
+        // in `0..n0` and the rest's are `j * n0`, so grid row `j` is `out[j n0..(j + 1) n0]`
+        // and bands of rows fill on every thread.
+        let rows_apart =
+            g0.iter().all(|&g| g < n0) && g_rest.iter().enumerate().all(|(j, &g)| g == j * n0);
+        if to_grid && rows_apart && n0 > 0 {
+            super::par::for_each_chunk_mut(
+                &mut out,
+                TILE * n0,
+                || (),
+                |_, t, band| {
+                    let js = t * TILE..t * TILE + band.len() / n0;
+                    for c0s in tiles(n0) {
+                        for (j, row) in js.clone().zip(band.chunks_mut(n0)) {
+                            for c0 in c0s.clone() {
+                                row[g0[c0]] = v[c0 * slab_len + j];
+                            }
+                        }
+                    }
+                },
+            );
+        } else if to_grid {
             for band in tiles(first.n_cores) {
                 for js in tiles(slab_len) {
                     for c0 in band.clone() {
