@@ -5,8 +5,8 @@ use fuzzyq_core::NamedOption;
 use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{
-    BackupPath, Grid, Kernel, Operator, Solution, SolveError, SolverConfig, SolverState, Stop,
-    SweepMode, solve, solve_from,
+    BackupPath, Buf, Grid, Kernel, Local, Operator, Solution, SolveError, SolverConfig,
+    SolverState, Stop, SweepMode, Sweeps, solve, solve_from,
 };
 use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
 use fuzzyq_sim::model::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
@@ -119,6 +119,40 @@ fn block_and_generic_backups_agree_on_two_agents() {
         }
     }
     assert!(differ < g.n_cores() / 100, "{differ} cores differ");
+}
+
+/// The in-process backend's greedy backup (values and actions in one pass) gives the plain
+/// backup's values and the greedy pass's actions, bit for bit, on both paths.
+#[test]
+fn greedy_backups_give_the_backup_and_the_greedy_actions_on_both_paths() {
+    let (m, g) = small_two_agent::<f64>();
+    let backup = Backup {
+        gamma: 0.96,
+        absorbing_goal: false,
+    };
+    for path in [BackupPath::Block, BackupPath::Generic] {
+        let op = Operator::new(&m, g.view(), backup, path).unwrap();
+        let v = values::<f64>(g.n_cores(), 7, -50.0, 120.0);
+        let mut local = Local::new(&op);
+        local.load(Buf(0), &v).unwrap();
+        local.backup(Buf(0), Buf(2)).unwrap();
+        local.greedy(Buf(0)).unwrap();
+        let greedy = local.policy().unwrap().into_owned();
+        local.load_policy(&vec![0; g.n_cores()]).unwrap();
+        local.backup_greedy(Buf(0), Buf(1)).unwrap();
+        let (got, want) = (local.values(Buf(1)).unwrap(), local.values(Buf(2)).unwrap());
+        let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&got), bits(&want), "{path:?}: values");
+        assert_eq!(
+            local.policy().unwrap().as_ref(),
+            &greedy[..],
+            "{path:?}: actions"
+        );
+        assert!(
+            greedy.iter().any(|&u| u != 0),
+            "{path:?}: a policy of more than action 0"
+        );
+    }
 }
 
 /// With absorbing goals, a goal core's backup is its reward whatever `V` is, and its greedy

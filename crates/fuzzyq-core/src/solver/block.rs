@@ -1224,9 +1224,7 @@ impl<T: Real> BlockOperator<T> {
                 pairs.resize(vs.len(), (T::ZERO, 0));
                 let rows0 = self.tables[0].rows.view();
                 self.slab_into(op, rows0, v, Reduce::Argmax, None, c0, w, pairs, &|r| r);
-                for ((x, u), &(px, pu)) in vs.iter_mut().zip(us.iter_mut()).zip(pairs.iter()) {
-                    (*x, *u) = (px, pu);
-                }
+                super::split_pairs(pairs, vs, us);
                 let first = c0 * slab;
                 super::sweeps::diff_range_by(vs, &v[first..first + vs.len()], &|&x: &T| x)
             },

@@ -750,6 +750,13 @@ enum Path<T: 'static> {
 /// Cores per task of the passes over every core's state (rewards, goals).
 const STATE_CHUNK: usize = 4096;
 
+/// Copies `(value, action)` pairs into `values` and `actions` (as many as the shorter holds).
+fn split_pairs<T: Copy>(pairs: &[(T, u32)], values: &mut [T], actions: &mut [u32]) {
+    for ((x, u), &(px, pu)) in values.iter_mut().zip(actions.iter_mut()).zip(pairs) {
+        (*x, *u) = (px, pu);
+    }
+}
+
 impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     /// Prepares the operator: validates the model against the grid, builds the block tables
     /// (if the path is `Block`, or `Auto` with declared blocks), evaluates per-core rewards.
@@ -1265,9 +1272,16 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             Path::Generic(g) => {
                 pairs.resize(v.len(), (T::ZERO, 0));
                 g.each_core(self, v, pairs, Reduce::Argmax, |r| r)?;
-                for ((x, u), &(px, pu)) in values.iter_mut().zip(actions.iter_mut()).zip(&*pairs) {
-                    (*x, *u) = (px, pu);
-                }
+                let pairs = &pairs[..];
+                let chunk = sweeps::PASS_CHUNK;
+                par::map_reduce_chunks_mut2(
+                    (values, actions),
+                    chunk,
+                    || (),
+                    |_, i, xs, us| split_pairs(&pairs[i * chunk..], xs, us),
+                    (),
+                    |(), ()| (),
+                );
                 Ok(None)
             }
         }

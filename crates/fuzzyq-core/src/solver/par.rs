@@ -44,20 +44,16 @@ where
     F: Fn(&mut S, usize, &mut [U]) -> R + Sync + Send,
     G: Fn(R, R) -> R + Sync + Send,
 {
-    #[cfg(feature = "parallel")]
-    {
-        out.par_chunks_mut(chunk)
-            .enumerate()
-            .map_init(init, |s, (i, c)| f(s, i, c))
-            .reduce(|| identity, &reduce)
-    }
-    #[cfg(not(feature = "parallel"))]
-    {
-        let mut s = init();
-        out.chunks_mut(chunk)
-            .enumerate()
-            .fold(identity, |r, (i, c)| reduce(r, f(&mut s, i, c)))
-    }
+    // Paired with as many `()`, which take no memory.
+    let mut none = vec![(); out.len()];
+    map_reduce_chunks_mut2(
+        (out, &mut none),
+        chunk,
+        init,
+        |s, i, c, _| f(s, i, c),
+        identity,
+        reduce,
+    )
 }
 
 /// [`map_reduce_chunks_mut`] over two slices of equal length at once: `f(state, chunk_index,

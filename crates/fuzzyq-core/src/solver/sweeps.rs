@@ -15,7 +15,7 @@ use crate::model::Model;
 use crate::real::Real;
 
 /// Elements per task of the passes over `V` between sweeps.
-const PASS_CHUNK: usize = 1 << 16;
+pub(super) const PASS_CHUNK: usize = 1 << 16;
 
 /// One of the three value buffers of a [`Sweeps`] backend: `Buf(0)`, `Buf(1)` or `Buf(2)`.
 /// Each holds one value per core in the operator's internal order, and starts at 0.
