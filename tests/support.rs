@@ -7,6 +7,35 @@ use fuzzyq_core::solver::Grid;
 use fuzzyq_core::{Model, ProductPartition, Real};
 use fuzzyq_sim::model::pointmass::{PointMass, PointMassConfig};
 
+/// The block-path operator of `m` over `g` with discount `gamma` and no absorbing goal.
+pub fn block_operator<'a, T: Real, M: Model<T> + Sync>(
+    m: &'a M,
+    g: &'a Grid<T>,
+    gamma: T,
+) -> fuzzyq_core::solver::Operator<'a, T, M> {
+    let backup = fuzzyq_core::Backup {
+        gamma,
+        absorbing_goal: false,
+    };
+    fuzzyq_core::solver::Operator::new(m, g.view(), backup, fuzzyq_core::solver::BackupPath::Block)
+        .expect("a block operator")
+}
+
+/// Asserts that every run of `runs` gives the first one's values, greedy actions and final
+/// change, bit for bit.
+#[track_caller]
+pub fn assert_same_bits<T: Real>(runs: &[fuzzyq_core::solver::Solution<T>]) {
+    for r in &runs[1..] {
+        assert!(
+            r.v.iter()
+                .zip(&runs[0].v)
+                .all(|(a, b)| a.to_f64().to_bits() == b.to_f64().to_bits())
+        );
+        assert_eq!(r.greedy, runs[0].greedy);
+        assert_eq!(r.final_delta.to_bits(), runs[0].final_delta.to_bits());
+    }
+}
+
 /// Asserts `|a - b| <= tol` elementwise, naming the first offending index.
 #[track_caller]
 pub fn assert_close<T: Real>(a: &[T], b: &[T], tol: f64) {

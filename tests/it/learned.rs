@@ -185,3 +185,29 @@ fn further_rounds_refit_on_everything_collected_and_are_reproducible() {
         .to_string();
     assert!(e.contains("rounds"), "{e}");
 }
+
+/// A learned model is known on its own grid only, so it takes no coarse start: the same run as
+/// without one, bit for bit.
+#[test]
+fn learned_models_take_no_coarse_start() {
+    use fuzzyq_core::solver::{Grid, SolverConfig, solve};
+    let (_, model) = learned(0.0);
+    let g: Grid<f64> = grid(2, &POS, &VEL);
+    assert!(g.coarsened().is_some());
+    let c = SolverConfig {
+        xi: 0.5,
+        extrapolate: true,
+        evaluation_sweeps: 5,
+        ..SolverConfig::default()
+    };
+    let go = |coarse_start| {
+        solve(&model, &g, &SolverConfig { coarse_start, ..c }, |_| {
+            std::ops::ControlFlow::Continue(())
+        })
+        .unwrap()
+    };
+    let (with, without) = (go(true), go(false));
+    assert!(with.coarse.is_none());
+    assert_eq!(with.v, without.v);
+    assert_eq!(with.greedy, without.greedy);
+}

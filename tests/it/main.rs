@@ -2,6 +2,7 @@
 
 mod alloc_count;
 mod approxrl;
+mod coarse;
 mod export;
 mod fuzz;
 mod khepera;

@@ -324,4 +324,13 @@ fn sharded_sweeps_give_the_single_process_run_bit_for_bit() {
     );
     let (m, g) = medium_two_agent::<f64>();
     agree(&m, &g, &mpi, 5, 2);
+    // From a coarse start: the coarse run in process, its `V` loaded into the shards.
+    let (m, g) = fuzzyq_tests::small_one_agent::<f32>();
+    assert!(g.coarsened().is_some());
+    let coarse = SolverConfig {
+        coarse_start: true,
+        evaluation_sweeps: 5,
+        ..vi
+    };
+    agree(&m, &g, &coarse, 2, 3);
 }

@@ -1372,7 +1372,7 @@ proptest! {
 /// Stops a run after sweep `k`, keeping its state, continues from that state, and checks
 /// that the result is the uninterrupted run's, bit for bit (values, greedy actions, every
 /// sweep's change).
-fn assert_resumes_bit_identically<T: Real, M: Model<T> + Sync>(
+pub(crate) fn assert_resumes_bit_identically<T: Real, M: Model<T> + Sync>(
     m: &M,
     g: &Grid<T>,
     c: &SolverConfig,

@@ -58,6 +58,7 @@ struct Settings<'a> {
     sweep: &'a str,
     extrapolate: Option<bool>,
     evaluation_sweeps: Option<usize>,
+    coarse_start: bool,
     absorbing_goal: bool,
     precision: Option<&'a str>,
     backup: &'a str,
@@ -96,6 +97,7 @@ impl Settings<'_> {
             } else {
                 0
             }),
+            coarse_start: self.coarse_start,
             kernel: self
                 .kernel
                 .map(|k| parse_option::<Kernel>(py, "kernel", k))
@@ -264,6 +266,8 @@ impl<'a, S> Watch<'a, S> {
 /// `gamma` and `xi`, plain sweeps (`extrapolate=False`, `evaluation_sweeps=0`) in `"f64"`, as
 /// `fuzzyq train --preset` runs it; otherwise `gamma=0.96`, `xi=0.05`, `extrapolate=True`,
 /// `evaluation_sweeps=5` (modified policy iteration where it applies), `"f32"`.
+/// `coarse_start=True` starts modified policy iteration from the solution on the grid with
+/// every other core, interpolated: the same error bound, fewer sweeps on fine grids.
 /// `operator="q-values"` runs Busoniu's fuzzy Q-iteration (theta stored; built-in models).
 /// `callback(info)` is called after every sweep with a dict (`sweep`, `delta_lower`,
 /// `delta_upper`, `extrapolated`, `evaluation`, `seconds`, `bound`, `xi`); an exception it raises stops the
@@ -295,6 +299,7 @@ impl<'a, S> Watch<'a, S> {
     sweep = "sync",
     extrapolate = None,
     evaluation_sweeps = None,
+    coarse_start = false,
     absorbing_goal = false,
     precision = None,
     backup = "auto",
@@ -317,6 +322,7 @@ pub(crate) fn solve(
     #[pyo3(from_py_with = arg)] sweep: &str,
     #[pyo3(from_py_with = arg)] extrapolate: Option<bool>,
     #[pyo3(from_py_with = arg)] evaluation_sweeps: Option<usize>,
+    #[pyo3(from_py_with = arg)] coarse_start: bool,
     #[pyo3(from_py_with = arg)] absorbing_goal: bool,
     #[pyo3(from_py_with = arg)] precision: Option<&str>,
     #[pyo3(from_py_with = arg)] backup: &str,
@@ -335,6 +341,7 @@ pub(crate) fn solve(
         sweep,
         extrapolate,
         evaluation_sweeps,
+        coarse_start,
         absorbing_goal,
         precision,
         backup,

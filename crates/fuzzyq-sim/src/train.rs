@@ -251,6 +251,7 @@ fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(
         sweep_seconds: q.seconds,
         evaluation_seconds: 0.0,
         seconds: start.elapsed().as_secs_f64(),
+        coarse: None,
     })
 }
 

@@ -69,6 +69,14 @@ pub(crate) struct TrainArgs {
     /// (default 5; 0 = value iteration, one full backup per sweep, as in the paper).
     #[arg(long, value_name = "N")]
     evaluation_sweeps: Option<usize>,
+    /// Start modified policy iteration from the solution on the grid with every other core,
+    /// interpolated (same stopping rule and error bound, fewer sweeps on fine grids; the
+    /// robots' default).
+    #[arg(long, overrides_with = "no_coarse_start")]
+    coarse_start: bool,
+    /// Start from V = 0 (the point masses' default).
+    #[arg(long)]
+    no_coarse_start: bool,
     /// Backup implementation.
     #[arg(long, value_parser = output::named::<BackupPath>())]
     backup: Option<BackupPath>,
@@ -185,9 +193,21 @@ struct Summary<'a> {
     peak_memory_mb: Option<f64>,
     deltas: &'a [(f64, f64)],
     extrapolated: &'a [usize],
+    /// The coarse start (`solver.coarse_start`): its grid's cores, its sweeps and the seconds
+    /// of its solve and interpolation (part of `seconds`, not of `sweep_seconds`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    coarse_start: Option<CoarseSummary>,
     /// `--learner learned-model`: the data and the fit.
     #[serde(skip_serializing_if = "Option::is_none")]
     learned_model: Option<LearnedSummary<'a>>,
+}
+
+/// The `--json` part of a coarse start.
+#[derive(Serialize)]
+struct CoarseSummary {
+    cores: usize,
+    sweeps: usize,
+    seconds: f64,
 }
 
 /// The `--json` part of `--learner learned-model`.
@@ -301,6 +321,12 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         s.extrapolate = false;
     }
     s.evaluation_sweeps = args.evaluation_sweeps.unwrap_or(s.evaluation_sweeps);
+    if args.coarse_start {
+        s.coarse_start = true;
+    }
+    if args.no_coarse_start {
+        s.coarse_start = false;
+    }
     config.validate()?;
     Ok(config)
 }
@@ -367,6 +393,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             (args.backup.is_some(), "--backup"),
             (args.extrapolate, "--extrapolate"),
             (args.evaluation_sweeps.is_some(), "--evaluation-sweeps"),
+            (args.coarse_start, "--coarse-start"),
         ] {
             refuse(
                 set,
@@ -649,6 +676,11 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             peak_memory_mb: peak_memory_mb(),
             deltas: &s.deltas,
             extrapolated: &s.extrapolated,
+            coarse_start: s.coarse.as_deref().map(|c| CoarseSummary {
+                cores: c.cores,
+                sweeps: c.sweeps,
+                seconds: c.seconds,
+            }),
             learned_model: learned_run.as_ref().map(|r| LearnedSummary {
                 source: args
                     .transitions
@@ -672,7 +704,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
 }
 
 /// The flags of the fuzzy Q-iteration solver, and whether each was given.
-fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 11] {
+fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 13] {
     [
         (args.xi.is_some(), "--xi"),
         (args.max_sweeps.is_some(), "--max-sweeps"),
@@ -682,6 +714,8 @@ fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 11] {
         (args.extrapolate, "--extrapolate"),
         (args.no_extrapolate, "--no-extrapolate"),
         (args.evaluation_sweeps.is_some(), "--evaluation-sweeps"),
+        (args.coarse_start, "--coarse-start"),
+        (args.no_coarse_start, "--no-coarse-start"),
         (args.backup.is_some(), "--backup"),
         (args.precision.is_some(), "--precision"),
         (args.kernel.is_some(), "--kernel"),

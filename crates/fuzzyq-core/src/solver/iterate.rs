@@ -11,8 +11,8 @@ use std::borrow::Cow;
 
 use super::sweeps::{Buf, Local, Sweeps};
 use super::{
-    Delta, Grid, Operator, Progress, Scheme, Solution, SolveError, SolverConfig, SolverState, Stop,
-    SweepMode, SweepRecord,
+    CoarseStart, Delta, Grid, Operator, Progress, Scheme, Solution, SolveError, SolverConfig,
+    SolverState, Stop, SweepMode, SweepRecord,
 };
 use crate::backup::Backup;
 use crate::model::Model;
@@ -59,7 +59,17 @@ where
     let start = Instant::now();
     let run = prepare(model, grid, config)?;
     let mut sweeps = Local::new(&run.op);
-    drive(&run, config, &mut sweeps, start, resume, true, observer)
+    let coarse = coarse_start(&run, model, grid, config, &resume, &mut sweeps)?;
+    drive(
+        &run,
+        config,
+        &mut sweeps,
+        start,
+        resume,
+        coarse,
+        true,
+        observer,
+    )
 }
 
 /// [`solve_from`] with the passes over `V` run by `sweeps` (a backend whose three value
@@ -87,16 +97,79 @@ where
     config.validate()?;
     let start = Instant::now();
     let run = prepare(model, grid, config)?;
-    drive(&run, config, sweeps, start, resume, show_state, observer)
+    let coarse = coarse_start(&run, model, grid, config, &resume, sweeps)?;
+    drive(
+        &run, config, sweeps, start, resume, coarse, show_state, observer,
+    )
 }
 
-/// Checks `resume`, loads it into `sweeps` and runs the scheme of `run`.
+/// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): `V` of the
+/// coarse run, interpolated, loaded into `sweeps`'s first buffer.
+fn coarse_start<T, M, S>(
+    run: &Prepared<'_, T, M>,
+    model: &M,
+    grid: &Grid<T>,
+    config: &SolverConfig,
+    resume: &Option<SolverState<'_, T>>,
+    sweeps: &mut S,
+) -> Result<Option<CoarseStart>, S::Error>
+where
+    T: Real,
+    M: Model<T> + Sync + ?Sized,
+    S: Sweeps<T>,
+{
+    if !run.coarse_start || resume.is_some() {
+        return Ok(None);
+    }
+    let Some((v, info)) = starting_values(model, grid, config)? else {
+        return Ok(None);
+    };
+    sweeps.load(Buf(0), &run.op.to_internal(&v))?;
+    Ok(Some(info))
+}
+
+/// The starting `V` of a run of `model` over `grid` with [`SolverConfig::coarse_start`]:
+/// the run on [`Grid::coarsened`] (without a coarse start of its own) interpolated onto
+/// `grid` (row-major), and what it took; `None` when `grid` has no coarser grid.
+fn starting_values<T, M>(
+    model: &M,
+    grid: &Grid<T>,
+    config: &SolverConfig,
+) -> Result<Option<(Vec<T>, CoarseStart)>, SolveError>
+where
+    T: Real,
+    M: Model<T> + Sync + ?Sized,
+{
+    let Some(coarse) = grid.coarsened() else {
+        return Ok(None);
+    };
+    let start = std::time::Instant::now();
+    let config = SolverConfig {
+        coarse_start: false,
+        ..*config
+    };
+    let s: Solution<T> = solve(model, &coarse, &config, |_| {
+        core::ops::ControlFlow::Continue(())
+    })?;
+    let v = grid.interpolated_from(&coarse, &s.v)?;
+    let info = CoarseStart {
+        cores: coarse.n_cores(),
+        sweeps: s.sweeps.len(),
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok(Some((v, info)))
+}
+
+/// Checks `resume`, loads it into `sweeps` and runs the scheme of `run` (from the coarse
+/// start's `V`, already in `sweeps`, when `coarse` is set).
+#[allow(clippy::too_many_arguments)] // the run, its backend, and how it starts
 fn drive<T, M, S>(
     run: &Prepared<'_, T, M>,
     config: &SolverConfig,
     sweeps: &mut S,
     start: Instant,
     resume: Option<SolverState<'_, T>>,
+    coarse: Option<CoarseStart>,
     show_state: bool,
     observer: impl FnMut(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()>,
 ) -> Result<Solution<T>, S::Error>
@@ -114,6 +187,7 @@ where
         sweeps,
         start,
         show_state,
+        coarse,
     };
     if run.scheme == Scheme::ModifiedPolicy {
         return d.modified_policy_iteration(resume, observer);
@@ -179,6 +253,8 @@ struct Driver<'r, 'a, T: Real, M: ?Sized, S> {
     sweeps: &'r mut S,
     start: Instant,
     show_state: bool,
+    /// The run's coarse start, if it had one.
+    coarse: Option<CoarseStart>,
 }
 
 /// `(shift, lo, hi)` of MacQueen's bounds after a sweep whose change lies in `[lo, hi]`:
@@ -224,6 +300,7 @@ where
             sweep_seconds,
             evaluation_seconds,
             seconds: offset + self.start.elapsed().as_secs_f64(),
+            coarse: self.coarse,
         })
     }
 
@@ -391,6 +468,10 @@ where
         }
         let offset = records.last().map_or(0.0, |r| r.seconds);
         let mut full = records.iter().filter(|r| !r.evaluation).count();
+        // From `V = 0` every action ties at the first full backup, so its policy is not worth
+        // evaluating; from a coarse start's `V` it is. (A continued run decides the same way:
+        // from its configuration, not from whether it started coarse this time.)
+        let first_policy = usize::from(!self.run.coarse_start);
         // Whether the policy buffer already holds the greedy actions of the returned `V`.
         let mut greedy_known = false;
         loop {
@@ -401,7 +482,7 @@ where
             let t0 = Instant::now();
             if evaluation {
                 self.sweeps.evaluate(v, next)?;
-            } else if full == 0 {
+            } else if full == 0 && self.coarse.is_none() {
                 // From V = 0 every expected value is 0: T(0) = rho exactly, and every action
                 // ties (the lowest, 0, is greedy). No pass needed.
                 self.sweeps.rewards(next)?;
@@ -444,7 +525,7 @@ where
             } else {
                 full += 1;
                 final_delta = half;
-                if full > 1 && d.change <= gamma * config.xi {
+                if full > first_policy && d.change <= gamma * config.xi {
                     // The backup's input is already within `change / (1 - gamma)` of `V*`,
                     // at most the guarantee, and the policy buffer holds exactly its greedy
                     // policy: return it as it was (left in `next`) and skip the greedy pass.
@@ -454,8 +535,7 @@ where
                     converged = true;
                 } else if half <= config.xi {
                     converged = true;
-                } else if full > 1 {
-                    // (The first policy is arbitrary: every action ties at V = 0.)
+                } else if full > first_policy {
                     evaluations_left = config.evaluation_sweeps;
                     eval_tol = (EVALUATION_PROGRESS * half).max(0.5 * config.xi);
                 }
@@ -511,6 +591,9 @@ struct Prepared<'a, T: Real, M: ?Sized> {
     /// Whether value iteration extrapolates: absorbing goals and terminal successors break
     /// the shift property MacQueen's bounds rest on (their rows of P sum to less than 1).
     extrapolate: bool,
+    /// Whether a fresh run starts from the coarse grid's `V` (modified policy iteration with
+    /// [`SolverConfig::coarse_start`] on a grid that has a coarser one).
+    coarse_start: bool,
 }
 
 fn prepare<'a, T, M>(
@@ -546,6 +629,10 @@ where
         op,
         bound,
         extrapolate,
+        coarse_start: mpi
+            && config.coarse_start
+            && !super::coarse::known_only_on_its_grid(model)
+            && grid.coarsened().is_some(),
         scheme: if mpi {
             Scheme::ModifiedPolicy
         } else {

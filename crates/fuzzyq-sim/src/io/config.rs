@@ -61,6 +61,7 @@ backup = "auto"                             # "auto", "block" or "generic"
 precision = "f32"                           # "f32" or "f64"
 extrapolate = true                          # MacQueen extrapolation: fewer sweeps, same guarantee; false = the paper's plain sweeps
 evaluation_sweeps = 5                       # modified policy iteration: evaluation sweeps per full backup; 0 = value iteration (the paper)
+coarse_start = false                        # true: start from the grid with every other core (same bound; pays on fine grids)
 "#;
 
 /// The default Khepera configuration: the robot experiment of sections 3.2-3.3.
@@ -117,6 +118,7 @@ backup = "auto"
 precision = "f32"
 extrapolate = true
 evaluation_sweeps = 5
+coarse_start = true                         # start from the grid with every other core (same bound, fewer sweeps)
 "#;
 
 /// A whole training configuration.
@@ -319,6 +321,11 @@ pub struct SolverSettings {
     /// backup, 0 for value iteration (see [`fuzzyq_core::solver::Scheme`]).
     #[serde(default = "default_evaluation_sweeps")]
     pub evaluation_sweeps: usize,
+    /// Modified policy iteration starts from the `V` of the grid with every other core,
+    /// interpolated (see [`SolverConfig::coarse_start`]): the same error bound, fewer sweeps
+    /// on fine grids. Default `false`; `true` in the Khepera robots' default configuration.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub coarse_start: bool,
     /// Force a kernel instance (`"scalar"`, `"portable"`, `"avx2"`, `"avx512"`); all give the same results.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<Kernel>,
@@ -338,6 +345,10 @@ fn default_evaluation_sweeps() -> usize {
     DEFAULT_EVALUATION_SWEEPS
 }
 
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
 impl Default for SolverSettings {
     fn default() -> Self {
         let c = SolverConfig::default();
@@ -351,6 +362,7 @@ impl Default for SolverSettings {
             precision: Precision::F32,
             extrapolate: true,
             evaluation_sweeps: DEFAULT_EVALUATION_SWEEPS,
+            coarse_start: false,
             kernel: None,
             operator: IterationOperator::Values,
         }
@@ -371,6 +383,7 @@ impl SolverSettings {
             kernel: self.kernel,
             extrapolate: self.extrapolate,
             evaluation_sweeps: self.evaluation_sweeps,
+            coarse_start: self.coarse_start,
         }
     }
 

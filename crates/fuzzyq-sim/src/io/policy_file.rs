@@ -128,6 +128,10 @@ pub struct TrainSummary {
     /// Seconds of the evaluation sweeps (not stored in the file).
     #[serde(skip)]
     pub evaluation_seconds: f64,
+    /// The run's coarse start, if it had one (not stored in the file; boxed: the summary
+    /// stays small).
+    #[serde(skip)]
+    pub coarse: Option<Box<fuzzyq_core::solver::CoarseStart>>,
 }
 
 impl TrainSummary {
@@ -167,6 +171,7 @@ impl TrainSummary {
                 .map(|r| r.sweep)
                 .collect(),
             evaluation_seconds: s.evaluation_seconds,
+            coarse: s.coarse.map(Box::new),
         }
     }
 }
@@ -810,6 +815,7 @@ mod tests {
                 fuzzyq_version: "test".into(),
                 evaluation: Vec::new(),
                 evaluation_seconds: 0.0,
+                coarse: None,
             },
         }
     }
