@@ -988,6 +988,14 @@ class Solution:
         """
 
     @property
+    def coarse_start(self) -> dict[str, Any] | None:
+        """The coarse start (``coarse_start=True``): the coarse grid's ``cores``, its
+        ``sweeps`` and the ``seconds`` of its solve and interpolation.
+
+        None for a run without one and for a solution loaded from a file.
+        """
+
+    @property
     def kernel(self) -> Literal["avx512", "avx2", "portable", "scalar", "generic", "q-values"]:
         """The kernel instance used.
 

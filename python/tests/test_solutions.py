@@ -163,6 +163,21 @@ def test_a_callback_returning_false_stops_and_keeps_the_partial_solution(
     assert stopped.final_delta == limited.final_delta
 
 
+def test_a_coarse_start_keeps_the_bound_and_reports_itself() -> None:
+    model = fuzzyq.PointMass(agents=1)
+    grid = model.paper_grid()
+    plain = fuzzyq.solve(model, grid, xi=1e-3)
+    coarse = fuzzyq.solve(model, grid, xi=1e-3, coarse_start=True)
+    assert plain.coarse_start is None
+    info = coarse.coarse_start
+    assert info is not None and info["cores"] == 15 * 15 and info["sweeps"] > 0
+    assert info["seconds"] >= 0.0 and coarse.converged
+    # Both within their own bound of the same fixed point.
+    gap = float(np.abs(np.asarray(coarse.V, float) - np.asarray(plain.V, float)).max())
+    assert gap <= coarse.error_bound + plain.error_bound + 1e-4
+    assert not np.array_equal(coarse.V, plain.V)
+
+
 def test_a_callback_stops_a_callable_model_solve() -> None:
     def transition(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.clip(x + 0.1 * u, -1, 1), -(x[:, 0] ** 2)

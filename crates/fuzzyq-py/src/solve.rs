@@ -1207,6 +1207,24 @@ impl Solution {
         self.summary.seconds
     }
 
+    /// The coarse start (`coarse_start=True`): a dict of the coarse grid's `cores`, its
+    /// `sweeps` and the `seconds` of its solve and interpolation; `None` for a run without
+    /// one and for a solution loaded from a file.
+    #[getter]
+    fn coarse_start<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.summary
+            .coarse
+            .as_deref()
+            .map(|c| {
+                let d = PyDict::new(py);
+                d.set_item("cores", c.cores)?;
+                d.set_item("sweeps", c.sweeps)?;
+                d.set_item("seconds", c.seconds)?;
+                Ok(d)
+            })
+            .transpose()
+    }
+
     /// The kernel instance used (`"avx512"`, `"avx2"`, `"portable"`, `"scalar"`, `"generic"` or
     /// `"q-values"`).
     #[getter]
