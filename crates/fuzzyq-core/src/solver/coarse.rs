@@ -75,16 +75,14 @@ impl<T: Real> Grid<T> {
     /// variables, so the passes give the same sum up to rounding). A core of this grid that
     /// is also a core of `coarse` gets its value exactly.
     ///
-    /// Errors: [`SolveError::StateDim`] when the grids differ in their number of state
-    /// variables, [`crate::EvalError`] (through [`SolveError`]) when `v` does not hold one
-    /// value per coarse core.
+    /// Errors: [`crate::EvalError::Length`] (through [`SolveError`]) when the grids differ
+    /// in their number of state variables or `v` does not hold one value per coarse core.
     pub fn interpolated_from(&self, coarse: &Self, v: &[T]) -> Result<Vec<T>, SolveError> {
-        if coarse.n_dims() != self.n_dims() {
-            return Err(SolveError::StateDim {
-                model: self.n_dims(),
-                grid: coarse.n_dims(),
-            });
-        }
+        crate::error::check_len(
+            "the coarse grid's state variables",
+            self.n_dims(),
+            coarse.n_dims(),
+        )?;
         crate::error::check_len("V", coarse.n_cores(), v.len())?;
         let mut cur = v.to_vec();
         // Shape before pass `d`: this grid's core counts before `d`, `coarse`'s from `d`.

@@ -103,8 +103,9 @@ where
     )
 }
 
-/// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): `V` of the
-/// coarse run, interpolated, loaded into `sweeps`'s first buffer.
+/// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): the same scheme
+/// on [`Prepared::coarse`] (without a coarse start of its own), its `V` interpolated onto
+/// `grid` and loaded into `sweeps`'s first buffer.
 fn coarse_start<T, M, S>(
     run: &Prepared<'_, T, M>,
     model: &M,
@@ -118,46 +119,22 @@ where
     M: Model<T> + Sync + ?Sized,
     S: Sweeps<T>,
 {
-    if !run.coarse_start || resume.is_some() {
-        return Ok(None);
-    }
-    let Some((v, info)) = starting_values(model, grid, config)? else {
+    let Some(coarse) = run.coarse.as_ref().filter(|_| resume.is_none()) else {
         return Ok(None);
     };
-    sweeps.load(Buf(0), &run.op.to_internal(&v))?;
-    Ok(Some(info))
-}
-
-/// The starting `V` of a run of `model` over `grid` with [`SolverConfig::coarse_start`]:
-/// the run on [`Grid::coarsened`] (without a coarse start of its own) interpolated onto
-/// `grid` (row-major), and what it took; `None` when `grid` has no coarser grid.
-fn starting_values<T, M>(
-    model: &M,
-    grid: &Grid<T>,
-    config: &SolverConfig,
-) -> Result<Option<(Vec<T>, CoarseStart)>, SolveError>
-where
-    T: Real,
-    M: Model<T> + Sync + ?Sized,
-{
-    let Some(coarse) = grid.coarsened() else {
-        return Ok(None);
-    };
-    let start = std::time::Instant::now();
+    let start = Instant::now();
     let config = SolverConfig {
         coarse_start: false,
         ..*config
     };
-    let s: Solution<T> = solve(model, &coarse, &config, |_| {
-        core::ops::ControlFlow::Continue(())
-    })?;
-    let v = grid.interpolated_from(&coarse, &s.v)?;
-    let info = CoarseStart {
+    let s = solve(model, coarse, &config, |_| ControlFlow::Continue(()))?;
+    let v = grid.interpolated_from(coarse, &s.v)?;
+    sweeps.load(Buf(0), &run.op.to_internal(&v))?;
+    Ok(Some(CoarseStart {
         cores: coarse.n_cores(),
         sweeps: s.sweeps.len(),
         seconds: start.elapsed().as_secs_f64(),
-    };
-    Ok(Some((v, info)))
+    }))
 }
 
 /// Checks `resume`, loads it into `sweeps` and runs the scheme of `run` (from the coarse
@@ -471,7 +448,7 @@ where
         // From `V = 0` every action ties at the first full backup, so its policy is not worth
         // evaluating; from a coarse start's `V` it is. (A continued run decides the same way:
         // from its configuration, not from whether it started coarse this time.)
-        let first_policy = usize::from(!self.run.coarse_start);
+        let first_policy = usize::from(self.run.coarse.is_none());
         // Whether the policy buffer already holds the greedy actions of the returned `V`.
         let mut greedy_known = false;
         loop {
@@ -591,9 +568,10 @@ struct Prepared<'a, T: Real, M: ?Sized> {
     /// Whether value iteration extrapolates: absorbing goals and terminal successors break
     /// the shift property MacQueen's bounds rest on (their rows of P sum to less than 1).
     extrapolate: bool,
-    /// Whether a fresh run starts from the coarse grid's `V` (modified policy iteration with
-    /// [`SolverConfig::coarse_start`] on a grid that has a coarser one).
-    coarse_start: bool,
+    /// The grid a fresh run first solves and starts from ([`SolverConfig::coarse_start`],
+    /// modified policy iteration on a grid that has a coarser one, for a model not known only
+    /// on its grid); `None` for a start from `V = 0`.
+    coarse: Option<Grid<T>>,
 }
 
 fn prepare<'a, T, M>(
@@ -629,10 +607,11 @@ where
         op,
         bound,
         extrapolate,
-        coarse_start: mpi
-            && config.coarse_start
-            && !super::coarse::known_only_on_its_grid(model)
-            && grid.coarsened().is_some(),
+        coarse: if mpi && config.coarse_start && !super::coarse::known_only_on_its_grid(model) {
+            grid.coarsened()
+        } else {
+            None
+        },
         scheme: if mpi {
             Scheme::ModifiedPolicy
         } else {
