@@ -156,7 +156,8 @@ struct Work<T> {
 
 /// Buffers besides the stage outputs.
 struct Extra<T> {
-    /// Stage 0 computed transposed (`[a][r]`), before it is interleaved into `[r][a]`.
+    /// A piece of a stage over rows of one value computed transposed (`[a][r]`), before it
+    /// is interleaved into `[r][a]` ([`BlockOperator::first_stage_piece_len`]).
     scratch: Vec<T>,
     /// Maxima of a run of last-block cores.
     maxima: Vec<T>,
@@ -691,6 +692,18 @@ impl<T: Real> BlockOperator<T> {
         self.r_len[b] * self.tables[b].n_actions * self.p_len[b]
     }
 
+    /// Length of the scratch in which [`Self::stage`] computes a piece of a stage whose rows
+    /// hold one value (the first stage; a later one after blocks of one action): one piece,
+    /// not the whole stage, since every task of a Gauss-Seidel sweep makes fresh buffers
+    /// and a larger one costs its page faults each time.
+    fn first_stage_piece_len(&self) -> usize {
+        (0..self.tables.len())
+            .filter(|&b| self.p_len[b] == 1)
+            .map(|b| FIRST_STAGE_PIECE.min(self.r_len[b]) * self.tables[b].n_actions)
+            .max()
+            .unwrap_or(0)
+    }
+
     /// The fused last stage's input rows when the stage before it computes them (`None` for
     /// a single block, whose last stage reads `V`): each successor core's row of prior
     /// actions padded so that the last stage, which loads every vector of a row once per
@@ -755,7 +768,7 @@ impl<T: Real> BlockOperator<T> {
                 .map(|(b, _)| vec![T::ZERO; self.stage_buffer_len(b)])
                 .collect(),
             extra: Extra {
-                scratch: vec![T::ZERO; self.r_len[0] * self.tables[0].n_actions],
+                scratch: vec![T::ZERO; self.first_stage_piece_len()],
                 maxima: vec![T::ZERO; last.n_cores],
                 args: vec![0; last.n_cores],
                 bounds: vec![T::ZERO; last_scratch_len(last.n_cores, self.p_len[nb - 1])],
