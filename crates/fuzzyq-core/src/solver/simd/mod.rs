@@ -506,6 +506,22 @@ trait Isa<T: Copy> {
     unsafe fn store(p: *mut T, v: Self::V);
     /// Stores the masked lanes only (the first `n`, which `m` selects).
     unsafe fn store_part(p: *mut T, v: Self::V, m: Self::M, n: usize);
+    /// Whether [`Isa::store_range`] is a single masked store, so that a stage over rows of a
+    /// few values runs them packed, several rows per vector (`stage::stage_flat`).
+    const RANGE_STORES: bool = false;
+    /// Stores lanes `lo..hi` (`lo < hi <= LANES`) to `p + lo ..`; no other lane's memory is
+    /// touched, so `p` itself may point before the buffer (it is only offset, never read).
+    /// By default through a buffer on the stack (instances of at most 16 lanes).
+    unsafe fn store_range(p: *mut T, v: Self::V, lo: usize, hi: usize) {
+        const { assert!(Self::LANES <= 16, "at most 16 lanes") };
+        let mut buf = [core::mem::MaybeUninit::<T>::uninit(); 16];
+        unsafe {
+            Self::store(buf.as_mut_ptr().cast(), v);
+            for (i, x) in buf.iter().enumerate().take(hi).skip(lo) {
+                *p.wrapping_add(i) = x.assume_init();
+            }
+        }
+    }
     /// Bit `i` set for each masked lane `i` equal to `t`.
     unsafe fn equal_bits(v: Self::V, t: T, m: Self::M) -> u64;
     /// The lowest valid lane `j * LANES + lane` of a register block equal to `t` (the last

@@ -11,6 +11,14 @@
 //! all of them, with one register block per action. Each action's entries still run in row
 //! order from zero, one fused multiply-add each, so the sums are the ones [`accumulate`]
 //! forms: the same bits.
+//!
+//! # Packed rows
+//! Rows of a few values (the point masses' second stage: 5 values in 16 lanes) fill a
+//! fraction of a vector. Where the rows of consecutive leading indices follow each other in
+//! the input and the instance stores any range of lanes in one masked store
+//! ([`Isa::RANGE_STORES`]: AVX-512), [`stage_flat`] runs them packed: whole vectors along
+//! the flat input, several rows each, and each vector stored row by row into its place. The
+//! same sums again; only the stores are split.
 
 use super::*;
 
@@ -477,6 +485,129 @@ unsafe fn try_stage_merged<T: Real, I: Isa<T>>(
     }
 }
 
+/// A merged stage over rows of a few values packed along the input: with rows `p_len` apart
+/// (`r_stride == p_len`), the leading indices' rows follow each other, so each register block
+/// of `NV` whole vectors spans several rows, and each vector's lanes are stored row by row
+/// ([`Isa::store_range`]). Each value is the same sum as in [`stage_merged`] (each action's
+/// entries in row order from zero): the same bits. The last block ends at the input's end
+/// (`r_len * p_len >= NV * LANES`), computing a few values twice (the same values).
+#[inline(always)]
+unsafe fn stage_flat<T: Real, I: Isa<T>, const NA: usize, const NV: usize>(
+    merged: &Merged<T, NA>,
+    (r_len, p_len): (usize, usize),
+    k_stride: usize,
+    os: OutStrides,
+    input: *const T,
+    out: *mut T,
+) {
+    let flat = r_len * p_len;
+    let span = NV * I::LANES;
+    let mut f = 0;
+    unsafe {
+        while f < flat {
+            let at = f.min(flat - span);
+            let mut acc = [[I::zero(); NV]; NA];
+            for s in 0..merged.n {
+                let x = input.add(merged.cols[s] as usize * k_stride + at);
+                let mut xv = [I::zero(); NV];
+                for (j, v) in xv.iter_mut().enumerate() {
+                    *v = I::load(x.add(j * I::LANES));
+                }
+                let bits = merged.masks[s];
+                for (a, block) in acc.iter_mut().enumerate() {
+                    if bits & (1 << a) != 0 {
+                        let w = I::splat(merged.ws[s][a]);
+                        for (acc, &v) in block.iter_mut().zip(&xv) {
+                            *acc = I::fma(w, v, *acc);
+                        }
+                    }
+                }
+            }
+            // Row `r` and the offset in it of each vector's first lane.
+            let mut r = at / p_len;
+            let mut off = at - r * p_len;
+            for j in 0..NV {
+                let mut lo = 0;
+                while lo < I::LANES {
+                    let row_end = lo + p_len - off;
+                    let hi = row_end.min(I::LANES);
+                    // Lane `i` in `lo..hi` goes to `r R + a A + off + (i - lo)`.
+                    let lane0 = (r * os.r_stride + off).wrapping_sub(lo);
+                    for (a, block) in acc.iter().enumerate() {
+                        let p = out.wrapping_add(lane0.wrapping_add(a * os.a_stride));
+                        I::store_range(p, block[j], lo, hi);
+                    }
+                    if hi == row_end {
+                        (r, off) = (r + 1, 0);
+                    } else {
+                        off += hi - lo;
+                    }
+                    lo = hi;
+                }
+            }
+            f = at + span;
+        }
+    }
+}
+
+/// [`stage_flat`] for `na` actions, if it applies (an instance with single masked range
+/// stores, rows at most half a vector long and `p_len` apart, at least one register block of
+/// them, 2 to 6 actions whose rows merge into [`MAX_STEPS`] steps); `false` when the caller
+/// must run the rows another way (nothing written then).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn try_stage_flat<T: Real, I: Isa<T>>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    na: usize,
+    (r_len, p_len): (usize, usize),
+    strides: Strides,
+    os: OutStrides,
+    input: *const T,
+    out: *mut T,
+) -> bool {
+    const NV: usize = 4;
+    if !I::RANGE_STORES
+        || 2 * p_len > I::LANES
+        || strides.r_stride != p_len
+        || r_len * p_len < NV * I::LANES
+    {
+        return false;
+    }
+    let shape = (r_len, p_len);
+    let k = strides.k_stride;
+    // (No closures here: they do not inherit `#[target_feature]`.)
+    unsafe {
+        match na {
+            2 => flat_for::<T, I, 2, NV>(rows, first_row, shape, k, os, input, out),
+            3 => flat_for::<T, I, 3, NV>(rows, first_row, shape, k, os, input, out),
+            4 => flat_for::<T, I, 4, NV>(rows, first_row, shape, k, os, input, out),
+            5 => flat_for::<T, I, 5, NV>(rows, first_row, shape, k, os, input, out),
+            6 => flat_for::<T, I, 6, NV>(rows, first_row, shape, k, os, input, out),
+            _ => false,
+        }
+    }
+}
+
+/// [`stage_flat`] for `NA` actions if their rows merge into [`MAX_STEPS`] steps.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn flat_for<T: Real, I: Isa<T>, const NA: usize, const NV: usize>(
+    rows: &Rows<'_, T>,
+    first_row: usize,
+    shape: (usize, usize),
+    k_stride: usize,
+    os: OutStrides,
+    input: *const T,
+    out: *mut T,
+) -> bool {
+    let Some(merged) = Merged::<T, NA>::new(rows, first_row) else {
+        return false;
+    };
+    unsafe { stage_flat::<T, I, NA, NV>(&merged, shape, k_stride, os, input, out) };
+    true
+}
+
 /// Splits a row of `p_len` lanes into register blocks: `(vectors, offset, lanes in the last
 /// vector)`. An iterator, not a callback: closures do not inherit `#[target_feature]`, and the
 /// intrinsics must inline into the feature-enabled kernel.
@@ -565,7 +696,11 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
             let shape = (r_len, p_len);
             return stage_impl::<T, I::Exact>(rows, first_row, na, shape, strides, os, input, out);
         }
-        if try_stage_merged::<T, I>(&rows, first_row, na, (r_len, p_len), (strides, os), ip, op) {
+        let shape = (r_len, p_len);
+        if try_stage_flat::<T, I>(&rows, first_row, na, shape, strides, os, ip, op) {
+            return;
+        }
+        if try_stage_merged::<T, I>(&rows, first_row, na, shape, (strides, os), ip, op) {
             return;
         }
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {

@@ -45,15 +45,14 @@ fn values(n: usize, seed: u64) -> Vec<f32> {
 }
 
 /// A shape: block cores, actions, successor cores, r_len, p_len (covering masked tails,
-/// single lanes and rows longer than a register block).
+/// single lanes, rows longer than a register block, and many rows of a few values, which
+/// the instances with range stores pack several to a vector).
 fn shape() -> impl Strategy<Value = (usize, usize, usize, usize, usize)> {
-    (
-        1usize..4,
-        1usize..7,
-        1usize..9,
-        1usize..5,
-        prop_oneof![1usize..40, 120usize..300],
-    )
+    let rp = prop_oneof![
+        (1usize..5, prop_oneof![1usize..40, 120usize..300]),
+        (8usize..50, 1usize..9),
+    ];
+    (1usize..4, 1usize..7, 1usize..9, rp).prop_map(|(c, a, k, (r, p))| (c, a, k, r, p))
 }
 
 proptest! {
@@ -66,7 +65,7 @@ proptest! {
         ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
             (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
         }),
-        (k_extra, r_gap) in (0usize..50, 0usize..20),
+        (k_extra, r_gap) in (0usize..50, prop_oneof![Just(0usize), 0usize..20]),
         (a_gap, action_outer) in (0usize..9, any::<bool>()),
         seed in any::<u64>(),
     ) {
@@ -311,17 +310,19 @@ fn f64_instances_match_too() {
         3,
     )
     .unwrap();
-    for p_len in [1, 5, 13, 130] {
-        let input: Vec<f64> = values(3 * 2 * p_len, 9)
+    // (Rows of 3 and 4 values over 20 and 37 leading indices: packed on range stores.)
+    for (r_len, p_len) in [(2, 1), (2, 5), (2, 13), (2, 130), (20, 3), (37, 4)] {
+        let input: Vec<f64> = values(3 * r_len * p_len, 9)
             .into_iter()
             .map(f64::from)
             .collect();
         let scalar = select::<f64>(Some(super::super::Kernel::Scalar)).unwrap();
         for k in f64::available() {
-            let (mut a, mut b) = (vec![0.0; 2 * 3 * p_len], vec![0.0; 2 * 3 * p_len]);
-            k.stage(rows.view(), 0, 3, 2, p_len, &input, &mut a);
-            scalar.stage(rows.view(), 0, 3, 2, p_len, &input, &mut b);
-            assert_eq!(a, b, "{} p_len {p_len}", k.name);
+            let n = r_len * 3 * p_len;
+            let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+            k.stage(rows.view(), 0, 3, r_len, p_len, &input, &mut a);
+            scalar.stage(rows.view(), 0, 3, r_len, p_len, &input, &mut b);
+            assert_eq!(a, b, "{} r_len {r_len}, p_len {p_len}", k.name);
         }
     }
 }

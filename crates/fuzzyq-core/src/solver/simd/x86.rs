@@ -52,6 +52,12 @@ impl Isa<f32> for Avx512 {
     unsafe fn store_part(p: *mut f32, v: __m512, m: __mmask16, _n: usize) {
         unsafe { _mm512_mask_storeu_ps(p, m, v) }
     }
+    const RANGE_STORES: bool = true;
+    #[inline(always)]
+    unsafe fn store_range(p: *mut f32, v: __m512, lo: usize, hi: usize) {
+        let m = (((1u32 << hi) - 1) & !((1u32 << lo) - 1)) as __mmask16;
+        unsafe { _mm512_mask_storeu_ps(p, m, v) }
+    }
     #[inline(always)]
     unsafe fn equal_bits(v: __m512, t: f32, m: __mmask16) -> u64 {
         (unsafe { _mm512_mask_cmpeq_ps_mask(m, v, _mm512_set1_ps(t)) }) as u64
@@ -125,6 +131,12 @@ impl Isa<f64> for Avx512 {
     }
     #[inline(always)]
     unsafe fn store_part(p: *mut f64, v: __m512d, m: __mmask8, _n: usize) {
+        unsafe { _mm512_mask_storeu_pd(p, m, v) }
+    }
+    const RANGE_STORES: bool = true;
+    #[inline(always)]
+    unsafe fn store_range(p: *mut f64, v: __m512d, lo: usize, hi: usize) {
+        let m = (((1u32 << hi) - 1) & !((1u32 << lo) - 1)) as __mmask8;
         unsafe { _mm512_mask_storeu_pd(p, m, v) }
     }
     #[inline(always)]
