@@ -14,7 +14,7 @@ use fuzzyq_core::solver::{
 };
 use fuzzyq_sim::io::checkpoint::{FqiState, RunState};
 use fuzzyq_sim::io::config::EnvConfig;
-use fuzzyq_sim::io::policy_file::PolicyFile;
+use fuzzyq_sim::io::policy_file::{PolicyFile, TrainSummary};
 use fuzzyq_sim::io::transitions::read_transitions_csv;
 use fuzzyq_sim::learn::fql::EpisodeRecord;
 use fuzzyq_sim::model::{EnvKind, F64Model};
@@ -200,6 +200,31 @@ struct Summary<'a> {
     /// `--learner learned-model`: the data and the fit.
     #[serde(skip_serializing_if = "Option::is_none")]
     learned_model: Option<LearnedSummary<'a>>,
+}
+
+/// A run's sweeps for the closing line: `52 sweeps (10 full backups + 42 evaluation sweeps,
+/// after a coarse start: 80 sweeps on 1185921 cores in 0.4 s)`; the kinds only where modified
+/// policy iteration ran, the coarse start only where one did.
+fn sweeps_done(s: &TrainSummary) -> String {
+    let evaluation = s.evaluation.len();
+    let mut parts = Vec::new();
+    if evaluation > 0 {
+        let full = s.sweeps - evaluation;
+        parts.push(format!(
+            "{full} full backups + {evaluation} evaluation sweeps"
+        ));
+    }
+    if let Some(c) = s.coarse.as_deref() {
+        parts.push(format!(
+            "after a coarse start: {} sweeps on {} cores in {:.1} s",
+            c.sweeps, c.cores, c.seconds
+        ));
+    }
+    if parts.is_empty() {
+        format!("{} sweeps", s.sweeps)
+    } else {
+        format!("{} sweeps ({})", s.sweeps, parts.join(", "))
+    }
 }
 
 /// The `--json` part of a coarse start.
@@ -626,13 +651,13 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     if !args.quiet {
         eprintln!(
-            "{} after {} sweeps in {:.1} s (final delta {:.4}, xi {}); policy written to {}",
+            "{} after {} in {:.1} s (final delta {:.4}, xi {}); policy written to {}",
             if s.converged {
                 "converged"
             } else {
                 "sweep limit reached"
             },
-            s.sweeps,
+            sweeps_done(s),
             s.seconds,
             s.final_delta,
             config.solver.xi,

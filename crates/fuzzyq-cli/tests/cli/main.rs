@@ -131,6 +131,30 @@ fn train_and_rollout_end_to_end() {
     assert_eq!(t["joint_actions"], 25);
     assert_eq!(t["converged"], true);
     assert!(t["delta_inf"].as_f64().unwrap() <= 0.05);
+    // The closing line counts the kinds of sweeps as the summary does.
+    let line = format!(
+        "converged after {} sweeps ({} full backups + {} evaluation sweeps) in ",
+        t["sweeps"], t["full_backups"], t["evaluation_sweeps"]
+    );
+    assert!(stderr(&o).contains(&line), "{line:?} in {}", stderr(&o));
+    // And a coarse start's sweeps and cores.
+    let args = ["train", "--config", "one.toml", "--coarse-start"];
+    let o = fuzzyq(
+        &[&args[..], &["--out", "c.fzq", "--json", "c.json"]].concat(),
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let c = json(&d.join("c.json"));
+    let line = format!(
+        "({} full backups + {} evaluation sweeps, after a coarse start: {} sweeps on {} cores in ",
+        c["full_backups"],
+        c["evaluation_sweeps"],
+        c["coarse_start"]["sweeps"],
+        c["coarse_start"]["cores"]
+    );
+    assert!(stderr(&o).contains(&line), "{line:?} in {}", stderr(&o));
+    std::fs::remove_file(d.join("c.fzq")).unwrap();
+    std::fs::remove_file(d.join("c.json")).unwrap();
     // Extrapolation (the default) needs far fewer sweeps than the paper's plain iteration,
     // which needs 114 (the change decays like 5 * 0.96^k).
     let o = fuzzyq(
