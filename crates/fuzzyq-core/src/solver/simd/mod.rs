@@ -511,16 +511,9 @@ trait Isa<T: Copy> {
     const RANGE_STORES: bool = false;
     /// Stores lanes `lo..hi` (`lo < hi <= LANES`) to `p + lo ..`; no other lane's memory is
     /// touched, so `p` itself may point before the buffer (it is only offset, never read).
-    /// By default through a buffer on the stack (instances of at most 16 lanes).
-    unsafe fn store_range(p: *mut T, v: Self::V, lo: usize, hi: usize) {
-        const { assert!(Self::LANES <= 16, "at most 16 lanes") };
-        let mut buf = [core::mem::MaybeUninit::<T>::uninit(); 16];
-        unsafe {
-            Self::store(buf.as_mut_ptr().cast(), v);
-            for (i, x) in buf.iter().enumerate().take(hi).skip(lo) {
-                *p.wrapping_add(i) = x.assume_init();
-            }
-        }
+    /// Called only on instances with [`Isa::RANGE_STORES`], which implement it.
+    unsafe fn store_range(_p: *mut T, _v: Self::V, _lo: usize, _hi: usize) {
+        unreachable!("range stores only on instances with RANGE_STORES")
     }
     /// Bit `i` set for each masked lane `i` equal to `t`.
     unsafe fn equal_bits(v: Self::V, t: T, m: Self::M) -> u64;

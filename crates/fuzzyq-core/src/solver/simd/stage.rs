@@ -290,6 +290,9 @@ pub(super) unsafe fn stage_narrow<T: Copy, I: Isa<T>, const NV: usize, const NR:
     }
 }
 
+/// Vectors per action's register block of a packed stage ([`stage_flat`]).
+const FLAT_BLOCK: usize = 4;
+
 /// Most steps of a [`Merged`] group (longer groups take the row-by-row path).
 const MAX_STEPS: usize = 32;
 
@@ -343,6 +346,49 @@ impl<T: Real, const NA: usize> Merged<T, NA> {
     }
 }
 
+/// One register block of every merged action: `NR` leading indices (`r_stride` apart) of
+/// `NV` vectors from `base` (the last vector masked by `m`), each step's inputs loaded once
+/// and added into the block of every action that takes it, in row order from zero.
+#[inline(always)]
+unsafe fn merged_block<T: Real, I: Isa<T>, const NA: usize, const NV: usize, const NR: usize>(
+    merged: &Merged<T, NA>,
+    base: *const T,
+    (k_stride, r_stride): (usize, usize),
+    m: I::M,
+) -> [[[I::V; NV]; NR]; NA] {
+    let mut acc = [[[unsafe { I::zero() }; NV]; NR]; NA];
+    for s in 0..merged.n {
+        let x = unsafe { base.add(merged.cols[s] as usize * k_stride) };
+        let mut xv = [[unsafe { I::zero() }; NV]; NR];
+        for (i, row) in xv.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                // SAFETY: the caller's block lies within the input (the last vector's
+                // masked lanes within it or discarded).
+                unsafe {
+                    let p = x.add(i * r_stride + j * I::LANES);
+                    *v = if j + 1 == NV {
+                        I::load_part(p, m)
+                    } else {
+                        I::load(p)
+                    };
+                }
+            }
+        }
+        let bits = merged.masks[s];
+        for (a, blocks) in acc.iter_mut().enumerate() {
+            if bits & (1 << a) != 0 {
+                let w = unsafe { I::splat(merged.ws[s][a]) };
+                for (block, xs) in blocks.iter_mut().zip(&xv) {
+                    for (acc, &v) in block.iter_mut().zip(xs) {
+                        *acc = unsafe { I::fma(w, v, *acc) };
+                    }
+                }
+            }
+        }
+    }
+    acc
+}
+
 /// A stage over merged actions for one register block of `NV` vectors at offset `p0` of
 /// every output row, `NR` leading indices at a time (the last `NR` end at `r_len`, computing
 /// a few rows twice: the same values): each step's inputs loaded once and added into the
@@ -377,32 +423,7 @@ pub(super) unsafe fn stage_merged<
         while r < r_len {
             let at = r.min(r_len - NR);
             let base = input.add(at * r_stride + p0);
-            let mut acc = [[[I::zero(); NV]; NR]; NA];
-            for s in 0..merged.n {
-                let x = base.add(merged.cols[s] as usize * k_stride);
-                let mut xv = [[I::zero(); NV]; NR];
-                for (i, row) in xv.iter_mut().enumerate() {
-                    for (j, v) in row.iter_mut().enumerate() {
-                        let p = x.add(i * r_stride + j * I::LANES);
-                        *v = if j + 1 == NV {
-                            I::load_part(p, m)
-                        } else {
-                            I::load(p)
-                        };
-                    }
-                }
-                let bits = merged.masks[s];
-                for (a, blocks) in acc.iter_mut().enumerate() {
-                    if bits & (1 << a) != 0 {
-                        let w = I::splat(merged.ws[s][a]);
-                        for (block, xs) in blocks.iter_mut().zip(&xv) {
-                            for (acc, &v) in block.iter_mut().zip(xs) {
-                                *acc = I::fma(w, v, *acc);
-                            }
-                        }
-                    }
-                }
-            }
+            let acc = merged_block::<T, I, NA, NV, NR>(merged, base, (k_stride, r_stride), m);
             for (a, blocks) in acc.iter().enumerate() {
                 for (i, block) in blocks.iter().enumerate() {
                     let o = out.add((at + i) * os.r_stride + a * os.a_stride + p0);
@@ -414,8 +435,10 @@ pub(super) unsafe fn stage_merged<
     }
 }
 
-/// [`stage_merged`] over every register block of the rows, for `NA` actions; `false` when
-/// the rows do not merge into [`MAX_STEPS`] steps (nothing written then).
+/// [`stage_merged`] over every register block of the rows, for `NA` actions, or
+/// [`stage_flat`] where the rows pack (an instance with range stores, rows of at most half a
+/// vector back to back, at least one packed block of them); `false` when the rows do not
+/// merge into [`MAX_STEPS`] steps (nothing written then).
 #[inline(always)]
 #[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
 unsafe fn stage_merged_rows<T: Real, I: Isa<T>, const NA: usize>(
@@ -429,6 +452,17 @@ unsafe fn stage_merged_rows<T: Real, I: Isa<T>, const NA: usize>(
     let Some(merged) = Merged::<T, NA>::new(rows, first_row) else {
         return false;
     };
+    let (s, os) = strides;
+    if I::RANGE_STORES
+        && 2 * p_len <= I::LANES
+        && s.r_stride == p_len
+        && r_len * p_len >= FLAT_BLOCK * I::LANES
+    {
+        // Rows of at most half a vector, back to back: packed.
+        let shape = (r_len, p_len);
+        unsafe { stage_flat::<T, I, NA, FLAT_BLOCK>(&merged, shape, s.k_stride, os, input, out) };
+        return true;
+    }
     unsafe {
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::MERGED) {
             let m = I::mask(tail);
@@ -504,25 +538,10 @@ unsafe fn stage_flat<T: Real, I: Isa<T>, const NA: usize, const NV: usize>(
     let span = NV * I::LANES;
     let mut f = 0;
     unsafe {
+        let all = I::mask(I::LANES);
         while f < flat {
             let at = f.min(flat - span);
-            let mut acc = [[I::zero(); NV]; NA];
-            for s in 0..merged.n {
-                let x = input.add(merged.cols[s] as usize * k_stride + at);
-                let mut xv = [I::zero(); NV];
-                for (j, v) in xv.iter_mut().enumerate() {
-                    *v = I::load(x.add(j * I::LANES));
-                }
-                let bits = merged.masks[s];
-                for (a, block) in acc.iter_mut().enumerate() {
-                    if bits & (1 << a) != 0 {
-                        let w = I::splat(merged.ws[s][a]);
-                        for (acc, &v) in block.iter_mut().zip(&xv) {
-                            *acc = I::fma(w, v, *acc);
-                        }
-                    }
-                }
-            }
+            let acc = merged_block::<T, I, NA, NV, 1>(merged, input.add(at), (k_stride, 0), all);
             // Row `r` and the offset in it of each vector's first lane.
             let mut r = at / p_len;
             let mut off = at - r * p_len;
@@ -533,7 +552,7 @@ unsafe fn stage_flat<T: Real, I: Isa<T>, const NA: usize, const NV: usize>(
                     let hi = row_end.min(I::LANES);
                     // Lane `i` in `lo..hi` goes to `r R + a A + off + (i - lo)`.
                     let lane0 = (r * os.r_stride + off).wrapping_sub(lo);
-                    for (a, block) in acc.iter().enumerate() {
+                    for (a, [block]) in acc.iter().enumerate() {
                         let p = out.wrapping_add(lane0.wrapping_add(a * os.a_stride));
                         I::store_range(p, block[j], lo, hi);
                     }
@@ -548,64 +567,6 @@ unsafe fn stage_flat<T: Real, I: Isa<T>, const NA: usize, const NV: usize>(
             f = at + span;
         }
     }
-}
-
-/// [`stage_flat`] for `na` actions, if it applies (an instance with single masked range
-/// stores, rows at most half a vector long and `p_len` apart, at least one register block of
-/// them, 2 to 6 actions whose rows merge into [`MAX_STEPS`] steps); `false` when the caller
-/// must run the rows another way (nothing written then).
-#[inline(always)]
-#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
-unsafe fn try_stage_flat<T: Real, I: Isa<T>>(
-    rows: &Rows<'_, T>,
-    first_row: usize,
-    na: usize,
-    (r_len, p_len): (usize, usize),
-    strides: Strides,
-    os: OutStrides,
-    input: *const T,
-    out: *mut T,
-) -> bool {
-    const NV: usize = 4;
-    if !I::RANGE_STORES
-        || 2 * p_len > I::LANES
-        || strides.r_stride != p_len
-        || r_len * p_len < NV * I::LANES
-    {
-        return false;
-    }
-    let shape = (r_len, p_len);
-    let k = strides.k_stride;
-    // (No closures here: they do not inherit `#[target_feature]`.)
-    unsafe {
-        match na {
-            2 => flat_for::<T, I, 2, NV>(rows, first_row, shape, k, os, input, out),
-            3 => flat_for::<T, I, 3, NV>(rows, first_row, shape, k, os, input, out),
-            4 => flat_for::<T, I, 4, NV>(rows, first_row, shape, k, os, input, out),
-            5 => flat_for::<T, I, 5, NV>(rows, first_row, shape, k, os, input, out),
-            6 => flat_for::<T, I, 6, NV>(rows, first_row, shape, k, os, input, out),
-            _ => false,
-        }
-    }
-}
-
-/// [`stage_flat`] for `NA` actions if their rows merge into [`MAX_STEPS`] steps.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
-unsafe fn flat_for<T: Real, I: Isa<T>, const NA: usize, const NV: usize>(
-    rows: &Rows<'_, T>,
-    first_row: usize,
-    shape: (usize, usize),
-    k_stride: usize,
-    os: OutStrides,
-    input: *const T,
-    out: *mut T,
-) -> bool {
-    let Some(merged) = Merged::<T, NA>::new(rows, first_row) else {
-        return false;
-    };
-    unsafe { stage_flat::<T, I, NA, NV>(&merged, shape, k_stride, os, input, out) };
-    true
 }
 
 /// Splits a row of `p_len` lanes into register blocks: `(vectors, offset, lanes in the last
@@ -696,11 +657,7 @@ pub(super) unsafe fn stage_impl<T: Real, I: Isa<T>>(
             let shape = (r_len, p_len);
             return stage_impl::<T, I::Exact>(rows, first_row, na, shape, strides, os, input, out);
         }
-        let shape = (r_len, p_len);
-        if try_stage_flat::<T, I>(&rows, first_row, na, shape, strides, os, ip, op) {
-            return;
-        }
-        if try_stage_merged::<T, I>(&rows, first_row, na, shape, (strides, os), ip, op) {
+        if try_stage_merged::<T, I>(&rows, first_row, na, (r_len, p_len), (strides, os), ip, op) {
             return;
         }
         for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
