@@ -12,7 +12,7 @@ use std::ops::ControlFlow;
 use fuzzyq_core::Real;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, Delta, IterationOperator, Precision, Progress, Solution, SolveError, SolverState,
+    self, Delta, IterationOperator, Precision, Progress, Scheme, Solution, SolveError, SolverState,
     SweepRecord,
 };
 use serde::Serialize;
@@ -229,6 +229,9 @@ fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(
                 record,
                 bound,
                 xi: solver_config.xi,
+                scheme: Scheme::Value,
+                extrapolate: false,
+                coarse: None,
             },
             None,
         )

@@ -10,7 +10,7 @@ use anyhow::Context;
 use clap::Args;
 use fuzzyq_core::additive::Update;
 use fuzzyq_core::solver::{
-    BackupPath, IterationOperator, Kernel, Precision, Progress, SolveError, SweepMode,
+    BackupPath, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError, SweepMode,
 };
 use fuzzyq_sim::io::checkpoint::{FqiState, RunState};
 use fuzzyq_sim::io::config::EnvConfig;
@@ -211,19 +211,32 @@ fn sweeps_done(s: &TrainSummary) -> String {
     if evaluation > 0 {
         let full = s.sweeps - evaluation;
         parts.push(format!(
-            "{full} full backups + {evaluation} evaluation sweeps"
+            "{} + {}",
+            count(full, "full backup"),
+            count(evaluation, "evaluation sweep")
         ));
     }
     if let Some(c) = s.coarse.as_deref() {
         parts.push(format!(
-            "after a coarse start: {} sweeps on {} cores in {:.1} s",
-            c.sweeps, c.cores, c.seconds
+            "after a coarse start: {} on {} cores in {:.1} s",
+            count(c.sweeps, "sweep"),
+            c.cores,
+            c.seconds
         ));
     }
     if parts.is_empty() {
-        format!("{} sweeps", s.sweeps)
+        count(s.sweeps, "sweep")
     } else {
-        format!("{} sweeps ({})", s.sweeps, parts.join(", "))
+        format!("{} ({})", count(s.sweeps, "sweep"), parts.join(", "))
+    }
+}
+
+/// `n` things, the noun in the plural unless `n` is 1.
+fn count(n: usize, noun: &str) -> String {
+    if n == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{n} {noun}s")
     }
 }
 
@@ -378,6 +391,32 @@ fn fmt_delta(p: &Progress) -> String {
     }
 }
 
+/// How a run iterates, from its first progress report: the scheme the solver chose from the
+/// settings and what the model allows, and the coarse start it made first, if any.
+fn fmt_scheme(p: &Progress, operator: IterationOperator, evaluation_sweeps: usize) -> String {
+    let mut line = match (p.scheme, p.extrapolate) {
+        _ if operator == IterationOperator::QValues => {
+            "Busoniu's fuzzy Q-iteration: full sweeps over every stored Q-value".to_string()
+        }
+        (Scheme::ModifiedPolicy, _) => format!(
+            "modified policy iteration: full backups, each followed by up to \
+             {evaluation_sweeps} evaluation sweeps under its greedy actions, every sweep \
+             extrapolated"
+        ),
+        (_, true) => "value iteration: full backups, extrapolated every other sweep".to_string(),
+        _ => "value iteration: full backups (the paper's fuzzy Q-iteration)".to_string(),
+    };
+    if let Some(c) = p.coarse {
+        line += &format!(
+            ", after a coarse start ({} on {} cores in {:.1} s)",
+            count(c.sweeps, "sweep"),
+            c.cores,
+            c.seconds
+        );
+    }
+    line
+}
+
 /// A progress bar on a terminal (hidden otherwise or with `--quiet`).
 fn progress_bar(quiet: bool, len: u64, template: &str) -> ProgressBar {
     if quiet || !std::io::stderr().is_terminal() {
@@ -506,7 +545,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     if !args.quiet {
         eprintln!(
             "fuzzyq train: {env}, {n_cores} cores x {joint} joint actions ({:.3e} Q-values), \
-             gamma {}, xi {}, {} sweeps{}, {threads} threads",
+             gamma {}, xi {}, {} sweeps, {threads} threads",
             n_cores as f64 * joint as f64,
             config.solver.gamma,
             config.solver.xi,
@@ -514,11 +553,6 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
                 "synchronous"
             } else {
                 "asynchronous"
-            },
-            if config.solver.extrapolate && synchronous {
-                " with extrapolation"
-            } else {
-                ""
             },
         );
     }
@@ -567,7 +601,18 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             state.sweeps()
         );
     }
+    let evaluation_sweeps = config.solver.evaluation_sweeps;
+    let mut scheme_shown = args.quiet;
     let mut observer = |p: &fuzzyq_core::solver::Progress, state: Option<&FqiState<'_>>| {
+        if !std::mem::replace(&mut scheme_shown, true) {
+            // What the solver decided to run, known from its first report.
+            let line = fmt_scheme(p, config.solver.operator, evaluation_sweeps);
+            if plain {
+                eprintln!("{line}");
+            } else {
+                bar.println(line);
+            }
+        }
         bar.set_length(p.bound as u64);
         bar.set_position(p.record.sweep as u64);
         bar.set_message(fmt_delta(p));

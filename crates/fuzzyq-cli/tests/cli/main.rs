@@ -137,6 +137,10 @@ fn train_and_rollout_end_to_end() {
         t["sweeps"], t["full_backups"], t["evaluation_sweeps"]
     );
     assert!(stderr(&o).contains(&line), "{line:?} in {}", stderr(&o));
+    // Before the sweeps, the scheme the solver chose (the default: modified policy iteration).
+    let scheme = "modified policy iteration: full backups, each followed by up to 5 evaluation \
+                  sweeps under its greedy actions, every sweep extrapolated\n";
+    assert!(stderr(&o).contains(scheme), "{scheme:?} in {}", stderr(&o));
     // And a coarse start's sweeps and cores.
     let args = ["train", "--config", "one.toml", "--coarse-start"];
     let o = fuzzyq(
@@ -153,6 +157,11 @@ fn train_and_rollout_end_to_end() {
         c["coarse_start"]["cores"]
     );
     assert!(stderr(&o).contains(&line), "{line:?} in {}", stderr(&o));
+    let scheme = format!(
+        "every sweep extrapolated, after a coarse start ({} sweeps on {} cores in ",
+        c["coarse_start"]["sweeps"], c["coarse_start"]["cores"]
+    );
+    assert!(stderr(&o).contains(&scheme), "{scheme:?} in {}", stderr(&o));
     std::fs::remove_file(d.join("c.fzq")).unwrap();
     std::fs::remove_file(d.join("c.json")).unwrap();
     // Extrapolation (the default) needs far fewer sweeps than the paper's plain iteration,
@@ -167,11 +176,12 @@ fn train_and_rollout_end_to_end() {
             "plain.fzq",
             "--json",
             "plain.json",
-            "-q",
         ],
         d,
     );
     assert!(o.status.success(), "{}", stderr(&o));
+    let scheme = "value iteration: full backups (the paper's fuzzy Q-iteration)\n";
+    assert!(stderr(&o).contains(scheme), "{scheme:?} in {}", stderr(&o));
     let plain = json(&d.join("plain.json"));
     assert_eq!(plain["sweeps"], 114);
     assert!(t["sweeps"].as_u64().unwrap() < 50, "{}", t["sweeps"]);

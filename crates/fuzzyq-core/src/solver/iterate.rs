@@ -411,10 +411,15 @@ where
 
     /// The progress report of a sweep.
     fn progress(&self, record: SweepRecord) -> Progress {
+        let mpi = self.run.scheme == Scheme::ModifiedPolicy;
         Progress {
             record,
             bound: self.run.bound,
             xi: self.config.xi,
+            scheme: self.run.scheme,
+            extrapolate: self.run.extrapolate
+                && (mpi || self.config.sweep == SweepMode::Synchronous),
+            coarse: self.coarse,
         }
     }
 

@@ -616,6 +616,15 @@ pub struct Progress {
     pub bound: usize,
     /// The threshold `xi`.
     pub xi: f64,
+    /// How the run iterates: the same in every report of a run, decided before its first
+    /// sweep from the settings and what the model and its operator allow.
+    pub scheme: Scheme,
+    /// Whether the run's sweeps move `V` to the midpoint of MacQueen's bounds (see
+    /// [`SolverConfig::extrapolate`]; false where that cannot apply).
+    pub extrapolate: bool,
+    /// The run's coarse start ([`SolverConfig::coarse_start`]), done before its first sweep,
+    /// if it had one.
+    pub coarse: Option<CoarseStart>,
 }
 
 /// Why the iteration stopped.
