@@ -293,7 +293,9 @@ fn given_rows<T: Real>(
             ptr.push(u32::try_from(col.len()).map_err(|_| "its table is too large")?);
         }
     }
-    let rows = RowsBuf::new(ptr, col, weight, n_cores).ok_or("its table is malformed")?;
+    let rows = RowsBuf::new(ptr, col, weight, n_cores)
+        .ok_or("its table is malformed")?
+        .with_groups(order.len());
     let offsets = grid_offsets(sub, grid, dims).map_err(|_| "its cores do not fit the grid")?;
     Ok((rows, offsets))
 }
@@ -474,7 +476,8 @@ impl<T: Real> BlockOperator<T> {
                 }
             }
             let rows = RowsBuf::new(ptr, col, weight, n_cores)
-                .expect("rows are built with in-range columns");
+                .expect("rows are built with in-range columns")
+                .with_groups(n_actions);
             tables.push(BlockTable {
                 dims,
                 n_cores,

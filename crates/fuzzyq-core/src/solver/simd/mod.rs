@@ -46,6 +46,36 @@ pub(super) struct RowsBuf<T> {
     col: Vec<u32>,
     weight: Vec<T>,
     n_cols: usize,
+    /// The rows merged by column in groups of one block core's actions, if made
+    /// ([`RowsBuf::with_groups`]).
+    groups: Option<GroupsBuf<T>>,
+}
+
+/// Lanes of a merged step's weights: at least the lanes of every instance's vector, so that a
+/// whole vector loads from one step.
+pub(super) const GROUP_LANES: usize = 16;
+
+/// Rows merged by column in groups of `na` consecutive rows (one block core's actions): group
+/// `g`'s steps `ptr[g]..ptr[g + 1]` read column `col[s]` with weight `weight[s][a]` for row
+/// `g na + a` (0 where that row has no entry there). Each row's entries appear in its own
+/// order, so a chain over the steps with fused multiply-adds from 0 sums every row as its own
+/// chain does, plus products with weight 0, which change no finite sum (an exact `+0` sum
+/// stays `+0`).
+#[derive(Clone, Debug)]
+struct GroupsBuf<T> {
+    na: usize,
+    ptr: Vec<u32>,
+    col: Vec<u32>,
+    weight: Vec<[T; GROUP_LANES]>,
+}
+
+/// A borrowed view of [`GroupsBuf`].
+#[derive(Clone, Copy, Debug)]
+struct Groups<'a, T> {
+    na: usize,
+    ptr: &'a [u32],
+    col: &'a [u32],
+    weight: &'a [[T; GROUP_LANES]],
 }
 
 /// A borrowed view of [`RowsBuf`]; only `RowsBuf::view` makes one, so the column bound holds.
@@ -55,6 +85,7 @@ pub struct Rows<'a, T> {
     col: &'a [u32],
     weight: &'a [T],
     n_cols: usize,
+    groups: Option<Groups<'a, T>>,
 }
 
 impl<T: Real> RowsBuf<T> {
@@ -68,7 +99,49 @@ impl<T: Real> RowsBuf<T> {
             col,
             weight,
             n_cols,
+            groups: None,
         })
+    }
+
+    /// These rows, also merged by column in groups of `na` consecutive rows (one block
+    /// core's actions; see [`GroupsBuf`]), for the pruned last stage's row bounds. Unchanged
+    /// unless `na` is 2 to [`GROUP_LANES`] and divides the row count.
+    pub(super) fn with_groups(mut self, na: usize) -> Self {
+        let n_rows = self.ptr.len() - 1;
+        if !(2..=GROUP_LANES).contains(&na) || !n_rows.is_multiple_of(na) {
+            return self;
+        }
+        let mut g = GroupsBuf {
+            na,
+            ptr: vec![0],
+            col: Vec::new(),
+            weight: Vec::new(),
+        };
+        let view = self.view();
+        for first in (0..n_rows).step_by(na) {
+            let mut heads = [0usize; GROUP_LANES];
+            loop {
+                // The smallest column among the rows' next entries: every row whose next
+                // entry reads it takes this step.
+                let next = (0..na)
+                    .filter_map(|a| view.row(first + a).0.get(heads[a]).copied())
+                    .min();
+                let Some(next) = next else { break };
+                let mut w = [T::ZERO; GROUP_LANES];
+                for (a, (head, w)) in heads.iter_mut().zip(&mut w).take(na).enumerate() {
+                    let (cols, ws) = view.row(first + a);
+                    if cols.get(*head) == Some(&next) {
+                        *w = ws[*head];
+                        *head += 1;
+                    }
+                }
+                g.col.push(next);
+                g.weight.push(w);
+            }
+            g.ptr.push(g.col.len() as u32);
+        }
+        self.groups = Some(g);
+        self
     }
 
     pub(super) fn view(&self) -> Rows<'_, T> {
@@ -77,6 +150,12 @@ impl<T: Real> RowsBuf<T> {
             col: &self.col,
             weight: &self.weight,
             n_cols: self.n_cols,
+            groups: self.groups.as_ref().map(|g| Groups {
+                na: g.na,
+                ptr: &g.ptr,
+                col: &g.col,
+                weight: &g.weight,
+            }),
         }
     }
 
@@ -107,6 +186,7 @@ impl<'a, T: Real> Rows<'a, T> {
             col,
             weight,
             n_cols,
+            groups: None,
         })
     }
 }
@@ -120,6 +200,15 @@ impl<'a, T> Rows<'a, T> {
     pub(super) fn row(&self, i: usize) -> (&'a [u32], &'a [T]) {
         let (s, e) = (self.ptr[i] as usize, self.ptr[i + 1] as usize);
         (&self.col[s..e], &self.weight[s..e])
+    }
+
+    /// The merged steps of rows `g na .. (g + 1) na` (see [`GroupsBuf`]), if these rows were
+    /// merged in groups of `na`.
+    #[inline(always)]
+    pub(super) fn group(&self, g: usize, na: usize) -> Option<(&'a [u32], &'a [[T; GROUP_LANES]])> {
+        let gr = self.groups.as_ref().filter(|gr| gr.na == na)?;
+        let (s, e) = (gr.ptr[g] as usize, gr.ptr[g + 1] as usize);
+        Some((&gr.col[s..e], &gr.weight[s..e]))
     }
 }
 

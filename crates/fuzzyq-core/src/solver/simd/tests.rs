@@ -109,6 +109,10 @@ proptest! {
         }),
         seed in any::<u64>(),
     ) {
+        // The rows also merged in groups of one core's actions, as the block path's tables
+        // are: the instances with a vector wide enough bound a core's rows from the groups,
+        // the scalar one row by row.
+        let rows = rows.with_groups(na);
         // Every other case on few distinct values, so that expected values tie often.
         let input: Vec<f32> = values(n_k * r_len * p_len, seed)
             .into_iter()
@@ -205,6 +209,56 @@ proptest! {
                         prop_assert_eq!(args[c] as usize, first, "argmax, core {}", c);
                     }
                 }
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// Merged in groups, each row's entries appear in its own order with its own weights
+    /// (weight 0 elsewhere), so the chain over a group's steps in a row's lane is that row's
+    /// own chain, bit for bit.
+    #[test]
+    fn merged_groups_keep_every_row_chain(
+        ((n_c, na, n_k, _, _), rows) in shape().prop_flat_map(|sh| {
+            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
+        }),
+        seed in any::<u64>(),
+    ) {
+        prop_assume!(na >= 2);
+        let x = values(n_k, seed);
+        let rows = rows.with_groups(na);
+        let view = rows.view();
+        prop_assert!(view.group(0, na + 1).is_none());
+        for c in 0..n_c {
+            let (cols, ws) = view.group(c, na).expect("merged in groups of na");
+            for a in 0..na {
+                let (rc, rw) = view.row(c * na + a);
+                let mut want = 0.0f32;
+                for (&k, &w) in rc.iter().zip(rw) {
+                    want = w.mul_add(x[k as usize], want);
+                }
+                let mut got = 0.0f32;
+                for (&k, w) in cols.iter().zip(ws) {
+                    got = w[a].mul_add(x[k as usize], got);
+                }
+                prop_assert_eq!(got.to_bits(), want.to_bits(), "core {}, action {}", c, a);
+                // Every entry of the row is one step, in the row's order.
+                let taken: Vec<(u32, u32)> = cols
+                    .iter()
+                    .zip(ws)
+                    .filter(|(_, w)| w[a] != 0.0)
+                    .map(|(&k, w)| (k, w[a].to_bits()))
+                    .collect();
+                let own: Vec<(u32, u32)> = rc
+                    .iter()
+                    .zip(rw)
+                    .filter(|(_, w)| **w != 0.0)
+                    .map(|(&k, w)| (k, w.to_bits()))
+                    .collect();
+                prop_assert_eq!(taken, own);
             }
         }
     }
@@ -323,6 +377,40 @@ fn f64_instances_match_too() {
             k.stage(rows.view(), 0, 3, r_len, p_len, &input, &mut a);
             scalar.stage(rows.view(), 0, 3, r_len, p_len, &input, &mut b);
             assert_eq!(a, b, "{} r_len {r_len}, p_len {p_len}", k.name);
+        }
+    }
+    // The pruned last stage, its row bounds from the three rows merged in one group (on the
+    // instances whose vector holds three lanes) or row by row.
+    let rows = rows.with_groups(3);
+    let scalar = select::<f64>(Some(super::super::Kernel::Scalar)).unwrap();
+    for p_len in [5, 40, 130] {
+        let input: Vec<f64> = values(3 * p_len, 11).into_iter().map(f64::from).collect();
+        let mut bounds = vec![0.0; last_scratch_len(3, p_len)];
+        let (mut m, mut ms) = (vec![0.0; 1], vec![0.0; 1]);
+        (scalar.last)(
+            rows.view(),
+            0,
+            3,
+            InRows::dense(p_len),
+            false,
+            &input,
+            &mut ms,
+            &mut bounds,
+            None,
+        );
+        for k in f64::available() {
+            (k.last)(
+                rows.view(),
+                0,
+                3,
+                InRows::dense(p_len),
+                false,
+                &input,
+                &mut m,
+                &mut bounds,
+                None,
+            );
+            assert_eq!(m, ms, "last, {} p_len {p_len}", k.name);
         }
     }
 }
