@@ -119,25 +119,14 @@ impl<T: Real> RowsBuf<T> {
         };
         let view = self.view();
         for first in (0..n_rows).step_by(na) {
-            let mut heads = [0usize; GROUP_LANES];
-            loop {
-                // The smallest column among the rows' next entries: every row whose next
-                // entry reads it takes this step.
-                let next = (0..na)
-                    .filter_map(|a| view.row(first + a).0.get(heads[a]).copied())
-                    .min();
-                let Some(next) = next else { break };
-                let mut w = [T::ZERO; GROUP_LANES];
-                for (a, (head, w)) in heads.iter_mut().zip(&mut w).take(na).enumerate() {
-                    let (cols, ws) = view.row(first + a);
-                    if cols.get(*head) == Some(&next) {
-                        *w = ws[*head];
-                        *head += 1;
-                    }
+            let base = g.col.len();
+            view.merge_by_column::<GROUP_LANES>(first, na, usize::MAX, |step, k, a, w| {
+                if base + step == g.col.len() {
+                    g.col.push(k);
+                    g.weight.push([T::ZERO; GROUP_LANES]);
                 }
-                g.col.push(next);
-                g.weight.push(w);
-            }
+                g.weight[base + step][a] = w;
+            });
             g.ptr.push(g.col.len() as u32);
         }
         self.groups = Some(g);
@@ -200,6 +189,57 @@ impl<'a, T> Rows<'a, T> {
     pub(super) fn row(&self, i: usize) -> (&'a [u32], &'a [T]) {
         let (s, e) = (self.ptr[i] as usize, self.ptr[i + 1] as usize);
         (&self.col[s..e], &self.weight[s..e])
+    }
+
+    /// Rows `first .. first + na` (`na <= N`) merged by column, for the merged
+    /// stage (`stage::Merged`, per call) and [`RowsBuf::with_groups`] (once per table): each
+    /// step reads the smallest column among the rows' next entries, and every row whose next
+    /// entry reads it takes the step, so each row's entries appear in its own order. Calls
+    /// `take(step, column, row, weight)` for each row taking each step, in order; returns the
+    /// number of steps, or `None` once there would be more than `max_steps`. (`N` bounds
+    /// the rows at compile time: the merged stage passes its action count, so that the loops
+    /// over the rows unroll.)
+    #[inline(always)]
+    pub(super) fn merge_by_column<const N: usize>(
+        &self,
+        first: usize,
+        na: usize,
+        max_steps: usize,
+        mut take: impl FnMut(usize, u32, usize, T),
+    ) -> Option<usize>
+    where
+        T: Copy,
+    {
+        let entries: [(&[u32], &[T]); N] = core::array::from_fn(|a| {
+            if a < na {
+                self.row(first + a)
+            } else {
+                (&[][..], &[][..])
+            }
+        });
+        let mut heads = [0usize; N];
+        let mut n = 0;
+        loop {
+            let mut next = u32::MAX;
+            for (&(cols, _), &h) in entries[..na].iter().zip(&heads) {
+                if let Some(&k) = cols.get(h) {
+                    next = next.min(k);
+                }
+            }
+            if next == u32::MAX {
+                return Some(n);
+            }
+            if n == max_steps {
+                return None;
+            }
+            for (a, (&(cols, ws), h)) in entries[..na].iter().zip(&mut heads).enumerate() {
+                if cols.get(*h) == Some(&next) {
+                    take(n, next, a, ws[*h]);
+                    *h += 1;
+                }
+            }
+            n += 1;
+        }
     }
 
     /// The merged steps of rows `g na .. (g + 1) na` (see [`GroupsBuf`]), if these rows were

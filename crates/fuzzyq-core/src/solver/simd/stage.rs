@@ -297,9 +297,9 @@ const FLAT_BLOCK: usize = 4;
 const MAX_STEPS: usize = 32;
 
 /// The rows of `NA` consecutive actions merged by column: step `s` reads column `cols[s]`
-/// for the actions whose bit is set in `masks[s]`, with weights `ws[s]`. Built by taking, at
-/// each step, the smallest column among the rows' next entries, so every row's entries
-/// appear in their order (rows sorted by column share every common column).
+/// for the actions whose bit is set in `masks[s]`, with weights `ws[s]`, as
+/// [`Rows::merge_by_column`] merges them (every row's entries in their order; rows sorted by
+/// column share every common column).
 pub(super) struct Merged<T, const NA: usize> {
     pub(super) n: usize,
     pub(super) cols: [u32; MAX_STEPS],
@@ -318,31 +318,13 @@ impl<T: Real, const NA: usize> Merged<T, NA> {
             masks: [0; MAX_STEPS],
             ws: [[T::ZERO; NA]; MAX_STEPS],
         };
-        let entries: [(&[u32], &[T]); NA] = core::array::from_fn(|a| rows.row(first_row + a));
-        let mut heads = [0usize; NA];
-        loop {
-            let mut next = u32::MAX;
-            for (a, &(cols, _)) in entries.iter().enumerate() {
-                if let Some(&k) = cols.get(heads[a]) {
-                    next = next.min(k);
-                }
-            }
-            if next == u32::MAX {
-                return Some(m);
-            }
-            if m.n == MAX_STEPS {
-                return None;
-            }
-            for (a, &(cols, ws)) in entries.iter().enumerate() {
-                if cols.get(heads[a]) == Some(&next) {
-                    m.masks[m.n] |= 1 << a;
-                    m.ws[m.n][a] = ws[heads[a]];
-                    heads[a] += 1;
-                }
-            }
-            m.cols[m.n] = next;
-            m.n += 1;
-        }
+        let n = rows.merge_by_column::<NA>(first_row, NA, MAX_STEPS, |step, k, a, w| {
+            m.cols[step] = k;
+            m.masks[step] |= 1 << a;
+            m.ws[step][a] = w;
+        })?;
+        m.n = n;
+        Some(m)
     }
 }
 
