@@ -211,11 +211,19 @@ fn visit_order(i: usize, top: usize) -> usize {
 }
 
 /// The upper bounds of the rows of core `c`'s actions (`ub[a]`, see [`last_block_pruned`])
-/// and the action of the largest (the lowest on ties). Where the rows are kept merged in
-/// groups of the core's actions ([`RowsBuf::with_groups`]) and a vector holds a lane per
-/// action, the bounds are one chain of vector multiply-adds over the group's steps (on the
-/// paper's grid 8 steps instead of 20 scalar multiply-adds with each row's bookkeeping);
-/// otherwise one scalar chain per row. Both give the same bits.
+/// and the action of the largest (the lowest on ties), the same on every instance.
+///
+/// Where the rows are kept merged in groups of the core's actions
+/// ([`RowsBuf::with_groups`]) and a vector holds a lane per action, the bounds are first one
+/// chain of vector multiply-adds over the group's steps (on the paper's grid 8 steps
+/// instead of 20 scalar multiply-adds with each row's bookkeeping). Each lane is its row's
+/// own chain with zero products between its entries, so when every lane is finite the lanes
+/// are the rows' chains bit for bit (on x86 the largest is then picked from the vector:
+/// [`Isa::MASK_COMPARES`]). Otherwise (a zero weight times an infinite bound is NaN in a
+/// lane whose row has no such product) the bounds are computed again row by row, as where
+/// there are no groups: one scalar chain per row. Every instance so has the scalar one's
+/// bounds and choice; a NaN lane once skipped a row that could hold the maximum (a first
+/// row of bound minus infinity ended the visits).
 #[inline(always)]
 unsafe fn row_bounds<T: Real, I: Isa<T>>(
     rows: &Rows<'_, T>,
@@ -225,14 +233,13 @@ unsafe fn row_bounds<T: Real, I: Isa<T>>(
     ub: &mut [T; PRUNE_MAX_ACTIONS],
 ) -> usize {
     if let Some((cols, ws)) = rows.group(c, na).filter(|_| na <= I::LANES) {
-        // The rows merged by column: one chain of vector multiply-adds, a lane per action
-        // (each lane its row's chain, with zero products between its entries: the same
-        // bits for finite bounds; a non-finite bound can only make a bound NaN, and a row
-        // of NaN bound is visited).
-        let mut lanes = [T::ZERO; GROUP_LANES];
-        // SAFETY: a step's weights hold `GROUP_LANES >= I::LANES` values, and every column
-        // indexes `bounds` (the rows' columns are below their `n_cols`, `bounds`' length at
-        // every caller).
+        // The vector is stored straight into `ub` (lanes past `na` hold zero-weight chains,
+        // never read): a copy of `na` lanes would be a call to `memmove` per core, 2-3% of
+        // a full backup.
+        const { assert!(GROUP_LANES <= PRUNE_MAX_ACTIONS) };
+        // SAFETY: a step's weights and `ub` hold `GROUP_LANES >= I::LANES` values, and every
+        // column indexes `bounds` (the rows' columns are below their `n_cols`, `bounds`'
+        // length at every caller).
         unsafe {
             let mut acc = I::zero();
             for (&k, w) in cols.iter().zip(ws) {
@@ -240,19 +247,48 @@ unsafe fn row_bounds<T: Real, I: Isa<T>>(
                 let b = I::splat(*bounds.get_unchecked(k as usize));
                 acc = I::fma(I::load(w.as_ptr()), b, acc);
             }
-            I::store(lanes.as_mut_ptr(), acc);
-        }
-        ub[..na].copy_from_slice(&lanes[..na]);
-    } else {
-        // Every row's chain first (independent, so they overlap).
-        for (a, u) in ub[..na].iter_mut().enumerate() {
-            let (cols, ws) = rows.row(c * na + a);
-            *u = unsafe { row_dot::<T, I>(cols, ws, bounds) };
+            if I::MASK_COMPARES {
+                // `0 x + 0` is 0 exactly when `x` is finite.
+                let mk = I::mask(na);
+                let finite = I::fma(acc, I::zero(), I::zero());
+                if I::equal_bits(finite, T::ZERO, mk) == (1u64 << na) - 1 {
+                    I::store(ub.as_mut_ptr(), acc);
+                    // The largest from the vector, not from `ub` (each scalar compare would
+                    // wait for the store): finite, so the maximum is exact and its lowest
+                    // lane the scalar loop's choice below.
+                    let bits = I::equal_bits(acc, I::reduce_max(acc, mk), mk);
+                    // A branch per action, not `trailing_zeros`: the CPU predicts the row
+                    // and starts on it before the bounds are known (an index computed from
+                    // the bits made the row's loads wait for them, 25% slower).
+                    for a in 0..na - 1 {
+                        if bits & (1 << a) != 0 {
+                            return a;
+                        }
+                    }
+                    return na - 1;
+                }
+            } else {
+                I::store(ub.as_mut_ptr(), acc);
+                if ub[..na].iter().all(|u| u.is_finite()) {
+                    return top_bound(&ub[..na]);
+                }
+            }
         }
     }
-    // The largest without branches on the data.
+    // Every row's chain first (independent, so they overlap).
+    for (a, u) in ub[..na].iter_mut().enumerate() {
+        let (cols, ws) = rows.row(c * na + a);
+        *u = unsafe { row_dot::<T, I>(cols, ws, bounds) };
+    }
+    top_bound(&ub[..na])
+}
+
+/// The index of the largest bound, the lowest on ties (a NaN bound is never larger, nor a
+/// bound larger than a NaN first one).
+#[inline(always)]
+fn top_bound<T: Real>(ub: &[T]) -> usize {
     let mut top = 0;
-    for a in 1..na {
+    for a in 1..ub.len() {
         top = if ub[a] > ub[top] { a } else { top };
     }
     top
@@ -382,6 +418,63 @@ unsafe fn last_narrow_arg<T: Real, I: Isa<T>>(
     }
 }
 
+/// [`last_block_pruned`] for one register block (`p0`, mask) of every core
+/// `first_core + i`, from and into its running maximum `out[i]`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn cores_pruned<T: Real, I: Isa<T>, const NV: usize, const ABS: bool>(
+    rows: &Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    stride: usize,
+    (p0, m): (usize, I::M),
+    input: *const T,
+    bounds: &[T],
+    out: &mut [T],
+) {
+    for (i, o) in out.iter_mut().enumerate() {
+        let c = first_core + i;
+        *o = unsafe {
+            last_block_pruned::<T, I, NV, ABS>(rows, c, na, stride, p0, m, input, bounds, *o)
+        };
+    }
+}
+
+/// [`last_block_pruned_arg`] for one register block (`p0`, mask) of every core
+/// `first_core + i`, from and into its running maximum `out[i]` and index `args[i]`
+/// (`u32::MAX` before any; indices fit `u32`: [`Kernels::last`]'s contract).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)] // the tensor's shape, spelled out
+unsafe fn cores_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
+    rows: &Rows<'_, T>,
+    first_core: usize,
+    na: usize,
+    shape: (usize, usize),
+    (p0, m): (usize, I::M),
+    input: *const T,
+    bounds: &[T],
+    out: &mut [T],
+    args: &mut [u32],
+) {
+    for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
+        let c = first_core + i;
+        let idx = if *arg == u32::MAX {
+            usize::MAX
+        } else {
+            *arg as usize
+        };
+        let (v, idx) = unsafe {
+            last_block_pruned_arg::<T, I, NV>(rows, c, na, shape, p0, m, input, bounds, (*o, idx))
+        };
+        *o = v;
+        *arg = if idx == usize::MAX {
+            u32::MAX
+        } else {
+            idx as u32
+        };
+    }
+}
+
 macro_rules! by_nv {
     ($nv:expr, $f:ident::<$t:ty, $i:ty, _ $(, $c:ident)*>($($arg:expr),* $(,)?)) => {
         match $nv {
@@ -455,58 +548,55 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
             }
             return;
         }
-        if let Some(args) = args.as_deref_mut().filter(|_| prune && !ABS) {
-            for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
-                let c = first_core + i;
-                let mut best = (T::from_f64(f64::NEG_INFINITY), usize::MAX);
+        if prune {
+            // Register block by register block, each over every core (the block's dispatch
+            // and bounds once per call, not per core); a core's running maximum is kept in
+            // its output (and its index in `args`): each core still sees its blocks in order,
+            // so the same bits.
+            let neg_inf = T::from_f64(f64::NEG_INFINITY);
+            out.fill(neg_inf);
+            if let Some(args) = args.as_deref_mut().filter(|_| !ABS) {
+                args.fill(u32::MAX);
                 for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
-                    let m = I::mask(tail);
                     let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
-                    best = by_nv!(
+                    let block = (p0, I::mask(tail));
+                    let shape = (p_len, stride);
+                    by_nv!(
                         nv,
-                        last_block_pruned_arg::<T, I, _>(
-                            &rows,
-                            c,
-                            na,
-                            (p_len, stride),
-                            p0,
-                            m,
-                            ip,
-                            b,
-                            best
+                        cores_pruned_arg::<T, I, _>(
+                            &rows, first_core, na, shape, block, ip, b, out, args
                         )
                     );
                 }
-                *o = best.0;
-                // Every row was computed by the same arithmetic, so some lane holds the maximum.
-                *arg = if best.1 == usize::MAX {
-                    0
-                } else {
-                    best.1 as u32
-                };
+                // Every row was computed by the same arithmetic, so some lane holds the
+                // maximum (`u32::MAX` only if it is NaN).
+                for arg in args.iter_mut().filter(|a| **a == u32::MAX) {
+                    *arg = 0;
+                }
+                return;
             }
-            return;
-        }
-        for (i, o) in out.iter_mut().enumerate() {
-            let c = first_core + i;
-            let mut best = T::from_f64(f64::NEG_INFINITY);
             for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
-                let m = I::mask(tail);
-                best = if prune {
-                    let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
-                    by_nv!(
-                        nv,
-                        last_block_pruned::<T, I, _, ABS>(&rows, c, na, stride, p0, m, ip, b, best)
-                    )
-                } else {
+                let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+                let block = (p0, I::mask(tail));
+                by_nv!(
+                    nv,
+                    cores_pruned::<T, I, _, ABS>(&rows, first_core, na, stride, block, ip, b, out)
+                );
+            }
+        } else {
+            for (i, o) in out.iter_mut().enumerate() {
+                let c = first_core + i;
+                let mut best = T::from_f64(f64::NEG_INFINITY);
+                for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
+                    let m = I::mask(tail);
                     let v = by_nv!(
                         nv,
                         last_block::<T, I, _, ABS>(&rows, c, na, stride, p0, m, ip)
                     );
-                    I::max1(best, v)
-                };
+                    best = I::max1(best, v);
+                }
+                *o = best;
             }
-            *o = best;
         }
     }
     if let Some(args) = args {

@@ -638,6 +638,10 @@ trait Isa<T: Copy> {
     /// Whether [`Isa::store_range`] is a single masked store, so that a stage over rows of a
     /// few values runs them packed, several rows per vector (`stage::stage_flat`).
     const RANGE_STORES: bool = false;
+    /// Whether [`Isa::equal_bits`] is a vector compare into a bit mask (x86), so that the
+    /// pruned last stage picks its first row from the vector of row bounds; elsewhere the
+    /// bits cost a test per lane and the bounds are compared one by one.
+    const MASK_COMPARES: bool = false;
     /// Stores lanes `lo..hi` (`lo < hi <= LANES`) to `p + lo ..`; no other lane's memory is
     /// touched, so `p` itself may point before the buffer (it is only offset, never read).
     /// Called only on instances with [`Isa::RANGE_STORES`], which implement it.

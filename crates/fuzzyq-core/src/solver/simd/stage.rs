@@ -309,22 +309,36 @@ pub(super) struct Merged<T, const NA: usize> {
 
 impl<T: Real, const NA: usize> Merged<T, NA> {
     /// Merges rows `first_row .. first_row + NA`; `None` past [`MAX_STEPS`] steps.
-    #[inline(always)]
+    #[cfg(test)]
     pub(super) fn new(rows: &Rows<'_, T>, first_row: usize) -> Option<Self> {
+        let mut m = Self::empty();
+        m.merge(rows, first_row).then_some(m)
+    }
+
+    /// No steps.
+    #[inline(always)]
+    fn empty() -> Self {
         const { assert!(NA <= 8, "action masks are u8") };
-        let mut m = Self {
+        Self {
             n: 0,
             cols: [0; MAX_STEPS],
             masks: [0; MAX_STEPS],
             ws: [[T::ZERO; NA]; MAX_STEPS],
-        };
+        }
+    }
+
+    /// Merges rows `first_row .. first_row + NA` into these (empty) steps, in place (a merge
+    /// returned by value was a `memmove` of the whole struct per call); `false` past
+    /// [`MAX_STEPS`] steps.
+    #[inline(always)]
+    fn merge(&mut self, rows: &Rows<'_, T>, first_row: usize) -> bool {
         let n = rows.merge_by_column::<NA>(first_row, NA, MAX_STEPS, |step, k, a, w| {
-            m.cols[step] = k;
-            m.masks[step] |= 1 << a;
-            m.ws[step][a] = w;
-        })?;
-        m.n = n;
-        Some(m)
+            self.cols[step] = k;
+            self.masks[step] |= 1 << a;
+            self.ws[step][a] = w;
+        });
+        self.n = n.unwrap_or(0);
+        n.is_some()
     }
 }
 
@@ -431,9 +445,10 @@ unsafe fn stage_merged_rows<T: Real, I: Isa<T>, const NA: usize>(
     input: *const T,
     out: *mut T,
 ) -> bool {
-    let Some(merged) = Merged::<T, NA>::new(rows, first_row) else {
+    let mut merged = Merged::<T, NA>::empty();
+    if !merged.merge(rows, first_row) {
         return false;
-    };
+    }
     let (s, os) = strides;
     if I::RANGE_STORES
         && 2 * p_len <= I::LANES

@@ -480,6 +480,66 @@ fn rows_too_long_to_merge_take_the_row_by_row_path_with_the_same_sums() {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// The pruned last stage on inputs with infinities, values whose sums overflow, and
+    /// columns of minus infinity: the row bounds are then not all finite (a step's zero
+    /// weight times an infinite bound is NaN), and every instance must give the maxima and
+    /// actions of the scalar instance, which bounds and chooses row by row.
+    #[test]
+    fn pruned_last_stage_with_non_finite_bounds_matches_the_scalar_instance(
+        ((n_c, na, n_k, _, p_len), rows) in shape().prop_flat_map(|sh| {
+            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
+        }),
+        seed in any::<u64>(),
+        (every, big) in (2usize..6, prop_oneof![Just(f32::INFINITY), Just(3.0e38f32)]),
+        (kinds, negative) in (prop::collection::vec(0u8..2, 8), any::<bool>()),
+    ) {
+        // Positive weights, and infinities of one sign per case: the values themselves are
+        // never NaN (the instances need not agree on the maximum of NaN values), while the
+        // bounds' lanes may be.
+        let weight = rows.weight.iter().map(|&w| w.max(1.0 / 64.0)).collect();
+        let rows = RowsBuf::new(rows.ptr.clone(), rows.col.clone(), weight, n_k)
+            .expect("valid rows")
+            .with_groups(na);
+        // Column by column: ordinary values, or among them every few a large one (or all
+        // minus infinity, a column whose bound is minus infinity).
+        let input: Vec<f32> = values(n_k * p_len, seed)
+            .into_iter()
+            .enumerate()
+            .map(|(i, x)| match (kinds[i / p_len], negative) {
+                (1, true) => f32::NEG_INFINITY,
+                (1, false) if (i + seed as usize).is_multiple_of(every) => big,
+                _ => x,
+            })
+            .collect();
+        let dense = InRows::dense(p_len);
+        let scalar = select::<f32>(Some(super::super::Kernel::Scalar)).unwrap();
+        let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+        let (mut want, mut want_args) = (vec![0.0f32; n_c], vec![0u32; n_c]);
+        (scalar.last)(rows.view(), 0, na, dense, false, &input, &mut want, &mut bounds, Some(&mut want_args));
+        for k in f32::available() {
+            let (mut m, mut args) = (vec![0.0f32; n_c], vec![0u32; n_c]);
+            (k.last)(rows.view(), 0, na, dense, false, &input, &mut m, &mut bounds, Some(&mut args));
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            prop_assert_eq!(bits(&m), bits(&want), "maxima, {} kernels", k.name);
+            prop_assert_eq!(&args, &want_args, "actions, {} kernels", k.name);
+            (k.last)(rows.view(), 0, na, dense, false, &input, &mut m, &mut bounds, None);
+            prop_assert_eq!(bits(&m), bits(&want), "maxima without actions, {} kernels", k.name);
+        }
+        // And they are the maxima of the full stage, whose first holder is the action.
+        for c in 0..n_c {
+            let mut full = vec![0.0f32; na * p_len];
+            scalar.stage(rows.view(), c * na, na, 1, p_len, &input, &mut full);
+            let max = full.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+            prop_assert_eq!(want[c].to_bits(), max.to_bits(), "maximum, core {}", c);
+            let first = full.iter().position(|&x| x == max).unwrap();
+            prop_assert_eq!(want_args[c] as usize, first, "action, core {}", c);
+        }
+    }
+}
+
 /// One value of a change-range test: mostly ordinary, some NaN and zeros of either sign.
 fn range_value() -> impl Strategy<Value = f32> {
     prop_oneof![
@@ -605,6 +665,34 @@ fn first_equal_rows_takes_the_lowest_valid_lane_of_the_lowest_row() {
                 };
                 assert_eq!(found, hit, "rows of {row_len}, {n_rows} rows");
             }
+        }
+    }
+}
+
+/// [`Isa::reduce_max`] of lanes all minus infinity, for every mask: minus infinity on every
+/// instance the CPU runs (AVX-512's masked reduction intrinsic gave the lowest finite value).
+#[test]
+fn reduce_max_of_minus_infinities_is_minus_infinity() {
+    fn check<T: Real + core::fmt::Debug, I: Isa<T>>() {
+        for n in 1..=I::LANES {
+            // SAFETY: only instances the CPU runs; `1 <= n <= LANES`.
+            let got = unsafe { I::reduce_max(I::neg_inf(), I::mask(n)) };
+            assert_eq!(got, T::from_f64(f64::NEG_INFINITY), "{n} lanes");
+        }
+    }
+    check::<f32, Scalar>();
+    check::<f64, Scalar>();
+    check::<f32, portable::Portable<true>>();
+    check::<f64, portable::Portable<true>>();
+    #[cfg(target_arch = "x86_64")]
+    {
+        if has_avx512() {
+            check::<f32, x86::Avx512>();
+            check::<f64, x86::Avx512>();
+        }
+        if has_avx2() {
+            check::<f32, x86::Avx2>();
+            check::<f64, x86::Avx2>();
         }
     }
 }

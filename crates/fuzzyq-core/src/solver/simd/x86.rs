@@ -17,6 +17,7 @@ impl Isa<f32> for Avx512 {
     const LANES: usize = 16;
     const BLOCK: usize = 8;
     const MERGED: usize = 4;
+    const MASK_COMPARES: bool = true;
     const OVERREAD: usize = 0;
     type Exact = Self;
     type Narrow = Avx2;
@@ -76,7 +77,9 @@ impl Isa<f32> for Avx512 {
     }
     #[inline(always)]
     unsafe fn reduce_max(v: __m512, m: __mmask16) -> f32 {
-        unsafe { _mm512_mask_reduce_max_ps(m, v) }
+        // Not `_mm512_mask_reduce_max_ps`: it fills the masked-off lanes with the lowest
+        // finite value, not minus infinity, so lanes all minus infinity reduced to it.
+        unsafe { _mm512_reduce_max_ps(<Self as Isa<f32>>::load_part_from(v, m)) }
     }
     #[inline(always)]
     unsafe fn load_part_from(v: __m512, m: __mmask16) -> __m512 {
@@ -98,6 +101,7 @@ impl Isa<f64> for Avx512 {
     const LANES: usize = 8;
     const BLOCK: usize = 8;
     const MERGED: usize = 4;
+    const MASK_COMPARES: bool = true;
     const OVERREAD: usize = 0;
     type Exact = Self;
     type Narrow = Avx2;
@@ -157,7 +161,9 @@ impl Isa<f64> for Avx512 {
     }
     #[inline(always)]
     unsafe fn reduce_max(v: __m512d, m: __mmask8) -> f64 {
-        unsafe { _mm512_mask_reduce_max_pd(m, v) }
+        // Not `_mm512_mask_reduce_max_pd`: it fills the masked-off lanes with the lowest
+        // finite value, not minus infinity, so lanes all minus infinity reduced to it.
+        unsafe { _mm512_reduce_max_pd(<Self as Isa<f64>>::load_part_from(v, m)) }
     }
     #[inline(always)]
     unsafe fn load_part_from(v: __m512d, m: __mmask8) -> __m512d {
@@ -183,6 +189,7 @@ impl Isa<f32> for Avx2 {
     const LANES: usize = 8;
     const BLOCK: usize = 8;
     const MERGED: usize = 2;
+    const MASK_COMPARES: bool = true;
     const OVERREAD: usize = 0;
     type Exact = Self;
     type Narrow = Self;
@@ -292,6 +299,7 @@ impl Isa<f64> for Avx2 {
     const LANES: usize = 4;
     const BLOCK: usize = 6;
     const MERGED: usize = 2;
+    const MASK_COMPARES: bool = true;
     const OVERREAD: usize = 0;
     type Exact = Self;
     type Narrow = Self;
