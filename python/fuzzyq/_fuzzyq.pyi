@@ -1489,7 +1489,11 @@ def solve(
         callback: called after every sweep with a dict: ``sweep`` (from 1),
             ``delta_lower`` and ``delta_upper`` (bounds of the sweep's change),
             ``extrapolated``, ``evaluation``, ``seconds``, ``bound`` (the a-priori sweep
-            bound of eq 37) and ``xi``. Returning False stops the solve after that sweep:
+            bound of eq 37) and ``xi``; and what the solver chose for the run, the same in
+            every call: ``scheme`` (``"value-iteration"`` or ``"modified-policy-iteration"``),
+            ``extrapolate`` (whether its sweeps move `V` to the midpoint of MacQueen's
+            bounds: not with absorbing goals or terminal states) and ``coarse_start`` (None,
+            or the dict `Solution.coarse_start` gives). Returning False stops the solve after that sweep:
             `solve` then returns the solution of the run limited to the sweeps done, with its
             error bound and ``stopped=True``. Any other return value continues. An exception
             it raises stops the solve and propagates.

@@ -288,6 +288,14 @@ def test_callback_sees_every_sweep_and_can_stop(one_agent: tuple[fuzzyq.PointMas
     s = fuzzyq.solve(model, grid, callback=seen.append)
     assert [d["sweep"] for d in seen] == list(range(1, s.sweeps + 1))
     assert set(seen[0]) >= {"sweep", "delta_lower", "delta_upper", "seconds", "bound", "extrapolated"}
+    # What the solver chose, the same in every call: here modified policy iteration with
+    # extrapolation (the defaults), no coarse start.
+    assert {(d["scheme"], d["extrapolate"], d["coarse_start"]) for d in seen} == {
+        ("modified-policy-iteration", True, None)
+    }
+    plain: list[dict[str, object]] = []
+    fuzzyq.solve(model, grid, extrapolate=False, evaluation_sweeps=0, max_sweeps=3, callback=plain.append)
+    assert {(d["scheme"], d["extrapolate"]) for d in plain} == {("value-iteration", False)}
 
     class Stop(Exception):
         pass

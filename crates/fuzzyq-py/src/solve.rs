@@ -11,8 +11,8 @@ use fuzzyq_core::NamedOption;
 use fuzzyq_core::options::UnknownName;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, BackupPath, IterationOperator, Kernel, Precision, Progress, SolveError, SweepMode,
-    TabulatedModel,
+    self, BackupPath, CoarseStart, IterationOperator, Kernel, Precision, Progress, Scheme,
+    SolveError, SweepMode, TabulatedModel,
 };
 use fuzzyq_sim::io::checkpoint::FqiState;
 use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
@@ -208,6 +208,17 @@ impl<'a, S> Watch<'a, S> {
                         d.set_item("seconds", p.record.seconds)?;
                         d.set_item("bound", p.bound)?;
                         d.set_item("xi", p.xi)?;
+                        // What the solver chose for the run (the same in every call).
+                        let scheme = match p.scheme {
+                            Scheme::Value => "value-iteration",
+                            Scheme::ModifiedPolicy => "modified-policy-iteration",
+                        };
+                        d.set_item("scheme", scheme)?;
+                        d.set_item("extrapolate", p.extrapolate)?;
+                        d.set_item(
+                            "coarse_start",
+                            p.coarse.map(|c| coarse_dict(py, &c)).transpose()?,
+                        )?;
                         let r = cb.call1(py, (d,))?;
                         // Only `False` itself stops: a callback returning nothing continues.
                         Ok(!r.bind(py).is(pyo3::types::PyBool::new(py, false)))
@@ -1215,13 +1226,7 @@ impl Solution {
         self.summary
             .coarse
             .as_deref()
-            .map(|c| {
-                let d = PyDict::new(py);
-                d.set_item("cores", c.cores)?;
-                d.set_item("sweeps", c.sweeps)?;
-                d.set_item("seconds", c.seconds)?;
-                Ok(d)
-            })
+            .map(|c| coarse_dict(py, c))
             .transpose()
     }
 
@@ -1403,4 +1408,14 @@ impl Solution {
             })
         })
     }
+}
+
+/// A coarse start as a dict: the coarse grid's `cores`, its `sweeps` and the `seconds` of its
+/// solve and interpolation.
+fn coarse_dict<'py>(py: Python<'py>, c: &CoarseStart) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("cores", c.cores)?;
+    d.set_item("sweeps", c.sweeps)?;
+    d.set_item("seconds", c.seconds)?;
+    Ok(d)
 }
