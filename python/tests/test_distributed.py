@@ -221,6 +221,8 @@ def test_sweeps_on_the_cluster_write_the_single_process_file(
     assert run.nodes == 2 and run.groups == 8
     assert [r["sweep"] for r in seen] == list(range(1, run.solution.sweeps + 1))
     assert any(r["evaluation"] for r in seen) and run.solution.converged
+    assert {r["scheme"] for r in seen} == {"modified-policy-iteration"}
+    assert all((r["extrapolate"], r["coarse_start"]) == (seen[0]["extrapolate"], seen[0]["coarse_start"]) for r in seen)
     # Each task fetched its halo's groups only: less than a broadcast of V to every task.
     assert 0 < run.fetched_bytes < 0.8 * run.broadcast_bytes
     assert run.summary()["distributed"]["fetched_bytes"] == run.fetched_bytes

@@ -513,6 +513,7 @@ pub(crate) fn train_sharded(
                     d.set_item("evaluation", r.evaluation)?;
                     d.set_item("seconds", r.seconds)?;
                     d.set_item("bound", p.bound)?;
+                    crate::solve::set_run_choices(&d, p)?;
                     let go = f.call1((d,))?;
                     Ok(if go.is(pyo3::types::PyBool::new(py, false)) {
                         ControlFlow::Break(())

@@ -208,17 +208,7 @@ impl<'a, S> Watch<'a, S> {
                         d.set_item("seconds", p.record.seconds)?;
                         d.set_item("bound", p.bound)?;
                         d.set_item("xi", p.xi)?;
-                        // What the solver chose for the run (the same in every call).
-                        let scheme = match p.scheme {
-                            Scheme::Value => "value-iteration",
-                            Scheme::ModifiedPolicy => "modified-policy-iteration",
-                        };
-                        d.set_item("scheme", scheme)?;
-                        d.set_item("extrapolate", p.extrapolate)?;
-                        d.set_item(
-                            "coarse_start",
-                            p.coarse.map(|c| coarse_dict(py, &c)).transpose()?,
-                        )?;
+                        set_run_choices(&d, p)?;
                         let r = cb.call1(py, (d,))?;
                         // Only `False` itself stops: a callback returning nothing continues.
                         Ok(!r.bind(py).is(pyo3::types::PyBool::new(py, false)))
@@ -1418,4 +1408,18 @@ fn coarse_dict<'py>(py: Python<'py>, c: &CoarseStart) -> PyResult<Bound<'py, PyD
     d.set_item("sweeps", c.sweeps)?;
     d.set_item("seconds", c.seconds)?;
     Ok(d)
+}
+
+/// Sets what the solver chose for a run in a progress record `d` (the same after every
+/// sweep): `scheme` (`"value-iteration"` or `"modified-policy-iteration"`), `extrapolate`
+/// and `coarse_start` (None or [`coarse_dict`]).
+pub(crate) fn set_run_choices(d: &Bound<'_, PyDict>, p: &Progress) -> PyResult<()> {
+    let scheme = match p.scheme {
+        Scheme::Value => "value-iteration",
+        Scheme::ModifiedPolicy => "modified-policy-iteration",
+    };
+    d.set_item("scheme", scheme)?;
+    d.set_item("extrapolate", p.extrapolate)?;
+    let coarse = p.coarse.map(|c| coarse_dict(d.py(), &c)).transpose()?;
+    d.set_item("coarse_start", coarse)
 }

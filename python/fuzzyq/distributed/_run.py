@@ -293,7 +293,9 @@ def train(
     `checkpoint`: write the run's state there after every sweep (the format of
     ``fuzzyq train --checkpoint``); `resume`: continue from such a file. `on_sweep(record)`:
     called after every sweep with a dict (``sweep``, ``delta``, ``delta_v``, ``evaluation``,
-    ``seconds``, ``bound``); returning ``False`` stops the run (`fuzzyq.SolverError`).
+    ``seconds``, ``bound``, and the run's ``scheme``, ``extrapolate`` and ``coarse_start`` as
+    `fuzzyq.solve`'s callback gets them); returning ``False`` stops the run
+    (`fuzzyq.SolverError`).
 
     Errors: `RayUnavailableError` without Ray; `fuzzyq.ConfigError` for a configuration that
     does not parse or cannot be sharded (the q-values operator, asynchronous sweeps, the
