@@ -167,8 +167,11 @@ def test_a_coarse_start_keeps_the_bound_and_reports_itself() -> None:
     model = fuzzyq.PointMass(agents=1)
     grid = model.paper_grid()
     plain = fuzzyq.solve(model, grid, xi=1e-3)
-    coarse = fuzzyq.solve(model, grid, xi=1e-3, coarse_start=True)
+    seen: list[dict[str, object]] = []
+    coarse = fuzzyq.solve(model, grid, xi=1e-3, coarse_start=True, callback=seen.append)
     assert plain.coarse_start is None
+    # The callback gets the same coarse start after every sweep.
+    assert seen and all(d["coarse_start"] == coarse.coarse_start for d in seen)
     info = coarse.coarse_start
     assert info is not None and info["cores"] == 15 * 15 and info["sweeps"] > 0
     assert info["seconds"] >= 0.0 and coarse.converged

@@ -259,7 +259,7 @@ unsafe fn row_bounds<T: Real, I: Isa<T>>(
                     let bits = I::equal_bits(acc, I::reduce_max(acc, mk), mk);
                     // A branch per action, not `trailing_zeros`: the CPU predicts the row
                     // and starts on it before the bounds are known (an index computed from
-                    // the bits made the row's loads wait for them, 25% slower).
+                    // the bits made the row's loads wait for them: 23% slower).
                     for a in 0..na - 1 {
                         if bits & (1 << a) != 0 {
                             return a;

@@ -55,6 +55,11 @@ fn shape() -> impl Strategy<Value = (usize, usize, usize, usize, usize)> {
     (1usize..4, 1usize..7, 1usize..9, rp).prop_map(|(c, a, k, (r, p))| (c, a, k, r, p))
 }
 
+/// A [`shape`] with random rows for its block cores' actions over its successor cores.
+fn shaped_rows() -> impl Strategy<Value = ((usize, usize, usize, usize, usize), RowsBuf<f32>)> {
+    shape().prop_flat_map(|sh| (Just(sh), rows_strategy(sh.0 * sh.1, sh.2)))
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
@@ -62,9 +67,7 @@ proptest! {
     /// instance, the chain `fma(w_e, in[k_e K + r S + p], acc)` from 0 in row order.
     #[test]
     fn strided_stages_sum_each_row_in_order_on_every_instance(
-        ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
-            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
-        }),
+        ((n_c, na, n_k, r_len, p_len), rows) in shaped_rows(),
         (k_extra, r_gap) in (0usize..50, prop_oneof![Just(0usize), 0usize..20]),
         (a_gap, action_outer) in (0usize..9, any::<bool>()),
         seed in any::<u64>(),
@@ -104,9 +107,7 @@ proptest! {
 
     #[test]
     fn every_instance_matches_the_scalar_one_bit_for_bit(
-        ((n_c, na, n_k, r_len, p_len), rows) in shape().prop_flat_map(|sh| {
-            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
-        }),
+        ((n_c, na, n_k, r_len, p_len), rows) in shaped_rows(),
         seed in any::<u64>(),
     ) {
         // The rows also merged in groups of one core's actions, as the block path's tables
@@ -222,9 +223,7 @@ proptest! {
     /// own chain, bit for bit.
     #[test]
     fn merged_groups_keep_every_row_chain(
-        ((n_c, na, n_k, _, _), rows) in shape().prop_flat_map(|sh| {
-            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
-        }),
+        ((n_c, na, n_k, _, _), rows) in shaped_rows(),
         seed in any::<u64>(),
     ) {
         prop_assume!(na >= 2);
@@ -489,9 +488,7 @@ proptest! {
     /// actions of the scalar instance, which bounds and chooses row by row.
     #[test]
     fn pruned_last_stage_with_non_finite_bounds_matches_the_scalar_instance(
-        ((n_c, na, n_k, _, p_len), rows) in shape().prop_flat_map(|sh| {
-            (Just(sh), rows_strategy(sh.0 * sh.1, sh.2))
-        }),
+        ((n_c, na, n_k, _, p_len), rows) in shaped_rows(),
         seed in any::<u64>(),
         (every, big) in (2usize..6, prop_oneof![Just(f32::INFINITY), Just(3.0e38f32)]),
         (kinds, negative) in (prop::collection::vec(0u8..2, 8), any::<bool>()),
