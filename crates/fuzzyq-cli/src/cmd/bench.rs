@@ -3,7 +3,13 @@
 //! Prints the CPU, its caches (as the OS reports them), the kernel instances it runs, the
 //! fused multiply-add peak measured with the chosen instance, and the time of the solver's
 //! full backups on a problem (the paper's grid by default), as multiply-adds per second and as
-//! a fraction of that peak.
+//! a fraction of the peak.
+//!
+//! A shared host's speed drifts (by more than 10% within minutes on the VMs this was measured
+//! on), so a peak measured once and backups timed later can meet in different phases of it.
+//! The peak is therefore also measured between the backups, briefly, after every sweep, and
+//! each backup is set against the mean of the peaks measured just before and just after it:
+//! the fraction reported is the median of those ratios.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -42,7 +48,8 @@ pub(crate) struct BenchArgs {
     /// Full backups timed (after a first one that is not).
     #[arg(long, value_name = "N", default_value_t = 4)]
     backups: usize,
-    /// Seconds of the fused multiply-add peak measurement.
+    /// Seconds of the first fused multiply-add peak measurement (a quarter of it is measured
+    /// again after every sweep, to set each backup against the peak around it).
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     peak_seconds: f64,
     /// Also write the results as JSON.
@@ -77,9 +84,15 @@ struct Report {
     joint_actions: usize,
     backup: String,
     multiply_adds_per_backup: Option<f64>,
+    /// The peak measured again after each sweep (the first, untimed one included).
+    peaks_between_backups: Vec<f64>,
     backup_seconds: Vec<f64>,
     median_backup_seconds: f64,
     gfma_per_second: Option<f64>,
+    /// Each backup's multiply-adds per second over the mean of the peaks measured just
+    /// before and just after it.
+    fractions_of_peak: Option<Vec<f64>>,
+    /// The median of `fractions_of_peak`.
     fraction_of_peak: Option<f64>,
 }
 
@@ -140,11 +153,11 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
     );
 
     let precision = config.solver.precision;
-    let peak = match precision {
-        Precision::F32 => solver::fma_peak::<f32>(Some(kernel), args.peak_seconds),
-        Precision::F64 => solver::fma_peak::<f64>(Some(kernel), args.peak_seconds),
-    }
-    .context("the kernel instance is not available")?;
+    let measure_peak = |seconds: f64| match precision {
+        Precision::F32 => solver::fma_peak::<f32>(Some(kernel), seconds),
+        Precision::F64 => solver::fma_peak::<f64>(Some(kernel), seconds),
+    };
+    let peak = measure_peak(args.peak_seconds).context("the kernel instance is not available")?;
     println!(
         "FMA peak   {:.1} GFMA/s ({} {}, {} threads, {} s)",
         peak.gfma_per_second,
@@ -161,25 +174,37 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
         config.env.name()
     );
     let start = Instant::now();
-    let mut ends = Vec::new();
+    // After every sweep: its end on the solve's clock, then the peak again, and how long that
+    // measurement took (the solve's clock runs on through it).
+    let (mut ends, mut around, mut spent) = (Vec::new(), Vec::new(), Vec::new());
     let artifact = train::train(&config, |p| {
         ends.push(p.record.seconds);
+        let t0 = Instant::now();
+        around.push(measure_peak(args.peak_seconds / 4.0).map_or(f64::NAN, |p| p.gfma_per_second));
+        spent.push(t0.elapsed().as_secs_f64());
         std::ops::ControlFlow::Continue(())
     })?;
     let summary = artifact.summary;
-    // Sweep k's time is the gap between the end of sweep k - 1 and its own; the first one
-    // (after the set-up, from V = 0) is not timed.
-    let times: Vec<f64> = ends.windows(2).map(|w| w[1] - w[0]).collect();
+    // Sweep k's time is the gap between the end of sweep k - 1 and its own, less the peak
+    // measured in between; the first one (after the set-up, from V = 0) is not timed.
+    let times: Vec<f64> = (1..ends.len())
+        .map(|k| ends[k] - ends[k - 1] - spent[k - 1])
+        .collect();
     if times.is_empty() {
         anyhow::bail!(
             "the solve stopped after {} sweep(s) (its values did not change): no full backup to time",
             ends.len()
         );
     }
-    let median = median(&times);
+    let median_seconds = median(&times);
     let fma = summary.multiply_adds_per_sweep;
-    let rate = fma.map(|f| f / median / 1e9);
-    let fraction = rate.map(|r| r / peak.gfma_per_second);
+    let rate = fma.map(|f| f / median_seconds / 1e9);
+    let fractions = fma.map(|f| {
+        (1..ends.len())
+            .map(|k| f / times[k - 1] / 1e9 / (0.5 * (around[k - 1] + around[k])))
+            .collect::<Vec<_>>()
+    });
+    let fraction = fractions.as_deref().map(median);
     println!(
         "problem    {}: {cores} cores x {joint} joint actions, {} path{}",
         config.env.name(),
@@ -188,13 +213,27 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
             ", {f:.3e} multiply-adds per full backup"
         )),
     );
+    let (lo, hi) = min_max(&around);
+    println!(
+        "           {lo:.1}-{hi:.1} GFMA/s in the {} measurements of {} s between the sweeps",
+        around.len(),
+        args.peak_seconds / 4.0
+    );
     println!(
         "backup     {:.3} s median of {} full backups (value iteration from V = 0){}",
-        median,
+        median_seconds,
         times.len(),
-        match (rate, fraction) {
-            (Some(r), Some(f)) =>
-                format!(": {r:.1} GFMA/s, {:.0}% of the measured peak", 100.0 * f),
+        match (rate, &fractions, fraction) {
+            (Some(r), Some(fs), Some(f)) => {
+                let (lo, hi) = min_max(fs);
+                format!(
+                    ": {r:.1} GFMA/s, {:.0}% of the peak measured around each backup \
+                     (median; {:.0}-{:.0}%)",
+                    100.0 * f,
+                    100.0 * lo,
+                    100.0 * hi
+                )
+            }
             _ => " (the generic path: no multiply-add count)".to_string(),
         }
     );
@@ -222,9 +261,11 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
             joint_actions: joint,
             backup: summary.backup,
             multiply_adds_per_backup: fma,
+            peaks_between_backups: around,
             backup_seconds: times,
-            median_backup_seconds: median,
+            median_backup_seconds: median_seconds,
             gfma_per_second: rate,
+            fractions_of_peak: fractions,
             fraction_of_peak: fraction,
         };
         write_json(path, &report)?;
@@ -240,6 +281,14 @@ fn median(xs: &[f64]) -> f64 {
         n if n % 2 == 1 => v[n / 2],
         n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
     }
+}
+
+/// The smallest and largest of `xs` (`(inf, -inf)` for none).
+fn min_max(xs: &[f64]) -> (f64, f64) {
+    xs.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        })
 }
 
 /// The CPU's model name (Linux `/proc/cpuinfo`), or the architecture elsewhere.

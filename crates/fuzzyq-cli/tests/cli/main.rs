@@ -1134,8 +1134,25 @@ fn bench_reports_the_machine_and_the_backup_against_the_peak() {
     assert_eq!(j["backup"], "block");
     assert_eq!(j["backup_seconds"].as_array().unwrap().len(), 2);
     assert!(j["peak_gfma_per_second"].as_f64().unwrap() > 0.0);
+    // The peak again after each of the three sweeps, and each timed backup against the two
+    // measured around it; the fraction reported is their median (of two: the mean).
+    let peaks = j["peaks_between_backups"].as_array().unwrap();
+    assert_eq!(peaks.len(), 3);
+    assert!(peaks.iter().all(|p| p.as_f64().unwrap() > 0.0), "{peaks:?}");
+    let fs: Vec<f64> = j["fractions_of_peak"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_f64().unwrap())
+        .collect();
+    assert_eq!(fs.len(), 2);
+    assert!(fs.iter().all(|f| *f > 0.0 && f.is_finite()), "{fs:?}");
     let f = j["fraction_of_peak"].as_f64().unwrap();
-    assert!(f > 0.0 && f.is_finite(), "fraction {f}");
+    assert!(
+        (f - 0.5 * (fs[0] + fs[1])).abs() <= 1e-12 * f,
+        "fraction {f}"
+    );
+    assert!(out.contains("between the sweeps"), "{out}");
     assert!(j["kernels"].as_array().unwrap().contains(&"scalar".into()));
 
     assert_all_fail(

@@ -39,7 +39,7 @@ use std::vec::Vec;
 
 use super::simd::{
     EvalIn, INPUT_PAD, InRows, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides,
-    last_scratch_len,
+    interleave, last_scratch_len,
 };
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
@@ -61,38 +61,6 @@ const fn line_len<T>() -> usize {
 /// target, and far from the first level's limits of the rows' bookkeeping. The unit tests'
 /// small grids use pieces of 7, so that they run several pieces and a shorter last one.
 const FIRST_STAGE_PIECE: usize = if cfg!(test) { 7 } else { 2048 };
-
-/// Writes `na` rows of `r` values (`[a][r]`) as `r` rows of `na` values (`[r][a]`), the output
-/// rows `r_stride` apart. Two to eight rows back to back (the first stages of every model
-/// here) run with the row count fixed, which the compiler turns into vector shuffles.
-fn interleave<T: Copy>(src: &[T], na: usize, (out, r_stride): (&mut [T], usize)) {
-    fn fixed<T: Copy, const NA: usize>(src: &[T], out: &mut [T]) {
-        let r = src.len() / NA;
-        let rows: [&[T]; NA] = core::array::from_fn(|a| &src[a * r..(a + 1) * r]);
-        for (ri, o) in out.as_chunks_mut::<NA>().0[..r].iter_mut().enumerate() {
-            for (x, row) in o.iter_mut().zip(&rows) {
-                *x = row[ri];
-            }
-        }
-    }
-    match (na, r_stride) {
-        (2, 2) => fixed::<T, 2>(src, out),
-        (3, 3) => fixed::<T, 3>(src, out),
-        (4, 4) => fixed::<T, 4>(src, out),
-        (5, 5) => fixed::<T, 5>(src, out),
-        (6, 6) => fixed::<T, 6>(src, out),
-        (7, 7) => fixed::<T, 7>(src, out),
-        (8, 8) => fixed::<T, 8>(src, out),
-        _ => {
-            let r = src.len() / na;
-            for (ri, o) in out.chunks_mut(r_stride).take(r).enumerate() {
-                for (a, x) in o[..na].iter_mut().enumerate() {
-                    *x = src[a * r + ri];
-                }
-            }
-        }
-    }
-}
 
 /// One block's sparse transition table.
 struct BlockTable<T> {
@@ -558,6 +526,7 @@ impl<T: Real> BlockOperator<T> {
                 work: Mutex::new(Vec::new()),
             }),
         };
+        op.lay_out_groups();
         if terminal {
             op.terminals = Some(op.scan_terminals(model, e, m));
         }
@@ -670,7 +639,15 @@ impl<T: Real> BlockOperator<T> {
     pub(super) fn set_kernel(&mut self, choice: super::Kernel) -> Result<(), SolveError> {
         self.kernels = super::simd::select_real::<T>(Some(choice))
             .ok_or(SolveError::KernelUnavailable(choice))?;
+        self.lay_out_groups();
         Ok(())
+    }
+
+    /// The tables' merged steps laid out for the kernels' vectors (the same weights).
+    fn lay_out_groups(&mut self) {
+        for t in &mut self.tables {
+            t.rows.set_group_lanes(self.kernels.lanes);
+        }
     }
 
     /// Name of the kernel instance in use (`"avx512"`, `"avx2"`, `"portable"` or `"scalar"`).

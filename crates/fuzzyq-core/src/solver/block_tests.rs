@@ -536,7 +536,7 @@ fn interleave_writes_every_value_once_in_place() {
             for r_stride in [na, na + 3, 16] {
                 let src: Vec<f32> = (0..na * r).map(|i| i as f32).collect();
                 let mut out = vec![-1.0f32; r * r_stride];
-                super::interleave(&src, na, (&mut out, r_stride));
+                super::super::simd::interleave(&src, na, (&mut out, r_stride));
                 for (i, &x) in out.iter().enumerate() {
                     let (ri, a) = (i / r_stride, i % r_stride);
                     let want = if a < na { (a * r + ri) as f32 } else { -1.0 };

@@ -233,19 +233,19 @@ unsafe fn row_bounds<T: Real, I: Isa<T>>(
     ub: &mut [T; PRUNE_MAX_ACTIONS],
 ) -> usize {
     if let Some((cols, ws)) = rows.group(c, na).filter(|_| na <= I::LANES) {
-        // The vector is stored straight into `ub` (lanes past `na` hold zero-weight chains,
-        // never read): a copy of `na` lanes would be a call to `memmove` per core, 2-3% of
-        // a full backup.
+        // The vector is stored straight into `ub` (lanes past `na` hold chains of other
+        // weights, never read): a copy of `na` lanes would be a call to `memmove` per core,
+        // 2-3% of a full backup.
         const { assert!(GROUP_LANES <= PRUNE_MAX_ACTIONS) };
-        // SAFETY: a step's weights and `ub` hold `GROUP_LANES >= I::LANES` values, and every
-        // column indexes `bounds` (the rows' columns are below their `n_cols`, `bounds`'
-        // length at every caller).
+        // SAFETY: `GROUP_LANES >= I::LANES` values are readable from every step's weights
+        // and writable in `ub`, and every column indexes `bounds` (the rows' columns are
+        // below their `n_cols`, `bounds`' length at every caller).
         unsafe {
             let mut acc = I::zero();
-            for (&k, w) in cols.iter().zip(ws) {
+            for (s, &k) in cols.iter().enumerate() {
                 debug_assert!((k as usize) < bounds.len());
                 let b = I::splat(*bounds.get_unchecked(k as usize));
-                acc = I::fma(I::load(w.as_ptr()), b, acc);
+                acc = I::fma(I::load(ws.at(s)), b, acc);
             }
             if I::MASK_COMPARES {
                 // `0 x + 0` is 0 exactly when `x` is finite.
@@ -490,6 +490,26 @@ macro_rules! by_nv {
     };
 }
 
+/// Register block `bi`'s bound of every input row (`n_cols` rows, `stride` apart), into
+/// `bounds[bi * n_cols..]`: computed just before the block's visits read those rows again,
+/// so that only the block's part of the input, not all of it, lies between the two reads.
+#[inline(always)]
+unsafe fn block_bounds<T: Real, I: Isa<T>, const ABS: bool>(
+    input: *const T,
+    (n_cols, stride): (usize, usize),
+    (bi, nv, p0, tail): (usize, usize, usize, usize),
+    bounds: &mut [T],
+) {
+    // SAFETY: the caller's block of every row lies within the input (`last_impl`'s checks).
+    unsafe {
+        let m = I::mask(tail);
+        let b = &mut bounds[bi * n_cols..(bi + 1) * n_cols];
+        for (k, bk) in b.iter_mut().enumerate() {
+            *bk = by_nv!(nv, row_bound::<T, I, _, ABS>(input.add(k * stride + p0), m));
+        }
+    }
+}
+
 #[inline(always)]
 #[allow(clippy::too_many_arguments)] // the tensor's shape and scratch, spelled out
 pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
@@ -530,15 +550,6 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
         );
     }
     unsafe {
-        if prune {
-            for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
-                let m = I::mask(tail);
-                for k in 0..n_cols {
-                    let x = ip.add(k * stride + p0);
-                    bounds[bi * n_cols + k] = by_nv!(nv, row_bound::<T, I, _, ABS>(x, m));
-                }
-            }
-        }
         if let Some(args) = args.as_deref_mut().filter(|_| narrow && !ABS) {
             let m = I::mask(p_len);
             for (i, (o, arg)) in out.iter_mut().zip(args.iter_mut()).enumerate() {
@@ -558,6 +569,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
             if let Some(args) = args.as_deref_mut().filter(|_| !ABS) {
                 args.fill(u32::MAX);
                 for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                    block_bounds::<T, I, ABS>(ip, (n_cols, stride), (bi, nv, p0, tail), bounds);
                     let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
                     let block = (p0, I::mask(tail));
                     let shape = (p_len, stride);
@@ -576,6 +588,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                 return;
             }
             for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
+                block_bounds::<T, I, ABS>(ip, (n_cols, stride), (bi, nv, p0, tail), bounds);
                 let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
                 let block = (p0, I::mask(tail));
                 by_nv!(

@@ -39,6 +39,38 @@ use std::vec::Vec;
 
 use crate::real::Real;
 
+/// Writes `na` rows of `r` values (`[a][r]`) as `r` rows of `na` values (`[r][a]`), the output
+/// rows `r_stride` apart. Two to eight rows back to back (the first stages of every model
+/// here) run with the row count fixed, which the compiler turns into vector shuffles.
+pub(super) fn interleave<T: Copy>(src: &[T], na: usize, (out, r_stride): (&mut [T], usize)) {
+    fn fixed<T: Copy, const NA: usize>(src: &[T], out: &mut [T]) {
+        let r = src.len() / NA;
+        let rows: [&[T]; NA] = core::array::from_fn(|a| &src[a * r..(a + 1) * r]);
+        for (ri, o) in out.as_chunks_mut::<NA>().0[..r].iter_mut().enumerate() {
+            for (x, row) in o.iter_mut().zip(&rows) {
+                *x = row[ri];
+            }
+        }
+    }
+    match (na, r_stride) {
+        (2, 2) => fixed::<T, 2>(src, out),
+        (3, 3) => fixed::<T, 3>(src, out),
+        (4, 4) => fixed::<T, 4>(src, out),
+        (5, 5) => fixed::<T, 5>(src, out),
+        (6, 6) => fixed::<T, 6>(src, out),
+        (7, 7) => fixed::<T, 7>(src, out),
+        (8, 8) => fixed::<T, 8>(src, out),
+        _ => {
+            let r = src.len() / na;
+            for (ri, o) in out.chunks_mut(r_stride).take(r).enumerate() {
+                for (a, x) in o[..na].iter_mut().enumerate() {
+                    *x = src[a * r + ri];
+                }
+            }
+        }
+    }
+}
+
 /// Sparse rows whose columns are all below `n_cols`, validated once when built.
 #[derive(Clone, Debug)]
 pub(super) struct RowsBuf<T> {
@@ -51,31 +83,68 @@ pub(super) struct RowsBuf<T> {
     groups: Option<GroupsBuf<T>>,
 }
 
-/// Lanes of a merged step's weights: at least the lanes of every instance's vector, so that a
-/// whole vector loads from one step.
+/// Most actions of a merged group, and the zero weights past the last step: at least the
+/// lanes of every instance's vector, so that a whole vector loads from any step.
 pub(super) const GROUP_LANES: usize = 16;
 
 /// Rows merged by column in groups of `na` consecutive rows (one block core's actions): group
-/// `g`'s steps `ptr[g]..ptr[g + 1]` read column `col[s]` with weight `weight[s][a]` for row
-/// `g na + a` (0 where that row has no entry there). Each row's entries appear in its own
-/// order, so a chain over the steps with fused multiply-adds from 0 sums every row as its own
-/// chain does, plus products with weight 0, which change no finite sum (an exact `+0` sum
-/// stays `+0`).
+/// `g`'s steps `ptr[g]..ptr[g + 1]` read column `col[s]` with weight `weight[s lanes + a]` for
+/// row `g na + a` (0 where that row has no entry there, and in the lanes from `na` to
+/// `lanes`, the power of two from `na`). Each row's entries appear in its own order, so a
+/// chain over the steps with fused multiply-adds from 0 sums every row as its own chain does,
+/// plus products with weight 0, which change no finite sum (an exact `+0` sum stays `+0`).
+///
+/// A step holds `lanes` weights: the vector lanes of the kernel instance in use, or more
+/// where there are more actions ([`RowsBuf::set_group_lanes`]). A vector loaded from a step
+/// so reads whole steps on the instance it was laid out for, and on any other reads the next
+/// step's weights in its lanes past `lanes` (past the last step, [`GROUP_LANES`] zeros),
+/// which a caller ignores. On the paper's grid (5 actions) an AVX2 or portable step takes
+/// 32 bytes, not 64 (a slab's steps 11 KB, not 23 KB, beside its 23 KB of input in a
+/// first-level cache that may hold 32 KiB), while AVX-512 keeps its 64-byte steps, each
+/// loaded whole (32-byte steps, half of them across two cache lines, were 4% slower there).
 #[derive(Clone, Debug)]
 struct GroupsBuf<T> {
     na: usize,
+    lanes: usize,
     ptr: Vec<u32>,
     col: Vec<u32>,
-    weight: Vec<[T; GROUP_LANES]>,
+    weight: Vec<T>,
 }
 
 /// A borrowed view of [`GroupsBuf`].
 #[derive(Clone, Copy, Debug)]
 struct Groups<'a, T> {
     na: usize,
+    lanes: usize,
     ptr: &'a [u32],
     col: &'a [u32],
-    weight: &'a [[T; GROUP_LANES]],
+    weight: &'a [T],
+}
+
+/// The weights of one group's merged steps ([`Rows::group`]): `lanes` per step, then the
+/// next steps' (or zeros past the last one), so that a vector of up to [`GROUP_LANES`]
+/// lanes loads from any step.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct StepWeights<'a, T> {
+    weight: &'a [T],
+    lanes: usize,
+}
+
+impl<'a, T> StepWeights<'a, T> {
+    /// Step `s`'s weights, one per action of the group (and zeros up to `lanes`).
+    #[cfg(test)]
+    pub(super) fn step(&self, s: usize) -> &'a [T] {
+        &self.weight[s * self.lanes..(s + 1) * self.lanes]
+    }
+
+    /// Step `s`'s first weight, followed by at least [`GROUP_LANES`] readable values.
+    #[inline(always)]
+    pub(super) fn at(&self, s: usize) -> *const T {
+        debug_assert!(s * self.lanes + GROUP_LANES <= self.weight.len());
+        // SAFETY: in bounds or one past the end (the debug assertion; callers pass a step
+        // of the group, and the group's weights run `GROUP_LANES` past its last step).
+        unsafe { self.weight.as_ptr().add(s * self.lanes) }
+    }
 }
 
 /// A borrowed view of [`RowsBuf`]; only `RowsBuf::view` makes one, so the column bound holds.
@@ -111,8 +180,10 @@ impl<T: Real> RowsBuf<T> {
         if !(2..=GROUP_LANES).contains(&na) || !n_rows.is_multiple_of(na) {
             return self;
         }
+        let lanes = na.next_power_of_two();
         let mut g = GroupsBuf {
             na,
+            lanes,
             ptr: vec![0],
             col: Vec::new(),
             weight: Vec::new(),
@@ -123,14 +194,35 @@ impl<T: Real> RowsBuf<T> {
             view.merge_by_column::<GROUP_LANES>(first, na, usize::MAX, |step, k, a, w| {
                 if base + step == g.col.len() {
                     g.col.push(k);
-                    g.weight.push([T::ZERO; GROUP_LANES]);
+                    g.weight.resize(g.weight.len() + lanes, T::ZERO);
                 }
-                g.weight[base + step][a] = w;
+                g.weight[(base + step) * lanes + a] = w;
             });
             g.ptr.push(g.col.len() as u32);
         }
+        g.weight.resize(g.weight.len() + GROUP_LANES, T::ZERO);
         self.groups = Some(g);
         self
+    }
+
+    /// Lays the merged steps out `vector_lanes` weights apart, or more where a group has
+    /// more actions (see [`GroupsBuf`]); the weights themselves do not change.
+    pub(super) fn set_group_lanes(&mut self, vector_lanes: usize) {
+        let Some(g) = self.groups.as_mut() else {
+            return;
+        };
+        let lanes = g.na.next_power_of_two().max(vector_lanes).min(GROUP_LANES);
+        if lanes == g.lanes {
+            return;
+        }
+        let n_steps = g.col.len();
+        let mut weight = vec![T::ZERO; n_steps * lanes + GROUP_LANES];
+        for s in 0..n_steps {
+            let from = &g.weight[s * g.lanes..s * g.lanes + g.na];
+            weight[s * lanes..s * lanes + g.na].copy_from_slice(from);
+        }
+        g.weight = weight;
+        g.lanes = lanes;
     }
 
     pub(super) fn view(&self) -> Rows<'_, T> {
@@ -141,6 +233,7 @@ impl<T: Real> RowsBuf<T> {
             n_cols: self.n_cols,
             groups: self.groups.as_ref().map(|g| Groups {
                 na: g.na,
+                lanes: g.lanes,
                 ptr: &g.ptr,
                 col: &g.col,
                 weight: &g.weight,
@@ -245,10 +338,12 @@ impl<'a, T> Rows<'a, T> {
     /// The merged steps of rows `g na .. (g + 1) na` (see [`GroupsBuf`]), if these rows were
     /// merged in groups of `na`.
     #[inline(always)]
-    pub(super) fn group(&self, g: usize, na: usize) -> Option<(&'a [u32], &'a [[T; GROUP_LANES]])> {
+    pub(super) fn group(&self, g: usize, na: usize) -> Option<(&'a [u32], StepWeights<'a, T>)> {
         let gr = self.groups.as_ref().filter(|gr| gr.na == na)?;
         let (s, e) = (gr.ptr[g] as usize, gr.ptr[g + 1] as usize);
-        Some((&gr.col[s..e], &gr.weight[s..e]))
+        let weight = &gr.weight[s * gr.lanes..e * gr.lanes + GROUP_LANES];
+        let lanes = gr.lanes;
+        Some((&gr.col[s..e], StepWeights { weight, lanes }))
     }
 }
 
