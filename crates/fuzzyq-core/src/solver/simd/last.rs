@@ -491,8 +491,11 @@ macro_rules! by_nv {
 }
 
 /// Register block `bi`'s bound of every input row (`n_cols` rows, `stride` apart), into
-/// `bounds[bi * n_cols..]`: computed just before the block's visits read those rows again,
-/// so that only the block's part of the input, not all of it, lies between the two reads.
+/// `bounds[bi * n_cols..]`, computed just before the block's visits. A plain full backup on
+/// the paper's grid ran 3-6% faster so than with every block's bounds first (Zen 5, in
+/// alternation; BENCHMARKS.md), though a simulated 32 KiB first-level cache missed no less.
+/// An `#[inline(always)]` function, not a closure: the closure lost the kernel's vector
+/// features and ran three times slower.
 #[inline(always)]
 unsafe fn block_bounds<T: Real, I: Isa<T>, const ABS: bool>(
     input: *const T,
