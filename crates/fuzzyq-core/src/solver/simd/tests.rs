@@ -231,44 +231,44 @@ proptest! {
         // As merged, and laid out for vectors of 1, 8 and 16 lanes (the same weights).
         let merged = rows.with_groups(na);
         for vector_lanes in [0, 1, 8, 16] {
-        let mut rows = merged.clone();
-        if vector_lanes > 0 {
-            rows.set_group_lanes(vector_lanes);
-        }
-        let view = rows.view();
-        prop_assert!(view.group(0, na + 1).is_none());
-        for c in 0..n_c {
-            let (cols, ws) = view.group(c, na).expect("merged in groups of na");
-            for a in 0..na {
-                let (rc, rw) = view.row(c * na + a);
-                let mut want = 0.0f32;
-                for (&k, &w) in rc.iter().zip(rw) {
-                    want = w.mul_add(x[k as usize], want);
-                }
-                let steps: Vec<&[f32]> = (0..cols.len()).map(|s| ws.step(s)).collect();
-                // Zeros in a step's lanes past the group's actions.
-                prop_assert!(steps.iter().all(|w| w[na..].iter().all(|&v| v == 0.0)));
-                let mut got = 0.0f32;
-                for (&k, w) in cols.iter().zip(&steps) {
-                    got = w[a].mul_add(x[k as usize], got);
-                }
-                prop_assert_eq!(got.to_bits(), want.to_bits(), "core {}, action {}", c, a);
-                // Every entry of the row is one step, in the row's order.
-                let taken: Vec<(u32, u32)> = cols
-                    .iter()
-                    .zip(&steps)
-                    .filter(|(_, w)| w[a] != 0.0)
-                    .map(|(&k, w)| (k, w[a].to_bits()))
-                    .collect();
-                let own: Vec<(u32, u32)> = rc
-                    .iter()
-                    .zip(rw)
-                    .filter(|(_, w)| **w != 0.0)
-                    .map(|(&k, w)| (k, w.to_bits()))
-                    .collect();
-                prop_assert_eq!(taken, own);
+            let mut rows = merged.clone();
+            if vector_lanes > 0 {
+                rows.set_group_lanes(vector_lanes);
             }
-        }
+            let view = rows.view();
+            prop_assert!(view.group(0, na + 1).is_none());
+            for c in 0..n_c {
+                let (cols, ws) = view.group(c, na).expect("merged in groups of na");
+                for a in 0..na {
+                    let (rc, rw) = view.row(c * na + a);
+                    let mut want = 0.0f32;
+                    for (&k, &w) in rc.iter().zip(rw) {
+                        want = w.mul_add(x[k as usize], want);
+                    }
+                    let steps: Vec<&[f32]> = (0..cols.len()).map(|s| ws.step(s)).collect();
+                    // Zeros in a step's lanes past the group's actions.
+                    prop_assert!(steps.iter().all(|w| w[na..].iter().all(|&v| v == 0.0)));
+                    let mut got = 0.0f32;
+                    for (&k, w) in cols.iter().zip(&steps) {
+                        got = w[a].mul_add(x[k as usize], got);
+                    }
+                    prop_assert_eq!(got.to_bits(), want.to_bits(), "core {}, action {}", c, a);
+                    // Every entry of the row is one step, in the row's order.
+                    let taken: Vec<(u32, u32)> = cols
+                        .iter()
+                        .zip(&steps)
+                        .filter(|(_, w)| w[a] != 0.0)
+                        .map(|(&k, w)| (k, w[a].to_bits()))
+                        .collect();
+                    let own: Vec<(u32, u32)> = rc
+                        .iter()
+                        .zip(rw)
+                        .filter(|(_, w)| **w != 0.0)
+                        .map(|(&k, w)| (k, w.to_bits()))
+                        .collect();
+                    prop_assert_eq!(taken, own);
+                }
+            }
         }
     }
 }
