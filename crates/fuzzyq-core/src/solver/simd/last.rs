@@ -368,6 +368,12 @@ pub(super) unsafe fn last_block_pruned_arg<T: Real, I: Isa<T>, const NV: usize>(
                 }
                 continue;
             }
+            // A row whose bound only ties the best can hold the maximum only at its own
+            // indices, from `a * p_len + p0` on: none lower than the best's index, if that
+            // one is lower.
+            if ub[a] == best && a * p_len + p0 > best_idx {
+                continue;
+            }
             let (cols, ws) = rows.row(c * na + a);
             let acc = row_block::<T, I, NV>(cols, ws, input.add(p0), stride, m);
             let v = I::reduce_max(block_max::<T, I, NV, false>(&acc, m), all);

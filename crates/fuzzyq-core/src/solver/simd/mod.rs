@@ -108,7 +108,44 @@ struct GroupsBuf<T> {
     lanes: usize,
     ptr: Vec<u32>,
     col: Vec<u32>,
-    weight: Vec<T>,
+    weight: LineBuf<T>,
+}
+
+/// [`GROUP_LANES`] values from a 64-byte boundary: a cache line of `f32`, two of `f64`.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+struct Line<T>([T; GROUP_LANES]);
+
+/// Values from a cache line's start, for the merged steps' weights: a 64-byte step so starts
+/// a line, and a whole-vector AVX-512 load of it reads one line, not two. (A `Vec<T>` starts
+/// wherever the allocator puts it, 16 bytes apart on this platform's `malloc`.)
+#[derive(Clone, Debug)]
+struct LineBuf<T> {
+    lines: Vec<Line<T>>,
+    len: usize,
+}
+
+impl<T: Real> LineBuf<T> {
+    /// `len` zeros.
+    fn zeroed(len: usize) -> Self {
+        const { assert!(size_of::<Line<T>>() == GROUP_LANES * size_of::<T>()) };
+        let lines = vec![Line([T::ZERO; GROUP_LANES]); len.div_ceil(GROUP_LANES)];
+        Self { lines, len }
+    }
+
+    /// The values.
+    fn as_slice(&self) -> &[T] {
+        // SAFETY: a `Line<T>` is `GROUP_LANES` values of `T` without padding (the assertion
+        // in `zeroed`, the only constructor), so the lines are `lines.len() * GROUP_LANES >=
+        // len` initialised values back to back.
+        unsafe { core::slice::from_raw_parts(self.lines.as_ptr().cast::<T>(), self.len) }
+    }
+
+    /// The values, to write.
+    fn as_mut_slice(&mut self) -> &mut [T] {
+        // SAFETY: as in `as_slice`, borrowed uniquely through `self`.
+        unsafe { core::slice::from_raw_parts_mut(self.lines.as_mut_ptr().cast::<T>(), self.len) }
+    }
 }
 
 /// A borrowed view of [`GroupsBuf`].
@@ -181,26 +218,28 @@ impl<T: Real> RowsBuf<T> {
             return self;
         }
         let lanes = na.next_power_of_two();
+        let (mut ptr, mut col, mut weight) = (vec![0], Vec::new(), Vec::new());
+        let view = self.view();
+        for first in (0..n_rows).step_by(na) {
+            let base = col.len();
+            view.merge_by_column::<GROUP_LANES>(first, na, usize::MAX, |step, k, a, w| {
+                if base + step == col.len() {
+                    col.push(k);
+                    weight.resize(weight.len() + lanes, T::ZERO);
+                }
+                weight[(base + step) * lanes + a] = w;
+            });
+            ptr.push(col.len() as u32);
+        }
+        weight.resize(weight.len() + GROUP_LANES, T::ZERO);
         let mut g = GroupsBuf {
             na,
             lanes,
-            ptr: vec![0],
-            col: Vec::new(),
-            weight: Vec::new(),
+            ptr,
+            col,
+            weight: LineBuf::zeroed(weight.len()),
         };
-        let view = self.view();
-        for first in (0..n_rows).step_by(na) {
-            let base = g.col.len();
-            view.merge_by_column::<GROUP_LANES>(first, na, usize::MAX, |step, k, a, w| {
-                if base + step == g.col.len() {
-                    g.col.push(k);
-                    g.weight.resize(g.weight.len() + lanes, T::ZERO);
-                }
-                g.weight[(base + step) * lanes + a] = w;
-            });
-            g.ptr.push(g.col.len() as u32);
-        }
-        g.weight.resize(g.weight.len() + GROUP_LANES, T::ZERO);
+        g.weight.as_mut_slice().copy_from_slice(&weight);
         self.groups = Some(g);
         self
     }
@@ -216,10 +255,11 @@ impl<T: Real> RowsBuf<T> {
             return;
         }
         let n_steps = g.col.len();
-        let mut weight = vec![T::ZERO; n_steps * lanes + GROUP_LANES];
+        let mut weight = LineBuf::zeroed(n_steps * lanes + GROUP_LANES);
+        let to = weight.as_mut_slice();
         for s in 0..n_steps {
-            let from = &g.weight[s * g.lanes..s * g.lanes + g.na];
-            weight[s * lanes..s * lanes + g.na].copy_from_slice(from);
+            let from = &g.weight.as_slice()[s * g.lanes..s * g.lanes + g.na];
+            to[s * lanes..s * lanes + g.na].copy_from_slice(from);
         }
         g.weight = weight;
         g.lanes = lanes;
@@ -236,7 +276,7 @@ impl<T: Real> RowsBuf<T> {
                 lanes: g.lanes,
                 ptr: &g.ptr,
                 col: &g.col,
-                weight: &g.weight,
+                weight: g.weight.as_slice(),
             }),
         }
     }

@@ -246,6 +246,10 @@ proptest! {
                         want = w.mul_add(x[k as usize], want);
                     }
                     let steps: Vec<&[f32]> = (0..cols.len()).map(|s| ws.step(s)).collect();
+                    // Every step starts on its own size's boundary, up to a cache line: a
+                    // whole-step load reads one line.
+                    let step_bytes = (ws.lanes * size_of::<f32>()).min(64);
+                    prop_assert!((0..cols.len()).all(|s| (ws.at(s) as usize).is_multiple_of(step_bytes)));
                     // Zeros in a step's lanes past the group's actions.
                     prop_assert!(steps.iter().all(|w| w[na..].iter().all(|&v| v == 0.0)));
                     let mut got = 0.0f32;
@@ -485,6 +489,45 @@ fn rows_too_long_to_merge_take_the_row_by_row_path_with_the_same_sums() {
                     assert_eq!(out[(r * na + a) * p_len + p].to_bits(), want.to_bits());
                 }
             }
+        }
+    }
+}
+
+/// The greedy action is the first holder of the maximum even when a later register block
+/// ties the maximum an earlier block found in a higher row: row 1 reaches 1 at lane 3 (index
+/// `p_len + 3`), row 0 only at lane 190 (index 190), in a block visited after, where its bound
+/// equals the best so far. Skipping rows whose bound only ties the best must not skip it.
+#[test]
+fn a_tie_in_a_later_register_block_at_a_lower_index_takes_the_action() {
+    let (n_k, p_len) = (2usize, 200usize);
+    let mut input = vec![0.0f32; n_k * p_len];
+    input[..16].fill(0.5); // row 0 below row 1's maximum in the first lanes
+    input[190] = 1.0;
+    input[p_len + 3] = 1.0;
+    for merged in [false, true] {
+        let rows = rows_of(&[&[(0, 1.0)], &[(1, 1.0)]], n_k);
+        let rows = if merged { rows.with_groups(2) } else { rows };
+        let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+        for k in f32::available() {
+            let (mut m, mut args) = ([0.0f32], [0u32]);
+            let dense = InRows::dense(p_len);
+            (k.last)(
+                rows.view(),
+                0,
+                2,
+                dense,
+                false,
+                &input,
+                &mut m,
+                &mut bounds,
+                Some(&mut args),
+            );
+            assert_eq!(
+                (m[0], args[0]),
+                (1.0, 190),
+                "{} kernels, merged {merged}",
+                k.name
+            );
         }
     }
 }
