@@ -20,7 +20,9 @@
 //! bits). Partial stores copy one fixed-size head per length (they must not write past the
 //! row). The maximiser's searches are the instance's own ([`Isa::first_equal`],
 //! [`Isa::first_equal_rows`]): lane-wise minima of the matching indices, where the defaults'
-//! bit masks would be widened lane by lane.
+//! bit masks would be widened lane by lane. A horizontal maximum starts from the vector in
+//! memory: built straight on the multiply-adds before it, LLVM's narrower reduction tree split
+//! them into two-lane pieces.
 //!
 //! On x86-64 the instance is compiled with AVX2 + FMA enabled (see `instance!` in the parent
 //! module), which is how the tests and benchmarks compare it with the hand-written AVX2
@@ -157,6 +159,13 @@ macro_rules! portable_isa {
             }
             #[inline(always)]
             unsafe fn reduce_max(v: [$t; $n], m: usize) -> $t {
+                // The vector passes through memory first (`black_box`, a store and a load):
+                // without it, LLVM's SLP vectoriser built the reduction's halving tree (4,
+                // then 2 lanes wide) back through the register block's multiply-adds, which
+                // it then ran two lanes at a time with the accumulators on the stack (a plain
+                // full backup 0.25 s instead of 0.19 s; BENCHMARKS.md). Only speed depends on
+                // it: the values are the same either way.
+                let v = core::hint::black_box(v);
                 let mut w = [<$t>::NEG_INFINITY; $n];
                 for i in 0..$n {
                     w[i] = if i < m { v[i] } else { <$t>::NEG_INFINITY };
