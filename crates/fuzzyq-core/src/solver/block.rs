@@ -38,8 +38,7 @@ use std::sync::{Mutex, PoisonError};
 use std::vec::Vec;
 
 use super::simd::{
-    EvalIn, INPUT_PAD, InRows, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides,
-    interleave, last_scratch_len,
+    EvalIn, INPUT_PAD, InRows, Kernels, OutStrides, PairScratch, Rows, RowsBuf, Strides, interleave,
 };
 use super::{Operator, Reduce, SolveError, par};
 use crate::action::JointActions;
@@ -751,7 +750,7 @@ impl<T: Real> BlockOperator<T> {
                 scratch: vec![T::ZERO; self.first_stage_piece_len()],
                 maxima: vec![T::ZERO; last.n_cores],
                 args: vec![0; last.n_cores],
-                bounds: vec![T::ZERO; last_scratch_len(last.n_cores, self.p_len[nb - 1])],
+                bounds: vec![T::ZERO; last.n_cores],
                 pair_inner: vec![T::ZERO; pair_inner],
                 pair_slots: vec![0; pair_slots],
             },

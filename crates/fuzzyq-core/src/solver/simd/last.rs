@@ -496,8 +496,9 @@ macro_rules! by_nv {
     };
 }
 
-/// Register block `bi`'s bound of every input row (`n_cols` rows, `stride` apart), into
-/// `bounds[bi * n_cols..]`, computed just before the block's visits. A plain full backup on
+/// One register block's bound of every input row (`n_cols` rows, `stride` apart), into
+/// `bounds[..n_cols]`, computed just before the block's visits (so one block's bounds are
+/// all the scratch holds). A plain full backup on
 /// the paper's grid ran 3-6% faster so than with every block's bounds first (Zen 5, in
 /// alternation; BENCHMARKS.md), though a simulated 32 KiB first-level cache missed no less.
 /// An `#[inline(always)]` function, not a closure: the closure lost the kernel's vector
@@ -506,13 +507,13 @@ macro_rules! by_nv {
 unsafe fn block_bounds<T: Real, I: Isa<T>, const ABS: bool>(
     input: *const T,
     (n_cols, stride): (usize, usize),
-    (bi, nv, p0, tail): (usize, usize, usize, usize),
+    (nv, p0, tail): (usize, usize, usize),
     bounds: &mut [T],
 ) {
     // SAFETY: the caller's block of every row lies within the input (`last_impl`'s checks).
     unsafe {
         let m = I::mask(tail);
-        let b = &mut bounds[bi * n_cols..(bi + 1) * n_cols];
+        let b = &mut bounds[..n_cols];
         for (k, bk) in b.iter_mut().enumerate() {
             *bk = by_nv!(nv, row_bound::<T, I, _, ABS>(input.add(k * stride + p0), m));
         }
@@ -552,11 +553,7 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
     }
     let prune = na <= PRUNE_MAX_ACTIONS && !narrow;
     if prune {
-        let n_blocks = Blocks::new(p_len, I::LANES, I::BLOCK).count();
-        assert!(
-            bounds.len() >= n_cols * n_blocks,
-            "last-stage scratch too short"
-        );
+        assert!(bounds.len() >= n_cols, "last-stage scratch too short");
     }
     unsafe {
         if let Some(args) = args.as_deref_mut().filter(|_| narrow && !ABS) {
@@ -577,9 +574,9 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
             out.fill(neg_inf);
             if let Some(args) = args.as_deref_mut().filter(|_| !ABS) {
                 args.fill(u32::MAX);
-                for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
-                    block_bounds::<T, I, ABS>(ip, (n_cols, stride), (bi, nv, p0, tail), bounds);
-                    let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+                for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
+                    block_bounds::<T, I, ABS>(ip, (n_cols, stride), (nv, p0, tail), bounds);
+                    let b = &bounds[..n_cols];
                     let block = (p0, I::mask(tail));
                     let shape = (p_len, stride);
                     by_nv!(
@@ -596,9 +593,9 @@ pub(super) unsafe fn last_impl<T: Real, I: Isa<T>, const ABS: bool>(
                 }
                 return;
             }
-            for (bi, (nv, p0, tail)) in Blocks::new(p_len, I::LANES, I::BLOCK).enumerate() {
-                block_bounds::<T, I, ABS>(ip, (n_cols, stride), (bi, nv, p0, tail), bounds);
-                let b = &bounds[bi * n_cols..(bi + 1) * n_cols];
+            for (nv, p0, tail) in Blocks::new(p_len, I::LANES, I::BLOCK) {
+                block_bounds::<T, I, ABS>(ip, (n_cols, stride), (nv, p0, tail), bounds);
+                let b = &bounds[..n_cols];
                 let block = (p0, I::mask(tail));
                 by_nv!(
                     nv,

@@ -526,7 +526,8 @@ impl From<InRows> for EvalIn {
 /// rows `(first_core + i) A + a`; with `args` (and not `abs`), also each core's lowest
 /// `a P + p` whose expected value equals its maximum (the greedy product action).
 ///
-/// `bounds` is scratch of at least [`last_scratch_len`] values.
+/// `bounds` is scratch of at least one value per input row (`rows`' column count): the row
+/// bounds of one register block at a time.
 pub type LastFn<T> = fn(
     rows: Rows<'_, T>,
     first_core: usize,
@@ -538,13 +539,6 @@ pub type LastFn<T> = fn(
     bounds: &mut [T],
     args: Option<&mut [u32]>,
 );
-
-/// Scratch the last stage needs: one bound per input row and register block (with the
-/// narrowest register blocks of any instance).
-pub(super) fn last_scratch_len(n_cols: usize, p_len: usize) -> usize {
-    // The scalar instance's blocks (4 lanes) are the narrowest.
-    n_cols * p_len.div_ceil(4).max(1)
-}
 
 /// Elements a kernel's input may extend past the tensor to let every instance use its fastest
 /// partial loads (the portable instance reads whole vectors at row tails and discards the

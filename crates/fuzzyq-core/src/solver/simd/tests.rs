@@ -155,7 +155,7 @@ proptest! {
             for (kc, row) in last_in.chunks_exact(p_len).enumerate() {
                 spread[kc * padded_rows.stride..][..p_len].copy_from_slice(row);
             }
-            let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+            let mut bounds = vec![0.0f32; n_k];
             for abs in [false, true] {
                 let mut m = vec![0.0f32; n_c];
                 let mut ms = vec![0.0f32; n_c];
@@ -239,19 +239,19 @@ proptest! {
             prop_assert!(view.group(0, na + 1).is_none());
             for c in 0..n_c {
                 let (cols, ws) = view.group(c, na).expect("merged in groups of na");
+                let steps: Vec<&[f32]> = (0..cols.len()).map(|s| ws.step(s)).collect();
+                // Every step starts on its own size's boundary, up to a cache line: a
+                // whole-step load reads one line.
+                let step_bytes = (ws.lanes * size_of::<f32>()).min(64);
+                prop_assert!((0..cols.len()).all(|s| (ws.at(s) as usize).is_multiple_of(step_bytes)));
+                // Zeros in a step's lanes past the group's actions.
+                prop_assert!(steps.iter().all(|w| w[na..].iter().all(|&v| v == 0.0)));
                 for a in 0..na {
                     let (rc, rw) = view.row(c * na + a);
                     let mut want = 0.0f32;
                     for (&k, &w) in rc.iter().zip(rw) {
                         want = w.mul_add(x[k as usize], want);
                     }
-                    let steps: Vec<&[f32]> = (0..cols.len()).map(|s| ws.step(s)).collect();
-                    // Every step starts on its own size's boundary, up to a cache line: a
-                    // whole-step load reads one line.
-                    let step_bytes = (ws.lanes * size_of::<f32>()).min(64);
-                    prop_assert!((0..cols.len()).all(|s| (ws.at(s) as usize).is_multiple_of(step_bytes)));
-                    // Zeros in a step's lanes past the group's actions.
-                    prop_assert!(steps.iter().all(|w| w[na..].iter().all(|&v| v == 0.0)));
                     let mut got = 0.0f32;
                     for (&k, w) in cols.iter().zip(&steps) {
                         got = w[a].mul_add(x[k as usize], got);
@@ -307,7 +307,7 @@ fn evaluating_two_stages_matches_the_full_stages() {
             for c in 0..3 {
                 let mut staged = vec![0.0f32; r_len * 2 * p_len];
                 k.stage(block.view(), c * 2, 2, r_len, p_len, &input, &mut staged);
-                let mut bounds = vec![0.0f32; last_scratch_len(r_len, 2 * p_len)];
+                let mut bounds = vec![0.0f32; r_len];
                 let (mut m, mut args) = (vec![0.0f32; r_len], vec![0u32; r_len]);
                 (k.last)(
                     last.view(),
@@ -398,7 +398,7 @@ fn f64_instances_match_too() {
     let scalar = select::<f64>(Some(super::super::Kernel::Scalar)).unwrap();
     for p_len in [5, 40, 130] {
         let input: Vec<f64> = values(3 * p_len, 11).into_iter().map(f64::from).collect();
-        let mut bounds = vec![0.0; last_scratch_len(3, p_len)];
+        let mut bounds = vec![0.0; 3];
         let (mut m, mut ms) = (vec![0.0; 1], vec![0.0; 1]);
         (scalar.last)(
             rows.view(),
@@ -507,7 +507,7 @@ fn a_tie_in_a_later_register_block_at_a_lower_index_takes_the_action() {
     for merged in [false, true] {
         let rows = rows_of(&[&[(0, 1.0)], &[(1, 1.0)]], n_k);
         let rows = if merged { rows.with_groups(2) } else { rows };
-        let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+        let mut bounds = vec![0.0f32; n_k];
         for k in f32::available() {
             let (mut m, mut args) = ([0.0f32], [0u32]);
             let dense = InRows::dense(p_len);
@@ -566,7 +566,7 @@ proptest! {
             .collect();
         let dense = InRows::dense(p_len);
         let scalar = select::<f32>(Some(super::super::Kernel::Scalar)).unwrap();
-        let mut bounds = vec![0.0f32; last_scratch_len(n_k, p_len)];
+        let mut bounds = vec![0.0f32; n_k];
         let (mut want, mut want_args) = (vec![0.0f32; n_c], vec![0u32; n_c]);
         (scalar.last)(rows.view(), 0, na, dense, false, &input, &mut want, &mut bounds, Some(&mut want_args));
         for k in f32::available() {
