@@ -5,6 +5,7 @@ mod approxrl;
 mod coarse;
 mod export;
 mod fuzz;
+mod gpu;
 mod khepera;
 mod learned;
 mod memberships;

@@ -136,6 +136,18 @@ pub enum SimError {
     /// A checkpoint problem.
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    /// The GPU path refused the run or failed (`solver.device = "gpu"`).
+    #[error(transparent)]
+    Gpu(fuzzyq_gpu::GpuError),
+}
+
+impl From<fuzzyq_gpu::GpuError> for SimError {
+    fn from(e: fuzzyq_gpu::GpuError) -> Self {
+        match e {
+            fuzzyq_gpu::GpuError::Solve(s) => Self::Solve(s),
+            e => Self::Gpu(e),
+        }
+    }
 }
 
 /// Returns `Err(ConfigError::invalid(field, reason).into())` from the enclosing function

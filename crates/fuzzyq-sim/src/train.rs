@@ -12,7 +12,7 @@ use std::ops::ControlFlow;
 use fuzzyq_core::Real;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, Delta, IterationOperator, Precision, Progress, Scheme, Solution, SolveError, SolverState,
+    self, Delta, Device, IterationOperator, Precision, Progress, Scheme, Solution, SolveError, SolverState,
     SweepRecord,
 };
 use serde::Serialize;
@@ -68,9 +68,22 @@ pub fn train_from(
     resume: Option<FqiState<'static>>,
     observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
 ) -> Result<PolicyArtifact, SimError> {
+    train_showing(config, resume, true, observer)
+}
+
+/// [`train_from`], the observer shown the run's state only with `show_state`: on the GPU
+/// (`solver.device = "gpu"`) a state is read back from the device after every sweep, so a
+/// caller that keeps none (no checkpoints) runs faster without. On the CPU the state costs
+/// nothing and is always shown.
+pub fn train_showing(
+    config: &TrainConfig,
+    resume: Option<FqiState<'static>>,
+    show_state: bool,
+    observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, SimError> {
     config.validate()?;
     let model = config.build_model()?;
-    solve_and_pack(&model, config, resume, observer)
+    solve_and_pack(&model, config, resume, show_state, observer)
 }
 
 /// [`train_from`] with the passes over `V` run by `sweeps`, a backend that holds `V`
@@ -158,12 +171,27 @@ fn solve_and_pack<M>(
     model: &M,
     config: &TrainConfig,
     resume: Option<FqiState<'static>>,
+    show_state: bool,
     mut observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
 ) -> Result<PolicyArtifact, SimError>
 where
     M: fuzzyq_core::Model<f32> + fuzzyq_core::Model<f64> + Sync,
 {
     match split_resume(config, resume)? {
+        Resume::F32(resume) if config.solver.device == Device::Gpu => {
+            let gpu = fuzzyq_gpu::Gpu::shared()?;
+            let grid = config.grid::<f32>()?;
+            let s = fuzzyq_gpu::solve_from(
+                &gpu,
+                model,
+                &grid,
+                &config.solver.solver_config(),
+                resume,
+                show_state,
+                |p, s| observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref()),
+            )?;
+            Ok(artifact(config, s, Values::F32))
+        }
         Resume::F32(resume) => {
             let s = solve::<f32, M>(model, config, resume, |p, s| {
                 observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref())
@@ -507,7 +535,7 @@ fn fit_and_solve(
     let table_error = fit::table_error(&tables, task)?;
     let learned = LearnedModel::new(task.clone(), tables.clone())?;
     let learning_seconds = start.elapsed().as_secs_f64();
-    let mut artifact = solve_and_pack(&learned, config, None, |p, _| observer(p))?;
+    let mut artifact = solve_and_pack(&learned, config, None, false, |p, _| observer(p))?;
     artifact.learned = Some(Box::new(tables));
     Ok((artifact, report, table_error, learning_seconds))
 }

@@ -17,7 +17,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use fuzzyq_core::NamedOption;
-use fuzzyq_core::solver::{self, Kernel, Precision};
+use fuzzyq_core::solver::{self, Device, Kernel, Precision};
 use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::train;
 use serde::Serialize;
@@ -55,6 +55,10 @@ pub(crate) struct BenchArgs {
     /// Also write the results as JSON.
     #[arg(long, value_name = "FILE.json")]
     json: Option<PathBuf>,
+    /// Time the backups on the CPU (default) or on the GPU (the adapter, its measured FMA
+    /// peak and a full backup's share of it).
+    #[arg(long, value_parser = output::named::<Device>(), default_value = "cpu")]
+    device: Device,
 }
 
 /// One cache level as the OS reports it.
@@ -112,6 +116,12 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
     )?;
     let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
     start_pool(args.threads)?;
+    if args.device == Device::Gpu {
+        if args.kernel.is_some() {
+            anyhow::bail!("--kernel chooses a CPU kernel; --device gpu has none");
+        }
+        return run_gpu(&args, config);
+    }
     let kernel = args.kernel.unwrap_or_else(Kernel::best);
     if !kernel.is_available() {
         anyhow::bail!("this CPU cannot run --kernel {}", kernel.name());
@@ -266,6 +276,124 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
             median_backup_seconds: median_seconds,
             gfma_per_second: rate,
             fractions_of_peak: fractions,
+            fraction_of_peak: fraction,
+        };
+        write_json(path, &report)?;
+    }
+    Ok(())
+}
+
+/// The `--json` output of `--device gpu`.
+#[derive(Debug, Serialize)]
+struct GpuReport {
+    adapter: String,
+    backend: String,
+    driver: String,
+    fused_fma: bool,
+    peak_gfma_per_second: f64,
+    env: &'static str,
+    cores: usize,
+    joint_actions: usize,
+    multiply_adds_per_backup: Option<f64>,
+    slabs_per_batch: u64,
+    setup_seconds: f64,
+    backup_seconds: Vec<f64>,
+    median_backup_seconds: f64,
+    gfma_per_second: Option<f64>,
+    fraction_of_peak: Option<f64>,
+}
+
+/// `fuzzyq bench --device gpu`: the adapter, its FMA peak, and full backups on it.
+fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> anyhow::Result<()> {
+    use fuzzyq_core::solver::{Buf, Sweeps};
+    if args.precision.is_some_and(|p| p != Precision::F32) {
+        anyhow::bail!("--device gpu runs in f32");
+    }
+    let gpu = fuzzyq_gpu::Gpu::shared()?;
+    let a = gpu.summary().clone();
+    println!(
+        "gpu        {} ({}, {}); fma {}; f64 in shaders: {}",
+        a.name,
+        a.backend,
+        a.driver,
+        if a.fused_fma { "fused" } else { "not fused" },
+        if a.f64 { "yes" } else { "no" }
+    );
+    let peak = gpu.fma_peak(args.peak_seconds)?;
+    println!("FMA peak   {peak:.1} GFMA/s (f32, best of {} s of dispatches)", args.peak_seconds);
+    let model = config.build_model()?;
+    let grid = config.grid::<f32>()?;
+    let s = config.solver.solver_config();
+    let backup = fuzzyq_core::backup::Backup {
+        gamma: s.gamma as f32,
+        absorbing_goal: s.absorbing_goal,
+    };
+    let t0 = Instant::now();
+    let op = solver::Operator::new(&model, grid.view(), backup, s.path)?;
+    let mut sweeps = fuzzyq_gpu::GpuSweeps::new(&gpu, &op)?;
+    let setup = t0.elapsed().as_secs_f64();
+    let (cores, joint) = (config.n_cores(), config.n_joint_actions());
+    let fma = op.multiply_adds_per_sweep();
+    eprintln!(
+        "timing {} full backups of {}: {cores} cores x {joint} joint actions ...",
+        args.backups + 1,
+        config.env.name()
+    );
+    // From V = 0, then each backup's output is the next one's input.
+    let mut times = Vec::with_capacity(args.backups);
+    let (mut v, mut out) = (Buf(0), Buf(1));
+    for k in 0..=args.backups {
+        let t = Instant::now();
+        sweeps.backup(v, out)?;
+        if k > 0 {
+            times.push(t.elapsed().as_secs_f64());
+        }
+        (v, out) = (out, v);
+    }
+    let median_seconds = median(&times);
+    let rate = fma.map(|f| f / median_seconds / 1e9);
+    let fraction = rate.map(|r| r / peak);
+    if std::env::var("FUZZYQ_GPU_PROFILE").is_ok_and(|v| !v.is_empty() && v != "0") {
+        // One more backup with every dispatch timed on its own.
+        sweeps.set_profiling(true);
+        sweeps.backup(v, out)?;
+        for (kernel, seconds, n) in sweeps.profile() {
+            println!("profile    {kernel}: {:.3} ms in {n} dispatches", 1e3 * seconds);
+        }
+    }
+    println!(
+        "problem    {}: {cores} cores x {joint} joint actions{}; {} slab(s) per batch; set-up {:.3} s",
+        config.env.name(),
+        fma.map_or(String::new(), |f| format!(", {f:.3e} multiply-adds per full backup")),
+        sweeps.batch(),
+        setup
+    );
+    let (lo, hi) = min_max(&times);
+    println!(
+        "backup     {:.4} s median of {} full backups ({lo:.4}-{hi:.4} s){}",
+        median_seconds,
+        times.len(),
+        match (rate, fraction) {
+            (Some(r), Some(f)) => format!(": {r:.1} GFMA/s, {:.1}% of the peak", 100.0 * f),
+            _ => String::new(),
+        }
+    );
+    if let Some(path) = &args.json {
+        let report = GpuReport {
+            adapter: a.name,
+            backend: a.backend,
+            driver: a.driver,
+            fused_fma: a.fused_fma,
+            peak_gfma_per_second: peak,
+            env: config.env.name(),
+            cores,
+            joint_actions: joint,
+            multiply_adds_per_backup: fma,
+            slabs_per_batch: sweeps.batch(),
+            setup_seconds: setup,
+            backup_seconds: times,
+            median_backup_seconds: median_seconds,
+            gfma_per_second: rate,
             fraction_of_peak: fraction,
         };
         write_json(path, &report)?;

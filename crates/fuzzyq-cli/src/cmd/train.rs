@@ -10,7 +10,8 @@ use anyhow::Context;
 use clap::Args;
 use fuzzyq_core::additive::Update;
 use fuzzyq_core::solver::{
-    BackupPath, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError, SweepMode,
+    BackupPath, Device, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError,
+    SweepMode,
 };
 use fuzzyq_sim::io::checkpoint::{FqiState, RunState};
 use fuzzyq_sim::io::config::EnvConfig;
@@ -87,6 +88,10 @@ pub(crate) struct TrainArgs {
     /// identical results).
     #[arg(long, value_parser = output::named::<Kernel>())]
     kernel: Option<Kernel>,
+    /// Where the sweeps compute: cpu, or gpu (the block path in f32 through wgpu; the CPU's
+    /// values and greedy actions bit for bit where the adapter fuses multiply-adds).
+    #[arg(long, value_parser = output::named::<Device>())]
+    device: Option<Device>,
     /// Worker threads (default: one per core; results do not depend on it).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
@@ -346,6 +351,7 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     s.backup = args.backup.unwrap_or(s.backup);
     s.precision = args.precision.unwrap_or(s.precision);
     s.kernel = args.kernel.or(s.kernel);
+    s.device = args.device.unwrap_or(s.device);
     if args.asynchronous {
         s.sweep = SweepMode::Asynchronous;
     }
@@ -556,6 +562,24 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             },
         );
     }
+    if config.solver.device == Device::Gpu {
+        // Opened here, once for the run (the solver shares it), so that its name comes first.
+        let gpu = fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
+        if !args.quiet {
+            let a = gpu.summary();
+            eprintln!(
+                "GPU: {} ({}, {}; fma {})",
+                a.name,
+                a.backend,
+                a.driver,
+                if a.fused_fma {
+                    "fused: the CPU's bits"
+                } else {
+                    "not fused: each product rounded first, so the last bits differ from the CPU's"
+                }
+            );
+        }
+    }
     let bar = progress_bar(
         args.quiet,
         0,
@@ -636,7 +660,8 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         (Some(l), Some(data)) => {
             train::train_on_transitions(&config, data, &l.fit, |p| observer(p, None)).map(with_run)
         }
-        (None, _) => train::train_from(&config, resume, observer).map(|a| (a, None)),
+        (None, _) => train::train_showing(&config, resume, args.checkpoint.is_some(), observer)
+            .map(|a| (a, None)),
     };
     bar.finish_and_clear();
     if let Some(e) = checkpoints.failure() {
@@ -774,7 +799,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
 }
 
 /// The flags of the fuzzy Q-iteration solver, and whether each was given.
-fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 13] {
+fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 14] {
     [
         (args.xi.is_some(), "--xi"),
         (args.max_sweeps.is_some(), "--max-sweeps"),
@@ -789,6 +814,7 @@ fn solver_flags(args: &TrainArgs) -> [(bool, &'static str); 13] {
         (args.backup.is_some(), "--backup"),
         (args.precision.is_some(), "--precision"),
         (args.kernel.is_some(), "--kernel"),
+        (args.device.is_some(), "--device"),
     ]
 }
 

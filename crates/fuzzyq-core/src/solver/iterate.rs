@@ -103,6 +103,64 @@ where
     )
 }
 
+/// [`solve_from`] with the passes over `V` run by a backend that `make` builds from the run's
+/// operator (a GPU holding its own copy of the block tables, say): the operator is prepared
+/// once, and a coarse start ([`SolverConfig::coarse_start`]) is solved by a backend `make`
+/// builds for the coarse grid's operator. The result is [`solve_from`]'s, bit for bit, when
+/// every backend computes each pass as [`Local`] does. With `show_state` false the observer
+/// is never shown a state (which would read every value of the backend after each sweep).
+pub fn solve_with<T, M, S>(
+    model: &M,
+    grid: &Grid<T>,
+    config: &SolverConfig,
+    resume: Option<SolverState<'_, T>>,
+    show_state: bool,
+    make: &mut dyn FnMut(&super::Operator<'_, T, M>) -> Result<S, S::Error>,
+    observer: impl FnMut(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()>,
+) -> Result<Solution<T>, S::Error>
+where
+    T: Real,
+    M: Model<T> + Sync + ?Sized,
+    S: Sweeps<T>,
+{
+    config.validate()?;
+    let start = Instant::now();
+    let run = prepare(model, grid, config)?;
+    let mut sweeps = make(&run.op)?;
+    let coarse = match run.coarse.as_ref().filter(|_| resume.is_none()) {
+        None => None,
+        Some(coarse) => {
+            let t0 = Instant::now();
+            let config = SolverConfig {
+                coarse_start: false,
+                ..*config
+            };
+            // A function pointer, not a closure: the recursive call instantiates this function
+            // once more, not once per nesting.
+            let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
+                |_, _| ControlFlow::Continue(());
+            let s = solve_with(model, coarse, &config, None, false, make, noop)?;
+            let v = grid.interpolated_from(coarse, &s.v)?;
+            sweeps.load(Buf(0), &run.op.to_internal(&v))?;
+            Some(CoarseStart {
+                cores: coarse.n_cores(),
+                sweeps: s.sweeps.len(),
+                seconds: t0.elapsed().as_secs_f64(),
+            })
+        }
+    };
+    drive(
+        &run,
+        config,
+        &mut sweeps,
+        start,
+        resume,
+        coarse,
+        show_state,
+        observer,
+    )
+}
+
 /// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): the same scheme
 /// on [`Prepared::coarse`] (without a coarse start of its own), its `V` interpolated onto
 /// `grid` and loaded into `sweeps`'s first buffer.
@@ -272,7 +330,7 @@ where
             bound: self.run.bound,
             reward_bound: op.reward_bound(),
             path: op.path(),
-            kernel: op.kernel(),
+            kernel: self.sweeps.kernel().unwrap_or_else(|| op.kernel()),
             multiply_adds_per_sweep: op.multiply_adds_per_sweep(),
             sweep_seconds,
             evaluation_seconds,

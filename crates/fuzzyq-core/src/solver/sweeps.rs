@@ -74,7 +74,8 @@ impl DiffStats {
     /// The statistics of differences whose range is `[lo, hi]` (`lo > hi`: none) after a
     /// shift `s`. Rounding `d + s` is monotone in `d`, so `max |d + s|` is taken at an end of
     /// the range: the same bits as the maximum over every difference.
-    pub(super) fn of_range(lo: f64, hi: f64, s: f64) -> Self {
+    #[must_use]
+    pub fn of_range(lo: f64, hi: f64, s: f64) -> Self {
         if lo > hi {
             return Self::EMPTY;
         }
@@ -150,6 +151,11 @@ pub trait Sweeps<T: Real> {
     fn values(&self, v: Buf) -> Result<Cow<'_, [T]>, Self::Error>;
     /// The policy buffer.
     fn policy(&self) -> Result<Cow<'_, [u32]>, Self::Error>;
+    /// What computes the passes, for [`Solution::kernel`](super::Solution::kernel) (`None`:
+    /// the operator's CPU kernel instance).
+    fn kernel(&self) -> Option<&'static str> {
+        None
+    }
 }
 
 /// The in-process backend: the buffers in memory, each pass on the operator's threads.

@@ -3,7 +3,7 @@
 //! paper's values with a comment on every field.
 
 use fuzzyq_core::solver::{
-    BackupPath, Grid, IterationOperator, Kernel, Precision, SolverConfig, SweepMode,
+    BackupPath, Device, Grid, IterationOperator, Kernel, Precision, SolverConfig, SweepMode,
 };
 use fuzzyq_core::{Membership, Partition, Real};
 use serde::{Deserialize, Serialize};
@@ -336,6 +336,15 @@ pub struct SolverSettings {
     /// [`fuzzyq_core::solver::solve_q`]).
     #[serde(default, skip_serializing_if = "is_values")]
     pub operator: IterationOperator,
+    /// Where the passes over `V` compute: `"cpu"` (default) or `"gpu"` (the block path in
+    /// `f32` on a GPU through wgpu, the same policy bytes where the adapter fuses
+    /// multiply-adds; see the `fuzzyq-gpu` crate).
+    #[serde(default, skip_serializing_if = "is_cpu")]
+    pub device: Device,
+}
+
+fn is_cpu(d: &Device) -> bool {
+    *d == Device::Cpu
 }
 
 /// The default cap on evaluation sweeps per full backup.
@@ -365,6 +374,7 @@ impl Default for SolverSettings {
             coarse_start: false,
             kernel: None,
             operator: IterationOperator::Values,
+            device: Device::Cpu,
         }
     }
 }
@@ -403,6 +413,28 @@ impl SolverSettings {
             "solver.kernel",
             "applies to the block backup; backup = \"generic\" has no kernel",
         );
+        if self.device == Device::Gpu {
+            require!(
+                self.precision == Precision::F32,
+                "solver.device",
+                "\"gpu\" runs in f32; set solver.precision = \"f32\"",
+            );
+            require!(
+                self.operator == IterationOperator::Values,
+                "solver.device",
+                "\"gpu\" runs operator \"values\"; \"q-values\" is CPU-only",
+            );
+            require!(
+                self.sweep == SweepMode::Synchronous,
+                "solver.device",
+                "\"gpu\" runs synchronous sweeps; set solver.sweep = \"sync\"",
+            );
+            require!(
+                self.kernel.is_none(),
+                "solver.kernel",
+                "chooses a CPU kernel; solver.device = \"gpu\" has none",
+            );
+        }
         discount("solver.gamma", self.gamma)?;
         positive("solver.xi", self.xi)?;
         require!(

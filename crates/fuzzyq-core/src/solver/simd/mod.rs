@@ -284,6 +284,11 @@ impl<T: Real> RowsBuf<T> {
         }
     }
 
+    /// The compressed rows: row starts, columns and weights.
+    pub(super) fn parts(&self) -> (&[u32], &[u32], &[T]) {
+        (&self.ptr, &self.col, &self.weight)
+    }
+
     /// Number of entries.
     pub(super) fn nnz(&self) -> usize {
         self.col.len()

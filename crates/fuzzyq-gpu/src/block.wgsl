@@ -1,0 +1,428 @@
+// The block backup's passes (see `fuzzyq_core::solver::BlockPlan` for the contraction and
+// `sweeps.rs` for how a pass is dispatched). Every sum runs over a row's entries in order with
+// `fma` from 0, as the CPU kernels do; `r + gamma m` is rounded as two operations (`unfused`).
+// Each dispatch reads its own `Params` (a dynamic offset into one uniform buffer).
+
+const WG: u32 = 64u;
+const MAX_BLOCKS: u32 = 8u;
+
+struct Params {
+    // The stage (`stage`), the last block (`last_fused`, `reduce_rows`) or the pass's mode.
+    b: u32,
+    // Threads (or items) of this dispatch.
+    count: u32,
+    // The first slab of this batch (a core of the first contracted block).
+    c0_lo: u32,
+    // Threads per core of `last_fused` (a power of two that divides `WG`).
+    tpc: u32,
+    // 0: maximum of the expected values; 1: and the argument; 2: the argument only;
+    // 3: maximum of the absolute values (written per core, for `max_pass`).
+    mode: u32,
+    // Joint actions, and whether `map` renumbers them to product actions.
+    n_joint: u32,
+    has_map: u32,
+    // 0: rewards per core; 1: rewards per (core, joint action).
+    reward_table: u32,
+    has_goal: u32,
+    // A runtime zero: `unfused` XORs products with it, so that no compiler fuses them.
+    zero: u32,
+    gamma: f32,
+    shift: f32,
+    // Cores of one slab (`R_0`) and blocks.
+    slab: u32,
+    n_blocks: u32,
+    // Elements of the buffers a generic pass covers.
+    len: u32,
+    pad: u32,
+    // Per block (contraction order): (cores, actions, R, P).
+    blocks: array<vec4<u32>, MAX_BLOCKS>,
+    // Per block: (first row start in `ptr`, 0, 0, 0).
+    rows: array<vec4<u32>, MAX_BLOCKS>,
+}
+
+@group(0) @binding(0) var<uniform> prm: Params;
+@group(0) @binding(1) var<storage, read> row_ptr: array<u32>;
+@group(0) @binding(2) var<storage, read> col: array<u32>;
+@group(0) @binding(3) var<storage, read> weight: array<f32>;
+@group(0) @binding(4) var<storage, read> src: array<f32>;
+@group(0) @binding(5) var<storage, read_write> dst: array<f32>;
+@group(0) @binding(6) var<storage, read_write> aux: array<u32>;
+@group(0) @binding(7) var<storage, read> rewards: array<f32>;
+@group(0) @binding(8) var<storage, read> goal: array<u32>;
+@group(0) @binding(9) var<storage, read> joint_map: array<u32>;
+@group(0) @binding(10) var<storage, read> src2: array<f32>;
+
+var<workgroup> best_v: array<f32, WG>;
+var<workgroup> best_i: array<u32, WG>;
+
+// The dispatch's linear thread index (workgroups laid out in x, then y).
+fn linear(gid: vec3<u32>, wid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return wid.y * nwg.x * WG + gid.x;
+}
+
+// `a * b` rounded to f32 on its own: the XOR with a value the compiler cannot know keeps any
+// later addition from fusing with the product.
+fn unfused(a: f32, b: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(a * b) ^ prm.zero);
+}
+
+fn blk(b: u32) -> vec4<u32> {
+    return prm.blocks[b];
+}
+
+// `V` of core `core` from the maximum `m` of its expected values (state-only reward).
+fn finish(core: u32, m: f32) -> f32 {
+    let r = rewards[core];
+    if prm.has_goal != 0u && goal[core] != 0u {
+        return r;
+    }
+    return r + unfused(prm.gamma, m);
+}
+
+// Stage `b` over the batch: `dst[o]`, `o = ((q R + r) A + a) P + p`, the sum over row
+// `c_b A + a` of table `b` of `w src[((q / n_b) n_b + k) R + r) P + p]` (stage 0 reads `V`,
+// whose slab `k` starts at `k R`).
+@compute @workgroup_size(64)
+fn stage(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+         @builtin(num_workgroups) nwg: vec3<u32>) {
+    let o = linear(gid, wid, nwg);
+    if o >= prm.count {
+        return;
+    }
+    let bl = blk(prm.b);
+    let n_b = bl.x;
+    let n_a = bl.y;
+    let r_len = bl.z;
+    let p_len = bl.w;
+    let p = o % p_len;
+    var t = o / p_len;
+    let a = t % n_a;
+    t = t / n_a;
+    let r = t % r_len;
+    let q = t / r_len;
+    var c: u32;
+    var base: u32;
+    if prm.b == 0u {
+        c = prm.c0_lo + q;
+        base = 0u;
+    } else {
+        c = q % n_b;
+        base = (q / n_b) * n_b;
+    }
+    let row = prm.rows[prm.b].x + c * n_a + a;
+    let e0 = row_ptr[row];
+    let e1 = row_ptr[row + 1u];
+    var acc = 0.0;
+    for (var e = e0; e < e1; e++) {
+        let i = ((base + col[e]) * r_len + r) * p_len + p;
+        acc = fma(weight[e], src[i], acc);
+    }
+    dst[o] = acc;
+}
+
+// Whether (v, i) beats (bv, bi): larger, or equal at a lower index.
+fn beats(v: f32, i: u32, bv: f32, bi: u32) -> bool {
+    return v > bv || (v == bv && i < bi);
+}
+
+// The last stage fused with the reduction, `tpc` threads per core of the batch: each thread
+// takes the product actions `a P + p` with `p = lane, lane + tpc, ...`, then the core's
+// threads reduce to the largest value at the lowest index. Mode 0 writes `V`, 1 `V` and the
+// greedy action, 2 the greedy action, 3 the maximum of the absolute values (0 at a goal).
+@compute @workgroup_size(64)
+fn last_fused(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+              @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let t = linear(gid, wid, nwg);
+    let tpc = prm.tpc;
+    let local = t / tpc;
+    let lane = t % tpc;
+    let valid = local < prm.count;
+    let bl = blk(prm.b);
+    let n_b = bl.x;
+    let n_a = bl.y;
+    let p_len = bl.w;
+    var bv = bitcast<f32>(0xff800000u ^ prm.zero);
+    var bi = 0xffffffffu;
+    if valid {
+        var c: u32;
+        var base: u32;
+        if prm.b == 0u {
+            c = prm.c0_lo + local;
+            base = 0u;
+        } else {
+            c = local % n_b;
+            base = (local / n_b) * n_b;
+        }
+        let abs_mode = prm.mode == 3u;
+        for (var a = 0u; a < n_a; a++) {
+            let row = prm.rows[prm.b].x + c * n_a + a;
+            let e0 = row_ptr[row];
+            let e1 = row_ptr[row + 1u];
+            for (var p = lane; p < p_len; p += tpc) {
+                var acc = 0.0;
+                for (var e = e0; e < e1; e++) {
+                    acc = fma(weight[e], src[(base + col[e]) * p_len + p], acc);
+                }
+                if abs_mode {
+                    acc = abs(acc);
+                }
+                if acc > bv {
+                    bv = acc;
+                    bi = a * p_len + p;
+                }
+            }
+        }
+    }
+    best_v[li] = bv;
+    best_i[li] = bi;
+    workgroupBarrier();
+    for (var s = tpc / 2u; s > 0u; s = s / 2u) {
+        if lane < s {
+            let v = best_v[li + s];
+            let i = best_i[li + s];
+            if beats(v, i, best_v[li], best_i[li]) {
+                best_v[li] = v;
+                best_i[li] = i;
+            }
+        }
+        workgroupBarrier();
+    }
+    if !valid || lane != 0u {
+        return;
+    }
+    let m = best_v[li];
+    let core = prm.c0_lo * prm.slab + local;
+    let is_goal = prm.has_goal != 0u && goal[core] != 0u;
+    switch prm.mode {
+        case 0u: {
+            dst[core] = finish(core, m);
+        }
+        case 1u: {
+            dst[core] = finish(core, m);
+            aux[core] = select(best_i[li], 0u, is_goal);
+        }
+        case 2u: {
+            aux[core] = select(best_i[li], 0u, is_goal);
+        }
+        default: {
+            dst[core] = select(m, 0.0, is_goal);
+        }
+    }
+}
+
+// Expected value of joint action `u` in a core's row of product actions.
+fn at(row: u32, u: u32) -> f32 {
+    if prm.has_map != 0u {
+        return src[row + joint_map[u]];
+    }
+    return src[row + u];
+}
+
+// The reduction of full rows (`src`: one row of product actions per core of the batch, the
+// last stage's output), one thread per core, over the joint actions in order, as the CPU's
+// `Operator::reduce`; modes as `last_fused`.
+@compute @workgroup_size(64)
+fn reduce_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+               @builtin(num_workgroups) nwg: vec3<u32>) {
+    let local = linear(gid, wid, nwg);
+    if local >= prm.count {
+        return;
+    }
+    let core = prm.c0_lo * prm.slab + local;
+    let width = prm.len;
+    let row = local * width;
+    let m = prm.n_joint;
+    let is_goal = prm.has_goal != 0u && goal[core] != 0u;
+    if prm.mode == 3u {
+        var best = 0.0;
+        if !is_goal {
+            for (var u = 0u; u < m; u++) {
+                let x = abs(at(row, u));
+                if !(best >= x) {
+                    best = x;
+                }
+            }
+        }
+        dst[core] = best;
+        return;
+    }
+    var best = 0.0;
+    var arg = 0u;
+    if prm.reward_table == 0u {
+        let r = rewards[core];
+        if is_goal {
+            best = r;
+        } else {
+            var e = at(row, 0u);
+            for (var u = 1u; u < m; u++) {
+                let x = at(row, u);
+                if x > e {
+                    e = x;
+                    arg = u;
+                }
+            }
+            best = r + unfused(prm.gamma, e);
+        }
+    } else {
+        for (var u = 0u; u < m; u++) {
+            let r = rewards[core * m + u];
+            var theta = r;
+            if !is_goal {
+                theta = r + unfused(prm.gamma, at(row, u));
+            }
+            if u == 0u || theta > best {
+                best = theta;
+                arg = u;
+            }
+        }
+    }
+    if prm.mode != 2u {
+        dst[core] = best;
+    }
+    if prm.mode != 0u {
+        aux[core] = arg;
+    }
+}
+
+// One policy-evaluation sweep, one thread per core: the expected value of the core's action
+// in `aux`, the sums nested as the stages nest them (block 0 innermost), then `finish`.
+@compute @workgroup_size(64)
+fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+            @builtin(num_workgroups) nwg: vec3<u32>) {
+    let core = linear(gid, wid, nwg);
+    if core >= prm.len {
+        return;
+    }
+    let nb = prm.n_blocks;
+    let pol = aux[core];
+    var start: array<u32, MAX_BLOCKS>;
+    var end: array<u32, MAX_BLOCKS>;
+    var e: array<u32, MAX_BLOCKS>;
+    var acc: array<f32, MAX_BLOCKS>;
+    // The core's block cores, c_{B-1} fastest.
+    var rest = core;
+    for (var i = 0u; i < nb; i++) {
+        let b = nb - 1u - i;
+        let bl = blk(b);
+        let c = rest % bl.x;
+        rest = rest / bl.x;
+        let a = (pol / bl.w) % bl.y;
+        let row = prm.rows[b].x + c * bl.y + a;
+        start[b] = row_ptr[row];
+        end[b] = row_ptr[row + 1u];
+        e[b] = start[b];
+        acc[b] = 0.0;
+    }
+    var result = 0.0;
+    var empty = false;
+    for (var b = 1u; b < nb; b++) {
+        empty = empty || start[b] == end[b];
+    }
+    loop {
+        if empty {
+            break;
+        }
+        var off = 0u;
+        for (var b = 1u; b < nb; b++) {
+            off += col[e[b]] * blk(b).z;
+        }
+        let r0 = blk(0u).z;
+        var s = 0.0;
+        for (var i = start[0]; i < end[0]; i++) {
+            s = fma(weight[i], src[col[i] * r0 + off], s);
+        }
+        var val = s;
+        var b = 1u;
+        var done = false;
+        loop {
+            if b >= nb {
+                done = true;
+                break;
+            }
+            acc[b] = fma(weight[e[b]], val, acc[b]);
+            e[b] += 1u;
+            if e[b] < end[b] {
+                break;
+            }
+            val = acc[b];
+            acc[b] = 0.0;
+            e[b] = start[b];
+            b += 1u;
+        }
+        if done {
+            result = val;
+            break;
+        }
+    }
+    dst[core] = finish(core, result);
+}
+
+// `dst = rho + gamma 0` per core: the backup of `V = 0` (state-only rewards).
+@compute @workgroup_size(64)
+fn rewards_pass(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+                @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear(gid, wid, nwg);
+    if i < prm.len {
+        dst[i] = finish(i, 0.0);
+    }
+}
+
+// `dst += shift` (the extrapolation's shift).
+@compute @workgroup_size(64)
+fn shift_pass(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+              @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear(gid, wid, nwg);
+    if i < prm.len {
+        dst[i] = dst[i] + prm.shift;
+    }
+}
+
+// `dst = src - src2` (the change `exact_delta` contracts).
+@compute @workgroup_size(64)
+fn sub_pass(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+            @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear(gid, wid, nwg);
+    if i < prm.len {
+        dst[i] = src[i] - src2[i];
+    }
+}
+
+// Per workgroup, the maximum of its stretch of `src` (`len` values, `prm.count` values per
+// workgroup), from 0 as `T::max_of` folds: into `dst[workgroup]`.
+@compute @workgroup_size(64)
+fn max_pass(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+            @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
+    let g = wid.y * nwg.x + wid.x;
+    let first = g * prm.count;
+    var m = 0.0;
+    for (var i = first + li; i < min(first + prm.count, prm.len); i += WG) {
+        let x = src[i];
+        if !(m >= x) {
+            m = x;
+        }
+    }
+    best_v[li] = m;
+    workgroupBarrier();
+    for (var s = WG / 2u; s > 0u; s = s / 2u) {
+        if li < s {
+            let x = best_v[li + s];
+            if !(best_v[li] >= x) {
+                best_v[li] = x;
+            }
+        }
+        workgroupBarrier();
+    }
+    if li == 0u {
+        dst[g] = best_v[0];
+    }
+}
+
+// Probe: `dst[i] = fma(src[i], src[i], src2[i])`, which tells whether the adapter fuses.
+@compute @workgroup_size(64)
+fn fma_probe(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+             @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = linear(gid, wid, nwg);
+    if i < prm.len {
+        dst[i] = fma(src[i], src[i], src2[i]);
+    }
+}

@@ -1,0 +1,52 @@
+//! Why a GPU run was refused or failed.
+
+use fuzzyq_core::solver::SolveError;
+
+/// An error of the GPU path: no adapter, a problem it cannot hold or run, a device failure,
+/// or the solver's own error.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No GPU adapter was found (no Vulkan, Metal or DX12 driver, or none that wgpu accepts).
+    #[error("no GPU adapter found (wgpu found no Vulkan, Metal or DX12 device{hint})")]
+    NoAdapter {
+        /// What to try, for this platform.
+        hint: &'static str,
+    },
+    /// `FUZZYQ_GPU_ADAPTER` names no adapter.
+    #[error("FUZZYQ_GPU_ADAPTER={want} names no GPU adapter (found: {found})")]
+    NoNamedAdapter {
+        /// The name asked for.
+        want: String,
+        /// The adapters found.
+        found: String,
+    },
+    /// The adapter refused the device the solver asks for.
+    #[error("the GPU adapter {adapter} refused a device: {why}")]
+    Device {
+        /// The adapter's name.
+        adapter: String,
+        /// wgpu's message.
+        why: String,
+    },
+    /// The run needs what the GPU path does not do.
+    #[error("the GPU path {0}; run it with --device cpu")]
+    Unsupported(&'static str),
+    /// A buffer exceeds the adapter's limits.
+    #[error("{what} needs {need} bytes on the GPU, more than the adapter's limit of {limit} bytes for one {kind}")]
+    TooLarge {
+        /// Which buffer.
+        what: &'static str,
+        /// Bytes it needs.
+        need: u64,
+        /// The adapter's limit.
+        limit: u64,
+        /// Which limit (a buffer, a binding).
+        kind: &'static str,
+    },
+    /// The device ran out of memory or lost itself.
+    #[error("the GPU failed: {0}")]
+    Failed(String),
+    /// The solver's own error (a model, grid or configuration it refuses, or an interrupted run).
+    #[error(transparent)]
+    Solve(#[from] SolveError),
+}

@@ -1,0 +1,257 @@
+//! The GPU context: one wgpu adapter and device, and what was measured of them.
+
+use std::sync::Arc;
+
+use crate::error::GpuError;
+
+/// What a GPU is, as the solver sees it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdapterSummary {
+    /// The adapter's name (`"NVIDIA H200"`, `"llvmpipe (LLVM 15.0.6, 256 bits)"`).
+    pub name: String,
+    /// The graphics API wgpu drives it through (`"vulkan"`, `"metal"`, `"dx12"`).
+    pub backend: String,
+    /// The driver and its version, as the adapter reports them.
+    pub driver: String,
+    /// Whether the adapter's `fma` is fused (one rounding), measured at start-up: where it is,
+    /// the GPU gives the CPU kernels' bits; where it is not (Mesa's lavapipe), it gives the
+    /// bits of the same sums with every product rounded first
+    /// ([`crate::reference::Rounding::Product`]).
+    pub fused_fma: bool,
+    /// Whether the adapter has `f64` in shaders (the change statistics run on the GPU with it,
+    /// on the host from the values without it).
+    pub f64: bool,
+    /// The adapter's largest buffer, in bytes.
+    pub max_buffer: u64,
+    /// The adapter's largest storage-buffer binding, in bytes.
+    pub max_binding: u64,
+}
+
+/// One GPU: wgpu's device and queue, shared by every run that uses it (cheap to clone).
+#[derive(Clone)]
+pub struct Gpu {
+    pub(crate) inner: Arc<Inner>,
+    /// The largest storage binding a run uses (the adapter's, or less).
+    pub(crate) max_binding: u64,
+    /// Bytes of a batch's largest stage buffer.
+    pub(crate) batch_bytes: u64,
+}
+
+pub(crate) struct Inner {
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    pub(crate) summary: AdapterSummary,
+}
+
+impl core::fmt::Debug for Gpu {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Gpu").field("adapter", &self.inner.summary).finish()
+    }
+}
+
+impl Gpu {
+    /// Opens the first high-performance adapter wgpu finds (`WGPU_ADAPTER_NAME` picks one by
+    /// name, `WGPU_BACKEND` the API) and measures whether its `fma` is fused.
+    pub fn new() -> Result<Self, GpuError> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::from_env()
+            .unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::METAL | wgpu::Backends::DX12);
+        desc.flags = wgpu::InstanceFlags::empty().with_env();
+        let instance = wgpu::Instance::new(desc);
+        let adapter = pick_adapter(&instance)?;
+        let info = adapter.get_info();
+        let features = adapter.features() & wgpu::Features::SHADER_F64;
+        let limits = adapter.limits();
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+                label: Some("fuzzyq"),
+                required_features: features,
+                required_limits: limits.clone(),
+                ..Default::default()
+            }))
+            .map_err(|e| GpuError::Device {
+                adapter: info.name.clone(),
+                why: e.to_string(),
+            })?;
+        let summary = AdapterSummary {
+            name: info.name.clone(),
+            backend: info.backend.to_str().to_owned(),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_owned(),
+            fused_fma: false,
+            f64: features.contains(wgpu::Features::SHADER_F64),
+            max_buffer: limits.max_buffer_size,
+            max_binding: u64::from(limits.max_storage_buffer_binding_size),
+        };
+        let mut gpu = Self {
+            max_binding: summary.max_binding,
+            batch_bytes: default_batch_bytes(),
+            inner: Arc::new(Inner {
+                device,
+                queue,
+                summary,
+            }),
+        };
+        let fused = crate::kernels::Kernels::new(&gpu)?.probe_fma(&gpu)?;
+        Arc::get_mut(&mut gpu.inner)
+            .expect("not shared yet")
+            .summary
+            .fused_fma = fused;
+        Ok(gpu)
+    }
+
+    /// The process's GPU: opened by the first call ([`Gpu::new`]) and shared by every later
+    /// one (a failed open is tried again next time).
+    pub fn shared() -> Result<Self, GpuError> {
+        static SHARED: std::sync::OnceLock<Gpu> = std::sync::OnceLock::new();
+        if let Some(g) = SHARED.get() {
+            return Ok(g.clone());
+        }
+        let g = Self::new()?;
+        Ok(SHARED.get_or_init(|| g).clone())
+    }
+
+    /// The adapter and what was measured of it.
+    #[must_use]
+    pub fn summary(&self) -> &AdapterSummary {
+        &self.inner.summary
+    }
+
+    /// This GPU with runs limited to storage bindings of at most `bytes` (the adapter's limit
+    /// is the default): a run whose `V` or one slab's stage output exceeds it is refused
+    /// before anything is allocated ([`GpuError::TooLarge`]). For trying a smaller card's
+    /// limits.
+    #[must_use]
+    pub fn with_binding_limit(mut self, bytes: u64) -> Self {
+        self.max_binding = bytes.min(self.inner.summary.max_binding);
+        self
+    }
+
+    /// This GPU with batches of slabs whose largest stage output takes at most `bytes` (at
+    /// least one slab each; default 256 MiB, or `FUZZYQ_GPU_BATCH_MB`). Any batch size gives
+    /// the same bits; larger batches mean fewer, larger dispatches.
+    #[must_use]
+    pub fn with_batch_bytes(mut self, bytes: u64) -> Self {
+        self.batch_bytes = bytes;
+        self
+    }
+}
+
+/// 256 MiB, or `FUZZYQ_GPU_BATCH_MB` mebibytes.
+fn default_batch_bytes() -> u64 {
+    std::env::var("FUZZYQ_GPU_BATCH_MB")
+        .ok()
+        .and_then(|s| s.parse::<u64>().ok())
+        .filter(|&m| m > 0)
+        .map_or(256 << 20, |m| m << 20)
+}
+
+/// The adapter named by `FUZZYQ_GPU_ADAPTER` (a part of its name), else the first of the
+/// most capable kind: a discrete GPU, then an integrated one, a virtual one, a CPU (Mesa's
+/// lavapipe).
+fn pick_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, GpuError> {
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let rank = |t: wgpu::DeviceType| match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Cpu => 3,
+        wgpu::DeviceType::Other => 4,
+    };
+    if let Ok(want) = std::env::var("FUZZYQ_GPU_ADAPTER") {
+        let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+        return adapters
+            .into_iter()
+            .find(|a| a.get_info().name.to_lowercase().contains(&want.to_lowercase()))
+            .ok_or(GpuError::NoNamedAdapter {
+                want,
+                found: names.join(", "),
+            });
+    }
+    adapters
+        .into_iter()
+        .min_by_key(|a| rank(a.get_info().device_type))
+        .ok_or(GpuError::NoAdapter {
+            hint: if cfg!(target_os = "linux") {
+                "; on Linux install the Vulkan loader and a driver, e.g. `apt-get install \
+                 libvulkan1 mesa-vulkan-drivers`"
+            } else {
+                ""
+            },
+        })
+}
+
+/// Chains of `peak.wgsl` per thread.
+const PEAK_CHAINS: u64 = 16;
+/// Threads of one peak dispatch.
+const PEAK_THREADS: u32 = 1 << 20;
+
+impl Gpu {
+    /// Measures the adapter's fused multiply-add throughput in `f32`, in billions per second:
+    /// 2^20 threads each running 16 independent `fma` chains, dispatches repeated for about
+    /// `seconds`; the best dispatch counts. The ceiling a full backup is set against
+    /// (`fuzzyq bench --device gpu`).
+    pub fn fma_peak(&self, seconds: f64) -> Result<f64, GpuError> {
+        use wgpu::util::DeviceExt;
+        let device = &self.inner.device;
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("peak.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("peak.wgsl").into()),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("peak"),
+            layout: None,
+            module: &module,
+            entry_point: Some("peak"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        let out = crate::buffers::zeroed(self, "peak out", 4 * u64::from(PEAK_THREADS));
+        let time = |iters: u32| -> Result<f64, GpuError> {
+            let params: [u32; 4] = [iters, 0.999_999f32.to_bits(), 1e-7f32.to_bits(), 0];
+            let ubuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("peak params"),
+                contents: bytemuck::cast_slice(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: ubuf.as_entire_binding(),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: out.as_entire_binding(),
+                    },
+                ],
+            });
+            let mut enc = device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.dispatch_workgroups(PEAK_THREADS / 256, 1, 1);
+            }
+            let t0 = std::time::Instant::now();
+            self.inner.queue.submit([enc.finish()]);
+            crate::buffers::wait(self)?;
+            Ok(t0.elapsed().as_secs_f64())
+        };
+        // Grow the chains until one dispatch takes a few milliseconds, then repeat it.
+        let mut iters = 16u32;
+        let mut t = time(iters)?;
+        while t < 0.005 && iters < (1 << 24) {
+            iters *= 4;
+            t = time(iters)?;
+        }
+        let fmas = u64::from(PEAK_THREADS) * PEAK_CHAINS * u64::from(iters);
+        let start = std::time::Instant::now();
+        let mut best = t;
+        while start.elapsed().as_secs_f64() < seconds {
+            best = best.min(time(iters)?);
+        }
+        Ok(fmas as f64 / best / 1e9)
+    }
+}

@@ -1,0 +1,236 @@
+//! The compute pipelines of `block.wgsl` and `diff.wgsl`, their parameters, and how a pass is
+//! dispatched over a linear range of threads.
+
+use crate::error::GpuError;
+use crate::gpu::Gpu;
+
+/// Threads per workgroup of every kernel (`WG` in the shaders).
+pub(crate) const WG: u32 = 64;
+/// Blocks the shaders' parameter arrays hold (`MAX_BLOCKS`).
+pub(crate) const MAX_BLOCKS: usize = 8;
+/// Bytes between two dispatches' parameters in the uniform buffer (the dynamic-offset
+/// alignment every adapter accepts, 256, times two: `Params` takes 320 bytes).
+pub(crate) const PARAM_STRIDE: u64 = 512;
+/// Workgroups along x before a dispatch spills into y.
+const MAX_X: u32 = 32768;
+
+/// One dispatch's parameters (`Params` in `block.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct Params {
+    pub b: u32,
+    pub count: u32,
+    pub c0_lo: u32,
+    pub tpc: u32,
+    pub mode: u32,
+    pub n_joint: u32,
+    pub has_map: u32,
+    pub reward_table: u32,
+    pub has_goal: u32,
+    pub zero: u32,
+    pub gamma: f32,
+    pub shift: f32,
+    pub slab: u32,
+    pub n_blocks: u32,
+    pub len: u32,
+    pub pad: u32,
+    pub blocks: [[u32; 4]; MAX_BLOCKS],
+    pub rows: [[u32; 4]; MAX_BLOCKS],
+}
+
+/// The parameters of `diff.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct DiffParams {
+    pub len: u32,
+    pub per_wg: u32,
+    pub zero: u32,
+    pub pad: u32,
+}
+
+/// The entry points of `block.wgsl`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Entry {
+    Stage,
+    LastFused,
+    ReduceRows,
+    Evaluate,
+    Rewards,
+    Shift,
+    Sub,
+    Max,
+    FmaProbe,
+}
+
+impl Entry {
+    const ALL: [Entry; 9] = [
+        Entry::Stage,
+        Entry::LastFused,
+        Entry::ReduceRows,
+        Entry::Evaluate,
+        Entry::Rewards,
+        Entry::Shift,
+        Entry::Sub,
+        Entry::Max,
+        Entry::FmaProbe,
+    ];
+
+    fn name(self) -> &'static str {
+        match self {
+            Entry::Stage => "stage",
+            Entry::LastFused => "last_fused",
+            Entry::ReduceRows => "reduce_rows",
+            Entry::Evaluate => "evaluate",
+            Entry::Rewards => "rewards_pass",
+            Entry::Shift => "shift_pass",
+            Entry::Sub => "sub_pass",
+            Entry::Max => "max_pass",
+            Entry::FmaProbe => "fma_probe",
+        }
+    }
+}
+
+/// The pipelines and their layouts.
+pub(crate) struct Kernels {
+    pub layout: wgpu::BindGroupLayout,
+    pipelines: Vec<wgpu::ComputePipeline>,
+    /// `diff.wgsl`, where the adapter has `f64`.
+    pub diff: Option<(wgpu::BindGroupLayout, wgpu::ComputePipeline)>,
+}
+
+fn storage(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn uniform(binding: u32, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+fn pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::BindGroupLayout,
+    module: &wgpu::ShaderModule,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(entry),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(entry),
+        layout: Some(&pl),
+        module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
+impl Kernels {
+    /// Compiles the shaders for `gpu`'s device.
+    pub fn new(gpu: &Gpu) -> Result<Self, GpuError> {
+        let device = &gpu.inner.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("block.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(include_str!("block.wgsl").into()),
+        });
+        let mut entries = vec![uniform(0, true)];
+        for (b, read_only) in [
+            (1, true),
+            (2, true),
+            (3, true),
+            (4, true),
+            (5, false),
+            (6, false),
+            (7, true),
+            (8, true),
+            (9, true),
+            (10, true),
+        ] {
+            entries.push(storage(b, read_only));
+        }
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("block"),
+            entries: &entries,
+        });
+        let pipelines = Entry::ALL
+            .iter()
+            .map(|e| pipeline(device, &layout, &module, e.name()))
+            .collect();
+        let diff = gpu.inner.summary.f64.then(|| {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("diff.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(include_str!("diff.wgsl").into()),
+            });
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("diff"),
+                entries: &[
+                    uniform(0, false),
+                    storage(1, true),
+                    storage(2, true),
+                    storage(3, false),
+                ],
+            });
+            let p = pipeline(device, &layout, &module, "diff_range");
+            (layout, p)
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Failed(format!("the shaders did not compile: {e}")));
+        }
+        Ok(Self {
+            layout,
+            pipelines,
+            diff,
+        })
+    }
+
+    pub fn pipeline(&self, e: Entry) -> &wgpu::ComputePipeline {
+        let i = Entry::ALL.iter().position(|&x| x == e).expect("every entry");
+        &self.pipelines[i]
+    }
+
+    /// Whether `fma` is fused on this adapter: `fma(x, x, -1)` for `x = 1 + 2^-12` is
+    /// `2^-11 + 2^-24` in one rounding and `2^-11` with the product rounded first.
+    pub fn probe_fma(&self, gpu: &Gpu) -> Result<bool, GpuError> {
+        let x = 1.0f32 + f32::powi(2.0, -12);
+        let out = crate::buffers::run_probe(gpu, self, &[x], &[-1.0])?;
+        let fused = x.mul_add(x, -1.0);
+        Ok(out[0].to_bits() == fused.to_bits())
+    }
+}
+
+/// Workgroups `(x, y)` covering `threads` threads (the shaders' `linear` index).
+pub(crate) fn grid(threads: u64) -> (u32, u32) {
+    let groups = threads.div_ceil(u64::from(WG)).max(1);
+    let x = groups.min(u64::from(MAX_X)) as u32;
+    let y = groups.div_ceil(u64::from(x)) as u32;
+    (x, y)
+}
+
+/// Workgroups `(x, y)` for `groups` workgroups (kernels indexed per workgroup).
+pub(crate) fn groups(groups: u64) -> (u32, u32) {
+    let groups = groups.max(1);
+    let x = groups.min(u64::from(MAX_X)) as u32;
+    let y = groups.div_ceil(u64::from(x)) as u32;
+    (x, y)
+}

@@ -1,0 +1,83 @@
+//! Fuzzy Q-iteration's block backup on a GPU, through [wgpu](https://wgpu.rs) (Vulkan, Metal,
+//! DX12: NVIDIA, AMD, Intel and Apple GPUs), with the CPU kernels' bits.
+//!
+//! # Design
+//! The iteration itself (sweep records, the stopping rule, MacQueen's extrapolation,
+//! modified policy iteration's evaluation budget, the coarse start) stays in
+//! `fuzzyq-core`'s driver, which asks a [`Sweeps`](fuzzyq_core::solver::Sweeps) backend for
+//! every pass over `V`. [`GpuSweeps`] is that backend on a GPU: the block tables
+//! ([`BlockPlan`](fuzzyq_core::solver::BlockPlan)), `V`'s three buffers and the policy live on
+//! the device, and only scalars come back between passes (the range of a sweep's change, the
+//! exact delta); `V` and the greedy actions come back at the end and when an observer asks
+//! for the run's state (a checkpoint).
+//!
+//! A full backup runs the block contraction a batch of slabs at a time (`block.wgsl`): each
+//! stage before the last writes its whole output for the batch, one thread per element; the
+//! last stage is fused with the maximum over actions (`tpc` threads per core, then a
+//! reduction in workgroup memory to the largest value at the lowest action) or, where the
+//! actions are renumbered or the reward depends on the action, writes full rows that one
+//! thread per core reduces over the joint actions in order. Policy evaluation runs one thread
+//! per core through the nested sums of its action.
+//!
+//! # The CPU's bits
+//! Every element is the CPU's sum: a chain over its row's entries in order, `fma` from 0, and
+//! `V = rho + gamma m` rounded as two operations (the product is XORed with a runtime zero so
+//! that no shader compiler fuses it). Maxima are exact in any order. So on an adapter whose
+//! `fma` is fused (measured at start-up, [`AdapterSummary::fused_fma`]; NVIDIA's are) a run
+//! gives the CPU's policy bytes. An adapter that rounds the product first (Mesa's lavapipe)
+//! gives the bits of [`reference::HostSweeps`] with [`reference::Rounding::Product`], which
+//! the tests check on every CI run. The change statistics use `f64` in shaders where the
+//! adapter has it, and otherwise read `V` back.
+//!
+//! # Limits
+//! `f32` only; the block path only (a model that declares no blocks is refused, as are models
+//! with terminal states and asynchronous sweeps); `V` and each batch's stage output must fit
+//! one storage binding of the adapter (checked before allocating, [`GpuError::TooLarge`]).
+
+mod buffers;
+mod error;
+mod gpu;
+mod kernels;
+pub mod reference;
+mod sweeps;
+
+use core::ops::ControlFlow;
+
+use fuzzyq_core::Model;
+use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
+
+pub use error::GpuError;
+pub use gpu::{AdapterSummary, Gpu};
+pub use sweeps::GpuSweeps;
+
+/// Runs fuzzy Q-iteration on `model` over `grid` on `gpu`, continued from `resume` or afresh:
+/// [`fuzzyq_core::solver::solve_from`] with every pass over `V` on the GPU (the coarse start's
+/// too). The observer sees every sweep and, with `show_state`, the run's state after each
+/// (`V` read back from the device: for checkpoints).
+pub fn solve_from<M>(
+    gpu: &Gpu,
+    model: &M,
+    grid: &Grid<f32>,
+    config: &SolverConfig,
+    resume: Option<SolverState<'_, f32>>,
+    show_state: bool,
+    observer: impl FnMut(&Progress, Option<&SolverState<'_, f32>>) -> ControlFlow<()>,
+) -> Result<Solution<f32>, GpuError>
+where
+    M: Model<f32> + Sync + ?Sized,
+{
+    if config.sweep != fuzzyq_core::solver::SweepMode::Synchronous {
+        return Err(GpuError::Unsupported(
+            "runs synchronous sweeps only (solver.sweep = \"sync\")",
+        ));
+    }
+    fuzzyq_core::solver::solve_with(
+        model,
+        grid,
+        config,
+        resume,
+        show_state,
+        &mut |op| GpuSweeps::new(gpu, op),
+        observer,
+    )
+}

@@ -1,0 +1,701 @@
+//! [`GpuSweeps`]: the passes over `V` of a run, on the GPU.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
+
+use fuzzyq_core::Model;
+use fuzzyq_core::solver::{Buf, DiffStats, Operator, Sweeps};
+
+use crate::buffers::{self, bind_group, params_bytes, with_data, zeroed};
+use crate::error::GpuError;
+use crate::gpu::Gpu;
+use crate::kernels::{self, DiffParams, Entry, Kernels, MAX_BLOCKS, PARAM_STRIDE, Params, WG};
+
+/// The last stage's reduction (`mode` in `block.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// `V` only.
+    Max = 0,
+    /// `V` and the greedy actions.
+    MaxArg = 1,
+    /// The greedy actions only.
+    Arg = 2,
+    /// The maximum absolute expected value per core (0 at goal cores).
+    Abs = 3,
+}
+
+/// Which device buffer a binding takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Slot {
+    V(u8),
+    Stage(usize),
+    Rows,
+    Scratch,
+    Dv,
+    Policy,
+    Partial,
+    DummyRead,
+    DummyWrite,
+}
+
+/// The shape of the block path, from [`fuzzyq_core::solver::BlockPlan`].
+#[derive(Clone, Debug)]
+struct Shape {
+    /// Cores.
+    n: usize,
+    /// Per block (contraction order): (cores, actions, R, P).
+    blocks: Vec<[u32; 4]>,
+    /// Per block: the index of its first row start in the joint `row_ptr` buffer.
+    row_base: Vec<u32>,
+    /// Joint actions.
+    n_joint: u32,
+    /// Product actions (`P` of the last block times its actions).
+    n_product: u64,
+    /// Cores per slab (`R_0`) and slabs (block 0's cores).
+    slab: u64,
+    n0: u64,
+    /// Slabs per batch.
+    batch: u64,
+    /// Whether the last stage reduces in place (the identity action map and a state-only
+    /// reward); else it writes full rows that `reduce_rows` reduces.
+    fused: bool,
+    /// Whether the absolute maximum reduces in place (the identity map).
+    fused_abs: bool,
+    gamma: f32,
+    has_goal: bool,
+    reward_table: bool,
+    can_evaluate: bool,
+}
+
+impl Shape {
+    fn n_blocks(&self) -> usize {
+        self.blocks.len()
+    }
+
+    /// Elements of stage `b`'s output for one slab.
+    fn stage_len(&self, b: usize) -> u64 {
+        let [_, a, _, p] = self.blocks[b];
+        self.slab * u64::from(a) * u64::from(p)
+    }
+
+    /// The base parameters of every dispatch.
+    fn params(&self) -> Params {
+        let mut blocks = [[0u32; 4]; MAX_BLOCKS];
+        let mut rows = [[0u32; 4]; MAX_BLOCKS];
+        for (b, blk) in self.blocks.iter().enumerate() {
+            blocks[b] = *blk;
+            rows[b][0] = self.row_base[b];
+        }
+        Params {
+            n_joint: self.n_joint,
+            has_map: 0,
+            reward_table: u32::from(self.reward_table),
+            has_goal: u32::from(self.has_goal),
+            gamma: self.gamma,
+            slab: self.slab as u32,
+            n_blocks: self.blocks.len() as u32,
+            len: self.n as u32,
+            blocks,
+            rows,
+            ..Params::default()
+        }
+    }
+}
+
+/// The passes over `V` of one run on a GPU ([`Sweeps`]): the block tables, `V`'s three
+/// buffers and the policy buffer live on the device; every pass computes each core's value as
+/// the CPU's [`fuzzyq_core::solver::Local`] does, in the same order, with the adapter's
+/// `fma` (so with the CPU's bits where it is fused), and only scalars come back between
+/// passes (the change statistics, the exact delta).
+pub struct GpuSweeps {
+    gpu: Gpu,
+    k: Kernels,
+    shape: Shape,
+    table: [wgpu::Buffer; 3],
+    rewards: wgpu::Buffer,
+    goal: wgpu::Buffer,
+    map: wgpu::Buffer,
+    v: [wgpu::Buffer; 3],
+    policy: wgpu::Buffer,
+    stages: Vec<wgpu::Buffer>,
+    rows: Option<wgpu::Buffer>,
+    scratch: Option<wgpu::Buffer>,
+    dv: Option<wgpu::Buffer>,
+    partial: wgpu::Buffer,
+    diff_out: Option<wgpu::Buffer>,
+    params: wgpu::Buffer,
+    params_cap: usize,
+    dummy_r: wgpu::Buffer,
+    dummy_w: wgpu::Buffer,
+    binds: HashMap<[Slot; 4], wgpu::BindGroup>,
+    /// Seconds and dispatches per kernel (and stage), when profiling
+    /// ([`GpuSweeps::set_profiling`]).
+    profile: Option<std::collections::BTreeMap<String, (f64, usize)>>,
+}
+
+impl core::fmt::Debug for GpuSweeps {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("GpuSweeps")
+            .field("gpu", &self.gpu)
+            .field("cores", &self.shape.n)
+            .field("batch", &self.shape.batch)
+            .finish()
+    }
+}
+
+/// Partial results of `max_pass` / `diff_range`: values per workgroup.
+const PER_WG: u64 = 4096;
+
+impl GpuSweeps {
+    /// Uploads `op`'s block tables and allocates the run's buffers on `gpu`.
+    ///
+    /// Refused ([`GpuError::Unsupported`]): the generic path (no blocks), terminal states,
+    /// more than 8 blocks. [`GpuError::TooLarge`] where a buffer exceeds the adapter's limits
+    /// (checked before allocating).
+    pub fn new<M: Model<f32> + Sync + ?Sized>(
+        gpu: &Gpu,
+        op: &Operator<'_, f32, M>,
+    ) -> Result<Self, GpuError> {
+        let plan = op.block_plan().ok_or(GpuError::Unsupported(
+            "runs the block backup only, and this model declares no independent blocks",
+        ))?;
+        if plan.terminals {
+            return Err(GpuError::Unsupported(
+                "does not run models with terminal states",
+            ));
+        }
+        if plan.tables.len() > MAX_BLOCKS {
+            return Err(GpuError::Unsupported("runs models of at most 8 blocks"));
+        }
+        let n = op.n_cores();
+        let max_binding = gpu.max_binding;
+        let check = |what: &'static str, bytes: u64| -> Result<(), GpuError> {
+            if bytes > max_binding {
+                return Err(GpuError::TooLarge {
+                    what,
+                    need: bytes,
+                    limit: max_binding,
+                    kind: "storage binding",
+                });
+            }
+            Ok(())
+        };
+        check("V", 4 * n as u64)?;
+        let mut blocks = Vec::new();
+        let mut row_base = Vec::new();
+        let (mut ptr, mut col, mut weight) = (Vec::new(), Vec::new(), Vec::new());
+        for t in &plan.tables {
+            let small = |x: usize| u32::try_from(x).map_err(|_| GpuError::Unsupported("runs grids of at most 2^32 cores"));
+            blocks.push([
+                small(t.n_cores)?,
+                small(t.n_actions)?,
+                small(t.r_len)?,
+                small(t.p_len)?,
+            ]);
+            row_base.push(ptr.len() as u32);
+            let entry_base = col.len() as u32;
+            ptr.extend(t.ptr.iter().map(|&p| p + entry_base));
+            col.extend_from_slice(t.col);
+            weight.extend_from_slice(t.weight);
+        }
+        let last = plan.tables.last().expect("at least one block");
+        let identity = plan.joint_to_product.is_none();
+        let reward_table = plan.rewards.is_none();
+        let mut shape = Shape {
+            n,
+            blocks,
+            row_base,
+            n_joint: plan.n_joint as u32,
+            n_product: (last.p_len * last.n_actions) as u64,
+            slab: plan.tables[0].r_len as u64,
+            n0: plan.tables[0].n_cores as u64,
+            batch: 1,
+            fused: identity && !reward_table,
+            fused_abs: identity,
+            gamma: plan.gamma,
+            has_goal: !plan.goal.is_empty(),
+            reward_table,
+            can_evaluate: plan.can_evaluate,
+        };
+        // The largest buffer a batch of one slab needs: a stage's output, or the full rows.
+        let nb = shape.n_blocks();
+        let mut per_slab = (0..nb.saturating_sub(1))
+            .map(|b| shape.stage_len(b))
+            .max()
+            .unwrap_or(0);
+        if !shape.fused || !shape.fused_abs {
+            per_slab = per_slab.max(shape.slab * shape.n_product);
+        }
+        let per_slab = 4 * per_slab.max(1);
+        check("one slab's stage output", per_slab)?;
+        let budget = gpu.batch_bytes.min(max_binding);
+        shape.batch = (budget / per_slab).clamp(1, shape.n0);
+
+        let device = &gpu.inner.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let rewards = match (plan.rewards, plan.reward_table) {
+            (Some(r), _) => with_data(gpu, "rewards", r),
+            (None, Some(t)) => {
+                check("the reward table", 4 * t.len() as u64)?;
+                with_data(gpu, "reward table", t)
+            }
+            (None, None) => {
+                // A reward of the action that the model computes: tabulated once.
+                check("the reward table", 4 * (n * plan.n_joint) as u64)?;
+                with_data(gpu, "reward table", &op.reward_rows())
+            }
+        };
+        let goal: Vec<u32> = plan.goal.iter().map(|&g| u32::from(g)).collect();
+        let map = plan.joint_to_product.unwrap_or(&[]);
+        let table = [
+            with_data(gpu, "row_ptr", &ptr),
+            with_data(gpu, "col", &col),
+            with_data(gpu, "weight", &weight),
+        ];
+        let vbytes = 4 * n as u64;
+        let stages = (0..nb.saturating_sub(1))
+            .map(|b| zeroed(gpu, "stage", 4 * shape.batch * shape.stage_len(b)))
+            .collect();
+        let rows = (!shape.fused || !shape.fused_abs)
+            .then(|| zeroed(gpu, "rows", 4 * shape.batch * shape.slab * shape.n_product));
+        let partials = n.div_ceil(PER_WG as usize) as u64;
+        let (gx, gy) = kernels::groups(partials);
+        let partial_len = u64::from(gx) * u64::from(gy);
+        let k = Kernels::new(gpu)?;
+        let diff_out = k
+            .diff
+            .is_some()
+            .then(|| zeroed(gpu, "diff partials", 16 * partial_len));
+        let n_batches = shape.n0.div_ceil(shape.batch) as usize;
+        let params_cap = (n_batches * (nb + 1)).max(4);
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("params"),
+            size: params_cap as u64 * PARAM_STRIDE,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let sweeps = Self {
+            gpu: gpu.clone(),
+            k,
+            table,
+            rewards,
+            goal: with_data(gpu, "goal", &goal),
+            map: with_data(gpu, "map", map),
+            v: [
+                zeroed(gpu, "V0", vbytes),
+                zeroed(gpu, "V1", vbytes),
+                zeroed(gpu, "V2", vbytes),
+            ],
+            policy: zeroed(gpu, "policy", vbytes),
+            stages,
+            rows,
+            scratch: None,
+            dv: None,
+            partial: zeroed(gpu, "max partials", 4 * partial_len),
+            diff_out,
+            params,
+            params_cap,
+            dummy_r: zeroed(gpu, "dummy", 4),
+            dummy_w: zeroed(gpu, "dummy", 4),
+            binds: HashMap::new(),
+            profile: None,
+            shape,
+        };
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Failed(format!(
+                "the run's buffers do not fit in the GPU's memory: {e}"
+            )));
+        }
+        Ok(sweeps)
+    }
+
+    /// The GPU this backend runs on.
+    #[must_use]
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    /// Slabs per batch (the stage buffers hold one batch).
+    #[must_use]
+    pub fn batch(&self) -> u64 {
+        self.shape.batch
+    }
+
+    /// Profiling on: every dispatch runs in a submission of its own, waited for, and its time
+    /// is added to its kernel's ([`Self::profile`]). Slower; for finding where a pass spends.
+    pub fn set_profiling(&mut self, on: bool) {
+        self.profile = on.then(Default::default);
+    }
+
+    /// Seconds and dispatches per kernel (`stage 2`, `last_fused`, ...) since profiling was
+    /// turned on.
+    #[must_use]
+    pub fn profile(&self) -> Vec<(String, f64, usize)> {
+        self.profile
+            .iter()
+            .flatten()
+            .map(|(k, &(t, n))| (k.clone(), t, n))
+            .collect()
+    }
+
+    fn buffer(&self, s: Slot) -> &wgpu::Buffer {
+        match s {
+            Slot::V(i) => &self.v[usize::from(i)],
+            Slot::Stage(b) => &self.stages[b],
+            Slot::Rows => self.rows.as_ref().expect("allocated with the rows path"),
+            Slot::Scratch => self.scratch.as_ref().expect("allocated first"),
+            Slot::Dv => self.dv.as_ref().expect("allocated first"),
+            Slot::Policy => &self.policy,
+            Slot::Partial => &self.partial,
+            Slot::DummyRead => &self.dummy_r,
+            Slot::DummyWrite => &self.dummy_w,
+        }
+    }
+
+    /// The bind group reading `src`, `src2` and writing `dst`, `aux`.
+    fn bind(&mut self, slots: [Slot; 4]) {
+        if self.binds.contains_key(&slots) {
+            return;
+        }
+        let [src, dst, aux, src2] = slots.map(|s| self.buffer(s));
+        let bufs: [&wgpu::Buffer; 11] = [
+            &self.params,
+            &self.table[0],
+            &self.table[1],
+            &self.table[2],
+            src,
+            dst,
+            aux,
+            &self.rewards,
+            &self.goal,
+            &self.map,
+            src2,
+        ];
+        let g = bind_group(&self.gpu, &self.k.layout, &bufs);
+        self.binds.insert(slots, g);
+    }
+
+    /// Runs `dispatches` (entry, parameters, bindings `[src, dst, aux, src2]`, threads or
+    /// workgroups) in one submission and waits for it.
+    fn run(&mut self, dispatches: &[(Entry, Params, [Slot; 4], (u32, u32))]) -> Result<(), GpuError> {
+        if self.profile.is_some() && dispatches.len() > 1 {
+            for d in dispatches {
+                let t0 = std::time::Instant::now();
+                self.run(std::slice::from_ref(d))?;
+                let key = match d.0 {
+                    Entry::Stage => format!("stage {}", d.1.b),
+                    e => format!("{e:?}"),
+                };
+                let p = self.profile.as_mut().expect("profiling");
+                let e = p.entry(key).or_insert((0.0, 0));
+                e.0 += t0.elapsed().as_secs_f64();
+                e.1 += 1;
+            }
+            return Ok(());
+        }
+        for chunk in dispatches.chunks(self.params_cap) {
+            for d in chunk {
+                self.bind(d.2);
+            }
+            let ps: Vec<Params> = chunk.iter().map(|d| d.1).collect();
+            let gpu = &self.gpu.inner;
+            gpu.queue.write_buffer(&self.params, 0, &params_bytes(&ps));
+            let mut enc = gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for (i, (entry, _, slots, (gx, gy))) in chunk.iter().enumerate() {
+                    pass.set_pipeline(self.k.pipeline(*entry));
+                    let offset = (i as u64 * PARAM_STRIDE) as u32;
+                    pass.set_bind_group(0, &self.binds[slots], &[offset]);
+                    pass.dispatch_workgroups(*gx, *gy, 1);
+                }
+            }
+            gpu.queue.submit([enc.finish()]);
+            buffers::wait(&self.gpu)?;
+        }
+        Ok(())
+    }
+
+    fn base(&self) -> Params {
+        let mut p = self.shape.params();
+        p.has_map = u32::from(!self.shape.fused_abs);
+        p
+    }
+
+    /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
+    /// `v` and writing `out` (values) and the policy buffer (actions).
+    fn full_pass(
+        &mut self,
+        input: Slot,
+        out: Slot,
+        mode: Mode,
+    ) -> Vec<(Entry, Params, [Slot; 4], (u32, u32))> {
+        let s = &self.shape;
+        let nb = s.n_blocks();
+        let fused = if mode == Mode::Abs { s.fused_abs } else { s.fused };
+        let base = self.base();
+        let mut ds = Vec::new();
+        let mut c0 = 0u64;
+        while c0 < s.n0 {
+            let nc0 = s.batch.min(s.n0 - c0);
+            // The stages before the last.
+            for b in 0..nb - 1 {
+                let count = nc0 * s.stage_len(b);
+                let src = if b == 0 { input } else { Slot::Stage(b - 1) };
+                let p = Params {
+                    b: b as u32,
+                    count: count as u32,
+                    c0_lo: c0 as u32,
+                    ..base
+                };
+                let slots = [src, Slot::Stage(b), Slot::DummyWrite, Slot::DummyRead];
+                ds.push((Entry::Stage, p, slots, kernels::grid(count)));
+            }
+            let last = nb - 1;
+            let src = if last == 0 { input } else { Slot::Stage(last - 1) };
+            let cores = nc0 * s.slab;
+            if fused {
+                let p_len = s.blocks[last][3];
+                let tpc = p_len.next_power_of_two().min(WG);
+                let p = Params {
+                    b: last as u32,
+                    count: cores as u32,
+                    c0_lo: c0 as u32,
+                    tpc,
+                    mode: mode as u32,
+                    ..base
+                };
+                let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
+                let slots = [src, dst, Slot::Policy, Slot::DummyRead];
+                ds.push((Entry::LastFused, p, slots, kernels::grid(cores * u64::from(tpc))));
+            } else {
+                let count = cores * s.n_product;
+                let p = Params {
+                    b: last as u32,
+                    count: count as u32,
+                    c0_lo: c0 as u32,
+                    ..base
+                };
+                let slots = [src, Slot::Rows, Slot::DummyWrite, Slot::DummyRead];
+                ds.push((Entry::Stage, p, slots, kernels::grid(count)));
+                let p = Params {
+                    count: cores as u32,
+                    c0_lo: c0 as u32,
+                    mode: mode as u32,
+                    len: s.n_product as u32,
+                    ..base
+                };
+                let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
+                let slots = [Slot::Rows, dst, Slot::Policy, Slot::DummyRead];
+                ds.push((Entry::ReduceRows, p, slots, kernels::grid(cores)));
+            }
+            c0 += nc0;
+        }
+        ds
+    }
+
+    fn v_slot(b: Buf) -> Slot {
+        Slot::V(b.0)
+    }
+
+    fn distinct(a: Buf, b: Buf) {
+        assert_ne!(a, b, "a pass reads and writes distinct buffers");
+    }
+
+    /// A pass over `len` values of `dst` (and `src`, `src2`).
+    fn elementwise(&mut self, entry: Entry, slots: [Slot; 4], shift: f32) -> Result<(), GpuError> {
+        let p = Params {
+            shift,
+            ..self.base()
+        };
+        let g = kernels::grid(self.shape.n as u64);
+        self.run(&[(entry, p, slots, g)])
+    }
+
+    /// The maximum of `src` (n values) from 0, as `T::max_of` folds.
+    fn max_of(&mut self, src: Slot) -> Result<f32, GpuError> {
+        let n = self.shape.n as u64;
+        let p = Params {
+            count: PER_WG as u32,
+            ..self.base()
+        };
+        let g = kernels::groups(n.div_ceil(PER_WG));
+        self.run(&[(Entry::Max, p, [src, Slot::Partial, Slot::DummyWrite, Slot::DummyRead], g)])?;
+        let parts: Vec<f32> =
+            buffers::read_as(&self.gpu, &self.partial, (g.0 * g.1) as usize)?;
+        Ok(parts
+            .into_iter()
+            .fold(0.0f32, |m, x| if m >= x { m } else { x }))
+    }
+
+    fn ensure(&mut self, slot: Slot) {
+        let bytes = 4 * self.shape.n as u64;
+        match slot {
+            Slot::Scratch if self.scratch.is_none() => {
+                self.scratch = Some(zeroed(&self.gpu, "abs", bytes));
+            }
+            Slot::Dv if self.dv.is_none() => self.dv = Some(zeroed(&self.gpu, "dv", bytes)),
+            _ => {}
+        }
+    }
+
+    fn values_of(&self, v: Buf) -> Result<Vec<f32>, GpuError> {
+        buffers::read_as(&self.gpu, &self.v[usize::from(v.0)], self.shape.n)
+    }
+}
+
+impl Sweeps<f32> for GpuSweeps {
+    type Error = GpuError;
+
+    fn backup(&mut self, v: Buf, out: Buf) -> Result<(), GpuError> {
+        Self::distinct(v, out);
+        let ds = self.full_pass(Self::v_slot(v), Self::v_slot(out), Mode::Max);
+        self.run(&ds)
+    }
+
+    fn backup_greedy(&mut self, v: Buf, out: Buf) -> Result<(), GpuError> {
+        Self::distinct(v, out);
+        let ds = self.full_pass(Self::v_slot(v), Self::v_slot(out), Mode::MaxArg);
+        self.run(&ds)
+    }
+
+    fn rewards(&mut self, out: Buf) -> Result<(), GpuError> {
+        if self.shape.reward_table {
+            return Err(GpuError::Unsupported(
+                "computes the backup of V = 0 only for rewards of the state alone",
+            ));
+        }
+        let slots = [Slot::DummyRead, Self::v_slot(out), Slot::DummyWrite, Slot::DummyRead];
+        self.elementwise(Entry::Rewards, slots, 0.0)
+    }
+
+    fn evaluate(&mut self, v: Buf, out: Buf) -> Result<(), GpuError> {
+        Self::distinct(v, out);
+        if !self.shape.can_evaluate {
+            return Err(fuzzyq_core::solver::SolveError::PolicyEvaluation.into());
+        }
+        let slots = [Self::v_slot(v), Self::v_slot(out), Slot::Policy, Slot::DummyRead];
+        self.elementwise(Entry::Evaluate, slots, 0.0)
+    }
+
+    fn sweep_async(&mut self, _v: Buf) -> Result<f64, GpuError> {
+        Err(GpuError::Unsupported(
+            "runs synchronous sweeps only (solver.sweep = \"sync\")",
+        ))
+    }
+
+    fn diff_stats(&mut self, a: Buf, b: Buf, s: f32) -> Result<DiffStats, GpuError> {
+        let n = self.shape.n as u64;
+        let Some((layout, pipeline)) = self.k.diff.as_ref() else {
+            // No f64 in this adapter's shaders: the statistics on the host.
+            let (x, y) = (self.values_of(a)?, self.values_of(b)?);
+            return Ok(fuzzyq_core::solver::diff_stats(&x, &y, s));
+        };
+        let out = self.diff_out.as_ref().expect("made with f64");
+        let gpu = &self.gpu.inner;
+        let g = kernels::groups(n.div_ceil(PER_WG));
+        let p = DiffParams {
+            len: n as u32,
+            per_wg: PER_WG as u32,
+            zero: 0,
+            pad: 0,
+        };
+        let ubuf = wgpu::util::DeviceExt::create_buffer_init(
+            &gpu.device,
+            &wgpu::util::BufferInitDescriptor {
+                label: Some("diff params"),
+                contents: bytemuck::bytes_of(&p),
+                usage: wgpu::BufferUsages::UNIFORM,
+            },
+        );
+        let bufs = [&ubuf, &self.v[usize::from(a.0)], &self.v[usize::from(b.0)], out];
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = bufs
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry {
+                binding: i as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout,
+            entries: &entries,
+        });
+        let mut enc = gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(g.0, g.1, 1);
+        }
+        gpu.queue.submit([enc.finish()]);
+        let parts: Vec<f64> = buffers::read_as(&self.gpu, out, 2 * (g.0 * g.1) as usize)?;
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for pair in parts.chunks_exact(2) {
+            lo = lo.min(pair[0]);
+            hi = hi.max(pair[1]);
+        }
+        Ok(DiffStats::of_range(lo, hi, f64::from(s)))
+    }
+
+    fn shift(&mut self, v: Buf, s: f32) -> Result<(), GpuError> {
+        if s == 0.0 {
+            return Ok(());
+        }
+        let slots = [Slot::DummyRead, Self::v_slot(v), Slot::DummyWrite, Slot::DummyRead];
+        self.elementwise(Entry::Shift, slots, s)
+    }
+
+    fn exact_delta(&mut self, a: Buf, b: Buf) -> Result<f64, GpuError> {
+        Self::distinct(a, b);
+        self.ensure(Slot::Dv);
+        self.ensure(Slot::Scratch);
+        let slots = [Self::v_slot(a), Slot::Dv, Slot::DummyWrite, Self::v_slot(b)];
+        self.elementwise(Entry::Sub, slots, 0.0)?;
+        let ds = self.full_pass(Slot::Dv, Slot::Scratch, Mode::Abs);
+        self.run(&ds)?;
+        let m = self.max_of(Slot::Scratch)?;
+        Ok(f64::from(self.shape.gamma * m))
+    }
+
+    fn greedy(&mut self, v: Buf) -> Result<(), GpuError> {
+        let ds = self.full_pass(Self::v_slot(v), Slot::DummyWrite, Mode::Arg);
+        self.run(&ds)
+    }
+
+    fn load(&mut self, v: Buf, values: &[f32]) -> Result<(), GpuError> {
+        fuzzyq_core::error::check_len("V", self.shape.n, values.len())
+            .map_err(fuzzyq_core::solver::SolveError::from)?;
+        let gpu = &self.gpu.inner;
+        gpu.queue
+            .write_buffer(&self.v[usize::from(v.0)], 0, bytemuck::cast_slice(values));
+        Ok(())
+    }
+
+    fn load_policy(&mut self, policy: &[u32]) -> Result<(), GpuError> {
+        fuzzyq_core::error::check_len("policy", self.shape.n, policy.len())
+            .map_err(fuzzyq_core::solver::SolveError::from)?;
+        self.gpu
+            .inner
+            .queue
+            .write_buffer(&self.policy, 0, bytemuck::cast_slice(policy));
+        Ok(())
+    }
+
+    fn values(&self, v: Buf) -> Result<Cow<'_, [f32]>, GpuError> {
+        Ok(Cow::Owned(self.values_of(v)?))
+    }
+
+    fn policy(&self) -> Result<Cow<'_, [u32]>, GpuError> {
+        Ok(Cow::Owned(buffers::read_as(
+            &self.gpu,
+            &self.policy,
+            self.shape.n,
+        )?))
+    }
+
+    fn kernel(&self) -> Option<&'static str> {
+        Some("wgpu")
+    }
+}

@@ -1,0 +1,92 @@
+#!/usr/bin/env bash
+# The GPU path checked on a Linux machine with a GPU, in a few minutes and without a Rust
+# toolchain or the network: the GPU tests, full backups on the GPU and the CPU, and the
+# default point-mass and Khepera runs on both (same policy bits?), then one table.
+#
+# Needs, built elsewhere (see the GPU section of BENCHMARKS.md for the commands):
+#   FUZZYQ_BIN   the release binary            (default: .gpucheck/fuzzyq, else target/release/fuzzyq)
+#   FUZZYQ_TESTS the integration-test binary   (default: .gpucheck/integration; skipped if absent)
+# and the Vulkan loader: where `ldconfig -p` lists no libvulkan.so.1, the Debian package in
+# .gl/ (`apt-get download libvulkan1` on a machine with the network) is unpacked into /.
+# NVIDIA's Vulkan driver file is looked up where NVIDIA's container images put it.
+# Logs and JSON go to $OUT (or ./gpu-check-out). GPU_CHECK_ENVS and GPU_CHECK_BENCH_ENV choose
+# smaller problems for a trial of the script itself (on lavapipe, say: `GPU_CHECK_ENVS=dcmotor
+# GPU_CHECK_BENCH_ENV=dcmotor GPU_CHECK_BATCHES=256 scripts/gpu-check.sh`).
+set -uo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-gpu-check-out}
+mkdir -p "$OUT"
+BIN=${FUZZYQ_BIN:-$( [ -x .gpucheck/fuzzyq ] && echo .gpucheck/fuzzyq || echo target/release/fuzzyq )}
+TESTS=${FUZZYQ_TESTS:-.gpucheck/integration}
+ROWS=()
+row() { ROWS+=("$(printf '| %s | %s | %s |' "$1" "$2" "$3")"); }
+now() { date +%s.%N; }
+secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
+
+# The Vulkan loader, and NVIDIA's driver file.
+if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan.so.1'; then
+  for f in .gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done
+  ldconfig
+fi
+for icd in /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json /usr/share/vulkan/icd.d/nvidia_icd.json /etc/vulkan/icd.d/nvidia_icd.json; do
+  if [ -z "${VK_DRIVER_FILES:-}" ] && [ -e "$icd" ]; then export VK_DRIVER_FILES=$icd; fi
+done
+export XDG_RUNTIME_DIR=${XDG_RUNTIME_DIR:-/tmp}
+nproc_=$(nproc)
+cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
+gpu=$(nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null | head -1)
+row "host" "${gpu:-no nvidia-smi}" "$cpu, $nproc_ CPUs"
+
+# 1. The GPU tests (bit for bit against the host reference, and against the CPU solver where
+#    the adapter fuses).
+if [ -x "$TESTS" ]; then
+  FUZZYQ_REQUIRE_GPU=1 timeout 240 "$TESTS" gpu:: --test-threads 4 >"$OUT/tests.log" 2>&1
+  rc=$?
+  res=$(grep -E '^test result' "$OUT/tests.log" | tail -1)
+  row "GPU tests (integration gpu::)" "$([ $rc = 0 ] && echo PASS || echo "FAIL rc=$rc")" "${res:-no result line}"
+  grep -m1 'GPU tests on' "$OUT/tests.log" | cut -c1-300 >"$OUT/adapter.txt" || true
+else
+  row "GPU tests" "SKIPPED" "no test binary at $TESTS"
+fi
+
+# 2. Full backups of the paper's grid on the GPU (several batch sizes) and on the CPU.
+GPU_CHECK_BATCHES=${GPU_CHECK_BATCHES:-256 64 1024}
+for mb in $GPU_CHECK_BATCHES; do
+  FUZZYQ_GPU_PROFILE=$([ "$mb" = "${GPU_CHECK_BATCHES%% *}" ] && echo 1) FUZZYQ_GPU_BATCH_MB=$mb timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --device gpu --backups 6 --peak-seconds 0.5 \
+    --json "$OUT/bench-gpu-$mb.json" >"$OUT/bench-gpu-$mb.log" 2>&1
+  rc=$?
+  line=$(grep -E '^backup' "$OUT/bench-gpu-$mb.log" | sed 's/^backup *//')
+  peak=$(grep -E '^FMA peak' "$OUT/bench-gpu-$mb.log" | sed 's/^FMA peak *//')
+  row "GPU full backup, batch ${mb} MiB" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "${line:-see log}; peak ${peak}"
+  prof=$(grep -E '^profile' "$OUT/bench-gpu-$mb.log" | sed 's/^profile *//' | paste -sd ';' -)
+  [ -n "$prof" ] && row "  its dispatches, one at a time" "" "$prof"
+done
+timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --backups 4 --peak-seconds 0.5 --json "$OUT/bench-cpu.json" >"$OUT/bench-cpu.log" 2>&1
+rc=$?
+row "CPU full backup ($nproc_ threads)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^backup' "$OUT/bench-cpu.log" | sed 's/^backup *//')"
+
+# 3. The default runs on both devices: wall time and the same values and greedy actions
+#    (the exported policies, which hold V and the greedy actions, compared byte for byte).
+for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
+  for dev in gpu cpu; do
+    t0=$(now)
+    timeout 180 "$BIN" train --env "$env" --device "$dev" ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-$dev.fzq" \
+      --json "$OUT/$env-$dev.json" >"$OUT/train-$env-$dev.log" 2>&1
+    rc=$?
+    t1=$(now)
+    wall=$(secs "$t0" "$t1")
+    eval "rc_$dev=$rc; wall_$dev=$wall"
+    [ $rc = 0 ] && "$BIN" export --policy "$OUT/$env-$dev.fzq" --out "$OUT/$env-$dev.bin" >/dev/null 2>&1
+  done
+  same="differ"
+  if [ -s "$OUT/$env-gpu.bin" ] && cmp -s "$OUT/$env-gpu.bin" "$OUT/$env-cpu.bin"; then same="identical"; fi
+  sweeps=$(grep -E 'sweeps|converged' "$OUT/train-$env-gpu.log" | tail -1 | cut -c1-120)
+  row "train --env $env" "$([ "$rc_gpu" = 0 ] && [ "$same" = identical ] && echo PASS || echo "FAIL (gpu rc=$rc_gpu, exports $same)")" \
+    "gpu ${wall_gpu} s wall, cpu ${wall_cpu} s wall; exported V + greedy $same; ${sweeps}"
+done
+
+echo
+echo "| check | result | figures |"
+echo "|---|---|---|"
+printf '%s\n' "${ROWS[@]}" | tee "$OUT/table.md"
+[ -s "$OUT/adapter.txt" ] && cat "$OUT/adapter.txt"

@@ -1,0 +1,374 @@
+//! The GPU path (`fuzzyq-gpu`) against the host reference that sums in the same order: bit for
+//! bit with the adapter's rounding (lavapipe rounds each product first; NVIDIA fuses), and
+//! against the CPU solver where the adapter fuses. Skipped, with a message, where no adapter
+//! exists; `FUZZYQ_REQUIRE_GPU=1` (set by CI, which installs lavapipe) makes that a failure.
+
+use std::ops::ControlFlow;
+use std::sync::OnceLock;
+
+use fuzzyq_core::Model;
+use fuzzyq_core::solver::{
+    self, Buf, Device, Grid, Operator, Precision, Solution, SolverConfig, Sweeps,
+};
+use fuzzyq_gpu::reference::{HostSweeps, Rounding};
+use fuzzyq_gpu::{Gpu, GpuError, GpuSweeps};
+use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
+use fuzzyq_sim::model::EnvKind;
+
+/// The adapter, once per test binary; `None` (and a message) where there is none.
+fn gpu() -> Option<&'static Gpu> {
+    static GPU: OnceLock<Option<Gpu>> = OnceLock::new();
+    GPU.get_or_init(|| match Gpu::new() {
+        Ok(g) => {
+            eprintln!("GPU tests on {:?}", g.summary());
+            Some(g)
+        }
+        Err(e) => {
+            assert!(
+                std::env::var_os("FUZZYQ_REQUIRE_GPU").is_none(),
+                "FUZZYQ_REQUIRE_GPU is set but no adapter opened: {e}"
+            );
+            eprintln!("skipped: GPU tests need an adapter ({e})");
+            None
+        }
+    })
+    .as_ref()
+}
+
+fn rounding(g: &Gpu) -> Rounding {
+    if g.summary().fused_fma {
+        Rounding::Fused
+    } else {
+        Rounding::Product
+    }
+}
+
+fn bits(v: &[f32]) -> Vec<u32> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// Values, greedy actions and every sweep record's statistics of two runs agree bit for bit.
+fn assert_same(a: &Solution<f32>, b: &Solution<f32>, what: &str) {
+    assert_eq!(bits(&a.v), bits(&b.v), "{what}: V");
+    assert_eq!(a.greedy, b.greedy, "{what}: greedy actions");
+    assert_eq!(a.sweeps.len(), b.sweeps.len(), "{what}: sweeps");
+    for (x, y) in a.sweeps.iter().zip(&b.sweeps) {
+        assert_eq!(x.delta, y.delta, "{what}: sweep {}", x.sweep);
+        assert_eq!(x.delta_v.to_bits(), y.delta_v.to_bits(), "{what}: sweep {}", x.sweep);
+    }
+    assert_eq!(a.final_delta.to_bits(), b.final_delta.to_bits(), "{what}: final delta");
+}
+
+fn noop(_: &solver::Progress, _: Option<&solver::SolverState<'_, f32>>) -> ControlFlow<()> {
+    ControlFlow::Continue(())
+}
+
+/// The run on the GPU and on the host reference with the adapter's rounding.
+fn gpu_and_reference<M: Model<f32> + Sync>(
+    g: &Gpu,
+    model: &M,
+    grid: &Grid<f32>,
+    config: &SolverConfig,
+) -> (Solution<f32>, Solution<f32>) {
+    let on_gpu = fuzzyq_gpu::solve_from(g, model, grid, config, None, false, noop).expect("gpu");
+    let r = rounding(g);
+    let reference = solver::solve_with(
+        model,
+        grid,
+        config,
+        None,
+        false,
+        &mut |op| HostSweeps::new(op, r),
+        noop,
+    )
+    .expect("reference");
+    (on_gpu, reference)
+}
+
+fn config_of(env: EnvKind) -> TrainConfig {
+    TrainConfig::default_for(env).expect("default")
+}
+
+/// The point masses on 5 positions x 3 velocities per axis (50,625 cores).
+fn pointmass_small() -> TrainConfig {
+    let mut c = config_of(EnvKind::Pointmass);
+    c.grid.position_cores = vec![-6.0, -0.5, 0.0, 0.5, 6.0];
+    c.grid.velocity_cores = vec![-3.0, 0.0, 3.0];
+    c
+}
+
+/// Two robots on 5 positions and 4 headings.
+fn khepera_small() -> TrainConfig {
+    let mut c = config_of(EnvKind::Khepera);
+    c.grid.position_cores = vec![-6.0, -1.0, 0.0, 1.0, 6.0];
+    c.grid.heading_divisions = Some(4);
+    c
+}
+
+fn run_config(c: &TrainConfig) {
+    let Some(g) = gpu() else { return };
+    c.validate().expect("valid");
+    let model = c.build_model().expect("model");
+    let grid = c.grid::<f32>().expect("grid");
+    let config = c.solver.solver_config();
+    let (on_gpu, reference) = gpu_and_reference(g, &model, &grid, &config);
+    assert_eq!(on_gpu.kernel, "wgpu");
+    assert_same(&on_gpu, &reference, "gpu against the reference");
+    if g.summary().fused_fma {
+        let cpu = solver::solve(&model, &grid, &config, |_| ControlFlow::Continue(())).unwrap();
+        assert_same(&on_gpu, &cpu, "gpu against the CPU solver");
+    }
+}
+
+#[test]
+fn point_masses_match_the_reference_bit_for_bit() {
+    run_config(&pointmass_small());
+}
+
+#[test]
+fn point_masses_by_value_iteration_match_the_reference() {
+    // Plain synchronous sweeps: the exact stopping rule's extra passes run too.
+    let mut c = pointmass_small();
+    c.solver.extrapolate = false;
+    c.solver.evaluation_sweeps = 0;
+    c.solver.max_sweeps = 30;
+    run_config(&c);
+}
+
+#[test]
+fn khepera_matches_the_reference_bit_for_bit() {
+    run_config(&khepera_small());
+}
+
+#[test]
+fn dcmotor_matches_the_reference_bit_for_bit() {
+    let mut c = config_of(EnvKind::Dcmotor);
+    c.solver.max_sweeps = 60;
+    run_config(&c);
+}
+
+#[test]
+fn absorbing_goals_match_the_reference() {
+    let mut c = pointmass_small();
+    c.solver.absorbing_goal = true;
+    c.solver.max_sweeps = 20;
+    run_config(&c);
+}
+
+/// The host reference with fused products is the CPU solver, bit for bit: the reference
+/// sums as the CPU kernels do (no GPU needed).
+#[test]
+fn the_fused_reference_is_the_cpu_solver() {
+    for c in [pointmass_small(), config_of(EnvKind::Dcmotor)] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let mut config = c.solver.solver_config();
+        config.max_sweeps = config.max_sweeps.min(40);
+        let reference = solver::solve_with(
+            &model,
+            &grid,
+            &config,
+            None,
+            false,
+            &mut |op| HostSweeps::new(op, Rounding::Fused),
+            noop,
+        )
+        .unwrap();
+        let cpu = solver::solve(&model, &grid, &config, |_| ControlFlow::Continue(())).unwrap();
+        assert_same(&reference, &cpu, "fused reference against the CPU");
+    }
+}
+
+/// Pseudo-random values in `[lo, hi)`.
+fn values(n: usize, seed: u64, lo: f32, hi: f32) -> Vec<f32> {
+    let mut s = seed | 1;
+    (0..n)
+        .map(|_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            lo + (hi - lo) * ((s >> 40) as f32 / (1u64 << 24) as f32)
+        })
+        .collect()
+}
+
+/// Every pass of the backend on random values against the reference, one at a time.
+fn passes_match<M: Model<f32> + Sync>(g: &Gpu, op: &Operator<'_, f32, M>) {
+    let mut gs = GpuSweeps::new(g, op).expect("gpu sweeps");
+    let mut hs = HostSweeps::new(op, rounding(g)).expect("reference");
+    let n = op.n_cores();
+    let (a, b) = (values(n, 7, -3.0, 5.0), values(n, 11, -2.0, 2.0));
+    let policy: Vec<u32> = values(n, 13, 0.0, op.joint().n_joint() as f32)
+        .into_iter()
+        .map(|x| x as u32)
+        .collect();
+    for s in [&mut gs as &mut dyn Sweeps<f32, Error = GpuError>] {
+        s.load(Buf(0), &a).unwrap();
+        s.load(Buf(1), &b).unwrap();
+    }
+    hs.load(Buf(0), &a).unwrap();
+    hs.load(Buf(1), &b).unwrap();
+    let same = |gs: &GpuSweeps, hs: &HostSweeps, what: &str| {
+        for k in 0..3 {
+            assert_eq!(
+                bits(&gs.values(Buf(k)).unwrap()),
+                bits(&hs.values(Buf(k)).unwrap()),
+                "{what}: buffer {k}"
+            );
+        }
+        assert_eq!(
+            gs.policy().unwrap().into_owned(),
+            hs.policy().unwrap().into_owned(),
+            "{what}: policy"
+        );
+    };
+    gs.backup(Buf(0), Buf(2)).unwrap();
+    hs.backup(Buf(0), Buf(2)).unwrap();
+    same(&gs, &hs, "backup");
+    gs.backup_greedy(Buf(1), Buf(2)).unwrap();
+    hs.backup_greedy(Buf(1), Buf(2)).unwrap();
+    same(&gs, &hs, "greedy backup");
+    gs.greedy(Buf(0)).unwrap();
+    hs.greedy(Buf(0)).unwrap();
+    same(&gs, &hs, "greedy");
+    for s in [0.0f32, 0.37, -1.25] {
+        assert_eq!(
+            gs.diff_stats(Buf(2), Buf(0), s).unwrap(),
+            hs.diff_stats(Buf(2), Buf(0), s).unwrap(),
+            "diff stats, shift {s}"
+        );
+    }
+    assert_eq!(
+        gs.exact_delta(Buf(0), Buf(1)).unwrap().to_bits(),
+        hs.exact_delta(Buf(0), Buf(1)).unwrap().to_bits(),
+        "exact delta"
+    );
+    gs.shift(Buf(2), 0.625).unwrap();
+    hs.shift(Buf(2), 0.625).unwrap();
+    same(&gs, &hs, "shift");
+    let plan = op.block_plan().unwrap();
+    if plan.can_evaluate {
+        gs.load_policy(&policy).unwrap();
+        hs.load_policy(&policy).unwrap();
+        gs.evaluate(Buf(0), Buf(2)).unwrap();
+        hs.evaluate(Buf(0), Buf(2)).unwrap();
+        same(&gs, &hs, "evaluation");
+    }
+    if plan.rewards.is_some() {
+        gs.rewards(Buf(1)).unwrap();
+        hs.rewards(Buf(1)).unwrap();
+        same(&gs, &hs, "rewards");
+    }
+}
+
+fn operator_passes(c: &TrainConfig) {
+    let Some(g) = gpu() else { return };
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let backup = fuzzyq_core::backup::Backup {
+        gamma: config.gamma as f32,
+        absorbing_goal: config.absorbing_goal,
+    };
+    let op = Operator::new(&model, grid.view(), backup, config.path).unwrap();
+    passes_match(g, &op);
+}
+
+#[test]
+fn every_pass_matches_the_reference_on_point_masses() {
+    operator_passes(&pointmass_small());
+    let mut goal = pointmass_small();
+    goal.solver.absorbing_goal = true;
+    operator_passes(&goal);
+}
+
+#[test]
+fn every_pass_matches_the_reference_on_khepera_and_dcmotor() {
+    operator_passes(&khepera_small());
+    operator_passes(&config_of(EnvKind::Dcmotor));
+}
+
+#[test]
+fn small_batches_give_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // One slab per batch: the stage buffers hold one slab and a pass runs many batches.
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let small = g.clone().with_batch_bytes(1);
+    let a = fuzzyq_gpu::solve_from(&small, &model, &grid, &config, None, false, noop).unwrap();
+    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(&a, &b, "one slab per batch against the default");
+}
+
+#[test]
+fn refusals_are_one_line_errors() {
+    let Some(g) = gpu() else { return };
+    // Asynchronous sweeps.
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let mut config = c.solver.solver_config();
+    config.sweep = solver::SweepMode::Asynchronous;
+    let e = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap_err();
+    assert!(e.to_string().contains("synchronous"), "{e}");
+    // The generic path.
+    let mut config = c.solver.solver_config();
+    config.path = solver::BackupPath::Generic;
+    let e = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap_err();
+    assert!(matches!(e, GpuError::Unsupported(_)), "{e}");
+    assert!(e.to_string().contains("block"), "{e}");
+    // A binding limit below V's size: refused before allocating.
+    let tiny = g.clone().with_binding_limit(1024);
+    let config = c.solver.solver_config();
+    let e = fuzzyq_gpu::solve_from(&tiny, &model, &grid, &config, None, false, noop).unwrap_err();
+    assert!(matches!(e, GpuError::TooLarge { .. }), "{e}");
+    assert!(e.to_string().contains("V needs"), "{e}");
+    for e in [e] {
+        assert!(!e.to_string().contains('\n'), "one line: {e}");
+    }
+}
+
+#[test]
+fn the_config_refuses_what_the_gpu_does_not_run() {
+    let mut c = pointmass_small();
+    c.solver.device = Device::Gpu;
+    c.solver.precision = Precision::F64;
+    let e = c.validate().unwrap_err().to_string();
+    assert!(e.starts_with("solver.device: \"gpu\" runs in f32"), "{e}");
+    let mut c = pointmass_small();
+    c.solver.device = Device::Gpu;
+    c.solver.sweep = solver::SweepMode::Asynchronous;
+    assert!(c.validate().unwrap_err().to_string().contains("sync"));
+    let text = "[solver]\ndevice = \"tpu\"\n";
+    let e = TrainConfig::from_toml(text).unwrap_err().to_string();
+    assert!(e.contains("device"), "{e}");
+}
+
+#[test]
+fn training_on_the_gpu_writes_the_reference_policy() {
+    let Some(g) = gpu() else { return };
+    let mut c = pointmass_small();
+    c.solver.device = Device::Gpu;
+    let artifact = fuzzyq_sim::train::train(&c, |_| ControlFlow::Continue(())).unwrap();
+    assert_eq!(artifact.summary.kernel, "wgpu");
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let r = rounding(g);
+    let reference = solver::solve_with(
+        &model,
+        &grid,
+        &config,
+        None,
+        false,
+        &mut |op| HostSweeps::new(op, r),
+        noop,
+    )
+    .unwrap();
+    let EnvConfig::Pointmass(_) = &c.env else {
+        unreachable!()
+    };
+    assert_eq!(artifact.greedy, reference.greedy);
+}
