@@ -25,6 +25,9 @@ pub struct AdapterSummary {
     pub max_buffer: u64,
     /// The adapter's largest storage-buffer binding, in bytes.
     pub max_binding: u64,
+    /// The adapter's workgroup memory, in bytes (the fused last two stages keep a slice of
+    /// the stage before the last there).
+    pub max_workgroup_memory: u32,
 }
 
 /// One GPU: wgpu's device and queue, shared by every run that uses it (cheap to clone).
@@ -35,6 +38,8 @@ pub struct Gpu {
     pub(crate) max_binding: u64,
     /// Bytes of a batch's largest stage buffer.
     pub(crate) batch_bytes: u64,
+    /// Whether full backups may fuse their last two stages in workgroup memory.
+    pub(crate) fuse_last_two: bool,
 }
 
 pub(crate) struct Inner {
@@ -81,10 +86,12 @@ impl Gpu {
             f64: features.contains(wgpu::Features::SHADER_F64),
             max_buffer: limits.max_buffer_size,
             max_binding: u64::from(limits.max_storage_buffer_binding_size),
+            max_workgroup_memory: limits.max_compute_workgroup_storage_size,
         };
         let mut gpu = Self {
             max_binding: summary.max_binding,
             batch_bytes: default_batch_bytes(),
+            fuse_last_two: std::env::var("FUZZYQ_GPU_FUSE_LAST_TWO").map_or(true, |v| v != "0"),
             inner: Arc::new(Inner {
                 device,
                 queue,
@@ -123,6 +130,15 @@ impl Gpu {
     #[must_use]
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.max_binding = bytes.min(self.inner.summary.max_binding);
+        self
+    }
+
+    /// This GPU with full backups that fuse their last two stages in workgroup memory where
+    /// the problem allows (`true`, the default; `FUZZYQ_GPU_FUSE_LAST_TWO=0` turns it off), or
+    /// that write the stage before the last to memory first. Both give the same bits.
+    #[must_use]
+    pub fn with_last_two_fused(mut self, fuse: bool) -> Self {
+        self.fuse_last_two = fuse;
         self
     }
 

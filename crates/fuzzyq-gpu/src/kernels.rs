@@ -60,6 +60,8 @@ pub(crate) enum Entry {
     Sub,
     Max,
     FmaProbe,
+    /// `last2.wgsl`, compiled per problem (not in [`Entry::ALL`]).
+    LastTwo,
 }
 
 impl Entry {
@@ -86,6 +88,7 @@ impl Entry {
             Entry::Sub => "sub_pass",
             Entry::Max => "max_pass",
             Entry::FmaProbe => "fma_probe",
+            Entry::LastTwo => "last2",
         }
     }
 }
@@ -217,6 +220,49 @@ impl Kernels {
         let fused = x.mul_add(x, -1.0);
         Ok(out[0].to_bits() == fused.to_bits())
     }
+}
+
+/// The fused last two stages (`last2.wgsl`) compiled for one problem's constants: the
+/// stage before the last is block `b` (`(cores, actions, P)` = `(nb, ab, pb)`), the last
+/// block has `nl` cores, `al` actions and `pl` product actions before it.
+pub(crate) fn last_two(
+    gpu: &Gpu,
+    k: &Kernels,
+    b: usize,
+    [nb, ab, pb]: [u32; 3],
+    [nl, al, pl]: [u32; 3],
+) -> Result<wgpu::ComputePipeline, GpuError> {
+    let consts = format!(
+        "const NL: u32 = {nl}u;\nconst AL: u32 = {al}u;\nconst PL: u32 = {pl}u;\n\
+         const NB: u32 = {nb}u;\nconst AB: u32 = {ab}u;\nconst PB: u32 = {pb}u;\n\
+         const BSTAGE: u32 = {b}u;\nconst LAST: u32 = {}u;\nconst SLN: u32 = {}u;\n\
+         const J: u32 = {}u;\n",
+        b + 1,
+        nl * pl,
+        pl.div_ceil(32),
+    );
+    let source = format!(
+        "{consts}{}\n{}",
+        include_str!("block.wgsl"),
+        include_str!("last2.wgsl")
+    );
+    let device = &gpu.inner.device;
+    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("last2.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let p = pipeline(device, &k.layout, &module, "last2");
+    if let Some(e) = pollster::block_on(scope.pop()) {
+        return Err(GpuError::Failed(format!("the fused last stages did not compile: {e}")));
+    }
+    Ok(p)
+}
+
+/// Bytes of workgroup memory `last2.wgsl` takes for a last block of `nl` cores with `pl`
+/// product actions before it.
+pub(crate) fn last_two_memory(nl: u64, pl: u64) -> u64 {
+    4 * nl * pl + 8 * 32 * nl
 }
 
 /// Workgroups `(x, y)` covering `threads` threads (the shaders' `linear` index).

@@ -61,6 +61,9 @@ struct Shape {
     fused: bool,
     /// Whether the absolute maximum reduces in place (the identity map).
     fused_abs: bool,
+    /// Whether a fused last stage also takes the stage before it, in workgroup memory
+    /// (`last2.wgsl`).
+    last_two: bool,
     gamma: f32,
     has_goal: bool,
     reward_table: bool,
@@ -70,6 +73,12 @@ struct Shape {
 impl Shape {
     fn n_blocks(&self) -> usize {
         self.blocks.len()
+    }
+
+    /// The stages whose outputs go to memory (those before the last, or before the last two
+    /// where they are fused).
+    fn written_stages(&self) -> usize {
+        self.n_blocks().saturating_sub(if self.last_two { 2 } else { 1 })
     }
 
     /// Elements of stage `b`'s output for one slab.
@@ -110,6 +119,8 @@ impl Shape {
 pub struct GpuSweeps {
     gpu: Gpu,
     k: Kernels,
+    /// The fused last two stages, compiled for this problem, where they apply.
+    last2: Option<wgpu::ComputePipeline>,
     shape: Shape,
     table: [wgpu::Buffer; 3],
     rewards: wgpu::Buffer,
@@ -212,14 +223,22 @@ impl GpuSweeps {
             batch: 1,
             fused: identity && !reward_table,
             fused_abs: identity,
+            last_two: false,
             gamma: plan.gamma,
             has_goal: !plan.goal.is_empty(),
             reward_table,
             can_evaluate: plan.can_evaluate,
         };
-        // The largest buffer a batch of one slab needs: a stage's output, or the full rows.
+        // The last two stages fused where the workgroup memory holds the slice between them.
         let nb = shape.n_blocks();
-        let mut per_slab = (0..nb.saturating_sub(1))
+        let [nl, al, _, pl] = shape.blocks[nb - 1];
+        shape.last_two = gpu.fuse_last_two
+            && nb >= 2
+            && shape.fused
+            && kernels::last_two_memory(u64::from(nl), u64::from(pl))
+                <= u64::from(gpu.inner.summary.max_workgroup_memory);
+        // The largest buffer a batch of one slab needs: a stage's output, or the full rows.
+        let mut per_slab = (0..shape.written_stages())
             .map(|b| shape.stage_len(b))
             .max()
             .unwrap_or(0);
@@ -253,7 +272,7 @@ impl GpuSweeps {
             with_data(gpu, "weight", &weight),
         ];
         let vbytes = 4 * n as u64;
-        let stages = (0..nb.saturating_sub(1))
+        let stages = (0..shape.written_stages())
             .map(|b| zeroed(gpu, "stage", 4 * shape.batch * shape.stage_len(b)))
             .collect();
         let rows = (!shape.fused || !shape.fused_abs)
@@ -262,6 +281,12 @@ impl GpuSweeps {
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = Kernels::new(gpu)?;
+        let last2 = if shape.last_two {
+            let [nb2, ab2, _, pb2] = shape.blocks[nb - 2];
+            Some(kernels::last_two(gpu, &k, nb - 2, [nb2, ab2, pb2], [nl, al, pl])?)
+        } else {
+            None
+        };
         let diff_out = k
             .diff
             .is_some()
@@ -277,6 +302,7 @@ impl GpuSweeps {
         let sweeps = Self {
             gpu: gpu.clone(),
             k,
+            last2,
             table,
             rewards,
             goal: with_data(gpu, "goal", &goal),
@@ -313,6 +339,13 @@ impl GpuSweeps {
     #[must_use]
     pub fn gpu(&self) -> &Gpu {
         &self.gpu
+    }
+
+    /// Whether full backups fuse their last two stages in workgroup memory
+    /// ([`Gpu::with_last_two_fused`]; where the problem's slice between them fits).
+    #[must_use]
+    pub fn last_two_fused(&self) -> bool {
+        self.shape.last_two
     }
 
     /// Slabs per batch (the stage buffers hold one batch).
@@ -404,7 +437,10 @@ impl GpuSweeps {
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
                 for (i, (entry, _, slots, (gx, gy))) in chunk.iter().enumerate() {
-                    pass.set_pipeline(self.k.pipeline(*entry));
+                    pass.set_pipeline(match entry {
+                        Entry::LastTwo => self.last2.as_ref().expect("compiled where used"),
+                        e => self.k.pipeline(*e),
+                    });
                     let offset = (i as u64 * PARAM_STRIDE) as u32;
                     pass.set_bind_group(0, &self.binds[slots], &[offset]);
                     pass.dispatch_workgroups(*gx, *gy, 1);
@@ -438,8 +474,8 @@ impl GpuSweeps {
         let mut c0 = 0u64;
         while c0 < s.n0 {
             let nc0 = s.batch.min(s.n0 - c0);
-            // The stages before the last.
-            for b in 0..nb - 1 {
+            // The stages before the last (or the last two).
+            for b in 0..s.written_stages() {
                 let count = nc0 * s.stage_len(b);
                 let src = if b == 0 { input } else { Slot::Stage(b - 1) };
                 let p = Params {
@@ -454,7 +490,21 @@ impl GpuSweeps {
             let last = nb - 1;
             let src = if last == 0 { input } else { Slot::Stage(last - 1) };
             let cores = nc0 * s.slab;
-            if fused {
+            if s.last_two {
+                let b = nb - 2;
+                let src = if b == 0 { input } else { Slot::Stage(b - 1) };
+                let prefixes = cores / u64::from(s.blocks[last][0]);
+                let p = Params {
+                    b: last as u32,
+                    count: prefixes as u32,
+                    c0_lo: c0 as u32,
+                    mode: mode as u32,
+                    ..base
+                };
+                let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
+                let slots = [src, dst, Slot::Policy, Slot::DummyRead];
+                ds.push((Entry::LastTwo, p, slots, kernels::groups(prefixes)));
+            } else if fused {
                 let p_len = s.blocks[last][3];
                 let tpc = p_len.next_power_of_two().min(WG);
                 let p = Params {

@@ -297,6 +297,8 @@ struct GpuReport {
     multiply_adds_per_backup: Option<f64>,
     slabs_per_batch: u64,
     setup_seconds: f64,
+    last_two_fused: bool,
+    evaluation_seconds: Vec<f64>,
     backup_seconds: Vec<f64>,
     median_backup_seconds: f64,
     gfma_per_second: Option<f64>,
@@ -353,6 +355,26 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     let median_seconds = median(&times);
     let rate = fma.map(|f| f / median_seconds / 1e9);
     let fraction = rate.map(|r| r / peak);
+    // Evaluation sweeps (modified policy iteration's) under the greedy actions of the last V.
+    let mut evaluation = Vec::new();
+    if op.block_plan().is_some_and(|p| p.can_evaluate) {
+        sweeps.backup_greedy(v, out)?;
+        for _ in 0..3 {
+            let t = Instant::now();
+            sweeps.evaluate(out, v)?;
+            evaluation.push(t.elapsed().as_secs_f64());
+        }
+        println!(
+            "evaluate   {:.4} s median of {} evaluation sweeps{}",
+            median(&evaluation),
+            evaluation.len(),
+            if sweeps.last_two_fused() {
+                "; full backups fuse their last two stages"
+            } else {
+                ""
+            }
+        );
+    }
     if std::env::var("FUZZYQ_GPU_PROFILE").is_ok_and(|v| !v.is_empty() && v != "0") {
         // One more backup with every dispatch timed on its own.
         sweeps.set_profiling(true);
@@ -391,6 +413,8 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             multiply_adds_per_backup: fma,
             slabs_per_batch: sweeps.batch(),
             setup_seconds: setup,
+            last_two_fused: sweeps.last_two_fused(),
+            evaluation_seconds: evaluation,
             backup_seconds: times,
             median_backup_seconds: median_seconds,
             gfma_per_second: rate,
