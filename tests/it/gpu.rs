@@ -303,27 +303,26 @@ fn small_batches_give_the_same_bits() {
 }
 
 #[test]
-fn the_last_two_stages_fused_or_not_give_the_same_bits() {
+fn lanes_reduced_in_memory_or_by_subgroups_give_the_same_bits() {
     let Some(g) = gpu() else { return };
     for c in [pointmass_small(), khepera_small()] {
         let model = c.build_model().unwrap();
         let grid = c.grid::<f32>().unwrap();
         let config = c.solver.solver_config();
-        let apart = g.clone().with_last_two_fused(false);
-        let a = fuzzyq_gpu::solve_from(&apart, &model, &grid, &config, None, false, noop).unwrap();
+        let memory = g.clone().with_subgroups(false);
+        let a = fuzzyq_gpu::solve_from(&memory, &model, &grid, &config, None, false, noop).unwrap();
         let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
-        assert_same(&a, &b, "last two stages apart against fused");
-        // Every pass too, on the path that writes the stage before the last.
+        assert_same(&a, &b, "lanes reduced in memory against subgroups");
         let backup = fuzzyq_core::backup::Backup {
             gamma: config.gamma as f32,
             absorbing_goal: config.absorbing_goal,
         };
         let op = Operator::new(&model, grid.view(), backup, config.path).unwrap();
-        assert!(!GpuSweeps::new(&apart, &op).unwrap().last_two_fused());
-        let fused = GpuSweeps::new(g, &op).unwrap().last_two_fused();
-        let memory = u64::from(g.summary().max_workgroup_memory);
-        assert!(fused || memory < 34_020, "fused where the slice fits");
-        passes_match(&apart, &op);
+        assert!(!GpuSweeps::new(&memory, &op).unwrap().uses_subgroups());
+        let sg = GpuSweeps::new(g, &op).unwrap().uses_subgroups();
+        assert_eq!(sg, g.summary().subgroup_size.is_some(), "subgroups where the adapter has them");
+        // Every pass too, with the lanes reduced in memory.
+        passes_match(&memory, &op);
     }
 }
 

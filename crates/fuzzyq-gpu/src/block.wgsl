@@ -13,10 +13,10 @@ struct Params {
     count: u32,
     // The first slab of this batch (a core of the first contracted block).
     c0_lo: u32,
-    // Threads per core of `last_fused` (a power of two that divides `WG`).
+    // Unused (alignment).
     tpc: u32,
-    // 0: maximum of the expected values; 1: and the argument; 2: the argument only;
-    // 3: maximum of the absolute values (written per core, for `max_pass`).
+    // The reduction: 0: maximum of the expected values; 1: and the argument; 2: the argument
+    // only; 3: maximum of the absolute values (written per core, for `max_pass`).
     mode: u32,
     // Joint actions, and whether `map` renumbers them to product actions.
     n_joint: u32,
@@ -125,91 +125,6 @@ fn beats(v: f32, i: u32, bv: f32, bi: u32) -> bool {
     return v > bv || (v == bv && i < bi);
 }
 
-// The last stage fused with the reduction, `tpc` threads per core of the batch: each thread
-// takes the product actions `a P + p` with `p = lane, lane + tpc, ...`, then the core's
-// threads reduce to the largest value at the lowest index. Mode 0 writes `V`, 1 `V` and the
-// greedy action, 2 the greedy action, 3 the maximum of the absolute values (0 at a goal).
-@compute @workgroup_size(64)
-fn last_fused(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
-              @builtin(num_workgroups) nwg: vec3<u32>, @builtin(local_invocation_index) li: u32) {
-    let t = linear(gid, wid, nwg);
-    let tpc = prm.tpc;
-    let local = t / tpc;
-    let lane = t % tpc;
-    let valid = local < prm.count;
-    let bl = blk(prm.b);
-    let n_b = bl.x;
-    let n_a = bl.y;
-    let p_len = bl.w;
-    var bv = bitcast<f32>(0xff800000u ^ prm.zero);
-    var bi = 0xffffffffu;
-    if valid {
-        var c: u32;
-        var base: u32;
-        if prm.b == 0u {
-            c = prm.c0_lo + local;
-            base = 0u;
-        } else {
-            c = local % n_b;
-            base = (local / n_b) * n_b;
-        }
-        let abs_mode = prm.mode == 3u;
-        for (var a = 0u; a < n_a; a++) {
-            let row = prm.rows[prm.b].x + c * n_a + a;
-            let e0 = row_ptr[row];
-            let e1 = row_ptr[row + 1u];
-            for (var p = lane; p < p_len; p += tpc) {
-                var acc = 0.0;
-                for (var e = e0; e < e1; e++) {
-                    acc = fma(weight[e], src[(base + col[e]) * p_len + p], acc);
-                }
-                if abs_mode {
-                    acc = abs(acc);
-                }
-                if acc > bv {
-                    bv = acc;
-                    bi = a * p_len + p;
-                }
-            }
-        }
-    }
-    best_v[li] = bv;
-    best_i[li] = bi;
-    workgroupBarrier();
-    for (var s = tpc / 2u; s > 0u; s = s / 2u) {
-        if lane < s {
-            let v = best_v[li + s];
-            let i = best_i[li + s];
-            if beats(v, i, best_v[li], best_i[li]) {
-                best_v[li] = v;
-                best_i[li] = i;
-            }
-        }
-        workgroupBarrier();
-    }
-    if !valid || lane != 0u {
-        return;
-    }
-    let m = best_v[li];
-    let core = prm.c0_lo * prm.slab + local;
-    let is_goal = prm.has_goal != 0u && goal[core] != 0u;
-    switch prm.mode {
-        case 0u: {
-            dst[core] = finish(core, m);
-        }
-        case 1u: {
-            dst[core] = finish(core, m);
-            aux[core] = select(best_i[li], 0u, is_goal);
-        }
-        case 2u: {
-            aux[core] = select(best_i[li], 0u, is_goal);
-        }
-        default: {
-            dst[core] = select(m, 0.0, is_goal);
-        }
-    }
-}
-
 // Expected value of joint action `u` in a core's row of product actions.
 fn at(row: u32, u: u32) -> f32 {
     if prm.has_map != 0u {
@@ -220,7 +135,7 @@ fn at(row: u32, u: u32) -> f32 {
 
 // The reduction of full rows (`src`: one row of product actions per core of the batch, the
 // last stage's output), one thread per core, over the joint actions in order, as the CPU's
-// `Operator::reduce`; modes as `last_fused`.
+// `Operator::reduce`; modes as `last1.wgsl`.
 @compute @workgroup_size(64)
 fn reduce_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
                @builtin(num_workgroups) nwg: vec3<u32>) {

@@ -25,9 +25,9 @@ pub struct AdapterSummary {
     pub max_buffer: u64,
     /// The adapter's largest storage-buffer binding, in bytes.
     pub max_binding: u64,
-    /// The adapter's workgroup memory, in bytes (the fused last two stages keep a slice of
-    /// the stage before the last there).
-    pub max_workgroup_memory: u32,
+    /// The adapter's subgroup size, where it has subgroup operations and one size (the last
+    /// stage reduces a core's lanes with them).
+    pub subgroup_size: Option<u32>,
 }
 
 /// One GPU: wgpu's device and queue, shared by every run that uses it (cheap to clone).
@@ -38,8 +38,8 @@ pub struct Gpu {
     pub(crate) max_binding: u64,
     /// Bytes of a batch's largest stage buffer.
     pub(crate) batch_bytes: u64,
-    /// Whether full backups may fuse their last two stages in workgroup memory.
-    pub(crate) fuse_last_two: bool,
+    /// Whether the last stage may reduce a core's lanes by subgroup operations.
+    pub(crate) subgroups: bool,
 }
 
 pub(crate) struct Inner {
@@ -65,7 +65,8 @@ impl Gpu {
         let instance = wgpu::Instance::new(desc);
         let adapter = pick_adapter(&instance)?;
         let info = adapter.get_info();
-        let features = adapter.features() & wgpu::Features::SHADER_F64;
+        let features =
+            adapter.features() & (wgpu::Features::SHADER_F64 | wgpu::Features::SUBGROUP);
         let limits = adapter.limits();
         let (device, queue) =
             pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
@@ -86,12 +87,15 @@ impl Gpu {
             f64: features.contains(wgpu::Features::SHADER_F64),
             max_buffer: limits.max_buffer_size,
             max_binding: u64::from(limits.max_storage_buffer_binding_size),
-            max_workgroup_memory: limits.max_compute_workgroup_storage_size,
+            subgroup_size: (features.contains(wgpu::Features::SUBGROUP)
+                && info.subgroup_min_size == info.subgroup_max_size
+                && (4..=64).contains(&info.subgroup_min_size))
+            .then_some(info.subgroup_min_size),
         };
         let mut gpu = Self {
             max_binding: summary.max_binding,
             batch_bytes: default_batch_bytes(),
-            fuse_last_two: std::env::var("FUZZYQ_GPU_FUSE_LAST_TWO").map_or(true, |v| v != "0"),
+            subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
             inner: Arc::new(Inner {
                 device,
                 queue,
@@ -133,12 +137,12 @@ impl Gpu {
         self
     }
 
-    /// This GPU with full backups that fuse their last two stages in workgroup memory where
-    /// the problem allows (`true`, the default; `FUZZYQ_GPU_FUSE_LAST_TWO=0` turns it off), or
-    /// that write the stage before the last to memory first. Both give the same bits.
+    /// This GPU with the last stage's lanes reduced by subgroup operations where the adapter
+    /// has them with one subgroup size (`true`, the default; `FUZZYQ_GPU_SUBGROUPS=0` turns
+    /// them off), or in workgroup memory. Both give the same bits.
     #[must_use]
-    pub fn with_last_two_fused(mut self, fuse: bool) -> Self {
-        self.fuse_last_two = fuse;
+    pub fn with_subgroups(mut self, on: bool) -> Self {
+        self.subgroups = on;
         self
     }
 

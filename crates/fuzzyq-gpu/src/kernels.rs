@@ -52,7 +52,6 @@ pub(crate) struct DiffParams {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Entry {
     Stage,
-    LastFused,
     ReduceRows,
     Evaluate,
     Rewards,
@@ -60,14 +59,15 @@ pub(crate) enum Entry {
     Sub,
     Max,
     FmaProbe,
-    /// `last2.wgsl`, compiled per problem (not in [`Entry::ALL`]).
-    LastTwo,
+    /// `stagec.wgsl`, compiled per problem and stage (not in [`Entry::ALL`]).
+    StageConst,
+    /// `last1.wgsl`, compiled per problem (not in [`Entry::ALL`]).
+    LastOne,
 }
 
 impl Entry {
-    const ALL: [Entry; 9] = [
+    const ALL: [Entry; 8] = [
         Entry::Stage,
-        Entry::LastFused,
         Entry::ReduceRows,
         Entry::Evaluate,
         Entry::Rewards,
@@ -80,7 +80,6 @@ impl Entry {
     fn name(self) -> &'static str {
         match self {
             Entry::Stage => "stage",
-            Entry::LastFused => "last_fused",
             Entry::ReduceRows => "reduce_rows",
             Entry::Evaluate => "evaluate",
             Entry::Rewards => "rewards_pass",
@@ -88,7 +87,8 @@ impl Entry {
             Entry::Sub => "sub_pass",
             Entry::Max => "max_pass",
             Entry::FmaProbe => "fma_probe",
-            Entry::LastTwo => "last2",
+            Entry::StageConst => "stage_c",
+            Entry::LastOne => "last1",
         }
     }
 }
@@ -222,48 +222,69 @@ impl Kernels {
     }
 }
 
-/// The fused last two stages (`last2.wgsl`) compiled for one problem's constants: the
-/// stage before the last is block `b` (`(cores, actions, P)` = `(nb, ab, pb)`), the last
-/// block has `nl` cores, `al` actions and `pl` product actions before it.
-pub(crate) fn last_two(
+/// A kernel of `template` compiled with the problem's constants `consts` (prepended, with
+/// `block.wgsl`'s declarations), its text's `replace` pairs substituted; `subgroups` when it
+/// uses subgroup operations.
+pub(crate) fn specialized(
     gpu: &Gpu,
     k: &Kernels,
-    b: usize,
-    [nb, ab, pb]: [u32; 3],
-    [nl, al, pl]: [u32; 3],
+    (template, entry): (&str, &str),
+    consts: &[(&str, u32)],
+    replace: &[(&str, &str)],
+    subgroups: bool,
 ) -> Result<wgpu::ComputePipeline, GpuError> {
-    let consts = format!(
-        "const NL: u32 = {nl}u;\nconst AL: u32 = {al}u;\nconst PL: u32 = {pl}u;\n\
-         const NB: u32 = {nb}u;\nconst AB: u32 = {ab}u;\nconst PB: u32 = {pb}u;\n\
-         const BSTAGE: u32 = {b}u;\nconst LAST: u32 = {}u;\nconst SLN: u32 = {}u;\n\
-         const J: u32 = {}u;\n",
-        b + 1,
-        nl * pl,
-        pl.div_ceil(32),
-    );
-    let source = format!(
-        "{consts}{}\n{}",
-        include_str!("block.wgsl"),
-        include_str!("last2.wgsl")
-    );
+    // Naga takes subgroup operations without `enable subgroups;` (which it does not parse
+    // yet) where the device has the feature; the flag only names the kernel's needs.
+    let _ = subgroups;
+    let mut source = String::new();
+    for (name, v) in consts {
+        source.push_str(&format!("const {name}: u32 = {v}u;\n"));
+    }
+    source.push_str(include_str!("block.wgsl"));
+    let mut body = template.to_owned();
+    for (from, to) in replace {
+        body = body.replace(from, to);
+    }
+    source.push_str(&body);
     let device = &gpu.inner.device;
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("last2.wgsl"),
+        label: Some(entry),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
-    let p = pipeline(device, &k.layout, &module, "last2");
+    let p = pipeline(device, &k.layout, &module, entry);
     if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Failed(format!("the fused last stages did not compile: {e}")));
+        return Err(GpuError::Failed(format!("the kernel {entry} did not compile: {e}")));
     }
     Ok(p)
 }
 
-/// Bytes of workgroup memory `last2.wgsl` takes for a last block of `nl` cores with `pl`
-/// product actions before it.
-pub(crate) fn last_two_memory(nl: u64, pl: u64) -> u64 {
-    4 * nl * pl + 8 * 32 * nl
-}
+/// The reduction over a core's lanes in `last1.wgsl`: by subgroup shuffles, or in
+/// workgroup memory.
+pub(crate) const REDUCE_SUBGROUP: &str = "
+    for (var m = TPC / 2u; m > 0u; m = m / 2u) {
+        let ov = subgroupShuffleXor(bv, m);
+        let oi = subgroupShuffleXor(bi, m);
+        if beats(ov, oi, bv, bi) {
+            bv = ov;
+            bi = oi;
+        }
+    }";
+
+/// See [`REDUCE_SUBGROUP`].
+pub(crate) const REDUCE_MEMORY: &str = "
+    tv[li] = bv;
+    ti[li] = bi;
+    workgroupBarrier();
+    for (var s = TPC / 2u; s > 0u; s = s / 2u) {
+        if lane < s && beats(tv[li + s], ti[li + s], tv[li], ti[li]) {
+            tv[li] = tv[li + s];
+            ti[li] = ti[li + s];
+        }
+        workgroupBarrier();
+    }
+    bv = tv[li];
+    bi = ti[li];";
 
 /// Workgroups `(x, y)` covering `threads` threads (the shaders' `linear` index).
 pub(crate) fn grid(threads: u64) -> (u32, u32) {

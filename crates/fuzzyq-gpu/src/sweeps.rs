@@ -61,9 +61,7 @@ struct Shape {
     fused: bool,
     /// Whether the absolute maximum reduces in place (the identity map).
     fused_abs: bool,
-    /// Whether a fused last stage also takes the stage before it, in workgroup memory
-    /// (`last2.wgsl`).
-    last_two: bool,
+
     gamma: f32,
     has_goal: bool,
     reward_table: bool,
@@ -75,10 +73,9 @@ impl Shape {
         self.blocks.len()
     }
 
-    /// The stages whose outputs go to memory (those before the last, or before the last two
-    /// where they are fused).
+    /// The stages whose outputs go to memory (those before the last).
     fn written_stages(&self) -> usize {
-        self.n_blocks().saturating_sub(if self.last_two { 2 } else { 1 })
+        self.n_blocks() - 1
     }
 
     /// Elements of stage `b`'s output for one slab.
@@ -119,8 +116,13 @@ impl Shape {
 pub struct GpuSweeps {
     gpu: Gpu,
     k: Kernels,
-    /// The fused last two stages, compiled for this problem, where they apply.
-    last2: Option<wgpu::ComputePipeline>,
+    /// The stages before the last, compiled with this problem's constants (`stagec.wgsl`).
+    stage_c: Vec<wgpu::ComputePipeline>,
+    /// The fused last stage compiled for this problem (`last1.wgsl`), where it applies, with
+    /// its cores per workgroup.
+    last1: Option<(wgpu::ComputePipeline, u32)>,
+    /// Whether `last1` reduces by subgroup operations.
+    subgroups: bool,
     shape: Shape,
     table: [wgpu::Buffer; 3],
     rewards: wgpu::Buffer,
@@ -223,20 +225,12 @@ impl GpuSweeps {
             batch: 1,
             fused: identity && !reward_table,
             fused_abs: identity,
-            last_two: false,
             gamma: plan.gamma,
             has_goal: !plan.goal.is_empty(),
             reward_table,
             can_evaluate: plan.can_evaluate,
         };
-        // The last two stages fused where the workgroup memory holds the slice between them.
         let nb = shape.n_blocks();
-        let [nl, al, _, pl] = shape.blocks[nb - 1];
-        shape.last_two = gpu.fuse_last_two
-            && nb >= 2
-            && shape.fused
-            && kernels::last_two_memory(u64::from(nl), u64::from(pl))
-                <= u64::from(gpu.inner.summary.max_workgroup_memory);
         // The largest buffer a batch of one slab needs: a stage's output, or the full rows.
         let mut per_slab = (0..shape.written_stages())
             .map(|b| shape.stage_len(b))
@@ -281,9 +275,47 @@ impl GpuSweeps {
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = Kernels::new(gpu)?;
-        let last2 = if shape.last_two {
-            let [nb2, ab2, _, pb2] = shape.blocks[nb - 2];
-            Some(kernels::last_two(gpu, &k, nb - 2, [nb2, ab2, pb2], [nl, al, pl])?)
+        let stage_c = (0..shape.written_stages())
+            .map(|b| {
+                let [n_b, a_b, r_b, p_b] = shape.blocks[b];
+                let consts = [("SB", b as u32), ("SN", n_b), ("SA", a_b), ("SR", r_b), ("SP", p_b)];
+                let t = (include_str!("stagec.wgsl"), "stage_c");
+                kernels::specialized(gpu, &k, t, &consts, &[], false)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let sg = gpu.inner.summary.subgroup_size.filter(|_| gpu.subgroups);
+        let last1 = if shape.fused_abs {
+            let [nl, al, _, pl] = shape.blocks[nb - 1];
+            // A workgroup of one subgroup (or of 64 threads reducing in memory); a core's
+            // lanes a power of two up to 32 (or the subgroup), each taking J columns.
+            let wgs = sg.unwrap_or(WG);
+            let tpc = pl.next_power_of_two().min(wgs).min(32);
+            let consts = [
+                ("LAST", (nb - 1) as u32),
+                ("NL", nl),
+                ("AL", al),
+                ("PL", pl),
+                ("TPC", tpc),
+                ("J", pl.div_ceil(tpc)),
+                ("CPW", wgs / tpc),
+                ("WGS", wgs),
+            ];
+            let replace: &[(&str, &str)] = if sg.is_some() {
+                &[
+                    ("LANE_PARAM", ", @builtin(subgroup_invocation_id) sid: u32"),
+                    ("LANE_EXPR", "sid"),
+                    ("REDUCE", kernels::REDUCE_SUBGROUP),
+                ]
+            } else {
+                &[
+                    ("LANE_PARAM", ""),
+                    ("LANE_EXPR", "li"),
+                    ("REDUCE", kernels::REDUCE_MEMORY),
+                ]
+            };
+            let t = (include_str!("last1.wgsl"), "last1");
+            let p = kernels::specialized(gpu, &k, t, &consts, replace, sg.is_some())?;
+            Some((p, wgs / tpc))
         } else {
             None
         };
@@ -302,7 +334,9 @@ impl GpuSweeps {
         let sweeps = Self {
             gpu: gpu.clone(),
             k,
-            last2,
+            stage_c,
+            last1,
+            subgroups: sg.is_some() && shape.fused_abs,
             table,
             rewards,
             goal: with_data(gpu, "goal", &goal),
@@ -341,11 +375,11 @@ impl GpuSweeps {
         &self.gpu
     }
 
-    /// Whether full backups fuse their last two stages in workgroup memory
-    /// ([`Gpu::with_last_two_fused`]; where the problem's slice between them fits).
+    /// Whether the last stage reduces a core's lanes by subgroup operations
+    /// ([`Gpu::with_subgroups`]).
     #[must_use]
-    pub fn last_two_fused(&self) -> bool {
-        self.shape.last_two
+    pub fn uses_subgroups(&self) -> bool {
+        self.subgroups
     }
 
     /// Slabs per batch (the stage buffers hold one batch).
@@ -416,7 +450,7 @@ impl GpuSweeps {
                 let t0 = std::time::Instant::now();
                 self.run(std::slice::from_ref(d))?;
                 let key = match d.0 {
-                    Entry::Stage => format!("stage {}", d.1.b),
+                    Entry::Stage | Entry::StageConst => format!("stage {}", d.1.b),
                     e => format!("{e:?}"),
                 };
                 let p = self.profile.as_mut().expect("profiling");
@@ -437,8 +471,10 @@ impl GpuSweeps {
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
                 for (i, (entry, _, slots, (gx, gy))) in chunk.iter().enumerate() {
+                    let params = &chunk[i].1;
                     pass.set_pipeline(match entry {
-                        Entry::LastTwo => self.last2.as_ref().expect("compiled where used"),
+                        Entry::StageConst => &self.stage_c[params.b as usize],
+                        Entry::LastOne => &self.last1.as_ref().expect("compiled where used").0,
                         e => self.k.pipeline(*e),
                     });
                     let offset = (i as u64 * PARAM_STRIDE) as u32;
@@ -485,39 +521,24 @@ impl GpuSweeps {
                     ..base
                 };
                 let slots = [src, Slot::Stage(b), Slot::DummyWrite, Slot::DummyRead];
-                ds.push((Entry::Stage, p, slots, kernels::grid(count)));
+                ds.push((Entry::StageConst, p, slots, kernels::grid(count)));
             }
             let last = nb - 1;
             let src = if last == 0 { input } else { Slot::Stage(last - 1) };
             let cores = nc0 * s.slab;
-            if s.last_two {
-                let b = nb - 2;
-                let src = if b == 0 { input } else { Slot::Stage(b - 1) };
-                let prefixes = cores / u64::from(s.blocks[last][0]);
-                let p = Params {
-                    b: last as u32,
-                    count: prefixes as u32,
-                    c0_lo: c0 as u32,
-                    mode: mode as u32,
-                    ..base
-                };
-                let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
-                let slots = [src, dst, Slot::Policy, Slot::DummyRead];
-                ds.push((Entry::LastTwo, p, slots, kernels::groups(prefixes)));
-            } else if fused {
-                let p_len = s.blocks[last][3];
-                let tpc = p_len.next_power_of_two().min(WG);
+            if fused {
+                let cpw = self.last1.as_ref().expect("compiled where fused").1;
                 let p = Params {
                     b: last as u32,
                     count: cores as u32,
                     c0_lo: c0 as u32,
-                    tpc,
                     mode: mode as u32,
                     ..base
                 };
                 let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
                 let slots = [src, dst, Slot::Policy, Slot::DummyRead];
-                ds.push((Entry::LastFused, p, slots, kernels::grid(cores * u64::from(tpc))));
+                let wgs = cores.div_ceil(u64::from(cpw));
+                ds.push((Entry::LastOne, p, slots, kernels::groups(wgs)));
             } else {
                 let count = cores * s.n_product;
                 let p = Params {

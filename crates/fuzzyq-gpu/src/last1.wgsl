@@ -1,0 +1,80 @@
+// The last stage fused with the reduction, compiled with the problem's constants
+// (`sweeps.rs`): LAST (the block), NL cores, AL actions, PL product actions before it; TPC
+// lanes per core, each taking J of the core's PL columns (p = lane + TPC j), so that a row
+// entry's weight and column feed J multiply-adds; CPW cores per workgroup of WGS threads.
+// With SG the workgroup is one subgroup and a core's lanes reduce by `subgroupShuffleXor`
+// (no workgroup memory, no barrier); without, in workgroup memory. The same sums in the same
+// order as `last_fused`, and the same maximum at the lowest index: the same bits.
+
+var<workgroup> tv: array<f32, WGS>;
+var<workgroup> ti: array<u32, WGS>;
+
+@compute @workgroup_size(WGS)
+fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,
+         @builtin(local_invocation_index) li: u32 LANE_PARAM) {
+    let t = LANE_EXPR;
+    let local = (wid.y * nwg.x + wid.x) * CPW + t / TPC;
+    let lane = t % TPC;
+    let valid = local < prm.count;
+    var bv = bitcast<f32>(0xff800000u ^ prm.zero);
+    var bi = 0xffffffffu;
+    if valid {
+        var c: u32;
+        var base: u32;
+        if LAST == 0u {
+            c = prm.c0_lo + local;
+            base = 0u;
+        } else {
+            c = local % NL;
+            base = (local / NL) * NL;
+        }
+        let abs_mode = prm.mode == 3u;
+        for (var a = 0u; a < AL; a++) {
+            let row = prm.rows[LAST].x + c * AL + a;
+            let e1 = row_ptr[row + 1u];
+            var acc: array<f32, J>;
+            for (var j = 0u; j < J; j++) {
+                acc[j] = 0.0;
+            }
+            for (var e = row_ptr[row]; e < e1; e++) {
+                let w = weight[e];
+                let k = (base + col[e]) * PL;
+                for (var j = 0u; j < J; j++) {
+                    acc[j] = fma(w, src[k + min(lane + TPC * j, PL - 1u)], acc[j]);
+                }
+            }
+            for (var j = 0u; j < J; j++) {
+                let p = lane + TPC * j;
+                var x = acc[j];
+                if abs_mode {
+                    x = abs(x);
+                }
+                if p < PL && x > bv {
+                    bv = x;
+                    bi = a * PL + p;
+                }
+            }
+        }
+    }
+    REDUCE
+    if !valid || lane != 0u {
+        return;
+    }
+    let core = prm.c0_lo * prm.slab + local;
+    let is_goal = prm.has_goal != 0u && goal[core] != 0u;
+    switch prm.mode {
+        case 0u: {
+            dst[core] = finish(core, bv);
+        }
+        case 1u: {
+            dst[core] = finish(core, bv);
+            aux[core] = select(bi, 0u, is_goal);
+        }
+        case 2u: {
+            aux[core] = select(bi, 0u, is_goal);
+        }
+        default: {
+            dst[core] = select(bv, 0.0, is_goal);
+        }
+    }
+}

@@ -1,0 +1,34 @@
+// Stage SB of a full backup with the problem's constants (`sweeps.rs`: SB, SN cores, SA
+// actions, SR, SP), so that every index is arithmetic on constants: `stage` of `block.wgsl`,
+// the same sums in the same order.
+
+@compute @workgroup_size(64)
+fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+           @builtin(num_workgroups) nwg: vec3<u32>) {
+    let o = linear(gid, wid, nwg);
+    if o >= prm.count {
+        return;
+    }
+    let p = o % SP;
+    var t = o / SP;
+    let a = t % SA;
+    t = t / SA;
+    let r = t % SR;
+    let q = t / SR;
+    var c: u32;
+    var base: u32;
+    if SB == 0u {
+        c = prm.c0_lo + q;
+        base = 0u;
+    } else {
+        c = q % SN;
+        base = (q / SN) * SN;
+    }
+    let row = prm.rows[SB].x + c * SA + a;
+    let e1 = row_ptr[row + 1u];
+    var acc = 0.0;
+    for (var e = row_ptr[row]; e < e1; e++) {
+        acc = fma(weight[e], src[((base + col[e]) * SR + r) * SP + p], acc);
+    }
+    dst[o] = acc;
+}
