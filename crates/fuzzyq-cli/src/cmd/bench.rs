@@ -297,7 +297,7 @@ struct GpuReport {
     multiply_adds_per_backup: Option<f64>,
     slabs_per_batch: u64,
     setup_seconds: f64,
-    last_two_fused: bool,
+    subgroups: bool,
     evaluation_seconds: Vec<f64>,
     backup_seconds: Vec<f64>,
     median_backup_seconds: f64,
@@ -368,8 +368,8 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             "evaluate   {:.4} s median of {} evaluation sweeps{}",
             median(&evaluation),
             evaluation.len(),
-            if sweeps.last_two_fused() {
-                "; full backups fuse their last two stages"
+            if sweeps.uses_subgroups() {
+                "; the last stage reduces by subgroup shuffles"
             } else {
                 ""
             }
@@ -413,7 +413,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             multiply_adds_per_backup: fma,
             slabs_per_batch: sweeps.batch(),
             setup_seconds: setup,
-            last_two_fused: sweeps.last_two_fused(),
+            subgroups: sweeps.uses_subgroups(),
             evaluation_seconds: evaluation,
             backup_seconds: times,
             median_backup_seconds: median_seconds,
