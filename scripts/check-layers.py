@@ -38,6 +38,15 @@ LAYERS = {
         {"train"},
         {"compare"},
     ],
+    "fuzzyq-gpu": [
+        {"error", "reference"},
+        {"context"},
+        {"buffers"},
+        {"kernels"},
+        {"probe"},
+        {"gpu"},
+        {"sweeps"},
+    ],
     "fuzzyq-cli": [
         {"output"},
         {"plot"},

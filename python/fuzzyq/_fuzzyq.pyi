@@ -1439,6 +1439,7 @@ def solve(
     backup: Literal["auto", "block", "generic"] = "auto",
     kernel: Literal["avx512", "avx2", "portable", "scalar"] | None = None,
     operator: Literal["values", "q-values"] = "values",
+    device: Literal["cpu", "gpu"] = "cpu",
     threads: int | None = None,
     callback: Callable[[dict[str, Any]], bool | None] | None = None,
     transitions: Mapping[str, npt.ArrayLike] | None = None,
@@ -1484,6 +1485,13 @@ def solve(
         operator: ``"values"`` (interpolate the per-core maxima, only `V` stored: any grid
             size) or ``"q-values"`` (Busoniu's fuzzy Q-iteration with theta stored, as the
             ApproxRL toolbox runs it; built-in models only).
+        device: ``"cpu"`` or ``"gpu"``: the block backup's sweeps on a GPU through wgpu
+            (Vulkan, Metal, DX12), in ``"f32"``, synchronous, for models that declare blocks
+            and have no terminal states (`ConfigError` otherwise, and `SolverError` where no
+            adapter opens). Where the adapter's multiply-adds are fused (NVIDIA's) `V` and
+            the greedy actions equal the CPU's bit for bit; elsewhere (Mesa's lavapipe) each
+            product is rounded first, so the last bits differ. ``Solution.kernel`` is
+            ``"wgpu"``.
         threads: the number of threads (a dedicated pool); None: all cores. Results are
             bit-identical for any count.
         callback: called after every sweep with a dict: ``sweep`` (from 1),

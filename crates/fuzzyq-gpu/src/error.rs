@@ -32,7 +32,9 @@ pub enum GpuError {
     #[error("the GPU path {0}; run it with --device cpu")]
     Unsupported(&'static str),
     /// A buffer exceeds the adapter's limits.
-    #[error("{what} needs {need} bytes on the GPU, more than the adapter's limit of {limit} bytes for one {kind}")]
+    #[error(
+        "{what} needs {need} bytes on the GPU, more than the adapter's limit of {limit} bytes for one {kind}"
+    )]
     TooLarge {
         /// Which buffer.
         what: &'static str,

@@ -2,38 +2,13 @@
 
 use std::sync::Arc;
 
+use crate::context::{AdapterSummary, Context};
 use crate::error::GpuError;
-
-/// What a GPU is, as the solver sees it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AdapterSummary {
-    /// The adapter's name (`"NVIDIA H200"`, `"llvmpipe (LLVM 15.0.6, 256 bits)"`).
-    pub name: String,
-    /// The graphics API wgpu drives it through (`"vulkan"`, `"metal"`, `"dx12"`).
-    pub backend: String,
-    /// The driver and its version, as the adapter reports them.
-    pub driver: String,
-    /// Whether the adapter's `fma` is fused (one rounding), measured at start-up: where it is,
-    /// the GPU gives the CPU kernels' bits; where it is not (Mesa's lavapipe), it gives the
-    /// bits of the same sums with every product rounded first
-    /// ([`crate::reference::Rounding::Product`]).
-    pub fused_fma: bool,
-    /// Whether the adapter has `f64` in shaders (the change statistics run on the GPU with it,
-    /// on the host from the values without it).
-    pub f64: bool,
-    /// The adapter's largest buffer, in bytes.
-    pub max_buffer: u64,
-    /// The adapter's largest storage-buffer binding, in bytes.
-    pub max_binding: u64,
-    /// The adapter's subgroup size, where it has subgroup operations and one size (the last
-    /// stage reduces a core's lanes with them).
-    pub subgroup_size: Option<u32>,
-}
 
 /// One GPU: wgpu's device and queue, shared by every run that uses it (cheap to clone).
 #[derive(Clone)]
 pub struct Gpu {
-    pub(crate) inner: Arc<Inner>,
+    pub(crate) inner: Arc<Context>,
     /// The largest storage binding a run uses (the adapter's, or less).
     pub(crate) max_binding: u64,
     /// Bytes of a batch's largest stage buffer.
@@ -42,15 +17,11 @@ pub struct Gpu {
     pub(crate) subgroups: bool,
 }
 
-pub(crate) struct Inner {
-    pub(crate) device: wgpu::Device,
-    pub(crate) queue: wgpu::Queue,
-    pub(crate) summary: AdapterSummary,
-}
-
 impl core::fmt::Debug for Gpu {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.debug_struct("Gpu").field("adapter", &self.inner.summary).finish()
+        f.debug_struct("Gpu")
+            .field("adapter", &self.inner.summary)
+            .finish()
     }
 }
 
@@ -63,30 +34,30 @@ impl Gpu {
             .unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::METAL | wgpu::Backends::DX12);
         desc.flags = wgpu::InstanceFlags::empty().with_env();
         let instance = wgpu::Instance::new(desc);
-        let adapter = pick_adapter(&instance)?;
+        let adapter = crate::context::pick_adapter(&instance)?;
         let info = adapter.get_info();
-        let features =
-            adapter.features() & (wgpu::Features::SHADER_F64 | wgpu::Features::SUBGROUP);
+        let features = adapter.features() & (wgpu::Features::SHADER_F64 | wgpu::Features::SUBGROUP);
         let limits = adapter.limits();
-        let (device, queue) =
-            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-                label: Some("fuzzyq"),
-                required_features: features,
-                required_limits: limits.clone(),
-                ..Default::default()
-            }))
-            .map_err(|e| GpuError::Device {
-                adapter: info.name.clone(),
-                why: e.to_string(),
-            })?;
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("fuzzyq"),
+            required_features: features,
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device {
+            adapter: info.name.clone(),
+            why: e.to_string(),
+        })?;
         let summary = AdapterSummary {
             name: info.name.clone(),
             backend: info.backend.to_str().to_owned(),
-            driver: format!("{} {}", info.driver, info.driver_info).trim().to_owned(),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_owned(),
             fused_fma: false,
             f64: features.contains(wgpu::Features::SHADER_F64),
             max_buffer: limits.max_buffer_size,
-            max_binding: u64::from(limits.max_storage_buffer_binding_size),
+            max_binding: limits.max_storage_buffer_binding_size,
             subgroup_size: (features.contains(wgpu::Features::SUBGROUP)
                 && info.subgroup_min_size == info.subgroup_max_size
                 && (4..=64).contains(&info.subgroup_min_size))
@@ -96,17 +67,23 @@ impl Gpu {
             max_binding: summary.max_binding,
             batch_bytes: default_batch_bytes(),
             subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
-            inner: Arc::new(Inner {
+            inner: Arc::new(Context {
                 device,
                 queue,
                 summary,
             }),
         };
-        let fused = crate::kernels::Kernels::new(&gpu)?.probe_fma(&gpu)?;
-        Arc::get_mut(&mut gpu.inner)
+        let k = crate::kernels::Kernels::new(&gpu.inner)?;
+        let fused = crate::probe::fused_fma(&gpu.inner, &k)?;
+        let subgroups = match gpu.inner.summary.subgroup_size {
+            Some(s) if crate::probe::subgroups_work(&gpu.inner, &k, s)? => Some(s),
+            _ => None,
+        };
+        let summary = &mut Arc::get_mut(&mut gpu.inner)
             .expect("not shared yet")
-            .summary
-            .fused_fma = fused;
+            .summary;
+        summary.fused_fma = fused;
+        summary.subgroup_size = subgroups;
         Ok(gpu)
     }
 
@@ -165,41 +142,6 @@ fn default_batch_bytes() -> u64 {
         .map_or(256 << 20, |m| m << 20)
 }
 
-/// The adapter named by `FUZZYQ_GPU_ADAPTER` (a part of its name), else the first of the
-/// most capable kind: a discrete GPU, then an integrated one, a virtual one, a CPU (Mesa's
-/// lavapipe).
-fn pick_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, GpuError> {
-    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
-    let rank = |t: wgpu::DeviceType| match t {
-        wgpu::DeviceType::DiscreteGpu => 0,
-        wgpu::DeviceType::IntegratedGpu => 1,
-        wgpu::DeviceType::VirtualGpu => 2,
-        wgpu::DeviceType::Cpu => 3,
-        wgpu::DeviceType::Other => 4,
-    };
-    if let Ok(want) = std::env::var("FUZZYQ_GPU_ADAPTER") {
-        let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
-        return adapters
-            .into_iter()
-            .find(|a| a.get_info().name.to_lowercase().contains(&want.to_lowercase()))
-            .ok_or(GpuError::NoNamedAdapter {
-                want,
-                found: names.join(", "),
-            });
-    }
-    adapters
-        .into_iter()
-        .min_by_key(|a| rank(a.get_info().device_type))
-        .ok_or(GpuError::NoAdapter {
-            hint: if cfg!(target_os = "linux") {
-                "; on Linux install the Vulkan loader and a driver, e.g. `apt-get install \
-                 libvulkan1 mesa-vulkan-drivers`"
-            } else {
-                ""
-            },
-        })
-}
-
 /// Chains of `peak.wgsl` per thread.
 const PEAK_CHAINS: u64 = 16;
 /// Threads of one peak dispatch.
@@ -225,7 +167,7 @@ impl Gpu {
             compilation_options: Default::default(),
             cache: None,
         });
-        let out = crate::buffers::zeroed(self, "peak out", 4 * u64::from(PEAK_THREADS));
+        let out = crate::buffers::zeroed(&self.inner, "peak out", 4 * u64::from(PEAK_THREADS));
         let time = |iters: u32| -> Result<f64, GpuError> {
             let params: [u32; 4] = [iters, 0.999_999f32.to_bits(), 1e-7f32.to_bits(), 0];
             let ubuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -256,7 +198,7 @@ impl Gpu {
             }
             let t0 = std::time::Instant::now();
             self.inner.queue.submit([enc.finish()]);
-            crate::buffers::wait(self)?;
+            crate::buffers::wait(&self.inner)?;
             Ok(t0.elapsed().as_secs_f64())
         };
         // Grow the chains until one dispatch takes a few milliseconds, then repeat it.

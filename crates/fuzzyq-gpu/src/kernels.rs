@@ -1,8 +1,8 @@
 //! The compute pipelines of `block.wgsl` and `diff.wgsl`, their parameters, and how a pass is
 //! dispatched over a linear range of threads.
 
+use crate::context::Context;
 use crate::error::GpuError;
-use crate::gpu::Gpu;
 
 /// Threads per workgroup of every kernel (`WG` in the shaders).
 pub(crate) const WG: u32 = 64;
@@ -150,8 +150,8 @@ fn pipeline(
 
 impl Kernels {
     /// Compiles the shaders for `gpu`'s device.
-    pub fn new(gpu: &Gpu) -> Result<Self, GpuError> {
-        let device = &gpu.inner.device;
+    pub fn new(gpu: &Context) -> Result<Self, GpuError> {
+        let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("block.wgsl"),
@@ -180,7 +180,7 @@ impl Kernels {
             .iter()
             .map(|e| pipeline(device, &layout, &module, e.name()))
             .collect();
-        let diff = gpu.inner.summary.f64.then(|| {
+        let diff = gpu.summary.f64.then(|| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("diff.wgsl"),
                 source: wgpu::ShaderSource::Wgsl(include_str!("diff.wgsl").into()),
@@ -198,7 +198,9 @@ impl Kernels {
             (layout, p)
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Failed(format!("the shaders did not compile: {e}")));
+            return Err(GpuError::Failed(format!(
+                "the shaders did not compile: {e}"
+            )));
         }
         Ok(Self {
             layout,
@@ -208,17 +210,11 @@ impl Kernels {
     }
 
     pub fn pipeline(&self, e: Entry) -> &wgpu::ComputePipeline {
-        let i = Entry::ALL.iter().position(|&x| x == e).expect("every entry");
+        let i = Entry::ALL
+            .iter()
+            .position(|&x| x == e)
+            .expect("every entry");
         &self.pipelines[i]
-    }
-
-    /// Whether `fma` is fused on this adapter: `fma(x, x, -1)` for `x = 1 + 2^-12` is
-    /// `2^-11 + 2^-24` in one rounding and `2^-11` with the product rounded first.
-    pub fn probe_fma(&self, gpu: &Gpu) -> Result<bool, GpuError> {
-        let x = 1.0f32 + f32::powi(2.0, -12);
-        let out = crate::buffers::run_probe(gpu, self, &[x], &[-1.0])?;
-        let fused = x.mul_add(x, -1.0);
-        Ok(out[0].to_bits() == fused.to_bits())
     }
 }
 
@@ -226,7 +222,7 @@ impl Kernels {
 /// `block.wgsl`'s declarations), its text's `replace` pairs substituted; `subgroups` when it
 /// uses subgroup operations.
 pub(crate) fn specialized(
-    gpu: &Gpu,
+    gpu: &Context,
     k: &Kernels,
     (template, entry): (&str, &str),
     consts: &[(&str, u32)],
@@ -246,7 +242,7 @@ pub(crate) fn specialized(
         body = body.replace(from, to);
     }
     source.push_str(&body);
-    let device = &gpu.inner.device;
+    let device = &gpu.device;
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(entry),
@@ -254,7 +250,9 @@ pub(crate) fn specialized(
     });
     let p = pipeline(device, &k.layout, &module, entry);
     if let Some(e) = pollster::block_on(scope.pop()) {
-        return Err(GpuError::Failed(format!("the kernel {entry} did not compile: {e}")));
+        return Err(GpuError::Failed(format!(
+            "the kernel {entry} did not compile: {e}"
+        )));
     }
     Ok(p)
 }
@@ -300,4 +298,44 @@ pub(crate) fn groups(groups: u64) -> (u32, u32) {
     let x = groups.min(u64::from(MAX_X)) as u32;
     let y = groups.div_ceil(u64::from(x)) as u32;
     (x, y)
+}
+
+/// A bind group of `layout` binding `bufs[i]` at binding `i` (binding 0 a uniform window of
+/// one dispatch's parameters).
+pub(crate) fn bind_group(
+    gpu: &Context,
+    layout: &wgpu::BindGroupLayout,
+    bufs: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry<'_>> = bufs
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: if i == 0 {
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: b,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(size_of::<Params>() as u64),
+                })
+            } else {
+                b.as_entire_binding()
+            },
+        })
+        .collect();
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: None,
+        layout,
+        entries: &entries,
+    })
+}
+
+/// The parameters of `n` dispatches, `PARAM_STRIDE` bytes apart.
+pub(crate) fn params_bytes(params: &[Params]) -> Vec<u8> {
+    let mut out = vec![0u8; params.len() * PARAM_STRIDE as usize];
+    for (i, p) in params.iter().enumerate() {
+        let at = i * PARAM_STRIDE as usize;
+        out[at..at + size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
+    }
+    out
 }

@@ -11,13 +11,17 @@
 //! exact delta); `V` and the greedy actions come back at the end and when an observer asks
 //! for the run's state (a checkpoint).
 //!
-//! A full backup runs the block contraction a batch of slabs at a time (`block.wgsl`): each
-//! stage before the last writes its whole output for the batch, one thread per element; the
-//! last stage is fused with the maximum over actions (`tpc` threads per core, then a
-//! reduction in workgroup memory to the largest value at the lowest action) or, where the
-//! actions are renumbered or the reward depends on the action, writes full rows that one
-//! thread per core reduces over the joint actions in order. Policy evaluation runs one thread
-//! per core through the nested sums of its action.
+//! A full backup runs the block contraction a batch of slabs at a time: each stage before the
+//! last writes its whole output for the batch, one thread per element (`stagec.wgsl`, compiled
+//! with the problem's sizes as constants); the last stage is fused with the maximum over
+//! actions (`last1.wgsl`: up to 32 lanes per core, each taking several of the core's columns
+//! so that a row entry's weight feeds several multiply-adds, then the lanes reduce to the
+//! largest value at the lowest action by subgroup shuffles, or in workgroup memory where the
+//! adapter has no single subgroup size or a start-up probe finds a workgroup of that size is
+//! not one subgroup) or, where the actions are renumbered or the reward depends on the action,
+//! writes full rows that one thread per core reduces over the joint actions in order
+//! (`block.wgsl`). Policy evaluation runs one thread per core through the nested sums of its
+//! action. Batches bound the stage buffers (256 MiB by default, [`Gpu::with_batch_bytes`]).
 //!
 //! # The CPU's bits
 //! Every element is the CPU's sum: a chain over its row's entries in order, `fma` from 0, and
@@ -35,9 +39,11 @@
 //! one storage binding of the adapter (checked before allocating, [`GpuError::TooLarge`]).
 
 mod buffers;
+mod context;
 mod error;
 mod gpu;
 mod kernels;
+mod probe;
 pub mod reference;
 mod sweeps;
 
@@ -46,8 +52,9 @@ use core::ops::ControlFlow;
 use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
 
+pub use context::AdapterSummary;
 pub use error::GpuError;
-pub use gpu::{AdapterSummary, Gpu};
+pub use gpu::Gpu;
 pub use sweeps::GpuSweeps;
 
 /// Runs fuzzy Q-iteration on `model` over `grid` on `gpu`, continued from `resume` or afresh:

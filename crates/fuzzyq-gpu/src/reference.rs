@@ -119,7 +119,11 @@ impl HostSweeps {
             let mut prefixes = 1usize;
             for (b, t) in self.tables.iter().enumerate() {
                 let (r_len, p_len, na) = (t.r_len, t.p_len, t.n_actions);
-                let cores: Vec<usize> = if b == 0 { vec![c0] } else { (0..t.n_cores).collect() };
+                let cores: Vec<usize> = if b == 0 {
+                    vec![c0]
+                } else {
+                    (0..t.n_cores).collect()
+                };
                 let mut next = vec![0.0f32; prefixes * cores.len() * r_len * na * p_len];
                 for q in 0..prefixes {
                     for (ci, &c) in cores.iter().enumerate() {

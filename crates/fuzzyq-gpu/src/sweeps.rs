@@ -6,10 +6,13 @@ use std::collections::HashMap;
 use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Buf, DiffStats, Operator, Sweeps};
 
-use crate::buffers::{self, bind_group, params_bytes, with_data, zeroed};
+use crate::buffers::{self, with_data, zeroed};
 use crate::error::GpuError;
 use crate::gpu::Gpu;
-use crate::kernels::{self, DiffParams, Entry, Kernels, MAX_BLOCKS, PARAM_STRIDE, Params, WG};
+use crate::kernels::{
+    self, DiffParams, Entry, Kernels, MAX_BLOCKS, PARAM_STRIDE, Params, WG, bind_group,
+    params_bytes,
+};
 
 /// The last stage's reduction (`mode` in `block.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,6 +26,10 @@ enum Mode {
     /// The maximum absolute expected value per core (0 at goal cores).
     Abs = 3,
 }
+
+/// One dispatch: the kernel, its parameters, its bindings `[src, dst, aux, src2]` and its
+/// workgroups `(x, y)`.
+type Dispatch = (Entry, Params, [Slot; 4], (u32, u32));
 
 /// Which device buffer a binding takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -198,7 +205,10 @@ impl GpuSweeps {
         let mut row_base = Vec::new();
         let (mut ptr, mut col, mut weight) = (Vec::new(), Vec::new(), Vec::new());
         for t in &plan.tables {
-            let small = |x: usize| u32::try_from(x).map_err(|_| GpuError::Unsupported("runs grids of at most 2^32 cores"));
+            let small = |x: usize| {
+                u32::try_from(x)
+                    .map_err(|_| GpuError::Unsupported("runs grids of at most 2^32 cores"))
+            };
             blocks.push([
                 small(t.n_cores)?,
                 small(t.n_actions)?,
@@ -247,40 +257,51 @@ impl GpuSweeps {
         let device = &gpu.inner.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let rewards = match (plan.rewards, plan.reward_table) {
-            (Some(r), _) => with_data(gpu, "rewards", r),
+            (Some(r), _) => with_data(&gpu.inner, "rewards", r),
             (None, Some(t)) => {
                 check("the reward table", 4 * t.len() as u64)?;
-                with_data(gpu, "reward table", t)
+                with_data(&gpu.inner, "reward table", t)
             }
             (None, None) => {
                 // A reward of the action that the model computes: tabulated once.
                 check("the reward table", 4 * (n * plan.n_joint) as u64)?;
-                with_data(gpu, "reward table", &op.reward_rows())
+                with_data(&gpu.inner, "reward table", &op.reward_rows())
             }
         };
         let goal: Vec<u32> = plan.goal.iter().map(|&g| u32::from(g)).collect();
         let map = plan.joint_to_product.unwrap_or(&[]);
         let table = [
-            with_data(gpu, "row_ptr", &ptr),
-            with_data(gpu, "col", &col),
-            with_data(gpu, "weight", &weight),
+            with_data(&gpu.inner, "row_ptr", &ptr),
+            with_data(&gpu.inner, "col", &col),
+            with_data(&gpu.inner, "weight", &weight),
         ];
         let vbytes = 4 * n as u64;
         let stages = (0..shape.written_stages())
-            .map(|b| zeroed(gpu, "stage", 4 * shape.batch * shape.stage_len(b)))
+            .map(|b| zeroed(&gpu.inner, "stage", 4 * shape.batch * shape.stage_len(b)))
             .collect();
-        let rows = (!shape.fused || !shape.fused_abs)
-            .then(|| zeroed(gpu, "rows", 4 * shape.batch * shape.slab * shape.n_product));
+        let rows = (!shape.fused || !shape.fused_abs).then(|| {
+            zeroed(
+                &gpu.inner,
+                "rows",
+                4 * shape.batch * shape.slab * shape.n_product,
+            )
+        });
         let partials = n.div_ceil(PER_WG as usize) as u64;
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
-        let k = Kernels::new(gpu)?;
+        let k = Kernels::new(&gpu.inner)?;
         let stage_c = (0..shape.written_stages())
             .map(|b| {
                 let [n_b, a_b, r_b, p_b] = shape.blocks[b];
-                let consts = [("SB", b as u32), ("SN", n_b), ("SA", a_b), ("SR", r_b), ("SP", p_b)];
+                let consts = [
+                    ("SB", b as u32),
+                    ("SN", n_b),
+                    ("SA", a_b),
+                    ("SR", r_b),
+                    ("SP", p_b),
+                ];
                 let t = (include_str!("stagec.wgsl"), "stage_c");
-                kernels::specialized(gpu, &k, t, &consts, &[], false)
+                kernels::specialized(&gpu.inner, &k, t, &consts, &[], false)
             })
             .collect::<Result<Vec<_>, _>>()?;
         let sg = gpu.inner.summary.subgroup_size.filter(|_| gpu.subgroups);
@@ -314,7 +335,7 @@ impl GpuSweeps {
                 ]
             };
             let t = (include_str!("last1.wgsl"), "last1");
-            let p = kernels::specialized(gpu, &k, t, &consts, replace, sg.is_some())?;
+            let p = kernels::specialized(&gpu.inner, &k, t, &consts, replace, sg.is_some())?;
             Some((p, wgs / tpc))
         } else {
             None
@@ -322,7 +343,7 @@ impl GpuSweeps {
         let diff_out = k
             .diff
             .is_some()
-            .then(|| zeroed(gpu, "diff partials", 16 * partial_len));
+            .then(|| zeroed(&gpu.inner, "diff partials", 16 * partial_len));
         let n_batches = shape.n0.div_ceil(shape.batch) as usize;
         let params_cap = (n_batches * (nb + 1)).max(4);
         let params = device.create_buffer(&wgpu::BufferDescriptor {
@@ -339,24 +360,24 @@ impl GpuSweeps {
             subgroups: sg.is_some() && shape.fused_abs,
             table,
             rewards,
-            goal: with_data(gpu, "goal", &goal),
-            map: with_data(gpu, "map", map),
+            goal: with_data(&gpu.inner, "goal", &goal),
+            map: with_data(&gpu.inner, "map", map),
             v: [
-                zeroed(gpu, "V0", vbytes),
-                zeroed(gpu, "V1", vbytes),
-                zeroed(gpu, "V2", vbytes),
+                zeroed(&gpu.inner, "V0", vbytes),
+                zeroed(&gpu.inner, "V1", vbytes),
+                zeroed(&gpu.inner, "V2", vbytes),
             ],
-            policy: zeroed(gpu, "policy", vbytes),
+            policy: zeroed(&gpu.inner, "policy", vbytes),
             stages,
             rows,
             scratch: None,
             dv: None,
-            partial: zeroed(gpu, "max partials", 4 * partial_len),
+            partial: zeroed(&gpu.inner, "max partials", 4 * partial_len),
             diff_out,
             params,
             params_cap,
-            dummy_r: zeroed(gpu, "dummy", 4),
-            dummy_w: zeroed(gpu, "dummy", 4),
+            dummy_r: zeroed(&gpu.inner, "dummy", 4),
+            dummy_w: zeroed(&gpu.inner, "dummy", 4),
             binds: HashMap::new(),
             profile: None,
             shape,
@@ -438,13 +459,13 @@ impl GpuSweeps {
             &self.map,
             src2,
         ];
-        let g = bind_group(&self.gpu, &self.k.layout, &bufs);
+        let g = bind_group(&self.gpu.inner, &self.k.layout, &bufs);
         self.binds.insert(slots, g);
     }
 
     /// Runs `dispatches` (entry, parameters, bindings `[src, dst, aux, src2]`, threads or
     /// workgroups) in one submission and waits for it.
-    fn run(&mut self, dispatches: &[(Entry, Params, [Slot; 4], (u32, u32))]) -> Result<(), GpuError> {
+    fn run(&mut self, dispatches: &[Dispatch]) -> Result<(), GpuError> {
         if self.profile.is_some() && dispatches.len() > 1 {
             for d in dispatches {
                 let t0 = std::time::Instant::now();
@@ -483,7 +504,7 @@ impl GpuSweeps {
                 }
             }
             gpu.queue.submit([enc.finish()]);
-            buffers::wait(&self.gpu)?;
+            buffers::wait(&self.gpu.inner)?;
         }
         Ok(())
     }
@@ -496,15 +517,14 @@ impl GpuSweeps {
 
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
     /// `v` and writing `out` (values) and the policy buffer (actions).
-    fn full_pass(
-        &mut self,
-        input: Slot,
-        out: Slot,
-        mode: Mode,
-    ) -> Vec<(Entry, Params, [Slot; 4], (u32, u32))> {
+    fn full_pass(&mut self, input: Slot, out: Slot, mode: Mode) -> Vec<Dispatch> {
         let s = &self.shape;
         let nb = s.n_blocks();
-        let fused = if mode == Mode::Abs { s.fused_abs } else { s.fused };
+        let fused = if mode == Mode::Abs {
+            s.fused_abs
+        } else {
+            s.fused
+        };
         let base = self.base();
         let mut ds = Vec::new();
         let mut c0 = 0u64;
@@ -524,7 +544,11 @@ impl GpuSweeps {
                 ds.push((Entry::StageConst, p, slots, kernels::grid(count)));
             }
             let last = nb - 1;
-            let src = if last == 0 { input } else { Slot::Stage(last - 1) };
+            let src = if last == 0 {
+                input
+            } else {
+                Slot::Stage(last - 1)
+            };
             let cores = nc0 * s.slab;
             if fused {
                 let cpw = self.last1.as_ref().expect("compiled where fused").1;
@@ -535,7 +559,11 @@ impl GpuSweeps {
                     mode: mode as u32,
                     ..base
                 };
-                let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
+                let dst = if mode == Mode::Abs {
+                    Slot::Scratch
+                } else {
+                    out
+                };
                 let slots = [src, dst, Slot::Policy, Slot::DummyRead];
                 let wgs = cores.div_ceil(u64::from(cpw));
                 ds.push((Entry::LastOne, p, slots, kernels::groups(wgs)));
@@ -556,7 +584,11 @@ impl GpuSweeps {
                     len: s.n_product as u32,
                     ..base
                 };
-                let dst = if mode == Mode::Abs { Slot::Scratch } else { out };
+                let dst = if mode == Mode::Abs {
+                    Slot::Scratch
+                } else {
+                    out
+                };
                 let slots = [Slot::Rows, dst, Slot::Policy, Slot::DummyRead];
                 ds.push((Entry::ReduceRows, p, slots, kernels::grid(cores)));
             }
@@ -591,9 +623,14 @@ impl GpuSweeps {
             ..self.base()
         };
         let g = kernels::groups(n.div_ceil(PER_WG));
-        self.run(&[(Entry::Max, p, [src, Slot::Partial, Slot::DummyWrite, Slot::DummyRead], g)])?;
+        self.run(&[(
+            Entry::Max,
+            p,
+            [src, Slot::Partial, Slot::DummyWrite, Slot::DummyRead],
+            g,
+        )])?;
         let parts: Vec<f32> =
-            buffers::read_as(&self.gpu, &self.partial, (g.0 * g.1) as usize)?;
+            buffers::read_as(&self.gpu.inner, &self.partial, (g.0 * g.1) as usize)?;
         Ok(parts
             .into_iter()
             .fold(0.0f32, |m, x| if m >= x { m } else { x }))
@@ -603,15 +640,15 @@ impl GpuSweeps {
         let bytes = 4 * self.shape.n as u64;
         match slot {
             Slot::Scratch if self.scratch.is_none() => {
-                self.scratch = Some(zeroed(&self.gpu, "abs", bytes));
+                self.scratch = Some(zeroed(&self.gpu.inner, "abs", bytes));
             }
-            Slot::Dv if self.dv.is_none() => self.dv = Some(zeroed(&self.gpu, "dv", bytes)),
+            Slot::Dv if self.dv.is_none() => self.dv = Some(zeroed(&self.gpu.inner, "dv", bytes)),
             _ => {}
         }
     }
 
     fn values_of(&self, v: Buf) -> Result<Vec<f32>, GpuError> {
-        buffers::read_as(&self.gpu, &self.v[usize::from(v.0)], self.shape.n)
+        buffers::read_as(&self.gpu.inner, &self.v[usize::from(v.0)], self.shape.n)
     }
 }
 
@@ -636,7 +673,12 @@ impl Sweeps<f32> for GpuSweeps {
                 "computes the backup of V = 0 only for rewards of the state alone",
             ));
         }
-        let slots = [Slot::DummyRead, Self::v_slot(out), Slot::DummyWrite, Slot::DummyRead];
+        let slots = [
+            Slot::DummyRead,
+            Self::v_slot(out),
+            Slot::DummyWrite,
+            Slot::DummyRead,
+        ];
         self.elementwise(Entry::Rewards, slots, 0.0)
     }
 
@@ -645,7 +687,12 @@ impl Sweeps<f32> for GpuSweeps {
         if !self.shape.can_evaluate {
             return Err(fuzzyq_core::solver::SolveError::PolicyEvaluation.into());
         }
-        let slots = [Self::v_slot(v), Self::v_slot(out), Slot::Policy, Slot::DummyRead];
+        let slots = [
+            Self::v_slot(v),
+            Self::v_slot(out),
+            Slot::Policy,
+            Slot::DummyRead,
+        ];
         self.elementwise(Entry::Evaluate, slots, 0.0)
     }
 
@@ -679,7 +726,12 @@ impl Sweeps<f32> for GpuSweeps {
                 usage: wgpu::BufferUsages::UNIFORM,
             },
         );
-        let bufs = [&ubuf, &self.v[usize::from(a.0)], &self.v[usize::from(b.0)], out];
+        let bufs = [
+            &ubuf,
+            &self.v[usize::from(a.0)],
+            &self.v[usize::from(b.0)],
+            out,
+        ];
         let entries: Vec<wgpu::BindGroupEntry<'_>> = bufs
             .iter()
             .enumerate()
@@ -701,7 +753,7 @@ impl Sweeps<f32> for GpuSweeps {
             pass.dispatch_workgroups(g.0, g.1, 1);
         }
         gpu.queue.submit([enc.finish()]);
-        let parts: Vec<f64> = buffers::read_as(&self.gpu, out, 2 * (g.0 * g.1) as usize)?;
+        let parts: Vec<f64> = buffers::read_as(&self.gpu.inner, out, 2 * (g.0 * g.1) as usize)?;
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for pair in parts.chunks_exact(2) {
             lo = lo.min(pair[0]);
@@ -714,7 +766,12 @@ impl Sweeps<f32> for GpuSweeps {
         if s == 0.0 {
             return Ok(());
         }
-        let slots = [Slot::DummyRead, Self::v_slot(v), Slot::DummyWrite, Slot::DummyRead];
+        let slots = [
+            Slot::DummyRead,
+            Self::v_slot(v),
+            Slot::DummyWrite,
+            Slot::DummyRead,
+        ];
         self.elementwise(Entry::Shift, slots, s)
     }
 
@@ -760,7 +817,7 @@ impl Sweeps<f32> for GpuSweeps {
 
     fn policy(&self) -> Result<Cow<'_, [u32]>, GpuError> {
         Ok(Cow::Owned(buffers::read_as(
-            &self.gpu,
+            &self.gpu.inner,
             &self.policy,
             self.shape.n,
         )?))

@@ -234,6 +234,10 @@ pub(crate) fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
         SimError::Eval(_) => error(py, Kind::Input, e.to_string()),
         SimError::Grid(_) => error(py, Kind::Config, e.to_string()),
         SimError::PolicyFile(f) => policy_file_error(py, f),
+        // A run the GPU path does not take, or one too large for the adapter: the settings'.
+        SimError::Gpu(
+            fuzzyq_gpu::GpuError::Unsupported(_) | fuzzyq_gpu::GpuError::TooLarge { .. },
+        ) => error(py, Kind::Config, e.to_string()),
         _ => error(py, Kind::Solver, e.to_string()),
     }
 }

@@ -11,7 +11,7 @@ use fuzzyq_core::NamedOption;
 use fuzzyq_core::options::UnknownName;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, BackupPath, CoarseStart, IterationOperator, Kernel, Precision, Progress, Scheme,
+    self, BackupPath, CoarseStart, Device, IterationOperator, Kernel, Precision, Progress, Scheme,
     SolveError, SweepMode, TabulatedModel,
 };
 use fuzzyq_sim::io::checkpoint::FqiState;
@@ -25,6 +25,7 @@ use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::learned::BlockTables;
 use fuzzyq_sim::model::{EnvModel, F64Model};
 use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
+use fuzzyq_sim::train::DeviceReal;
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
@@ -64,6 +65,7 @@ struct Settings<'a> {
     backup: &'a str,
     kernel: Option<&'a str>,
     operator: &'a str,
+    device: &'a str,
 }
 
 impl Settings<'_> {
@@ -103,6 +105,7 @@ impl Settings<'_> {
                 .map(|k| parse_option::<Kernel>(py, "kernel", k))
                 .transpose()?,
             operator: parse_option::<IterationOperator>(py, "operator", self.operator)?,
+            device: parse_option::<Device>(py, "device", self.device)?,
         })
     }
 }
@@ -229,6 +232,12 @@ impl<'a, S> Watch<'a, S> {
         })
     }
 
+    /// Whether the run's state is kept after each sweep (only a callback can stop a run and
+    /// need it): a GPU run reads it back from the device only then.
+    fn wants_state(&self) -> bool {
+        self.callback.is_some()
+    }
+
     /// The observer of a run without state.
     fn plain(&self) -> impl FnMut(&Progress) -> ControlFlow<()> + Send + '_
     where
@@ -270,6 +279,8 @@ impl<'a, S> Watch<'a, S> {
 /// `coarse_start=True` starts modified policy iteration from the solution on the grid with
 /// every other core, interpolated: the same error bound, fewer sweeps on fine grids.
 /// `operator="q-values"` runs Busoniu's fuzzy Q-iteration (theta stored; built-in models).
+/// `device="gpu"` runs the block backup's sweeps on a GPU through wgpu, in `"f32"` (the CPU's
+/// bits where the adapter fuses multiply-adds; see the `fuzzyq-gpu` crate).
 /// `callback(info)` is called after every sweep with a dict (`sweep`, `delta_lower`,
 /// `delta_upper`, `extrapolated`, `evaluation`, `seconds`, `bound`, `xi`); an exception it raises stops the
 /// solve and propagates. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
@@ -306,6 +317,7 @@ impl<'a, S> Watch<'a, S> {
     backup = "auto",
     kernel = None,
     operator = "values",
+    device = "cpu",
     threads = None,
     callback = None,
     transitions = None,
@@ -329,6 +341,7 @@ pub(crate) fn solve(
     #[pyo3(from_py_with = arg)] backup: &str,
     #[pyo3(from_py_with = arg)] kernel: Option<&str>,
     #[pyo3(from_py_with = arg)] operator: &str,
+    #[pyo3(from_py_with = arg)] device: &str,
     #[pyo3(from_py_with = arg)] threads: Option<usize>,
     callback: Option<Py<PyAny>>,
     transitions: Option<&Bound<'_, PyAny>>,
@@ -348,6 +361,7 @@ pub(crate) fn solve(
         backup,
         kernel,
         operator,
+        device,
     };
     guard(py, || {
         solve_(
@@ -451,9 +465,12 @@ fn solve_(
                    watch: &Watch<'_, FqiState<'static>>| {
             py.detach(|| {
                 with_pool(threads, || match &data {
-                    None => fuzzyq_sim::train::train_from(config, resume, |p, s| {
-                        watch.see(p, || s.map(|s| s.clone().into_owned()))
-                    }),
+                    None => fuzzyq_sim::train::train_showing(
+                        config,
+                        resume,
+                        watch.wants_state(),
+                        |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
+                    ),
                     Some(d) => fuzzyq_sim::train::train_on_transitions(
                         config,
                         d,
@@ -523,6 +540,13 @@ fn solve_(
     if settings.absorbing_goal {
         return Err(no_goal(py, "a CallableModel has no goal states"));
     }
+    if settings.device == Device::Gpu && settings.precision != Precision::F32 {
+        return Err(error(
+            py,
+            Kind::Config,
+            "device: \"gpu\" runs in float32; pass precision=\"f32\"",
+        ));
+    }
     let cm_obj = cm;
     let cm = cm.get();
     let tables = cm.tabulate(py, &g.inner, settings.precision, &limit)?;
@@ -540,9 +564,15 @@ fn solve_(
                        watch: &Watch<'_, solver::SolverState<'static, $t>>| {
                 py.detach(|| {
                     with_pool(threads, || {
-                        solver::solve_from(&*table, &grid_t, config, resume, |p, s| {
-                            watch.see(p, || s.map(|s| s.clone().into_owned()))
-                        })
+                        <$t as DeviceReal>::solve_on_device(
+                            settings.device,
+                            &*table,
+                            &grid_t,
+                            config,
+                            resume,
+                            watch.wants_state(),
+                            |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
+                        )
                     })
                 })
                 .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
@@ -552,18 +582,22 @@ fn solve_(
             watch.close(py);
             let (s, stopped) = match result {
                 Ok(s) => (s, false),
-                Err(e) => match watch.stopped() {
+                Err(fuzzyq_sim::SimError::Solve(e)) => match watch.stopped() {
                     Some((k, before)) => {
                         let limited = solver::SolverConfig {
                             max_sweeps: k,
                             ..config
                         };
                         let quiet = Watch::new(py, None, false, k)?;
-                        let s = run(&limited, before, &quiet)?.map_err(|e| quiet.error(py, &e))?;
+                        let s = run(&limited, before, &quiet)?.map_err(|e| match e {
+                            fuzzyq_sim::SimError::Solve(e) => quiet.error(py, &e),
+                            e => sim_error(py, &e),
+                        })?;
                         (s, true)
                     }
                     None => return Err(watch.error(py, &e)),
                 },
+                Err(e) => return Err(sim_error(py, &e)),
             };
             let summary = TrainSummary::from_solution(&s);
             let v = PyArray1::from_vec(py, s.v).into_any().unbind();

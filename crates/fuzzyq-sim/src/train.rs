@@ -12,8 +12,8 @@ use std::ops::ControlFlow;
 use fuzzyq_core::Real;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, Delta, Device, IterationOperator, Precision, Progress, Scheme, Solution, SolveError, SolverState,
-    SweepRecord,
+    self, Delta, Device, IterationOperator, Precision, Progress, Scheme, Solution, SolveError,
+    SolverState, SweepRecord,
 };
 use serde::Serialize;
 
@@ -138,6 +138,65 @@ where
     }
 }
 
+/// A floating-point type a run can take to a [`Device`]: `f32` runs on the GPU too, `f64`
+/// only on the CPU.
+pub trait DeviceReal: Real {
+    /// [`solver::solve_from`] of `model` on `device` (`show_state`: whether the observer is
+    /// shown the run's state, which the GPU reads back after every sweep).
+    fn solve_on_device<M: fuzzyq_core::Model<Self> + Sync + ?Sized>(
+        device: Device,
+        model: &M,
+        grid: &solver::Grid<Self>,
+        config: &solver::SolverConfig,
+        resume: Option<SolverState<'_, Self>>,
+        show_state: bool,
+        observer: impl FnMut(&Progress, Option<&SolverState<'_, Self>>) -> ControlFlow<()>,
+    ) -> Result<Solution<Self>, SimError>;
+}
+
+impl DeviceReal for f32 {
+    fn solve_on_device<M: fuzzyq_core::Model<f32> + Sync + ?Sized>(
+        device: Device,
+        model: &M,
+        grid: &solver::Grid<f32>,
+        config: &solver::SolverConfig,
+        resume: Option<SolverState<'_, f32>>,
+        show_state: bool,
+        observer: impl FnMut(&Progress, Option<&SolverState<'_, f32>>) -> ControlFlow<()>,
+    ) -> Result<Solution<f32>, SimError> {
+        match device {
+            Device::Cpu => Ok(solver::solve_from(model, grid, config, resume, observer)?),
+            Device::Gpu => {
+                let gpu = fuzzyq_gpu::Gpu::shared()?;
+                Ok(fuzzyq_gpu::solve_from(
+                    &gpu, model, grid, config, resume, show_state, observer,
+                )?)
+            }
+        }
+    }
+}
+
+impl DeviceReal for f64 {
+    fn solve_on_device<M: fuzzyq_core::Model<f64> + Sync + ?Sized>(
+        device: Device,
+        model: &M,
+        grid: &solver::Grid<f64>,
+        config: &solver::SolverConfig,
+        resume: Option<SolverState<'_, f64>>,
+        _show_state: bool,
+        observer: impl FnMut(&Progress, Option<&SolverState<'_, f64>>) -> ControlFlow<()>,
+    ) -> Result<Solution<f64>, SimError> {
+        match device {
+            Device::Cpu => Ok(solver::solve_from(model, grid, config, resume, observer)?),
+            Device::Gpu => Err(ConfigError::invalid(
+                "solver.device",
+                "\"gpu\" runs in f32; set solver.precision = \"f32\"",
+            )
+            .into()),
+        }
+    }
+}
+
 /// A run's state to continue from, in the configured precision.
 enum Resume {
     F32(Option<SolverState<'static, f32>>),
@@ -179,10 +238,9 @@ where
 {
     match split_resume(config, resume)? {
         Resume::F32(resume) if config.solver.device == Device::Gpu => {
-            let gpu = fuzzyq_gpu::Gpu::shared()?;
             let grid = config.grid::<f32>()?;
-            let s = fuzzyq_gpu::solve_from(
-                &gpu,
+            let s = f32::solve_on_device(
+                Device::Gpu,
                 model,
                 &grid,
                 &config.solver.solver_config(),

@@ -322,7 +322,10 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         if a.f64 { "yes" } else { "no" }
     );
     let peak = gpu.fma_peak(args.peak_seconds)?;
-    println!("FMA peak   {peak:.1} GFMA/s (f32, best of {} s of dispatches)", args.peak_seconds);
+    println!(
+        "FMA peak   {peak:.1} GFMA/s (f32, best of {} s of dispatches)",
+        args.peak_seconds
+    );
     let model = config.build_model()?;
     let grid = config.grid::<f32>()?;
     let s = config.solver.solver_config();
@@ -380,13 +383,18 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         sweeps.set_profiling(true);
         sweeps.backup(v, out)?;
         for (kernel, seconds, n) in sweeps.profile() {
-            println!("profile    {kernel}: {:.3} ms in {n} dispatches", 1e3 * seconds);
+            println!(
+                "profile    {kernel}: {:.3} ms in {n} dispatches",
+                1e3 * seconds
+            );
         }
     }
     println!(
         "problem    {}: {cores} cores x {joint} joint actions{}; {} slab(s) per batch; set-up {:.3} s",
         config.env.name(),
-        fma.map_or(String::new(), |f| format!(", {f:.3e} multiply-adds per full backup")),
+        fma.map_or(String::new(), |f| format!(
+            ", {f:.3e} multiply-adds per full backup"
+        )),
         sweeps.batch(),
         setup
     );

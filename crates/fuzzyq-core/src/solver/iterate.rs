@@ -103,6 +103,10 @@ where
     )
 }
 
+/// Builds a [`Sweeps`] backend for a prepared operator ([`solve_with`]).
+pub type MakeSweeps<'m, T, M, S> =
+    dyn FnMut(&super::Operator<'_, T, M>) -> Result<S, <S as Sweeps<T>>::Error> + 'm;
+
 /// [`solve_from`] with the passes over `V` run by a backend that `make` builds from the run's
 /// operator (a GPU holding its own copy of the block tables, say): the operator is prepared
 /// once, and a coarse start ([`SolverConfig::coarse_start`]) is solved by a backend `make`
@@ -115,7 +119,7 @@ pub fn solve_with<T, M, S>(
     config: &SolverConfig,
     resume: Option<SolverState<'_, T>>,
     show_state: bool,
-    make: &mut dyn FnMut(&super::Operator<'_, T, M>) -> Result<S, S::Error>,
+    make: &mut MakeSweeps<'_, T, M, S>,
     observer: impl FnMut(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()>,
 ) -> Result<Solution<T>, S::Error>
 where

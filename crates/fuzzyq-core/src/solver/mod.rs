@@ -101,7 +101,7 @@ mod table;
 
 pub use block::decide::{DecisionBlock, DecisionTables};
 pub use coarse::CoarseStart;
-pub use iterate::{solve, solve_from, solve_on, solve_with};
+pub use iterate::{MakeSweeps, solve, solve_from, solve_on, solve_with};
 pub use qiter::{QSolution, solve_q};
 pub use slabs::SlabLayout;
 pub use state::SolverState;

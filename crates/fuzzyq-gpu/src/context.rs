@@ -1,0 +1,78 @@
+//! The device a [`crate::Gpu`] holds, and what was measured of it: the lowest layer above
+//! the errors, which the buffers, the kernels and the probes build on.
+
+use crate::error::GpuError;
+
+/// What a GPU is, as the solver sees it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdapterSummary {
+    /// The adapter's name (`"NVIDIA H200"`, `"llvmpipe (LLVM 15.0.6, 256 bits)"`).
+    pub name: String,
+    /// The graphics API wgpu drives it through (`"vulkan"`, `"metal"`, `"dx12"`).
+    pub backend: String,
+    /// The driver and its version, as the adapter reports them.
+    pub driver: String,
+    /// Whether the adapter's `fma` is fused (one rounding), measured at start-up: where it is,
+    /// the GPU gives the CPU kernels' bits; where it is not (Mesa's lavapipe), it gives the
+    /// bits of the same sums with every product rounded first
+    /// ([`crate::reference::Rounding::Product`]).
+    pub fused_fma: bool,
+    /// Whether the adapter has `f64` in shaders (the change statistics run on the GPU with it,
+    /// on the host from the values without it).
+    pub f64: bool,
+    /// The adapter's largest buffer, in bytes.
+    pub max_buffer: u64,
+    /// The adapter's largest storage-buffer binding, in bytes.
+    pub max_binding: u64,
+    /// The adapter's subgroup size, where it has subgroup operations, one size, and a
+    /// workgroup of that many threads is one subgroup whose shuffles reduce as the last stage
+    /// needs (checked at start-up); the last stage then reduces a core's lanes with them.
+    pub subgroup_size: Option<u32>,
+}
+
+/// wgpu's device and queue, and the adapter's summary.
+pub(crate) struct Context {
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    pub(crate) summary: AdapterSummary,
+}
+
+/// The adapter named by `FUZZYQ_GPU_ADAPTER` (a part of its name), else the first of the
+/// most capable kind: a discrete GPU, then an integrated one, a virtual one, a CPU (Mesa's
+/// lavapipe).
+pub(crate) fn pick_adapter(instance: &wgpu::Instance) -> Result<wgpu::Adapter, GpuError> {
+    let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+    let rank = |t: wgpu::DeviceType| match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Cpu => 3,
+        wgpu::DeviceType::Other => 4,
+    };
+    if let Ok(want) = std::env::var("FUZZYQ_GPU_ADAPTER") {
+        let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+        return adapters
+            .into_iter()
+            .find(|a| {
+                a.get_info()
+                    .name
+                    .to_lowercase()
+                    .contains(&want.to_lowercase())
+            })
+            .ok_or(GpuError::NoNamedAdapter {
+                want,
+                found: names.join(", "),
+            });
+    }
+    adapters
+        .into_iter()
+        .min_by_key(|a| rank(a.get_info().device_type))
+        .ok_or(GpuError::NoAdapter {
+            hint: if cfg!(target_os = "linux") {
+                "; on Linux install the Vulkan loader and a driver, e.g. `apt-get install \
+                 libvulkan1 mesa-vulkan-drivers`"
+            } else {
+                ""
+            },
+        })
+}
