@@ -15,6 +15,8 @@ use fuzzyq_gpu::{Gpu, GpuError, GpuSweeps};
 use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
 use fuzzyq_sim::model::EnvKind;
 
+use crate::solver::values;
+
 /// The adapter, once per test binary; `None` (and a message) where there is none.
 fn gpu() -> Option<&'static Gpu> {
     static GPU: OnceLock<Option<Gpu>> = OnceLock::new();
@@ -188,26 +190,13 @@ fn the_fused_reference_is_the_cpu_solver() {
     }
 }
 
-/// Pseudo-random values in `[lo, hi)`.
-fn values(n: usize, seed: u64, lo: f32, hi: f32) -> Vec<f32> {
-    let mut s = seed | 1;
-    (0..n)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            lo + (hi - lo) * ((s >> 40) as f32 / (1u64 << 24) as f32)
-        })
-        .collect()
-}
-
 /// Every pass of the backend on random values against the reference, one at a time.
 fn passes_match<M: Model<f32> + Sync>(g: &Gpu, op: &Operator<'_, f32, M>) {
     let mut gs = GpuSweeps::new(g, op).expect("gpu sweeps");
     let mut hs = HostSweeps::new(op, rounding(g)).expect("reference");
     let n = op.n_cores();
-    let (a, b) = (values(n, 7, -3.0, 5.0), values(n, 11, -2.0, 2.0));
-    let policy: Vec<u32> = values(n, 13, 0.0, op.joint().n_joint() as f32)
+    let (a, b): (Vec<f32>, Vec<f32>) = (values(n, 7, -3.0, 5.0), values(n, 11, -2.0, 2.0));
+    let policy: Vec<u32> = values::<f64>(n, 13, 0.0, op.joint().n_joint() as f64)
         .into_iter()
         .map(|x| x as u32)
         .collect();
@@ -268,16 +257,25 @@ fn passes_match<M: Model<f32> + Sync>(g: &Gpu, op: &Operator<'_, f32, M>) {
     }
 }
 
+/// The operator a run of `config` prepares.
+fn operator<'a, M: Model<f32> + Sync>(
+    model: &'a M,
+    grid: &'a Grid<f32>,
+    config: &SolverConfig,
+) -> Operator<'a, f32, M> {
+    let backup = fuzzyq_core::backup::Backup {
+        gamma: config.gamma as f32,
+        absorbing_goal: config.absorbing_goal,
+    };
+    Operator::new(model, grid.view(), backup, config.path).unwrap()
+}
+
 fn operator_passes(c: &TrainConfig) {
     let Some(g) = gpu() else { return };
     let model = c.build_model().unwrap();
     let grid = c.grid::<f32>().unwrap();
     let config = c.solver.solver_config();
-    let backup = fuzzyq_core::backup::Backup {
-        gamma: config.gamma as f32,
-        absorbing_goal: config.absorbing_goal,
-    };
-    let op = Operator::new(&model, grid.view(), backup, config.path).unwrap();
+    let op = operator(&model, &grid, &config);
     passes_match(g, &op);
 }
 
@@ -320,11 +318,7 @@ fn lanes_reduced_in_memory_or_by_subgroups_give_the_same_bits() {
         let a = fuzzyq_gpu::solve_from(&memory, &model, &grid, &config, None, false, noop).unwrap();
         let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
         assert_same(&a, &b, "lanes reduced in memory against subgroups");
-        let backup = fuzzyq_core::backup::Backup {
-            gamma: config.gamma as f32,
-            absorbing_goal: config.absorbing_goal,
-        };
-        let op = Operator::new(&model, grid.view(), backup, config.path).unwrap();
+        let op = operator(&model, &grid, &config);
         assert!(!GpuSweeps::new(&memory, &op).unwrap().uses_subgroups());
         let sg = GpuSweeps::new(g, &op).unwrap().uses_subgroups();
         assert_eq!(

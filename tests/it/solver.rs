@@ -29,7 +29,7 @@ fn run<T: Real, M: Model<T> + Sync>(m: &M, g: &Grid<T>, c: &SolverConfig) -> Sol
 }
 
 /// Deterministic pseudo-random values in `[lo, hi)`.
-fn values<T: Real>(n: usize, seed: u64, lo: f64, hi: f64) -> Vec<T> {
+pub(crate) fn values<T: Real>(n: usize, seed: u64, lo: f64, hi: f64) -> Vec<T> {
     let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
     (0..n)
         .map(|_| {

@@ -7,7 +7,7 @@ const WG: u32 = 64u;
 const MAX_BLOCKS: u32 = 8u;
 
 struct Params {
-    // The stage (`stage`), the last block (`last_fused`, `reduce_rows`) or the pass's mode.
+    // The stage (the block of `stagec.wgsl`, `last1.wgsl`).
     b: u32,
     // Threads (or items) of this dispatch.
     count: u32,
@@ -70,6 +70,15 @@ fn blk(b: u32) -> vec4<u32> {
     return prm.blocks[b];
 }
 
+// Item `q` of a batch at a stage of `n` block cores: its block core and the first item of its
+// prefix (`(c, base)`); the first stage's cores start at the batch's first slab.
+fn core_of(first: bool, q: u32, n: u32) -> vec2<u32> {
+    if first {
+        return vec2<u32>(prm.c0_lo + q, 0u);
+    }
+    return vec2<u32>(q % n, (q / n) * n);
+}
+
 // `V` of core `core` from the maximum `m` of its expected values (state-only reward).
 fn finish(core: u32, m: f32) -> f32 {
     let r = rewards[core];
@@ -77,47 +86,6 @@ fn finish(core: u32, m: f32) -> f32 {
         return r;
     }
     return r + unfused(prm.gamma, m);
-}
-
-// Stage `b` over the batch: `dst[o]`, `o = ((q R + r) A + a) P + p`, the sum over row
-// `c_b A + a` of table `b` of `w src[((q / n_b) n_b + k) R + r) P + p]` (stage 0 reads `V`,
-// whose slab `k` starts at `k R`).
-@compute @workgroup_size(64)
-fn stage(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
-         @builtin(num_workgroups) nwg: vec3<u32>) {
-    let o = linear(gid, wid, nwg);
-    if o >= prm.count {
-        return;
-    }
-    let bl = blk(prm.b);
-    let n_b = bl.x;
-    let n_a = bl.y;
-    let r_len = bl.z;
-    let p_len = bl.w;
-    let p = o % p_len;
-    var t = o / p_len;
-    let a = t % n_a;
-    t = t / n_a;
-    let r = t % r_len;
-    let q = t / r_len;
-    var c: u32;
-    var base: u32;
-    if prm.b == 0u {
-        c = prm.c0_lo + q;
-        base = 0u;
-    } else {
-        c = q % n_b;
-        base = (q / n_b) * n_b;
-    }
-    let row = prm.rows[prm.b].x + c * n_a + a;
-    let e0 = row_ptr[row];
-    let e1 = row_ptr[row + 1u];
-    var acc = 0.0;
-    for (var e = e0; e < e1; e++) {
-        let i = ((base + col[e]) * r_len + r) * p_len + p;
-        acc = fma(weight[e], src[i], acc);
-    }
-    dst[o] = acc;
 }
 
 // Whether (v, i) beats (bv, bi): larger, or equal at a lower index.

@@ -51,7 +51,6 @@ pub(crate) struct DiffParams {
 /// The entry points of `block.wgsl`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Entry {
-    Stage,
     ReduceRows,
     Evaluate,
     Rewards,
@@ -66,8 +65,7 @@ pub(crate) enum Entry {
 }
 
 impl Entry {
-    const ALL: [Entry; 8] = [
-        Entry::Stage,
+    const ALL: [Entry; 7] = [
         Entry::ReduceRows,
         Entry::Evaluate,
         Entry::Rewards,
@@ -79,7 +77,6 @@ impl Entry {
 
     fn name(self) -> &'static str {
         match self {
-            Entry::Stage => "stage",
             Entry::ReduceRows => "reduce_rows",
             Entry::Evaluate => "evaluate",
             Entry::Rewards => "rewards_pass",

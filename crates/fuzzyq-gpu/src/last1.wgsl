@@ -19,15 +19,9 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     var bv = bitcast<f32>(0xff800000u ^ prm.zero);
     var bi = 0xffffffffu;
     if valid {
-        var c: u32;
-        var base: u32;
-        if LAST == 0u {
-            c = prm.c0_lo + local;
-            base = 0u;
-        } else {
-            c = local % NL;
-            base = (local / NL) * NL;
-        }
+        let cb = core_of(LAST == 0u, local, NL);
+        let c = cb.x;
+        let base = cb.y;
         let abs_mode = prm.mode == 3u;
         for (var a = 0u; a < AL; a++) {
             let row = prm.rows[LAST].x + c * AL + a;

@@ -23,7 +23,8 @@ pub(crate) fn subgroups_work(gpu: &Context, k: &Kernels, wgs: u32) -> Result<boo
     let tpc = wgs.min(32);
     let consts = [("WGS", wgs), ("TPC", tpc)];
     let t = (include_str!("sgprobe.wgsl"), "sg_probe");
-    let Ok(pipeline) = crate::kernels::specialized(gpu, k, t, &consts, &[], true) else {
+    let replace = [("REDUCE", crate::kernels::REDUCE_SUBGROUP)];
+    let Ok(pipeline) = crate::kernels::specialized(gpu, k, t, &consts, &replace, true) else {
         return Ok(false);
     };
     let groups = 64u32;

@@ -1,5 +1,5 @@
 // Probe: whether a workgroup of WGS threads is one subgroup whose lanes `subgroupShuffleXor`
-// exchanges, as `last1.wgsl` relies on: every cluster of TPC lanes reduces `src` to its
+// exchanges, as `last1.wgsl` relies on (REDUCE is its reduction, `REDUCE_SUBGROUP`): every cluster of TPC lanes reduces `src` to its
 // largest value at the lowest index, each lane writing the result at its own element.
 
 @compute @workgroup_size(WGS)
@@ -7,14 +7,7 @@ fn sg_probe(@builtin(workgroup_id) wid: vec3<u32>, @builtin(subgroup_invocation_
     let g = wid.x * WGS + sid;
     var bv = src[g];
     var bi = g;
-    for (var m = TPC / 2u; m > 0u; m = m / 2u) {
-        let ov = subgroupShuffleXor(bv, m);
-        let oi = subgroupShuffleXor(bi, m);
-        if beats(ov, oi, bv, bi) {
-            bv = ov;
-            bi = oi;
-        }
-    }
+    REDUCE
     dst[g] = bv;
     aux[g] = bi;
 }

@@ -15,15 +15,9 @@ fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id)
     t = t / SA;
     let r = t % SR;
     let q = t / SR;
-    var c: u32;
-    var base: u32;
-    if SB == 0u {
-        c = prm.c0_lo + q;
-        base = 0u;
-    } else {
-        c = q % SN;
-        base = (q / SN) * SN;
-    }
+    let cb = core_of(SB == 0u, q, SN);
+    let c = cb.x;
+    let base = cb.y;
     let row = prm.rows[SB].x + c * SA + a;
     let e1 = row_ptr[row + 1u];
     var acc = 0.0;

@@ -123,7 +123,8 @@ impl Shape {
 pub struct GpuSweeps {
     gpu: Gpu,
     k: Kernels,
-    /// The stages before the last, compiled with this problem's constants (`stagec.wgsl`).
+    /// The stages before the last (and the last, where it writes full rows), compiled with
+    /// this problem's constants (`stagec.wgsl`).
     stage_c: Vec<wgpu::ComputePipeline>,
     /// The fused last stage compiled for this problem (`last1.wgsl`), where it applies, with
     /// its cores per workgroup.
@@ -290,7 +291,14 @@ impl GpuSweeps {
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = Kernels::new(&gpu.inner)?;
-        let stage_c = (0..shape.written_stages())
+        // Every stage the passes run as a stage: those before the last, and the last where it
+        // writes full rows.
+        let compiled = if shape.fused && shape.fused_abs {
+            nb - 1
+        } else {
+            nb
+        };
+        let stage_c = (0..compiled)
             .map(|b| {
                 let [n_b, a_b, r_b, p_b] = shape.blocks[b];
                 let consts = [
@@ -471,7 +479,7 @@ impl GpuSweeps {
                 let t0 = std::time::Instant::now();
                 self.run(std::slice::from_ref(d))?;
                 let key = match d.0 {
-                    Entry::Stage | Entry::StageConst => format!("stage {}", d.1.b),
+                    Entry::StageConst => format!("stage {}", d.1.b),
                     e => format!("{e:?}"),
                 };
                 let p = self.profile.as_mut().expect("profiling");
@@ -576,7 +584,7 @@ impl GpuSweeps {
                     ..base
                 };
                 let slots = [src, Slot::Rows, Slot::DummyWrite, Slot::DummyRead];
-                ds.push((Entry::Stage, p, slots, kernels::grid(count)));
+                ds.push((Entry::StageConst, p, slots, kernels::grid(count)));
                 let p = Params {
                     count: cores as u32,
                     c0_lo: c0 as u32,

@@ -59,7 +59,13 @@ where
     let start = Instant::now();
     let run = prepare(model, grid, config)?;
     let mut sweeps = Local::new(&run.op);
-    let coarse = coarse_start(&run, model, grid, config, &resume, &mut sweeps)?;
+    let coarse = coarse_start(
+        &run,
+        (grid, config),
+        &resume,
+        &mut sweeps,
+        solve_locally(model),
+    )?;
     drive(
         &run,
         config,
@@ -97,7 +103,7 @@ where
     config.validate()?;
     let start = Instant::now();
     let run = prepare(model, grid, config)?;
-    let coarse = coarse_start(&run, model, grid, config, &resume, sweeps)?;
+    let coarse = coarse_start(&run, (grid, config), &resume, sweeps, solve_locally(model))?;
     drive(
         &run, config, sweeps, start, resume, coarse, show_state, observer,
     )
@@ -131,28 +137,13 @@ where
     let start = Instant::now();
     let run = prepare(model, grid, config)?;
     let mut sweeps = make(&run.op)?;
-    let coarse = match run.coarse.as_ref().filter(|_| resume.is_none()) {
-        None => None,
-        Some(coarse) => {
-            let t0 = Instant::now();
-            let config = SolverConfig {
-                coarse_start: false,
-                ..*config
-            };
-            // A function pointer, not a closure: the recursive call instantiates this function
-            // once more, not once per nesting.
-            let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
-                |_, _| ControlFlow::Continue(());
-            let s = solve_with(model, coarse, &config, None, false, make, noop)?;
-            let v = grid.interpolated_from(coarse, &s.v)?;
-            sweeps.load(Buf(0), &run.op.to_internal(&v))?;
-            Some(CoarseStart {
-                cores: coarse.n_cores(),
-                sweeps: s.sweeps.len(),
-                seconds: t0.elapsed().as_secs_f64(),
-            })
-        }
-    };
+    // The coarse grid's backend made by `make` too. A function pointer for its observer, not
+    // a closure: the recursive call instantiates this function once more, not once per nesting.
+    let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
+        |_, _| ControlFlow::Continue(());
+    let coarse = coarse_start(&run, (grid, config), &resume, &mut sweeps, |g, c| {
+        solve_with(model, g, c, None, false, make, noop)
+    })?;
     drive(
         &run,
         config,
@@ -166,15 +157,14 @@ where
 }
 
 /// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): the same scheme
-/// on [`Prepared::coarse`] (without a coarse start of its own), its `V` interpolated onto
-/// `grid` and loaded into `sweeps`'s first buffer.
+/// on [`Prepared::coarse`] (without a coarse start of its own), solved by `solve_coarse`, its
+/// `V` interpolated onto `grid` and loaded into `sweeps`'s first buffer.
 fn coarse_start<T, M, S>(
     run: &Prepared<'_, T, M>,
-    model: &M,
-    grid: &Grid<T>,
-    config: &SolverConfig,
+    (grid, config): (&Grid<T>, &SolverConfig),
     resume: &Option<SolverState<'_, T>>,
     sweeps: &mut S,
+    solve_coarse: impl FnOnce(&Grid<T>, &SolverConfig) -> Result<Solution<T>, S::Error>,
 ) -> Result<Option<CoarseStart>, S::Error>
 where
     T: Real,
@@ -189,7 +179,7 @@ where
         coarse_start: false,
         ..*config
     };
-    let s = solve(model, coarse, &config, |_| ControlFlow::Continue(()))?;
+    let s = solve_coarse(coarse, &config)?;
     let v = grid.interpolated_from(coarse, &s.v)?;
     sweeps.load(Buf(0), &run.op.to_internal(&v))?;
     Ok(Some(CoarseStart {
@@ -197,6 +187,13 @@ where
         sweeps: s.sweeps.len(),
         seconds: start.elapsed().as_secs_f64(),
     }))
+}
+
+/// The CPU solve of a coarse start.
+fn solve_locally<T: Real, M: Model<T> + Sync + ?Sized, E: From<SolveError>>(
+    model: &M,
+) -> impl FnOnce(&Grid<T>, &SolverConfig) -> Result<Solution<T>, E> {
+    move |g, c| Ok(solve(model, g, c, |_| ControlFlow::Continue(()))?)
 }
 
 /// Checks `resume`, loads it into `sweeps` and runs the scheme of `run` (from the coarse
