@@ -21,7 +21,7 @@ pub enum GpuError {
         found: String,
     },
     /// The adapter refused the device the solver asks for.
-    #[error("the GPU adapter {adapter} refused a device: {why}")]
+    #[error("the GPU adapter {adapter} refused a device: {}", one_line(why))]
     Device {
         /// The adapter's name.
         adapter: String,
@@ -46,9 +46,30 @@ pub enum GpuError {
         kind: &'static str,
     },
     /// The device ran out of memory or lost itself.
-    #[error("the GPU failed: {0}")]
+    #[error("the GPU failed: {}", one_line(.0))]
     Failed(String),
     /// The solver's own error (a model, grid or configuration it refuses, or an interrupted run).
     #[error(transparent)]
     Solve(#[from] SolveError),
+}
+
+/// wgpu's multi-line messages on one line: their non-empty lines, trimmed, joined by "; ".
+fn one_line(s: &str) -> String {
+    s.lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn device_failures_print_on_one_line() {
+        let e = super::GpuError::Failed("Validation Error\n\nCaused by:\n  In x\n".into());
+        assert_eq!(
+            e.to_string(),
+            "the GPU failed: Validation Error; Caused by:; In x"
+        );
+    }
 }

@@ -1219,3 +1219,55 @@ fn export_writes_the_compact_policy_and_refuses_what_it_cannot_export() {
         ],
     );
 }
+
+/// `--device gpu`: a small run on whatever adapter opens (CI's lavapipe; skipped, with a
+/// message, where none does), and its refusals as one line each.
+#[test]
+fn train_on_the_gpu_and_its_refusals() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    assert_all_fail(
+        d,
+        &[
+            (
+                "train --env pointmass --device gpu --precision f64 --out x.fzq",
+                "solver.device: \"gpu\" runs in f32",
+            ),
+            (
+                "train --env pointmass --device gpu --async --out x.fzq",
+                "synchronous sweeps",
+            ),
+            (
+                "bench --device gpu --kernel avx2",
+                "--kernel chooses a CPU kernel",
+            ),
+            ("train --env pointmass --device tpu --out x.fzq", "tpu"),
+        ],
+    );
+    let o = fuzzyq(
+        &[
+            "train",
+            "--env",
+            "dcmotor",
+            "--precision",
+            "f32",
+            "--device",
+            "gpu",
+            "--out",
+            "g.fzq",
+            "--json",
+            "g.json",
+            "--quiet",
+        ],
+        d,
+    );
+    let err = stderr(&o);
+    if err.contains("no GPU adapter") && std::env::var_os("FUZZYQ_REQUIRE_GPU").is_none() {
+        eprintln!("skipped: {err}");
+        return;
+    }
+    assert!(o.status.success(), "{err}");
+    let j = json(&d.join("g.json"));
+    assert_eq!(j["kernel"], "wgpu");
+    assert_eq!(j["converged"], true);
+}
