@@ -90,7 +90,13 @@ def run_cli(*args: object, check: bool = True) -> subprocess.CompletedProcess[st
 
 
 def test_unshardable_configurations_are_refused(tmp_path: Path) -> None:
-    for key, value in (("sweep", '"async"'), ("operator", '"q-values"'), ("backup", '"generic"')):
+    refused = (
+        ("sweep", '"async"'),
+        ("operator", '"q-values"'),
+        ("backup", '"generic"'),
+        ("device", '"gpu"'),
+    )
+    for key, value in refused:
         with pytest.raises(fuzzyq.ConfigError, match=f"solver.{key}"):
             fuzzyq.SlabProblem(setting(key, value))
     with pytest.raises(fuzzyq.ConfigError):

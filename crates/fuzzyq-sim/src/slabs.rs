@@ -38,6 +38,11 @@ pub fn check_shardable(config: &TrainConfig) -> Result<(), ConfigError> {
         "solver.backup",
         "must be \"block\" or \"auto\" for sharded sweeps (the generic path has no slabs)"
     );
+    crate::error::require!(
+        s.device == fuzzyq_core::solver::Device::Cpu,
+        "solver.device",
+        "must be \"cpu\" for sharded sweeps (the workers compute their slabs on their CPUs)"
+    );
     Ok(())
 }
 

@@ -62,6 +62,7 @@ precision = "f32"                           # "f32" or "f64"
 extrapolate = true                          # MacQueen extrapolation: fewer sweeps, same guarantee; false = the paper's plain sweeps
 evaluation_sweeps = 5                       # modified policy iteration: evaluation sweeps per full backup; 0 = value iteration (the paper)
 coarse_start = false                        # true: start from the grid with every other core (same bound; pays on fine grids)
+device = "cpu"                              # "cpu" or "gpu" (the block path in f32 through wgpu; the CPU's bits where the GPU fuses multiply-adds)
 "#;
 
 /// The default Khepera configuration: the robot experiment of sections 3.2-3.3.
@@ -119,6 +120,7 @@ precision = "f32"
 extrapolate = true
 evaluation_sweeps = 5
 coarse_start = true                         # start from the grid with every other core (same bound, fewer sweeps)
+device = "cpu"                              # "cpu" or "gpu" (the block path in f32 through wgpu)
 "#;
 
 /// A whole training configuration.
