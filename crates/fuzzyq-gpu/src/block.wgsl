@@ -13,8 +13,8 @@ struct Params {
     count: u32,
     // The first slab of this batch (a core of the first contracted block).
     c0_lo: u32,
-    // Unused (alignment).
-    tpc: u32,
+    // Padding: the fields before `blocks` fill whole 16-byte rows.
+    pad0: u32,
     // The reduction: 0: maximum of the expected values; 1: and the argument; 2: the argument
     // only; 3: maximum of the absolute values (written per core, for `max_pass`).
     mode: u32,

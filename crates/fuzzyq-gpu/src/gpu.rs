@@ -9,6 +9,8 @@ use crate::error::GpuError;
 #[derive(Clone)]
 pub struct Gpu {
     pub(crate) inner: Arc<Context>,
+    /// The generic kernels (`block.wgsl`, `diff.wgsl`), shared by every run.
+    pub(crate) kernels: Arc<crate::kernels::Kernels>,
     /// The largest storage binding a run uses (the adapter's, or less).
     pub(crate) max_binding: u64,
     /// Bytes of a batch's largest stage buffer.
@@ -26,8 +28,9 @@ impl core::fmt::Debug for Gpu {
 }
 
 impl Gpu {
-    /// Opens the first high-performance adapter wgpu finds (`WGPU_ADAPTER_NAME` picks one by
-    /// name, `WGPU_BACKEND` the API) and measures whether its `fma` is fused.
+    /// Opens the most capable adapter wgpu finds (`FUZZYQ_GPU_ADAPTER` picks one by a part of
+    /// its name, `WGPU_BACKEND` the API), compiles the generic kernels and runs the start-up
+    /// probes (is `fma` fused; do subgroup shuffles reduce as the last stage needs).
     pub fn new() -> Result<Self, GpuError> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = wgpu::Backends::from_env()
@@ -63,28 +66,25 @@ impl Gpu {
                 && (4..=64).contains(&info.subgroup_min_size))
             .then_some(info.subgroup_min_size),
         };
-        let mut gpu = Self {
-            max_binding: summary.max_binding,
-            batch_bytes: default_batch_bytes(),
-            subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
-            inner: Arc::new(Context {
-                device,
-                queue,
-                summary,
-            }),
+        let mut ctx = Context {
+            device,
+            queue,
+            summary,
         };
-        let k = crate::kernels::Kernels::new(&gpu.inner)?;
-        let fused = crate::probe::fused_fma(&gpu.inner, &k)?;
-        let subgroups = match gpu.inner.summary.subgroup_size {
-            Some(s) if crate::probe::subgroups_work(&gpu.inner, &k, s)? => Some(s),
+        // The generic kernels, compiled once for every run on this GPU, and the probes.
+        let kernels = crate::kernels::Kernels::new(&ctx)?;
+        ctx.summary.fused_fma = crate::probe::fused_fma(&ctx, &kernels)?;
+        ctx.summary.subgroup_size = match ctx.summary.subgroup_size {
+            Some(s) if crate::probe::subgroups_work(&ctx, &kernels, s)? => Some(s),
             _ => None,
         };
-        let summary = &mut Arc::get_mut(&mut gpu.inner)
-            .expect("not shared yet")
-            .summary;
-        summary.fused_fma = fused;
-        summary.subgroup_size = subgroups;
-        Ok(gpu)
+        Ok(Self {
+            max_binding: ctx.summary.max_binding,
+            batch_bytes: default_batch_bytes(),
+            subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
+            kernels: Arc::new(kernels),
+            inner: Arc::new(ctx),
+        })
     }
 
     /// The process's GPU: opened by the first call ([`Gpu::new`]) and shared by every later

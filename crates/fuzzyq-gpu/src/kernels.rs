@@ -21,7 +21,7 @@ pub(crate) struct Params {
     pub b: u32,
     pub count: u32,
     pub c0_lo: u32,
-    pub tpc: u32,
+    pub pad0: u32,
     pub mode: u32,
     pub n_joint: u32,
     pub has_map: u32,

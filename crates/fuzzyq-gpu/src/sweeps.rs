@@ -122,7 +122,7 @@ impl Shape {
 /// passes (the change statistics, the exact delta).
 pub struct GpuSweeps {
     gpu: Gpu,
-    k: Kernels,
+    k: std::sync::Arc<Kernels>,
     /// The stages before the last (and the last, where it writes full rows), compiled with
     /// this problem's constants (`stagec.wgsl`).
     stage_c: Vec<wgpu::ComputePipeline>,
@@ -290,7 +290,7 @@ impl GpuSweeps {
         let partials = n.div_ceil(PER_WG as usize) as u64;
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
-        let k = Kernels::new(&gpu.inner)?;
+        let k = gpu.kernels.clone();
         // Every stage the passes run as a stage: those before the last, and the last where it
         // writes full rows.
         let compiled = if shape.fused && shape.fused_abs {

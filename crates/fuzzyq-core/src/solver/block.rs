@@ -626,31 +626,6 @@ impl<T: Real> BlockOperator<T> {
         }
     }
 
-    /// The tables in contraction order, with the stage lengths, for [`super::BlockPlan`].
-    pub(super) fn plan_tables(&self) -> Vec<super::PlanTable<'_, T>> {
-        self.tables
-            .iter()
-            .enumerate()
-            .map(|(b, t)| {
-                let (ptr, col, weight) = t.rows.parts();
-                super::PlanTable {
-                    n_cores: t.n_cores,
-                    n_actions: t.n_actions,
-                    r_len: self.r_len[b],
-                    p_len: self.p_len[b],
-                    ptr,
-                    col,
-                    weight,
-                }
-            })
-            .collect()
-    }
-
-    /// Whether the model has terminal (core, joint action) pairs.
-    pub(super) fn has_terminals(&self) -> bool {
-        self.terminals.is_some()
-    }
-
     pub(super) fn joint_to_product(&self) -> Option<&[u32]> {
         self.map.as_deref()
     }
@@ -1494,6 +1469,8 @@ impl<T: Real> BlockOperator<T> {
 pub(super) mod decide;
 #[path = "block_order.rs"]
 mod order;
+#[path = "block_plan.rs"]
+mod plan;
 use decide::QWork;
 
 #[cfg(test)]

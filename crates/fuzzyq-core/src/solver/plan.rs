@@ -1,0 +1,120 @@
+//! The block path laid bare for a backend that computes its passes itself
+//! ([`BlockPlan`], [`Operator::block_plan`], [`Operator::reward_rows`]).
+
+use std::vec::Vec;
+
+use super::{Operator, Path, STATE_CHUNK, par};
+use crate::model::Model;
+use crate::real::Real;
+
+/// The block path's operator laid bare for a backend that computes its passes itself (a GPU,
+/// say): every table in contraction order and what the reduction needs
+/// ([`Operator::block_plan`]). A backend that sums each row's entries in order with fused
+/// multiply-adds from 0, stage after stage, and reduces as described here gets the CPU
+/// kernels' bits.
+///
+/// Stage `b` maps a tensor `[k_b][r][p]` (`r < r_len`, `p < p_len`) to `[r][a_b][p]`:
+/// `out[(r A + a) P + p] = sum_e w_e in[(k_e R + r) P + p]` over the row `c_b A + a` of table
+/// `b`, for each block core `c_b`; stage 0 reads `V` (internal order) and stage `b + 1` reads
+/// stage `b`'s output of the same prefix `(c_0, ..., c_b)`. The last stage leaves one
+/// expected value per core `(c_0, ..., c_{B-1})` (internal order, `c_0` slowest) and product
+/// action `p`.
+#[derive(Clone, Debug)]
+pub struct BlockPlan<'o, T> {
+    /// The tables in contraction order.
+    pub tables: Vec<PlanTable<'o, T>>,
+    /// Joint action -> product action, `None` where they coincide.
+    pub joint_to_product: Option<&'o [u32]>,
+    /// Number of joint actions.
+    pub n_joint: usize,
+    /// The discount factor, in the run's precision.
+    pub gamma: T,
+    /// `rho(x_d)` per core (internal order), when the reward does not depend on the action:
+    /// `V[d] = rho_d + gamma max_u ev[d, u]` (unfused), the greedy action the lowest
+    /// maximiser of `ev`.
+    pub rewards: Option<&'o [T]>,
+    /// `rho(x_d, u)` per core (internal order) and joint action, for a reward that depends on
+    /// the action: `theta = rho + gamma ev` (unfused), the lowest `u` with the largest.
+    pub reward_table: Option<&'o [T]>,
+    /// Absorbing goal flags per core (internal order; empty without an absorbing goal): a
+    /// goal core's value is its reward (of action 0) and its greedy action 0.
+    pub goal: &'o [bool],
+    /// Whether the model has terminal (core, joint action) pairs (their rows are zeroed
+    /// before the reduction; a backend may refuse such models).
+    pub terminals: bool,
+    /// Whether the operator runs policy-evaluation sweeps ([`Operator::evaluate_policy`]).
+    pub can_evaluate: bool,
+}
+
+/// One block's table of a [`BlockPlan`]: row `c A + a` (block core `c`, block action `a`)
+/// holds the memberships of the block's successor, entries `ptr[row]..ptr[row + 1]` of
+/// `col` and `weight`, in the order the kernels sum them.
+#[derive(Clone, Copy, Debug)]
+pub struct PlanTable<'o, T> {
+    /// Block cores.
+    pub n_cores: usize,
+    /// Block actions.
+    pub n_actions: usize,
+    /// The product of the later blocks' core counts (the stage's `R`).
+    pub r_len: usize,
+    /// The product of the earlier blocks' action counts (the stage's `P`).
+    pub p_len: usize,
+    /// Row starts, `n_cores * n_actions + 1` of them.
+    pub ptr: &'o [u32],
+    /// Columns (block cores of the successor).
+    pub col: &'o [u32],
+    /// Weights (memberships), finite and non-negative.
+    pub weight: &'o [T],
+}
+
+impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
+    /// `rho(x_d, u)` of every core (internal order) and joint action, a row of joint actions
+    /// per core: the table a backend that reduces on its own needs for a reward of the action
+    /// that the model computes ([`BlockPlan::reward_table`] is `None` then). The same values
+    /// the CPU's reduction computes, from the same core states.
+    #[must_use]
+    pub fn reward_rows(&self) -> Vec<T> {
+        if let Some(t) = &self.reward_table {
+            return t.to_vec();
+        }
+        let (n, m) = (self.n_cores(), self.joint.n_joint());
+        let (e, a) = (self.state_dim(), self.joint.dim());
+        let coords = self.block_coords();
+        let mut out = vec![T::ZERO; n * m];
+        par::for_each_chunk_mut(
+            &mut out,
+            STATE_CHUNK * m,
+            || (vec![T::ZERO; e], vec![T::ZERO; a]),
+            |(x, u), ci, chunk| {
+                let first = ci * STATE_CHUNK;
+                let range = first..first + chunk.len() / m;
+                self.for_each_core_state(&coords, range, x, |i, x| {
+                    for j in 0..m {
+                        self.joint.vector_unchecked(j, u);
+                        chunk[(i - first) * m + j] = self.model.reward(x, u);
+                    }
+                });
+            },
+        );
+        out
+    }
+
+    /// The block path's tables and reduction ([`BlockPlan`]); `None` on the generic path.
+    #[must_use]
+    pub fn block_plan(&self) -> Option<BlockPlan<'_, T>> {
+        let Path::Block(b) = &self.path else {
+            return None;
+        };
+        Some(BlockPlan {
+            tables: b.plan_tables(),
+            joint_to_product: b.joint_to_product(),
+            n_joint: self.joint.n_joint(),
+            gamma: self.gamma,
+            rewards: self.rewards.as_deref(),
+            reward_table: self.reward_table.as_deref(),
+            goal: &self.goal,
+            terminals: b.has_terminals(),
+            can_evaluate: self.can_evaluate(),
+        })
+    }
+}
