@@ -21,10 +21,14 @@ cargo rustc --locked -p fuzzyq-embedded-controller --lib --profile firmware \
 venv=target/python-test-venv
 rm -rf "$venv"
 ./scripts/setup-python.sh "$venv"
-"$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib tqdm "ray>=2.9"
+"$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib joblib "ray>=2.9"
 # Run from outside the source tree so that `import fuzzyq` finds the installed wheel; the
 # Python-CLI tests use the binary `cargo test` just built from this checkout.
 export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"
+# The wheel setup-python.sh built: test_wheel.py installs it into a fresh environment with no
+# cargo on PATH and runs the package, the `fuzzyq` command and `python -m fuzzyq` there.
+FUZZYQ_WHEEL=$(ls "$PWD"/target/wheels/fuzzyq-*.whl)
+export FUZZYQ_WHEEL
 (cd target && "$OLDPWD/$venv/bin/python" -m pytest "$OLDPWD/python/tests" -q -p no:cacheprovider)
 # (The pytest run above includes `mypy --strict` on every README python block and
 # examples/*.py, python/tests/test_readme.py, and the package's doctests, test_docs.py.)

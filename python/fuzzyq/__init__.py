@@ -17,9 +17,11 @@ of the `fuzzyq` command line tool. `load` reads every policy file the command li
 Q-learning, VQQL). `Policy.rollout` runs a policy on its environment as `fuzzyq rollout` does.
 Gymnasium and PettingZoo environments live in `fuzzyq.envs`.
 
-The documentation site (``mkdocs build`` in a checkout, as the README's "From Python" says)
-has a getting-started page, a page per environment and the API reference generated from these
-modules and the type stubs.
+The documentation site (``mkdocs build --strict`` in a checkout; its sources are in
+docs/site) has a getting-started page, the Python guide (docs/site/python/guide.md), a page
+per environment and the API reference generated from these modules and the type stubs. The
+package also installs the ``fuzzyq`` command line (``fuzzyq --help``, or
+``python -m fuzzyq --help``).
 
 Every error fuzzyq raises for bad input derives from `FuzzyqError`, with a one-line message
 that starts with the argument at fault:

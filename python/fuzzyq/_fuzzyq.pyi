@@ -42,6 +42,7 @@ __all__ = [
     "available_kernels",
     "train_sharded",
     "_restore",
+    "_cli",
 ]
 
 __version__: str
@@ -1429,17 +1430,17 @@ def solve(
     *,
     gamma: float | None = None,
     xi: float | None = None,
-    max_sweeps: int = 1000,
-    sweep: Literal["sync", "async"] = "sync",
+    max_sweeps: int | None = None,
+    sweep: Literal["sync", "async"] | None = None,
     extrapolate: bool | None = None,
     evaluation_sweeps: int | None = None,
-    coarse_start: bool = False,
-    absorbing_goal: bool = False,
+    coarse_start: bool | None = None,
+    absorbing_goal: bool | None = None,
     precision: Literal["f32", "f64", "float32", "float64"] | None = None,
-    backup: Literal["auto", "block", "generic"] = "auto",
+    backup: Literal["auto", "block", "generic"] | None = None,
     kernel: Literal["avx512", "avx2", "portable", "scalar"] | None = None,
-    operator: Literal["values", "q-values"] = "values",
-    device: Literal["cpu", "gpu"] = "cpu",
+    operator: Literal["values", "q-values"] | None = None,
+    device: Literal["cpu", "gpu"] | None = None,
     threads: int | None = None,
     callback: Callable[[dict[str, Any]], bool | None] | None = None,
     transitions: Mapping[str, npt.ArrayLike] | None = None,
@@ -1450,11 +1451,13 @@ def solve(
 
     A built-in model (`PointMass`, `DcMotor`, `Pendulum`, `CarHill`, `Arm`) is solved through
     the same code as ``fuzzyq train``; a `CallableModel` is tabulated on the grid first.
-    Settings left at None take the model's defaults: for a classic benchmark its preset's
-    `gamma` and `xi`, plain sweeps (``extrapolate=False``, ``evaluation_sweeps=0``) in
-    ``"f64"``, as ``fuzzyq train --preset`` runs it; otherwise ``gamma=0.96``, ``xi=0.05``,
-    ``extrapolate=True``, ``evaluation_sweeps=5`` (modified policy iteration where it
-    applies), ``"f32"``. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
+    Settings left at None take the task's defaults, the very settings ``fuzzyq train`` runs
+    for it (one definition serves both): for a classic benchmark its preset's `gamma` and
+    `xi`, plain sweeps (``extrapolate=False``, ``evaluation_sweeps=0``) in ``"f64"``; for the
+    Khepera robots the paper's settings with ``coarse_start=True``; otherwise ``gamma=0.96``,
+    ``xi=0.05``, ``extrapolate=True``, ``evaluation_sweeps=5`` (modified policy iteration where
+    it applies), ``"f32"``, ``max_sweeps=1000``, ``sweep="sync"``, ``backup="auto"``,
+    ``operator="values"``, ``device="cpu"``, no coarse start and no absorbing goal. Ctrl-C raises `KeyboardInterrupt` at the end of the current sweep.
 
     Args:
         model: the model to solve.
@@ -1462,7 +1465,9 @@ def solve(
         gamma: the discount factor, in ``[0, 1)``.
         xi: the stopping threshold: the run stops when the sweep's change
             ``||theta_{k+1} - theta_k||_inf`` is at most `xi` (the paper's rule).
-        max_sweeps: the most sweeps to run; the solution then has ``converged=False``.
+        max_sweeps: the most sweeps to run, full backups and evaluation sweeps alike (under
+            modified policy iteration the last one allowed is a full backup); the solution
+            then has ``converged=False``.
         sweep: ``"sync"`` (every core reads the previous sweep's values: Jacobi, the paper's
             eq 20) or ``"async"`` (slabs update in place, later ones read the new values:
             Gauss-Seidel).
@@ -1514,8 +1519,8 @@ def solve(
         max_memory_gb: the memory the solve may need (default: 90% of the machine's); a
             larger problem is refused with its estimate before anything is allocated or a
             `CallableModel`'s function is called.
-        progress: show a tqdm progress bar of the sweeps. tqdm is an optional dependency
-            (``pip install tqdm``); without it ``progress=True`` raises `ConfigError`.
+        progress: show a tqdm progress bar of the sweeps (tqdm is installed with the
+            package; if it was removed, ``progress=True`` raises `ConfigError`).
 
     Returns:
         The solution.
@@ -1784,4 +1789,15 @@ def _restore(kind: str, data: Any) -> Any:
 
     Returns:
         The object.
+    """
+
+def _cli(argv: list[str]) -> int:
+    """Runs the ``fuzzyq`` command line (the package's ``fuzzyq`` command and ``python -m
+    fuzzyq``; not for direct use).
+
+    Args:
+        argv: the program's name, then its arguments.
+
+    Returns:
+        The exit code: 0 on success, 2 for an error, 130 when Ctrl-C stopped a training run.
     """

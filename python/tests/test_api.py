@@ -308,7 +308,11 @@ def test_callback_sees_every_sweep_and_can_stop(one_agent: tuple[fuzzyq.PointMas
         fuzzyq.solve(model, grid, callback=stop)
 
 
-def test_ctrl_c_interrupts_a_long_solve_promptly() -> None:
+@pytest.mark.parametrize("threads", [None, 2])
+def test_ctrl_c_interrupts_a_long_solve_promptly(threads: int | None) -> None:
+    # The solve runs on the package's worker threads (fork-safe pools, and `threads=2` a pool
+    # of its own) while the calling thread looks for Ctrl-C: Python runs signal handlers on
+    # the main thread only.
     model = fuzzyq.PointMass(agents=2)
     grid = model.paper_grid()
     # Python's own Ctrl-C handler: a library imported by another test may have installed
@@ -322,7 +326,9 @@ def test_ctrl_c_interrupts_a_long_solve_promptly() -> None:
             # Plain sweeps to a tolerance far below the default: minutes of work however
             # fast the host, so Ctrl-C always lands mid-run (the default solve takes about
             # 3 s now, too close to the timer).
-            fuzzyq.solve(model, grid, extrapolate=False, evaluation_sweeps=0, xi=1e-6)
+            fuzzyq.solve(
+                model, grid, extrapolate=False, evaluation_sweeps=0, xi=1e-6, threads=threads
+            )
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, previous)

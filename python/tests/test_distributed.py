@@ -3,7 +3,7 @@ node) give the single-process policy file byte for byte, also when a worker proc
 mid-sweep and when the driver is killed and resumed from its checkpoint; bad input is refused
 before any cluster is touched.
 
-Skipped, with the reason, when Ray is not installed (``pip install "fuzzyq[distributed]"``).
+Skipped, with the reason, when Ray is not installed (``pip install "ray>=2.9"``).
 """
 
 from __future__ import annotations
@@ -156,7 +156,7 @@ def test_without_ray_a_typed_error_says_how_to_install_it(
 
 # On a local cluster.
 
-RAY_MISSING = 'Ray is not installed: pip install "fuzzyq[distributed]" to run these tests'
+RAY_MISSING = 'Ray is not installed: pip install "ray>=2.9" to run these tests'
 
 
 def _free_port() -> int:

@@ -208,3 +208,42 @@ def test_misspelt_options_fail_mypy(tmp_path: Path) -> None:
     assert status == 1, stdout
     lines = sorted(int(m) for m in re.findall(r"typos\.py:(\d+): error", stdout))
     assert lines == [5, 6, 7, 8, 9], stdout
+
+
+# The headline figures: one source, docs/headline-figures.md, copied verbatim between markers
+# into README.md, BENCHMARKS.md and the site's performance page; the pages a newcomer reads
+# first quote no timing of their own, so no second figure for the same thing can disagree.
+
+HEADLINE_SOURCE = ROOT / "docs" / "headline-figures.md"
+HEADLINE_COPIES = [ROOT / "README.md", ROOT / "BENCHMARKS.md", SITE / "performance.md"]
+HEADLINE_MARKED = re.compile(
+    r"<!-- headline-figures:start -->\n(.*?)<!-- headline-figures:end -->", re.S
+)
+# A duration: a number or a range of numbers, then a unit of time ("1.5 s", "12-20 s", "8 ms").
+TIMING = re.compile(r"\b\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?\s?(?:s|ms|us|µs|ns|sec|seconds?)\b")
+
+
+def _headline_table() -> str:
+    """The source's table, without the comment that opens the file."""
+    return re.sub(r"\A<!--.*?-->\n+", "", HEADLINE_SOURCE.read_text(), flags=re.S)
+
+
+def test_headline_figures_agree() -> None:
+    table = _headline_table()
+    rows = [line for line in table.splitlines() if line.startswith("|")]
+    assert len(rows) >= 4 and all(row.count("|") == 5 for row in rows), table
+    for page in HEADLINE_COPIES:
+        copies = HEADLINE_MARKED.findall(page.read_text())
+        assert copies, f"{page.relative_to(ROOT)} has no headline-figures markers"
+        for copy in copies:
+            assert copy == table, (
+                f"{page.relative_to(ROOT)}: the headline figures differ from "
+                "docs/headline-figures.md; copy the table there verbatim"
+            )
+    for page in [ROOT / "README.md", SITE / "index.md", SITE / "getting-started.md"]:
+        outside = HEADLINE_MARKED.sub("", page.read_text())
+        stray = [m.group(0) for m in TIMING.finditer(outside)]
+        assert not stray, (
+            f"{page.relative_to(ROOT)} quotes timings outside the headline table: {stray}; "
+            "point to the table instead"
+        )

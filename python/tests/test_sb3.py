@@ -1,6 +1,6 @@
 """Stable-Baselines3 training and Gymnasium video recording on ``FuzzyQ/PointMass-v0``.
 
-These need large optional packages (``pip install fuzzyq[sb3]``: stable-baselines3, which
+These need large optional packages (``pip install ".[sb3]"``: stable-baselines3, which
 brings torch, and moviepy) that CI does not install: each test skips with the reason when its
 package is missing.
 """
@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 gymnasium = pytest.importorskip(
-    "gymnasium", reason="gymnasium is not installed (pip install fuzzyq[envs])"
+    "gymnasium", reason="gymnasium is not installed (pip install gymnasium pettingzoo)"
 )
-pytest.importorskip("pettingzoo", reason="pettingzoo is not installed (pip install fuzzyq[envs])")
+pytest.importorskip("pettingzoo", reason="pettingzoo is not installed (pip install gymnasium pettingzoo)")
 
 import fuzzyq  # noqa: E402, F401  (registers FuzzyQ/PointMass-v0 for gymnasium.make)
 
@@ -26,10 +26,10 @@ ENV_ID = "FuzzyQ/PointMass-v0"
 def require_sb3() -> None:
     pytest.importorskip(
         "torch",
-        reason="torch is not installed (Stable-Baselines3 needs it: pip install fuzzyq[sb3])",
+        reason="torch is not installed (Stable-Baselines3 needs it: pip install '.[sb3]')",
     )
     pytest.importorskip(
-        "stable_baselines3", reason="stable-baselines3 is not installed (pip install fuzzyq[sb3])"
+        "stable_baselines3", reason="stable-baselines3 is not installed (pip install '.[sb3]')"
     )
 
 
@@ -76,7 +76,7 @@ def test_sb3_env_checker_accepts_the_env() -> None:
 
 def test_record_video_writes_the_episode(tmp_path: Path) -> None:
     moviepy = pytest.importorskip(
-        "moviepy", reason="moviepy is not installed (RecordVideo needs it: pip install fuzzyq[sb3])"
+        "moviepy", reason="moviepy is not installed (RecordVideo needs it: pip install '.[sb3]')"
     )
     from gymnasium.wrappers import RecordVideo
 

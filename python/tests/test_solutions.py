@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import pickle
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -156,11 +157,34 @@ def test_a_callback_returning_false_stops_and_keeps_the_partial_solution(
     assert seen == [1, 2, 3, 4]
     limited = fuzzyq.solve(model, grid, max_sweeps=4, **opts)  # type: ignore[arg-type]
     assert stopped.stopped and not stopped.converged and not limited.stopped
-    # (With evaluation sweeps, the sweep limit and the callback count full backups.)
-    assert stopped.sweeps == limited.sweeps
+    # Every sweep counts, evaluation sweeps too: the stop after sweep 4 returns 4 sweeps.
+    assert stopped.sweeps == limited.sweeps == 4
     assert np.array_equal(stopped.V, limited.V)
     assert np.array_equal(stopped.greedy, limited.greedy)
     assert stopped.final_delta == limited.final_delta
+
+
+def test_a_stop_under_the_default_scheme_returns_exactly_the_sweeps_run() -> None:
+    # Regression (issue 49): under modified policy iteration (the default) a stop at sweep 10
+    # ran on to 35 sweeps and max_sweeps=3 ran 13, counting only full backups.
+    model = fuzzyq.PointMass(agents=1)
+    grid = model.paper_grid()
+    seen: list[dict[str, Any]] = []
+
+    def stop_at_10(info: dict[str, Any]) -> bool:
+        seen.append(info)
+        return info["sweep"] < 10
+
+    stopped = fuzzyq.solve(model, grid, xi=1e-6, callback=stop_at_10)
+    assert seen[-1]["scheme"] == "modified-policy-iteration"
+    assert any(d["evaluation"] for d in seen)
+    assert [d["sweep"] for d in seen] == list(range(1, 11))
+    assert stopped.stopped and not stopped.converged and stopped.sweeps == 10
+    for k in (1, 2, 3, 7):
+        limited = fuzzyq.solve(model, grid, xi=1e-6, max_sweeps=k)
+        assert limited.sweeps == k and not limited.converged
+        # The last sweep allowed is a full backup: the bound is MacQueen's, as on convergence.
+        assert np.isfinite(limited.error_bound) and limited.error_bound > 0
 
 
 def test_a_coarse_start_keeps_the_bound_and_reports_itself() -> None:
@@ -247,3 +271,18 @@ def test_evaluate_runs_many_starts(one_agent: fuzzyq.Solution, motor: fuzzyq.Sol
     assert classic["runs"]["x0"].shape == (7, 2) and "mean_return" in classic["summary"]
     with pytest.raises(fuzzyq.InputError, match="starts"):
         fuzzyq.evaluate(motor.policy("greedy"), [1.0, 2.0])
+
+
+def test_a_state_beyond_single_precision_is_named_so(tmp_path: Path) -> None:
+    # Regression (issue 49): 1e300 on a float32 solution was "not a finite number".
+    model = fuzzyq.PointMass(agents=1)
+    single = fuzzyq.solve(model, model.paper_grid(), max_sweeps=3)
+    for kind in ("greedy", "interpolated"):
+        with pytest.raises(fuzzyq.InputError, match="beyond the solution's precision"):
+            single.policy(kind).act([1e300, 0.0, 0.0, 0.0])
+    double = fuzzyq.solve(model, model.paper_grid(), max_sweeps=3, precision="float64")
+    assert np.isfinite(double.policy("greedy").act([1e300, 0.0, 0.0, 0.0])).all()
+    # Regression: saving into a missing directory named the temporary file.
+    with pytest.raises(fuzzyq.PolicyFileError, match="does not exist") as e:
+        single.save(str(tmp_path / "no" / "such" / "x.fzq"))
+    assert ".fuzzyq-" not in str(e.value)

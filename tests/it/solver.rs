@@ -1511,3 +1511,42 @@ fn a_state_that_does_not_fit_the_run_is_refused() {
         assert!(e.to_string().contains(needle), "{e}");
     }
 }
+
+/// Regression (issue 49): `max_sweeps` counts every sweep under modified policy iteration,
+/// evaluation sweeps too (it counted full backups only: `max_sweeps = 3` ran 13 sweeps), and
+/// the last sweep allowed is a full backup, so that the run ends on MacQueen's bound. A run
+/// continued from a saved state stops at the same limit.
+#[test]
+fn modified_policy_iteration_counts_every_sweep_against_the_limit() {
+    let (m, g) = medium_two_agent::<f32>();
+    let base = SolverConfig {
+        xi: 1e-7,
+        extrapolate: true,
+        evaluation_sweeps: 5,
+        ..config(BackupPath::Block, SweepMode::Synchronous)
+    };
+    let unlimited = run(&m, &g, &base);
+    assert!(
+        unlimited.evaluation_sweeps() > 0,
+        "the run has evaluation sweeps"
+    );
+    for k in 1..=12 {
+        let c = SolverConfig {
+            max_sweeps: k,
+            ..base
+        };
+        let s = run(&m, &g, &c);
+        assert_eq!(s.sweeps.len(), k, "max_sweeps = {k}");
+        assert_eq!(s.stop, Stop::SweepLimit);
+        let last = s.sweeps.last().expect("a sweep");
+        assert!(
+            !last.evaluation,
+            "max_sweeps = {k}: the last sweep is a full backup"
+        );
+        assert!(s.final_delta.is_finite() && s.final_delta > 0.0);
+        // The sweeps before the last are those of the unlimited run.
+        for (a, b) in s.sweeps[..k - 1].iter().zip(&unlimited.sweeps) {
+            assert_eq!((a.sweep, a.evaluation), (b.sweep, b.evaluation));
+        }
+    }
+}

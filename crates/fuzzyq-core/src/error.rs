@@ -110,6 +110,14 @@ pub enum EvalError {
         /// The number of valid indices.
         len: usize,
     },
+    /// A finite input that the evaluation's precision cannot hold (a state of `1e300` for a
+    /// solution in `f32`, whose largest number is about `3.4e38`).
+    BeyondPrecision {
+        /// What the input is.
+        what: &'static str,
+        /// Its first such element.
+        index: usize,
+    },
     /// The model has more agents than [`MAX_AGENTS`](crate::MAX_AGENTS), or none.
     Agents {
         /// How many agents the model declares.
@@ -128,6 +136,11 @@ impl fmt::Display for EvalError {
             Self::NotFinite { what, index } => {
                 write!(f, "{what}: element {index} is not a finite number")
             }
+            Self::BeyondPrecision { what, index } => write!(
+                f,
+                "{what}: element {index} is beyond the solution's precision (single precision \
+                 holds |x| <= 3.4e38)"
+            ),
             Self::OutOfRange { what, index, len } => {
                 write!(f, "{what}: index {index} is out of range 0..{len}")
             }

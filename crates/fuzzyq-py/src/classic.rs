@@ -128,9 +128,9 @@ impl ClassicModel {
         g
     }
 
-    /// The preset's discount and threshold.
-    pub(crate) fn preset_gamma_xi(&self) -> (f64, f64) {
-        (self.preset.gamma, self.preset.xi)
+    /// The preset's name (its solver defaults are `fuzzyq train --preset`'s).
+    pub(crate) fn preset_name(&self) -> &str {
+        &self.preset.name
     }
 
     fn m(&self) -> &EnvModel {

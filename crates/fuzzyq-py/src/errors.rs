@@ -218,7 +218,9 @@ pub(crate) fn memory_error(py: Python<'_>, arg: &str, e: &SimError) -> PyErr {
 pub(crate) fn solve_error(py: Python<'_>, e: &SolveError) -> PyErr {
     let kind = match e {
         SolveError::Eval(EvalError::Length { .. } | EvalError::OutOfRange { .. }) => Kind::Input,
-        SolveError::Eval(EvalError::NotFinite { .. }) => Kind::Input,
+        SolveError::Eval(EvalError::NotFinite { .. } | EvalError::BeyondPrecision { .. }) => {
+            Kind::Input
+        }
         SolveError::NonFinite { .. } => Kind::Model,
         SolveError::TooLarge { .. } | SolveError::Interrupted { .. } => Kind::Solver,
         _ => Kind::Config,

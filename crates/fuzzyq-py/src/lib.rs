@@ -16,6 +16,7 @@ mod khepera;
 mod model;
 mod pickle;
 mod policy;
+mod pool;
 mod slabs;
 mod solve;
 
@@ -44,7 +45,18 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;
     m.add_function(wrap_pyfunction!(slabs::train_sharded, m)?)?;
     m.add_function(wrap_pyfunction!(restore, m)?)?;
+    m.add_function(wrap_pyfunction!(cli, m)?)?;
     Ok(())
+}
+
+/// Runs the `fuzzyq` command line on `argv` (the program's name first) with the GIL released
+/// and returns its exit code: the package's `fuzzyq` command and `python -m fuzzyq` (not for
+/// direct use). The command line is the Rust binary's own code (`fuzzyq_cli::run`), so a wheel
+/// carries the whole tool.
+#[pyfunction]
+#[pyo3(name = "_cli")]
+fn cli(py: Python<'_>, argv: Vec<std::ffi::OsString>) -> u8 {
+    py.detach(|| fuzzyq_cli::run(argv))
 }
 
 /// Rebuilds a pickled object (the inverse of the classes' `__reduce__`; not for direct use).

@@ -81,8 +81,7 @@ impl Policy {
         };
         let file = fuzzyq_sim::io::policy_file::PolicyFile::from_bytes(&bytes, "<pickle>".as_ref())
             .map_err(|e| crate::errors::policy_file_error(py, &e))?;
-        let policy = py
-            .detach(|| SimPolicy::from_file(file))
+        let policy = crate::pool::detach(py, || SimPolicy::from_file(file))
             .map_err(|e| sim_error(py, &e))?;
         Ok(Py::new(
             py,
@@ -168,7 +167,7 @@ impl Policy {
         let n = xs.len() / e.max(1);
         let mut us = vec![0.0; n * a];
         let mut idx = vec![-1i64; n];
-        py.detach(|| {
+        crate::pool::detach(py, || {
             xs.par_chunks(e * CHUNK)
                 .zip(us.par_chunks_mut(a * CHUNK))
                 .zip(idx.par_chunks_mut(CHUNK))
@@ -195,7 +194,7 @@ impl Policy {
         let m = self.n_joint_();
         let n = xs.len() / e.max(1);
         let mut out = vec![0.0; n * m];
-        py.detach(|| {
+        crate::pool::detach(py, || {
             xs.par_chunks(e)
                 .zip(out.par_chunks_mut(m))
                 .try_for_each(|(x, row)| {
@@ -720,8 +719,7 @@ impl Policy {
                 seed,
             };
             let policy = &*self.inner;
-            let outcome = py
-                .detach(|| evaluate::run(policy, &start, &rollout))
+            let outcome = crate::pool::detach(py, || evaluate::run(policy, &start, &rollout))
                 .map_err(|e| sim_error(py, &e))?;
             let out = PyDict::new(py);
             let a = self.action_dim_();
@@ -839,8 +837,8 @@ impl Policy {
             };
             let kind = self.kind;
             let inner = &self.inner;
-            let (runs, summary) = py
-                .detach(|| -> Result<(Value, Value), SimError> {
+            let (runs, summary) =
+                crate::pool::detach(py, || -> Result<(Value, Value), SimError> {
                     fn json<T: serde::Serialize>(v: &T) -> Value {
                         serde_json::to_value(v).unwrap_or(Value::Null)
                     }

@@ -80,7 +80,7 @@ fn pass<U: Element + Copy + Default + Send>(
     f: impl FnOnce(&mut [U]) -> Result<(), SolveError> + Send,
 ) -> PyResult<Py<PyAny>> {
     let mut out = vec![U::default(); n];
-    py.detach(|| f(&mut out)).map_err(|e| solve_error(py, &e))?;
+    crate::pool::detach(py, || f(&mut out)).map_err(|e| solve_error(py, &e))?;
     Ok(PyArray1::from_vec(py, out).into_any().unbind())
 }
 
@@ -97,8 +97,7 @@ impl SlabProblem {
     fn new(py: Python<'_>, #[pyo3(from_py_with = arg)] config: &str) -> PyResult<Self> {
         guard(py, || {
             let config = TrainConfig::from_toml(config).map_err(|e| config_error(py, &e))?;
-            let inner = py
-                .detach(|| slabs::SlabProblem::new(&config))
+            let inner = crate::pool::detach(py, || slabs::SlabProblem::new(&config))
                 .map_err(|e| sim_error(py, &e))?;
             Ok(Self { inner })
         })
@@ -177,8 +176,10 @@ impl SlabProblem {
                 let (h, v) = (halo.as_slice()?, v.as_slice()?);
                 let n = self.cores(&r);
                 let (mut out, mut acts) = (vec![T::ZERO; n], vec![0u32; n]);
-                py.detach(|| op.backup_greedy_slabs(r.clone(), h, v, &mut out, &mut acts))
-                    .map_err(|e| solve_error(py, &e))?;
+                crate::pool::detach(py, || {
+                    op.backup_greedy_slabs(r.clone(), h, v, &mut out, &mut acts)
+                })
+                .map_err(|e| solve_error(py, &e))?;
                 Ok((
                     PyArray1::from_vec(py, out).into_any().unbind(),
                     PyArray1::from_vec(py, acts).into_any().unbind(),
@@ -263,7 +264,7 @@ impl SlabProblem {
                         "abs_max: a_halo and b_halo differ in length",
                     ));
                 }
-                py.detach(|| {
+                crate::pool::detach(py, || {
                     let dv: Vec<T> = a.iter().zip(b).map(|(&x, &y)| x - y).collect();
                     op.abs_max_slabs(r.clone(), h, &dv)
                 })
@@ -293,7 +294,9 @@ impl SlabProblem {
                         "diff_stats: a and b differ in length",
                     ));
                 }
-                let d = py.detach(|| fuzzyq_core::solver::diff_stats(a, b, T::from_f64(shift)));
+                let d = crate::pool::detach(py, || {
+                    fuzzyq_core::solver::diff_stats(a, b, T::from_f64(shift))
+                });
                 Ok((d.change, d.lo, d.hi))
             })
         })
@@ -310,7 +313,9 @@ impl SlabProblem {
             with_op!(self, |_op: T| {
                 let v = values::<T>(py, v, "v")?;
                 let mut out = v.as_slice()?.to_vec();
-                py.detach(|| fuzzyq_core::solver::shift(&mut out, T::from_f64(shift)));
+                crate::pool::detach(py, || {
+                    fuzzyq_core::solver::shift(&mut out, T::from_f64(shift))
+                });
                 Ok(PyArray1::from_vec(py, out).into_any().unbind())
             })
         })
@@ -463,15 +468,14 @@ pub(crate) fn train_sharded(
         let state = match &resume {
             None => None,
             Some(path) => {
-                let c = py
-                    .detach(|| {
-                        let c = Checkpoint::load(path)?;
-                        c.check_settings(&settings, path)?;
-                        Ok(c)
-                    })
-                    .map_err(|e: fuzzyq_sim::io::checkpoint::CheckpointError| {
-                        error(py, Kind::Input, format!("resume: {e}"))
-                    })?;
+                let c = crate::pool::detach(py, || {
+                    let c = Checkpoint::load(path)?;
+                    c.check_settings(&settings, path)?;
+                    Ok(c)
+                })
+                .map_err(|e: fuzzyq_sim::io::checkpoint::CheckpointError| {
+                    error(py, Kind::Input, format!("resume: {e}"))
+                })?;
                 match c.state {
                     RunState::Fqi(s) => Some(s),
                     RunState::Fql(_) => {

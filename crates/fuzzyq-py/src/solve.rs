@@ -5,17 +5,19 @@
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::str::FromStr;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use fuzzyq_core::NamedOption;
 use fuzzyq_core::options::UnknownName;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, BackupPath, CoarseStart, Device, IterationOperator, Kernel, Precision, Progress, Scheme,
-    SolveError, SweepMode, TabulatedModel,
+    self, CoarseStart, Device, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError,
+    TabulatedModel,
 };
+use fuzzyq_sim::SimError;
 use fuzzyq_sim::io::checkpoint::FqiState;
-use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverSettings, TrainConfig};
+use fuzzyq_sim::io::config::{EnvConfig, GridConfig, SolverOverrides, SolverSettings, TrainConfig};
 use fuzzyq_sim::io::policy_file::{
     PolicyArtifact, PolicyFile, TabulatedArtifact, TrainSummary, Values,
 };
@@ -51,74 +53,55 @@ pub(crate) fn parse_option<T: FromStr<Err = UnknownName>>(
         .map_err(|e: UnknownName| error(py, Kind::Config, format!("{field}: {e}, got {got:?}")))
 }
 
-/// The solver settings as given to `solve` (`None`: the model's default).
+/// The solver settings as given to `solve` (`None`: the task's default, decided by
+/// [`TrainConfig::solver_defaults`] as for `fuzzyq train`).
 struct Settings<'a> {
     gamma: Option<f64>,
     xi: Option<f64>,
-    max_sweeps: usize,
-    sweep: &'a str,
+    max_sweeps: Option<usize>,
+    sweep: Option<&'a str>,
     extrapolate: Option<bool>,
     evaluation_sweeps: Option<usize>,
-    coarse_start: bool,
-    absorbing_goal: bool,
+    coarse_start: Option<bool>,
+    absorbing_goal: Option<bool>,
     precision: Option<&'a str>,
-    backup: &'a str,
+    backup: Option<&'a str>,
     kernel: Option<&'a str>,
-    operator: &'a str,
-    device: &'a str,
+    operator: Option<&'a str>,
+    device: Option<&'a str>,
 }
 
 impl Settings<'_> {
-    /// The settings with the model's defaults filled in: the preset's `gamma` and `xi`, plain
-    /// sweeps in float64 for a classic benchmark (as `fuzzyq train --preset` runs it), the
-    /// paper's settings otherwise.
-    fn resolve(&self, py: Python<'_>, classic: Option<(f64, f64)>) -> PyResult<SolverSettings> {
-        let defaults = SolverSettings::default();
+    /// The settings given, their names parsed (`"float32"` and `"float64"` are accepted for
+    /// the precisions as numpy names them).
+    fn overrides(&self, py: Python<'_>) -> PyResult<SolverOverrides> {
+        fn named<T: FromStr<Err = UnknownName>>(
+            py: Python<'_>,
+            field: &str,
+            got: Option<&str>,
+        ) -> PyResult<Option<T>> {
+            got.map(|g| parse_option(py, field, g)).transpose()
+        }
         let precision = match self.precision {
-            None if classic.is_some() => Precision::F64,
-            None => defaults.precision,
-            Some("float32") => Precision::F32,
-            Some("float64") => Precision::F64,
-            Some(p) => parse_option(py, "precision", p)?,
+            Some("float32") => Some(Precision::F32),
+            Some("float64") => Some(Precision::F64),
+            p => named(py, "precision", p)?,
         };
-        Ok(SolverSettings {
-            gamma: self
-                .gamma
-                .unwrap_or(classic.map_or(defaults.gamma, |c| c.0)),
-            xi: self.xi.unwrap_or(classic.map_or(defaults.xi, |c| c.1)),
+        Ok(SolverOverrides {
+            gamma: self.gamma,
+            xi: self.xi,
             max_sweeps: self.max_sweeps,
-            sweep: parse_option::<SweepMode>(py, "sweep", self.sweep)?,
+            sweep: named(py, "sweep", self.sweep)?,
             absorbing_goal: self.absorbing_goal,
-            backup: parse_option::<BackupPath>(py, "backup", self.backup)?,
+            backup: named(py, "backup", self.backup)?,
             precision,
-            extrapolate: self
-                .extrapolate
-                .unwrap_or(classic.is_none() && defaults.extrapolate),
-            evaluation_sweeps: self.evaluation_sweeps.unwrap_or(if classic.is_none() {
-                defaults.evaluation_sweeps
-            } else {
-                0
-            }),
+            extrapolate: self.extrapolate,
+            evaluation_sweeps: self.evaluation_sweeps,
             coarse_start: self.coarse_start,
-            kernel: self
-                .kernel
-                .map(|k| parse_option::<Kernel>(py, "kernel", k))
-                .transpose()?,
-            operator: parse_option::<IterationOperator>(py, "operator", self.operator)?,
-            device: parse_option::<Device>(py, "device", self.device)?,
+            kernel: named(py, "kernel", self.kernel)?,
+            operator: named(py, "operator", self.operator)?,
+            device: named(py, "device", self.device)?,
         })
-    }
-}
-
-/// Runs `f` on `threads` threads (a dedicated pool) or on the global pool.
-fn with_pool<R: Send>(threads: Option<usize>, f: impl FnOnce() -> R + Send) -> Result<R, String> {
-    match threads {
-        None => Ok(f()),
-        Some(n) => rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build()
-            .map(|p| p.install(f))
-            .map_err(|e| e.to_string()),
     }
 }
 
@@ -130,6 +113,8 @@ struct Watch<'a, S> {
     /// The tqdm bar of `progress=True`.
     bar: Option<Py<PyAny>>,
     failure: Mutex<Option<PyErr>>,
+    /// Set by [`interrupt`](Self::interrupt): the run stops after its current sweep.
+    interrupted: AtomicBool,
     halt: Mutex<Halt<S>>,
 }
 
@@ -169,6 +154,7 @@ impl<'a, S> Watch<'a, S> {
             callback,
             bar,
             failure: Mutex::new(None),
+            interrupted: AtomicBool::new(false),
             halt: Mutex::new(Halt {
                 at: None,
                 before: None,
@@ -177,7 +163,14 @@ impl<'a, S> Watch<'a, S> {
         })
     }
 
-    /// After each sweep: checks for Ctrl-C, updates the bar, calls the callback (an exception
+    /// Ctrl-C (or another exception a signal handler raised, `e`): the run stops after its
+    /// current sweep and `e` is raised.
+    fn interrupt(&self, e: PyErr) {
+        self.failure.lock().expect("not poisoned").get_or_insert(e);
+        self.interrupted.store(true, Ordering::SeqCst);
+    }
+
+    /// After each sweep: stops if interrupted, checks for Ctrl-C, updates the bar, calls the callback (an exception
     /// it raises is kept to be re-raised; `False` asks to stop), and keeps the state (`state`
     /// is called only when a callback could stop the run).
     fn see(&self, p: &Progress, state: impl FnOnce() -> Option<S>) -> ControlFlow<()> {
@@ -185,6 +178,9 @@ impl<'a, S> Watch<'a, S> {
             let mut h = self.halt.lock().expect("not poisoned");
             h.before = h.latest.take();
             h.latest = state();
+        }
+        if self.interrupted.load(Ordering::SeqCst) {
+            return ControlFlow::Break(());
         }
         Python::attach(|py| {
             let result = py.check_signals().and_then(|()| {
@@ -272,10 +268,10 @@ impl<'a, S> Watch<'a, S> {
 ///
 /// `model` is a built-in model (`PointMass`, `DcMotor`, `Pendulum`, `CarHill`, `Arm`), solved
 /// through the same code as `fuzzyq train`, or a `CallableModel`, tabulated on the grid first.
-/// Settings left at `None` take the model's defaults: for a classic benchmark its preset's
-/// `gamma` and `xi`, plain sweeps (`extrapolate=False`, `evaluation_sweeps=0`) in `"f64"`, as
-/// `fuzzyq train --preset` runs it; otherwise `gamma=0.96`, `xi=0.05`, `extrapolate=True`,
-/// `evaluation_sweeps=5` (modified policy iteration where it applies), `"f32"`.
+/// Settings left at `None` take the task's defaults, those `fuzzyq train` runs
+/// ([`TrainConfig::solver_defaults`]): a classic benchmark's preset's `gamma` and `xi` with
+/// plain sweeps in `"f64"`; the robots' paper settings with a coarse start; otherwise
+/// `gamma=0.96`, `xi=0.05`, `extrapolate=True`, `evaluation_sweeps=5`, `"f32"`.
 /// `coarse_start=True` starts modified policy iteration from the solution on the grid with
 /// every other core, interpolated: the same error bound, fewer sweeps on fine grids.
 /// `operator="q-values"` runs Busoniu's fuzzy Q-iteration (theta stored; built-in models).
@@ -307,17 +303,17 @@ impl<'a, S> Watch<'a, S> {
     *,
     gamma = None,
     xi = None,
-    max_sweeps = 1000,
-    sweep = "sync",
+    max_sweeps = None,
+    sweep = None,
     extrapolate = None,
     evaluation_sweeps = None,
-    coarse_start = false,
-    absorbing_goal = false,
+    coarse_start = None,
+    absorbing_goal = None,
     precision = None,
-    backup = "auto",
+    backup = None,
     kernel = None,
-    operator = "values",
-    device = "cpu",
+    operator = None,
+    device = None,
     threads = None,
     callback = None,
     transitions = None,
@@ -331,17 +327,17 @@ pub(crate) fn solve(
     #[pyo3(from_py_with = arg)] grid: &Bound<'_, Grid>,
     #[pyo3(from_py_with = arg)] gamma: Option<f64>,
     #[pyo3(from_py_with = arg)] xi: Option<f64>,
-    #[pyo3(from_py_with = arg)] max_sweeps: usize,
-    #[pyo3(from_py_with = arg)] sweep: &str,
+    #[pyo3(from_py_with = arg)] max_sweeps: Option<usize>,
+    #[pyo3(from_py_with = arg)] sweep: Option<&str>,
     #[pyo3(from_py_with = arg)] extrapolate: Option<bool>,
     #[pyo3(from_py_with = arg)] evaluation_sweeps: Option<usize>,
-    #[pyo3(from_py_with = arg)] coarse_start: bool,
-    #[pyo3(from_py_with = arg)] absorbing_goal: bool,
+    #[pyo3(from_py_with = arg)] coarse_start: Option<bool>,
+    #[pyo3(from_py_with = arg)] absorbing_goal: Option<bool>,
     #[pyo3(from_py_with = arg)] precision: Option<&str>,
-    #[pyo3(from_py_with = arg)] backup: &str,
+    #[pyo3(from_py_with = arg)] backup: Option<&str>,
     #[pyo3(from_py_with = arg)] kernel: Option<&str>,
-    #[pyo3(from_py_with = arg)] operator: &str,
-    #[pyo3(from_py_with = arg)] device: &str,
+    #[pyo3(from_py_with = arg)] operator: Option<&str>,
+    #[pyo3(from_py_with = arg)] device: Option<&str>,
     #[pyo3(from_py_with = arg)] threads: Option<usize>,
     callback: Option<Py<PyAny>>,
     transitions: Option<&Bound<'_, PyAny>>,
@@ -400,53 +396,42 @@ fn solve_(
     }
     let g = grid.get();
 
-    // A built-in model: the configuration `fuzzyq train` would read, trained the same way.
+    // A built-in model: the configuration `fuzzyq train` would read (the task's defaults,
+    // then the settings given), trained the same way.
+    let overrides = given.overrides(py)?;
+    let explicit = || GridConfig {
+        membership: g.inner.membership(),
+        ..GridConfig::explicit(g.inner.cores().to_vec())
+    };
     let builtin = if let Ok(pm) = model.cast::<PointMass>() {
-        let settings = given.resolve(py, None)?;
         Some((
             EnvConfig::Pointmass(pm.get().model.config().clone()),
-            GridConfig {
-                membership: g.inner.membership(),
-                ..GridConfig::explicit(g.inner.cores().to_vec())
-            },
-            settings,
+            explicit(),
+            None,
         ))
     } else if let Ok(k) = model.cast::<crate::khepera::Khepera>() {
-        let defaults = k.get().train_config(py)?;
-        let mut settings = given.resolve(py, None)?;
-        if given.xi.is_none() {
-            // The paper's threshold for the robots.
-            settings.xi = defaults.solver.xi;
-        }
-        Some((
-            defaults.env,
-            GridConfig {
-                membership: g.inner.membership(),
-                ..GridConfig::explicit(g.inner.cores().to_vec())
-            },
-            settings,
-        ))
+        Some((k.get().train_config(py)?.env, explicit(), None))
     } else if let Ok(c) = model.cast::<ClassicModel>() {
         let c = c.get();
-        let settings = given.resolve(py, Some(c.preset_gamma_xi()))?;
-        Some((c.env.clone(), ClassicModel::grid_config(g), settings))
+        Some((
+            c.env.clone(),
+            ClassicModel::grid_config(g),
+            Some(c.preset_name()),
+        ))
     } else {
         None
     };
-    if let Some((env, grid_config, settings)) = builtin {
-        let config = TrainConfig {
-            env,
-            grid: grid_config,
-            solver: settings,
-        };
-        config.validate().map_err(|e| config_error(py, &e))?;
+    if let Some((env, grid_config, preset)) = builtin {
+        let config = TrainConfig::for_task(env, grid_config, preset, &overrides)
+            .map_err(|e| config_error(py, &e))?;
         limit
             .check(&fuzzyq_sim::memory::train(&config))
             .map_err(|e| memory_error(py, "max_memory_gb", &e))?;
         if config.solver.absorbing_goal {
             let task = config.build_model().map_err(|e| sim_error(py, &e))?;
             let inner = &g.inner;
-            let any_goal = py.detach(|| any_core(inner, |x| F64Model::is_goal(&task, x)));
+            let any_goal =
+                crate::pool::detach(py, || any_core(inner, |x| F64Model::is_goal(&task, x)));
             if !any_goal {
                 return Err(no_goal(
                     py,
@@ -460,50 +445,36 @@ fn solve_(
         let data = transitions
             .map(|t| transitions_from(t, &config))
             .transpose()?;
-        let run = |config: &TrainConfig,
+        let run = |limit: Option<usize>,
                    resume: Option<FqiState<'static>>,
                    watch: &Watch<'_, FqiState<'static>>| {
-            py.detach(|| {
-                with_pool(threads, || match &data {
-                    None => fuzzyq_sim::train::train_showing(
-                        config,
-                        resume,
-                        watch.wants_state(),
-                        |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
-                    ),
-                    Some(d) => fuzzyq_sim::train::train_on_transitions(
-                        config,
-                        d,
-                        &FitConfig::default(),
-                        watch.plain(),
-                    )
-                    .map(|r| r.artifact),
-                })
+            let mut config = config.clone();
+            config.solver.max_sweeps = limit.unwrap_or(config.solver.max_sweeps);
+            let interrupted = |e| watch.interrupt(e);
+            crate::pool::run_interruptible(py, threads, interrupted, || match &data {
+                None => fuzzyq_sim::train::train_showing(
+                    &config,
+                    resume,
+                    watch.wants_state(),
+                    |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
+                ),
+                Some(d) => fuzzyq_sim::train::train_on_transitions(
+                    &config,
+                    d,
+                    &FitConfig::default(),
+                    watch.plain(),
+                )
+                .map(|r| r.artifact),
             })
             .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
         };
-        let watch = Watch::new(py, callback.as_ref(), progress, config.solver.max_sweeps)?;
-        let result = run(&config, None, &watch)?;
-        watch.close(py);
-        let (artifact, stopped) = match result {
-            Ok(a) => (a, false),
-            Err(fuzzyq_sim::SimError::Solve(e)) => match watch.stopped() {
-                // Stopped by the callback after sweep k: the run limited to k sweeps, continued
-                // from the state after sweep k - 1 (the same bits as the interrupted run's V).
-                Some((k, before)) => {
-                    let mut limited = config.clone();
-                    limited.solver.max_sweeps = k;
-                    let quiet = Watch::new(py, None, false, k)?;
-                    match run(&limited, before, &quiet)? {
-                        Ok(a) => (a, true),
-                        Err(fuzzyq_sim::SimError::Solve(e)) => return Err(quiet.error(py, &e)),
-                        Err(e) => return Err(sim_error(py, &e)),
-                    }
-                }
-                None => return Err(watch.error(py, &e)),
-            },
-            Err(e) => return Err(sim_error(py, &e)),
-        };
+        let (artifact, stopped) = run_watched(
+            py,
+            callback.as_ref(),
+            progress,
+            config.solver.max_sweeps,
+            run,
+        )?;
         let mut solution = Solution::from_artifact(py, artifact, Some(grid.clone().unbind()))?;
         solution.stopped = stopped;
         return Ok(solution);
@@ -528,7 +499,8 @@ fn solve_(
             ),
         ));
     };
-    let settings = given.resolve(py, None)?;
+    let mut settings = SolverSettings::default();
+    overrides.apply(&mut settings);
     if settings.operator != IterationOperator::Values {
         return Err(error(
             py,
@@ -554,51 +526,33 @@ fn solve_(
     macro_rules! run {
         ($t:ty, $variant:ident) => {{
             let grid_t = g.to_precision::<$t>(py)?;
-            let table = py
-                .detach(|| tables.model::<$t>(grid_t, &cm.actions))
+            let table = crate::pool::detach(py, || tables.model::<$t>(grid_t, &cm.actions))
                 .map_err(|e| solve_error(py, &e))?;
             let table = Arc::new(table);
             let grid_t = g.to_precision::<$t>(py)?;
-            let run = |config: &solver::SolverConfig,
+            let run = |limit: Option<usize>,
                        resume: Option<solver::SolverState<'static, $t>>,
                        watch: &Watch<'_, solver::SolverState<'static, $t>>| {
-                py.detach(|| {
-                    with_pool(threads, || {
-                        <$t as DeviceReal>::solve_on_device(
-                            settings.device,
-                            &*table,
-                            &grid_t,
-                            config,
-                            resume,
-                            watch.wants_state(),
-                            |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
-                        )
-                    })
+                let config = solver::SolverConfig {
+                    max_sweeps: limit.unwrap_or(config.max_sweeps),
+                    ..config
+                };
+                let interrupted = |e| watch.interrupt(e);
+                crate::pool::run_interruptible(py, threads, interrupted, || {
+                    <$t as DeviceReal>::solve_on_device(
+                        settings.device,
+                        &*table,
+                        &grid_t,
+                        &config,
+                        resume,
+                        watch.wants_state(),
+                        |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
+                    )
                 })
                 .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
             };
-            let watch = Watch::new(py, callback.as_ref(), progress, config.max_sweeps)?;
-            let result = run(&config, None, &watch)?;
-            watch.close(py);
-            let (s, stopped) = match result {
-                Ok(s) => (s, false),
-                Err(fuzzyq_sim::SimError::Solve(e)) => match watch.stopped() {
-                    Some((k, before)) => {
-                        let limited = solver::SolverConfig {
-                            max_sweeps: k,
-                            ..config
-                        };
-                        let quiet = Watch::new(py, None, false, k)?;
-                        let s = run(&limited, before, &quiet)?.map_err(|e| match e {
-                            fuzzyq_sim::SimError::Solve(e) => quiet.error(py, &e),
-                            e => sim_error(py, &e),
-                        })?;
-                        (s, true)
-                    }
-                    None => return Err(watch.error(py, &e)),
-                },
-                Err(e) => return Err(sim_error(py, &e)),
-            };
+            let (s, stopped) =
+                run_watched(py, callback.as_ref(), progress, config.max_sweeps, run)?;
             let summary = TrainSummary::from_solution(&s);
             let v = PyArray1::from_vec(py, s.v).into_any().unbind();
             let mut solution = Solution::assemble(
@@ -623,23 +577,43 @@ fn solve_(
     }
 }
 
-/// Checks `threads` as `fuzzyq train --threads` does: at least 1, and at most 8 per core (at
-/// least 64): more workers only add memory (a stack each) and contention, and a huge count
-/// would exhaust the memory starting them.
+/// Runs a solve (`run(limit, resume, watch)`) watched by `callback` and the `progress` bar.
+/// If the callback stopped it after sweep `k`, the result is the run limited to `k` sweeps:
+/// `run` again with the limit `k` from the state after sweep `k - 1` (the same bits as the
+/// stopped run's, and the bound of a run that ends there). Returns the result and whether the
+/// callback stopped it; an exception the callback raised propagates.
+fn run_watched<S, R>(
+    py: Python<'_>,
+    callback: Option<&Py<PyAny>>,
+    progress: bool,
+    max_sweeps: usize,
+    run: impl Fn(Option<usize>, Option<S>, &Watch<'_, S>) -> PyResult<Result<R, SimError>>,
+) -> PyResult<(R, bool)> {
+    let watch = Watch::new(py, callback, progress, max_sweeps)?;
+    let result = run(None, None, &watch)?;
+    watch.close(py);
+    match result {
+        Ok(r) => Ok((r, false)),
+        Err(SimError::Solve(e)) => {
+            let Some((k, before)) = watch.stopped() else {
+                return Err(watch.error(py, &e));
+            };
+            let quiet = Watch::new(py, None, false, k)?;
+            match run(Some(k), before, &quiet)? {
+                Ok(r) => Ok((r, true)),
+                Err(SimError::Solve(e)) => Err(quiet.error(py, &e)),
+                Err(e) => Err(sim_error(py, &e)),
+            }
+        }
+        Err(e) => Err(sim_error(py, &e)),
+    }
+}
+
+/// Checks `threads` as `fuzzyq train --threads` does ([`fuzzyq_sim::train::check_threads`]).
 fn check_threads(py: Python<'_>, threads: Option<usize>) -> PyResult<()> {
-    let Some(n) = threads else {
-        return Ok(());
-    };
-    let cores = std::thread::available_parallelism().map_or(1, usize::from);
-    let most = (8 * cores).max(64);
-    if (1..=most).contains(&n) {
-        Ok(())
-    } else {
-        Err(error(
-            py,
-            Kind::Config,
-            format!("threads: expected 1 to {most} on this machine ({cores} cores), got {n}"),
-        ))
+    match threads.map(fuzzyq_sim::train::check_threads) {
+        Some(Err(e)) => Err(error(py, Kind::Config, format!("threads: {e}"))),
+        _ => Ok(()),
     }
 }
 
@@ -746,11 +720,10 @@ pub(crate) fn collect<'py>(
             episode_steps,
             seed,
         };
-        let data = py
-            .detach(|| {
-                fuzzyq_sim::train::collect_from_plant(&task, &collection, &mut Exploration::Random)
-            })
-            .map_err(|e| sim_error(py, &e))?;
+        let data = crate::pool::detach(py, || {
+            fuzzyq_sim::train::collect_from_plant(&task, &collection, &mut Exploration::Random)
+        })
+        .map_err(|e| sim_error(py, &e))?;
         let (e, d, n) = (data.state_dim(), data.action_dim(), data.len());
         let (x, u, next, r) = data.columns();
         let out = PyDict::new(py);
@@ -781,8 +754,7 @@ pub(crate) fn load(
     model: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Py<PyAny>> {
     guard(py, || {
-        let file = py
-            .detach(|| PolicyFile::load(&path))
+        let file = crate::pool::detach(py, || PolicyFile::load(&path))
             .map_err(|e| policy_file_error(py, &e))?;
         let model = match model {
             Some(m) if !m.is_none() => Some(m.cast::<CallableModel>().map_err(|_| {
@@ -824,8 +796,7 @@ pub(crate) fn load(
             PolicyFile::Tabulated(_) => unreachable!("returned above"),
             learned => {
                 let bytes = learned.to_bytes().map_err(|e| sim_error(py, &e))?;
-                let policy = py
-                    .detach(|| SimPolicy::from_file(learned))
+                let policy = crate::pool::detach(py, || SimPolicy::from_file(learned))
                     .map_err(|e| sim_error(py, &e))?;
                 let policy = Policy::new(
                     Arc::new(policy),
@@ -965,7 +936,7 @@ impl Solution {
             (Source::Env(config, learned), values) => {
                 let config = (**config).clone();
                 let learned = learned.as_deref().cloned();
-                py.detach(|| {
+                crate::pool::detach(py, || {
                     FqiPolicy::with_model(config, learned, values, greedy).and_then(prepared)
                 })
             }
@@ -984,13 +955,13 @@ impl Solution {
                             Precision::F32 => {
                                 let grid = g.to_precision::<f32>(py)?;
                                 let actions = &model.get().actions;
-                                py.detach(|| tables.model(grid, actions))
+                                crate::pool::detach(py, || tables.model(grid, actions))
                                     .map(|t| Table::F32(Arc::new(t)))
                             }
                             Precision::F64 => {
                                 let grid = g.to_precision::<f64>(py)?;
                                 let actions = &model.get().actions;
-                                py.detach(|| tables.model(grid, actions))
+                                crate::pool::detach(py, || tables.model(grid, actions))
                                     .map(|t| Table::F64(Arc::new(t)))
                             }
                         }
@@ -1001,14 +972,14 @@ impl Solution {
                 match (table, values) {
                     (Table::F32(t), Values::F32(v)) => {
                         let grid = self.grid.get().to_precision::<f32>(py)?;
-                        py.detach(|| {
+                        crate::pool::detach(py, || {
                             FqiPolicy::tabulated(t, grid, v, greedy, gamma, absorbing)
                                 .and_then(prepared)
                         })
                     }
                     (Table::F64(t), Values::F64(v)) => {
                         let grid = self.grid.get().to_precision::<f64>(py)?;
-                        py.detach(|| {
+                        crate::pool::detach(py, || {
                             FqiPolicy::tabulated(t, grid, v, greedy, gamma, absorbing)
                                 .and_then(prepared)
                         })
@@ -1289,7 +1260,7 @@ impl Solution {
                     ),
                 ));
             }
-            let t = py.detach(|| p.theta()).map_err(|e| sim_error(py, &e))?;
+            let t = crate::pool::detach(py, || p.theta()).map_err(|e| sim_error(py, &e))?;
             Ok(PyArray2::from_owned_array(
                 py,
                 Array2::from_shape_vec((n, m), t).expect("n x m"),
@@ -1400,14 +1371,12 @@ impl Solution {
                 }));
                 file.check()
                     .map_err(|e| error(py, Kind::Input, format!("save: {e}")))?;
-                return py
-                    .detach(|| file.save(&path))
-                    .map_err(|e| sim_error(py, &e));
+                return crate::pool::detach(py, || file.save(&path)).map_err(|e| sim_error(py, &e));
             };
             artifact
                 .check()
                 .map_err(|e| error(py, Kind::Input, format!("save: {e}")))?;
-            py.detach(|| PolicyFile::Fqi(artifact).save(&path))
+            crate::pool::detach(py, || PolicyFile::Fqi(artifact).save(&path))
                 .map_err(|e| sim_error(py, &e))
         })
     }

@@ -78,3 +78,8 @@ pub use model::pointmass::{PointMass, PointMassConfig};
 #[cfg(doctest)]
 #[doc = include_str!("../../../README.md")]
 pub struct ReadmeDoctests;
+
+/// The Rust guide's examples (docs/site/rust/guide.md), compiled as doctests likewise.
+#[cfg(doctest)]
+#[doc = include_str!("../../../docs/site/rust/guide.md")]
+pub struct RustGuideDoctests;

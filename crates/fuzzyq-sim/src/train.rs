@@ -49,6 +49,22 @@ fuzzyq_core::named_option! {
     }
 }
 
+/// Checks a worker-thread count for a run on this machine: at least 1, and at most 8 per
+/// core (at least 64); more workers only add memory (a stack each) and contention, and a huge
+/// count would exhaust the memory starting them. The error says what was expected (the
+/// command line prefixes `--threads`, Python `threads`).
+pub fn check_threads(n: usize) -> Result<(), String> {
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    let most = (8 * cores).max(64);
+    if (1..=most).contains(&n) {
+        Ok(())
+    } else {
+        Err(format!(
+            "expected 1 to {most} on this machine ({cores} cores), got {n}"
+        ))
+    }
+}
+
 /// Runs fuzzy Q-iteration as configured; `observer` sees every sweep and may stop the run
 /// ([`SolveError::Interrupted`]).
 pub fn train(

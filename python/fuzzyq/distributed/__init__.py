@@ -12,7 +12,7 @@ minima, so every sweep's `V`, the greedy actions and the policy file are bit for
 >>> import fuzzyq.distributed as fd  # doctest: +SKIP
 >>> run = fd.train(open("pointmass.toml").read(), out="policy.fzq")  # doctest: +SKIP
 
-Ray is an optional dependency (``pip install "fuzzyq[distributed]"``); without ``address`` a
+Ray is an optional dependency (``pip install "ray>=2.9"``, or the ``distributed`` extra); without ``address`` a
 local Ray instance is started, with it (``"auto"`` or ``"HOST:PORT"``) the driver joins an
 existing cluster (``ray start --head``). Tasks lost with a worker are retried by Ray and give
 the same result (each is a pure function of its inputs); a driver that dies is continued from

@@ -22,7 +22,7 @@ _RETRIES = 5
 
 
 class RayUnavailableError(fuzzyq.FuzzyqError, ImportError):
-    """Ray is not installed (``pip install "fuzzyq[distributed]"``)."""
+    """Ray is not installed (``pip install "ray>=2.9"``)."""
 
 
 def _ray() -> Any:
@@ -30,7 +30,7 @@ def _ray() -> Any:
         import ray
     except ImportError as e:
         raise RayUnavailableError(
-            'fuzzyq.distributed needs Ray: pip install "fuzzyq[distributed]" (or "ray>=2.9")'
+            'fuzzyq.distributed needs Ray: pip install "ray>=2.9"'
         ) from e
     return ray
 

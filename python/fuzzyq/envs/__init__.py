@@ -1,6 +1,6 @@
 """Gymnasium and PettingZoo environments: the paper's point-mass task, and any fuzzyq model.
 
-Requires the optional dependencies: ``pip install fuzzyq[envs]`` (gymnasium and pettingzoo).
+Requires the optional dependencies: gymnasium and pettingzoo (``pip install gymnasium pettingzoo``, or the ``envs`` extra: ``pip install ".[envs]"`` in a checkout, ``pip install "fuzzyq-*.whl[envs]"`` for a wheel).
 
 - `PointMassEnv`: a Gymnasium `Env` with the joint observation and ``Discrete(25**agents)``
   joint actions; registered as ``"FuzzyQ/PointMass-v0"`` (with ``max_episode_steps=75``) by
@@ -23,7 +23,7 @@ Both point-mass envs take the keyword arguments of `fuzzyq.PointMass` plus ``max
 the task is continuing (never terminated) and truncated after `max_steps`. Every env renders
 as ``"rgb_array"`` (a uint8 picture drawn with NumPy: for the point masses the arena, the goal
 and each agent in its colour of `AGENT_COLOURS` with a velocity tick), ``"human"`` (that picture
-in a matplotlib window: ``pip install fuzzyq[plot]``) or ``"ansi"`` (text), so
+in a matplotlib window: ``pip install matplotlib``, in the ``envs`` extra) or ``"ansi"`` (text), so
 `gymnasium.wrappers.RecordVideo` records them.
 
 >>> import fuzzyq, fuzzyq.envs
@@ -44,7 +44,7 @@ try:
 except ImportError as exc:  # pragma: no cover - exercised by a test that hides the modules
     raise ImportError(
         "fuzzyq.envs needs the optional dependencies gymnasium and pettingzoo: "
-        "pip install fuzzyq[envs]"
+        "pip install gymnasium pettingzoo"
     ) from exc
 
 from ._model_sim import default_episode_steps

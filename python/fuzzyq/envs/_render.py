@@ -210,7 +210,7 @@ def require_matplotlib() -> None:
     if importlib.util.find_spec("matplotlib") is None:
         raise ImportError(
             "render_mode='human' needs matplotlib, which is not installed: "
-            "pip install fuzzyq[plot] (or use render_mode='rgb_array')"
+            "pip install matplotlib (or use render_mode='rgb_array')"
         )
 
 

@@ -47,7 +47,7 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
             ``(state_dim, 2)`` array of ``[low, high]`` rows or a `fuzzyq.Grid` (its first and
             last cores). They bound the observation space and the default start.
         render_mode: None, ``"rgb_array"``, ``"human"`` (a matplotlib window, updated on every
-            `reset` and `step`; needs ``pip install fuzzyq[plot]``) or ``"ansi"``. See `render`.
+            `reset` and `step`; needs ``pip install matplotlib``) or ``"ansi"``. See `render`.
 
     Raises:
         fuzzyq.InputTypeError: `model` is not a fuzzyq model, or an argument has a wrong type.

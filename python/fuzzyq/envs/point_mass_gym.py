@@ -37,7 +37,7 @@ class PointMassEnv(SimBacked, gymnasium.Env[Observation, np.int64]):
         render_mode: None, ``"rgb_array"`` (`render` returns a ``(400, 400, 3)`` uint8 picture
             of the arena, the goal and the agents: see `fuzzyq.envs.PointMassEnv.render`),
             ``"human"`` (the same picture in a matplotlib window, updated on every `reset` and
-            `step` at ``metadata["render_fps"]``; needs ``pip install fuzzyq[plot]``) or
+            `step` at ``metadata["render_fps"]``; needs ``pip install matplotlib``) or
             ``"ansi"`` (`render` returns a text picture of the state).
         **model_kwargs: passed to `fuzzyq.PointMass` (``agents=2``, ``mass``, ``sample_time``,
             ``position_limit``, ``velocity_limit``, ``force_levels``, ``goal_radius``,

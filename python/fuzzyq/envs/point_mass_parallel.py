@@ -40,7 +40,7 @@ class PointMassParallelEnv(
             (default 75); None never truncates.
         render_mode: None, ``"rgb_array"`` (`render` returns the ``(400, 400, 3)`` uint8
             picture of `PointMassEnv.render`), ``"human"`` (that picture in a matplotlib window,
-            updated on every `reset` and `step`; needs ``pip install fuzzyq[plot]``) or
+            updated on every `reset` and `step`; needs ``pip install matplotlib``) or
             ``"ansi"`` (`render` returns a text picture of the state).
         **model_kwargs: passed to `fuzzyq.PointMass` (``agents=2``, ``mass``, ``sample_time``,
             ...); invalid options raise the model's errors.

@@ -104,6 +104,12 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     if args.steps == Some(0) {
         anyhow::bail!("--steps must be at least 1");
     }
+    // The physics engine runs in single precision: 1e39 would be an infinite disc.
+    if let Some(r) = args.radius
+        && !(r > 0.0 && r <= f64::from(f32::MAX))
+    {
+        anyhow::bail!("--radius: expected a positive number within single precision, got {r}");
+    }
     let policy = Policy::load(&args.policy)?;
     let Some(model) = policy.model() else {
         anyhow::bail!("--policy: a policy of a tabulated model has no plant to run on");
@@ -111,8 +117,13 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     let env = model.kind();
     let spec = env.spec();
     check_flags(&args, env, spec, model)?;
-    // Refuse a policy kind the policy does not have before any work.
-    drop(policy.controller(args.policy_kind)?);
+    // Refuse a policy kind the policy does not have before any work, naming the flag.
+    if policy.controller(args.policy_kind).is_err() {
+        anyhow::bail!(
+            "--policy-kind: a policy learned from samples (fql, vqql) acts greedily \
+             (decentralised); leave --policy-kind greedy"
+        );
+    }
     let steps = args.steps.unwrap_or(spec.default_steps);
     let seed = args.seed.unwrap_or(0);
     output::check_memory(

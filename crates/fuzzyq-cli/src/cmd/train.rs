@@ -14,8 +14,8 @@ use fuzzyq_core::solver::{
     SweepMode,
 };
 use fuzzyq_sim::io::checkpoint::{FqiState, RunState};
-use fuzzyq_sim::io::config::EnvConfig;
-use fuzzyq_sim::io::policy_file::{PolicyFile, TrainSummary};
+use fuzzyq_sim::io::config::{EnvConfig, SolverOverrides};
+use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary};
 use fuzzyq_sim::io::transitions::read_transitions_csv;
 use fuzzyq_sim::learn::fql::EpisodeRecord;
 use fuzzyq_sim::model::{EnvKind, F64Model};
@@ -47,7 +47,8 @@ pub(crate) struct TrainArgs {
     /// Stop when the sweep's change ||theta_{k+1} - theta_k||_inf is at most X.
     #[arg(long, value_name = "X")]
     xi: Option<f64>,
-    /// Sweep limit.
+    /// Sweep limit: every sweep counts, full backups and evaluation sweeps alike (the last
+    /// one allowed is a full backup).
     #[arg(long, value_name = "K")]
     max_sweeps: Option<usize>,
     /// The iteration.
@@ -317,15 +318,7 @@ pub(crate) fn load_config(
 /// Starts the global thread pool with `threads` workers (default: one per core).
 pub(crate) fn start_pool(threads: Option<usize>) -> anyhow::Result<()> {
     if let Some(n) = threads {
-        if n == 0 {
-            anyhow::bail!("--threads must be at least 1");
-        }
-        // More workers than 8 per core only add memory (a stack each) and contention.
-        let cores = std::thread::available_parallelism().map_or(1, usize::from);
-        let most = (8 * cores).max(64);
-        if n > most {
-            anyhow::bail!("--threads {n}: at most {most} on this machine ({cores} cores)");
-        }
+        train::check_threads(n).map_err(|e| anyhow::anyhow!("--threads: {e}"))?;
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()
@@ -343,36 +336,34 @@ fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             _ => anyhow::bail!("--arena applies to --env khepera only"),
         }
     }
-    let s = &mut config.solver;
-    s.gamma = args.gamma.unwrap_or(s.gamma);
-    s.xi = args.xi.unwrap_or(s.xi);
-    s.max_sweeps = args.max_sweeps.unwrap_or(s.max_sweeps);
-    s.operator = args.operator.unwrap_or(s.operator);
-    s.backup = args.backup.unwrap_or(s.backup);
-    s.precision = args.precision.unwrap_or(s.precision);
-    s.kernel = args.kernel.or(s.kernel);
-    s.device = args.device.unwrap_or(s.device);
-    if args.asynchronous {
-        s.sweep = SweepMode::Asynchronous;
-    }
-    if args.absorbing_goal {
-        s.absorbing_goal = true;
-    }
-    if args.extrapolate {
-        s.extrapolate = true;
-    }
-    if args.no_extrapolate {
-        s.extrapolate = false;
-    }
-    s.evaluation_sweeps = args.evaluation_sweeps.unwrap_or(s.evaluation_sweeps);
-    if args.coarse_start {
-        s.coarse_start = true;
-    }
-    if args.no_coarse_start {
-        s.coarse_start = false;
-    }
+    solver_overrides(args).apply(&mut config.solver);
     config.validate()?;
     Ok(config)
+}
+
+/// The solver settings the flags set (the rest keep the configuration's values).
+fn solver_overrides(args: &TrainArgs) -> SolverOverrides {
+    // A `--no-` flag wins over its positive form, as the help's order reads.
+    let either = |yes: bool, no: bool| match (yes, no) {
+        (_, true) => Some(false),
+        (true, false) => Some(true),
+        (false, false) => None,
+    };
+    SolverOverrides {
+        gamma: args.gamma,
+        xi: args.xi,
+        max_sweeps: args.max_sweeps,
+        sweep: args.asynchronous.then_some(SweepMode::Asynchronous),
+        absorbing_goal: args.absorbing_goal.then_some(true),
+        backup: args.backup,
+        precision: args.precision,
+        extrapolate: either(args.extrapolate, args.no_extrapolate),
+        evaluation_sweeps: args.evaluation_sweeps,
+        coarse_start: either(args.coarse_start, args.no_coarse_start),
+        kernel: args.kernel,
+        operator: args.operator,
+        device: args.device,
+    }
 }
 
 /// Peak resident memory of this process (Linux `VmHWM`), in MB.
@@ -446,8 +437,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     if matches!(args.learner, Learner::Fqi | Learner::LearnedModel) {
         output::check_memory(args.max_memory, &fuzzyq_sim::memory::train(&config))?;
     }
-    let learned = args.learner == Learner::LearnedModel;
-    if args.learner != Learner::Fqi && !learned {
+    if matches!(args.learner, Learner::Fql | Learner::Vqql) {
         for (set, flag) in solver_flags(&args) {
             refuse(
                 set,
@@ -457,7 +447,98 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         return run_from_samples(&args, &config);
     }
-    if config.solver.operator == IterationOperator::QValues {
+    refuse_misplaced_flags(&args, &config)?;
+    let learning = model_learning(&args, &config)?;
+    let logged = match &args.transitions {
+        Some(path) => {
+            let task = config.build_model()?;
+            let (e, d) = (
+                F64Model::state_dim(&task),
+                F64Model::actions(&task).dim() * F64Model::n_agents(&task),
+            );
+            Some(read_transitions_csv(path, e, d)?)
+        }
+        None => None,
+    };
+    plan_outputs(&args)?;
+    let mut checkpoints = Checkpoints::new(
+        args.checkpoint.as_deref(),
+        args.checkpoint_every,
+        10,
+        config.to_toml(),
+    )?;
+    let resume = match checkpoints.resume(args.resume.as_deref(), true, "fqi")? {
+        Some(RunState::Fqi(state)) => Some(state),
+        _ => None,
+    };
+    start_pool(args.threads)?;
+    let threads = rayon::current_num_threads();
+    if !args.quiet {
+        announce(&args, &config, threads, learning.as_ref(), logged.as_ref())?;
+        if let (Some(state), Some(path)) = (&resume, &args.resume) {
+            eprintln!(
+                "continuing from checkpoint {} after sweep {}",
+                path.display(),
+                state.sweeps()
+            );
+        }
+    } else if config.solver.device == Device::Gpu {
+        // Opened here, once for the run (the solver shares it).
+        fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
+    }
+    let task = Task {
+        config: &config,
+        learning: learning.as_ref(),
+        logged: logged.as_ref(),
+    };
+    let (artifact, learned_run) = solve(&args, &task, resume, &mut checkpoints)?;
+    let file = PolicyFile::Fqi(artifact);
+    output::write_file(&args.out, &file.to_bytes()?)?;
+    let PolicyFile::Fqi(artifact) = file else {
+        unreachable!("just built")
+    };
+    let s = &artifact.summary;
+    if !args.quiet {
+        if let Some(r) = &learned_run {
+            report_learned(r, args.json.is_some());
+        }
+        eprintln!(
+            "{} after {} in {:.1} s (final delta {:.4}, xi {}); policy written to {}",
+            if s.converged {
+                "converged"
+            } else {
+                "sweep limit reached"
+            },
+            sweeps_done(s),
+            s.seconds,
+            s.final_delta,
+            config.solver.xi,
+            args.out.display()
+        );
+    }
+    if let Some(path) = &args.json {
+        write_json(
+            path,
+            &summary(&args, &task, s, threads, learned_run.as_ref()),
+        )?;
+    }
+    Ok(())
+}
+
+/// What a fuzzy Q-iteration run solves: the configuration, and for `--learner learned-model`
+/// how the model is learned and the logged transitions it is learned from, if any.
+struct Task<'a> {
+    config: &'a TrainConfig,
+    learning: Option<&'a train::ModelLearning>,
+    logged: Option<&'a fuzzyq_sim::learn::samples::Transitions>,
+}
+
+/// Refuses the flags that do not apply to this run of fuzzy Q-iteration (or of
+/// `--learner learned-model`), naming each.
+fn refuse_misplaced_flags(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
+    let learned = args.learner == Learner::LearnedModel;
+    let q_values = config.solver.operator == IterationOperator::QValues;
+    if q_values {
         for (set, flag) in [
             (args.asynchronous, "--async"),
             (args.backup.is_some(), "--backup"),
@@ -503,93 +584,72 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             "applies to --learner fqi, fql and vqql (a learned model's run is not resumable)",
         )?;
         refuse(
-            set && config.solver.operator == IterationOperator::QValues,
+            set && q_values,
             flag,
             "needs --operator values (runs of the q-values operator cannot be continued)",
         )?;
     }
-    let learning = learned.then(|| {
-        let mut l = train::ModelLearning::new(args.samples.unwrap_or(20_000), args.seed);
-        l.rounds = args.rounds.unwrap_or(l.rounds);
-        l.epsilon = args.epsilon.unwrap_or(l.epsilon);
-        l
-    });
-    if let Some(l) = &learning {
-        l.validate()?;
-        train::check_learnable(&config)?;
-    }
-    let logged = match &args.transitions {
-        Some(path) => {
-            let task = config.build_model()?;
-            let (e, d) = (
-                F64Model::state_dim(&task),
-                F64Model::actions(&task).dim() * F64Model::n_agents(&task),
-            );
-            Some(read_transitions_csv(path, e, d)?)
-        }
-        None => None,
-    };
-    plan_outputs(&args)?;
-    let mut checkpoints = Checkpoints::new(
-        args.checkpoint.as_deref(),
-        args.checkpoint_every,
-        10,
-        config.to_toml(),
-    )?;
-    let resume = match checkpoints.resume(args.resume.as_deref(), true, "fqi")? {
-        Some(RunState::Fqi(state)) => Some(state),
-        _ => None,
-    };
-    start_pool(args.threads)?;
-    let threads = rayon::current_num_threads();
-    let stop = output::interrupt_flag();
+    Ok(())
+}
 
+/// `--learner learned-model`: how the model is learned (checked against the task); `None`
+/// for fuzzy Q-iteration on the task's own model.
+fn model_learning(
+    args: &TrainArgs,
+    config: &TrainConfig,
+) -> anyhow::Result<Option<train::ModelLearning>> {
+    if args.learner != Learner::LearnedModel {
+        return Ok(None);
+    }
+    let mut l = train::ModelLearning::new(args.samples.unwrap_or(20_000), args.seed);
+    l.rounds = args.rounds.unwrap_or(l.rounds);
+    l.epsilon = args.epsilon.unwrap_or(l.epsilon);
+    l.validate()?;
+    train::check_learnable(config)?;
+    Ok(Some(l))
+}
+
+/// The run's opening lines on stderr: the problem, the GPU (opened here, once for the run:
+/// the solver shares it), and where a learned model's data come from.
+fn announce(
+    args: &TrainArgs,
+    config: &TrainConfig,
+    threads: usize,
+    learning: Option<&train::ModelLearning>,
+    logged: Option<&fuzzyq_sim::learn::samples::Transitions>,
+) -> anyhow::Result<()> {
     let n_cores = config.n_cores();
-    let env = config.env.name();
     let joint = config.n_joint_actions();
-    let synchronous = config.solver.sweep == SweepMode::Synchronous;
-    if !args.quiet {
+    eprintln!(
+        "fuzzyq train: {}, {n_cores} cores x {joint} joint actions ({:.3e} Q-values), \
+         gamma {}, xi {}, {} sweeps, {threads} threads",
+        config.env.name(),
+        n_cores as f64 * joint as f64,
+        config.solver.gamma,
+        config.solver.xi,
+        if config.solver.sweep == SweepMode::Synchronous {
+            "synchronous"
+        } else {
+            "asynchronous"
+        },
+    );
+    if config.solver.device == Device::Gpu {
+        let gpu = fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
+        let a = gpu.summary();
         eprintln!(
-            "fuzzyq train: {env}, {n_cores} cores x {joint} joint actions ({:.3e} Q-values), \
-             gamma {}, xi {}, {} sweeps, {threads} threads",
-            n_cores as f64 * joint as f64,
-            config.solver.gamma,
-            config.solver.xi,
-            if synchronous {
-                "synchronous"
+            "GPU: {} ({}, {}; fma {})",
+            a.name,
+            a.backend,
+            a.driver,
+            if a.fused_fma {
+                "fused: the CPU's bits"
             } else {
-                "asynchronous"
-            },
+                "not fused: each product rounded first, so the last bits differ from the CPU's"
+            }
         );
     }
-    if config.solver.device == Device::Gpu {
-        // Opened here, once for the run (the solver shares it), so that its name comes first.
-        let gpu = fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
-        if !args.quiet {
-            let a = gpu.summary();
-            eprintln!(
-                "GPU: {} ({}, {}; fma {})",
-                a.name,
-                a.backend,
-                a.driver,
-                if a.fused_fma {
-                    "fused: the CPU's bits"
-                } else {
-                    "not fused: each product rounded first, so the last bits differ from the CPU's"
-                }
-            );
-        }
-    }
-    let bar = progress_bar(
-        args.quiet,
-        0,
-        "{spinner} sweep {pos}/{len} (a-priori bound) {msg} [{elapsed_precise}]",
-    );
-    bar.set_message("preparing");
-    bar.enable_steady_tick(Duration::from_millis(200));
-    let plain = !args.quiet && !std::io::stderr().is_terminal();
-    match (&learning, &logged, args.quiet) {
-        (_, Some(data), false) => eprintln!(
+    match (learning, logged) {
+        (_, Some(data)) => eprintln!(
             "learned model: {} logged transitions from {}, fitted per dynamics block, then solved",
             data.len(),
             args.transitions
@@ -597,7 +657,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
                 .unwrap_or(Path::new(""))
                 .display()
         ),
-        (Some(l), None, false) => eprintln!(
+        (Some(l), None) => eprintln!(
             "learned model: {} transitions from the plant (random actions, episodes of {} \
              steps, seed {}), fitted per dynamics block, then solved{}",
             l.collection.samples,
@@ -618,13 +678,27 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         ),
         _ => {}
     }
-    if let (Some(state), false, Some(path)) = (&resume, args.quiet, &args.resume) {
-        eprintln!(
-            "continuing from checkpoint {} after sweep {}",
-            path.display(),
-            state.sweeps()
-        );
-    }
+    Ok(())
+}
+
+/// Solves the task with a progress bar (or plain lines when stderr is not a terminal),
+/// writing checkpoints as asked; Ctrl-C stops after the current sweep with a checkpoint.
+fn solve(
+    args: &TrainArgs,
+    task: &Task<'_>,
+    resume: Option<FqiState<'static>>,
+    checkpoints: &mut Checkpoints,
+) -> anyhow::Result<(PolicyArtifact, Option<train::LearnedModelRun>)> {
+    let config = task.config;
+    let stop = output::interrupt_flag();
+    let bar = progress_bar(
+        args.quiet,
+        0,
+        "{spinner} sweep {pos}/{len} (a-priori bound) {msg} [{elapsed_precise}]",
+    );
+    bar.set_message("preparing");
+    bar.enable_steady_tick(Duration::from_millis(200));
+    let plain = !args.quiet && !std::io::stderr().is_terminal();
     let evaluation_sweeps = config.solver.evaluation_sweeps;
     let mut scheme_shown = args.quiet;
     let mut observer = |p: &fuzzyq_core::solver::Progress, state: Option<&FqiState<'_>>| {
@@ -655,147 +729,131 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         })
     };
     let with_run = |r: train::LearnedModelRun| (r.artifact.clone(), Some(r));
-    let result = match (&learning, &logged) {
-        (Some(l), None) => train::train_learned(&config, l, |p| observer(p, None)).map(with_run),
+    let result = match (task.learning, task.logged) {
+        (Some(l), None) => train::train_learned(config, l, |p| observer(p, None)).map(with_run),
         (Some(l), Some(data)) => {
-            train::train_on_transitions(&config, data, &l.fit, |p| observer(p, None)).map(with_run)
+            train::train_on_transitions(config, data, &l.fit, |p| observer(p, None)).map(with_run)
         }
-        (None, _) => train::train_showing(&config, resume, args.checkpoint.is_some(), observer)
+        (None, _) => train::train_showing(config, resume, args.checkpoint.is_some(), observer)
             .map(|a| (a, None)),
     };
     bar.finish_and_clear();
     if let Some(e) = checkpoints.failure() {
         return Err(e);
     }
-    let (artifact, learned_run) = match result {
-        Ok(a) => a,
+    match result {
+        Ok(a) => Ok(a),
         Err(SimError::Solve(SolveError::Interrupted { sweeps })) => {
-            return Err(
-                Failure::Interrupted(checkpoints.interrupted(&format!("{sweeps} sweeps"))).into(),
-            );
+            Err(Failure::Interrupted(checkpoints.interrupted(&format!("{sweeps} sweeps"))).into())
         }
-        Err(e) => return Err(e.into()),
-    };
-    let file = PolicyFile::Fqi(artifact);
-    output::write_file(&args.out, &file.to_bytes()?)?;
-    let PolicyFile::Fqi(artifact) = file else {
-        unreachable!("just built")
-    };
-    let s = &artifact.summary;
-    if let (Some(r), false) = (&learned_run, args.quiet) {
-        let rows: usize = r.fit.blocks.iter().map(|b| b.rows).sum();
-        let (max_l1, mean_l1) = r.table_error.iter().fold((0.0f64, 0.0), |(m, a), t| {
-            (m.max(t.max_l1), a + t.mean_l1 / r.table_error.len() as f64)
-        });
-        eprintln!(
-            "learned model: {} transitions collected and fitted in {:.2} s; {} of {rows} rows \
-             needed a wider kernel than their core's{}; L1 distance of the rows to the true \
-             noise-free model's: max {max_l1:.3}, mean {mean_l1:.4}",
-            r.fit.samples,
-            r.learning_seconds,
-            r.fit.under_sampled_rows(),
-            if args.json.is_some() {
-                " (listed in the JSON)"
-            } else {
-                ""
-            },
-        );
-        if r.rounds.len() > 1 {
-            for (k, round) in r.rounds.iter().enumerate() {
-                eprintln!(
-                    "round {}: {} transitions, {} rows widened, {} sweeps, {:.1} s",
-                    k + 1,
-                    round.transitions,
-                    round.under_sampled_rows,
-                    round.sweeps,
-                    round.seconds
-                );
-            }
-        }
-        if r.fit.reward_mismatches > 0 {
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// What a learned model's run collected and fitted, on stderr.
+fn report_learned(r: &train::LearnedModelRun, listed_in_json: bool) {
+    let rows: usize = r.fit.blocks.iter().map(|b| b.rows).sum();
+    let (max_l1, mean_l1) = r.table_error.iter().fold((0.0f64, 0.0), |(m, a), t| {
+        (m.max(t.max_l1), a + t.mean_l1 / r.table_error.len() as f64)
+    });
+    eprintln!(
+        "learned model: {} transitions collected and fitted in {:.2} s; {} of {rows} rows \
+         needed a wider kernel than their core's{}; L1 distance of the rows to the true \
+         noise-free model's: max {max_l1:.3}, mean {mean_l1:.4}",
+        r.fit.samples,
+        r.learning_seconds,
+        r.fit.under_sampled_rows(),
+        if listed_in_json {
+            " (listed in the JSON)"
+        } else {
+            ""
+        },
+    );
+    if r.rounds.len() > 1 {
+        for (k, round) in r.rounds.iter().enumerate() {
             eprintln!(
-                "warning: {} transitions recorded a reward other than the task's",
-                r.fit.reward_mismatches
+                "round {}: {} transitions, {} rows widened, {} sweeps, {:.1} s",
+                k + 1,
+                round.transitions,
+                round.under_sampled_rows,
+                round.sweeps,
+                round.seconds
             );
         }
     }
-    if !args.quiet {
+    if r.fit.reward_mismatches > 0 {
         eprintln!(
-            "{} after {} in {:.1} s (final delta {:.4}, xi {}); policy written to {}",
-            if s.converged {
-                "converged"
-            } else {
-                "sweep limit reached"
-            },
-            sweeps_done(s),
-            s.seconds,
-            s.final_delta,
-            config.solver.xi,
-            args.out.display()
+            "warning: {} transitions recorded a reward other than the task's",
+            r.fit.reward_mismatches
         );
     }
-    if let Some(path) = &args.json {
-        let gamma = config.solver.gamma;
-        let summary = Summary {
-            env,
-            policy: args.out.display().to_string(),
-            sweeps: s.sweeps,
-            full_backups: s.sweeps - s.evaluation.len(),
-            evaluation_sweeps: s.evaluation.len(),
-            converged: s.converged,
-            delta_inf: s.final_delta,
-            xi: config.solver.xi,
-            gamma,
-            error_bound: gamma / (1.0 - gamma) * s.final_delta,
-            sweep_bound: s.sweep_bound,
-            seconds: s.seconds,
-            seconds_per_sweep: s.seconds / s.sweeps.max(1) as f64,
-            cores: n_cores,
-            joint_actions: joint,
-            q_values: n_cores as f64 * joint as f64,
-            backup: &s.backup,
-            kernel: &s.kernel,
-            multiply_adds_per_sweep: s.multiply_adds_per_sweep,
-            sweep_seconds: s.sweep_seconds,
-            evaluation_seconds: s.evaluation_seconds,
-            // Billions of multiply-adds per second over the full backups.
-            gflops_fma: s.multiply_adds_per_sweep.map(|m| {
-                m * (s.sweeps - s.evaluation.len()) as f64
-                    / (s.sweep_seconds - s.evaluation_seconds).max(1e-9)
-                    / 1e9
-            }),
-            precision: config.solver.precision,
-            sweep: config.solver.sweep,
-            absorbing_goal: config.solver.absorbing_goal,
-            threads,
-            peak_memory_mb: peak_memory_mb(),
-            deltas: &s.deltas,
-            extrapolated: &s.extrapolated,
-            coarse_start: s.coarse.as_deref().map(|c| CoarseSummary {
-                cores: c.cores,
-                sweeps: c.sweeps,
-                seconds: c.seconds,
-            }),
-            learned_model: learned_run.as_ref().map(|r| LearnedSummary {
-                source: args
-                    .transitions
-                    .as_ref()
-                    .map_or_else(|| "plant".into(), |p| p.display().to_string()),
-                samples: r.fit.samples,
-                seed: args.transitions.is_none().then_some(args.seed),
-                learning_seconds: r.learning_seconds,
-                fit: &r.fit,
-                table_error: &r.table_error,
-                rounds: &r.rounds,
-                epsilon: learning
-                    .as_ref()
-                    .filter(|l| l.rounds > 1)
-                    .map(|l| l.epsilon),
-            }),
-        };
-        write_json(path, &summary)?;
+}
+
+/// The `--json` summary of a run of fuzzy Q-iteration.
+fn summary<'a>(
+    args: &'a TrainArgs,
+    task: &Task<'_>,
+    s: &'a TrainSummary,
+    threads: usize,
+    learned_run: Option<&'a train::LearnedModelRun>,
+) -> Summary<'a> {
+    let config = task.config;
+    let (n_cores, joint) = (config.n_cores(), config.n_joint_actions());
+    let gamma = config.solver.gamma;
+    Summary {
+        env: config.env.name(),
+        policy: args.out.display().to_string(),
+        sweeps: s.sweeps,
+        full_backups: s.sweeps - s.evaluation.len(),
+        evaluation_sweeps: s.evaluation.len(),
+        converged: s.converged,
+        delta_inf: s.final_delta,
+        xi: config.solver.xi,
+        gamma,
+        error_bound: gamma / (1.0 - gamma) * s.final_delta,
+        sweep_bound: s.sweep_bound,
+        seconds: s.seconds,
+        seconds_per_sweep: s.seconds / s.sweeps.max(1) as f64,
+        cores: n_cores,
+        joint_actions: joint,
+        q_values: n_cores as f64 * joint as f64,
+        backup: &s.backup,
+        kernel: &s.kernel,
+        multiply_adds_per_sweep: s.multiply_adds_per_sweep,
+        sweep_seconds: s.sweep_seconds,
+        evaluation_seconds: s.evaluation_seconds,
+        // Billions of multiply-adds per second over the full backups.
+        gflops_fma: s.multiply_adds_per_sweep.map(|m| {
+            m * (s.sweeps - s.evaluation.len()) as f64
+                / (s.sweep_seconds - s.evaluation_seconds).max(1e-9)
+                / 1e9
+        }),
+        precision: config.solver.precision,
+        sweep: config.solver.sweep,
+        absorbing_goal: config.solver.absorbing_goal,
+        threads,
+        peak_memory_mb: peak_memory_mb(),
+        deltas: &s.deltas,
+        extrapolated: &s.extrapolated,
+        coarse_start: s.coarse.as_deref().map(|c| CoarseSummary {
+            cores: c.cores,
+            sweeps: c.sweeps,
+            seconds: c.seconds,
+        }),
+        learned_model: learned_run.map(|r| LearnedSummary {
+            source: args
+                .transitions
+                .as_ref()
+                .map_or_else(|| "plant".into(), |p| p.display().to_string()),
+            samples: r.fit.samples,
+            seed: args.transitions.is_none().then_some(args.seed),
+            learning_seconds: r.learning_seconds,
+            fit: &r.fit,
+            table_error: &r.table_error,
+            rounds: &r.rounds,
+            epsilon: task.learning.filter(|l| l.rounds > 1).map(|l| l.epsilon),
+        }),
     }
-    Ok(())
 }
 
 /// The flags of the fuzzy Q-iteration solver, and whether each was given.

@@ -17,13 +17,9 @@
 
 use std::cell::RefCell;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, SystemTime};
 
 use anyhow::{Context, bail};
 use fuzzyq_sim::io::dir_of;
-
-/// Temporaries older than this are stale: no run of fuzzyq keeps one open that long.
-const STALE_AFTER: Duration = Duration::from_secs(3600);
 
 /// Where a planned output goes.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -143,47 +139,10 @@ fn prepare_dir(dir: &Path, flag: &str, given: &Path) -> anyhow::Result<()> {
         .prefix(".fuzzyq-probe-")
         .tempfile_in(dir)
         .with_context(|| format!("{flag} {}: cannot write there", given.display()))?;
-    let owner = owner_of(probe.path());
+    let owner = fuzzyq_sim::io::owner_of(probe.path());
     drop(probe);
-    remove_stale(dir, owner);
+    fuzzyq_sim::io::remove_stale(dir, owner);
     Ok(())
-}
-
-#[cfg(unix)]
-fn owner_of(path: &Path) -> Option<u32> {
-    use std::os::unix::fs::MetadataExt;
-    std::fs::metadata(path).ok().map(|m| m.uid())
-}
-
-#[cfg(not(unix))]
-fn owner_of(_path: &Path) -> Option<u32> {
-    None
-}
-
-/// Removes `.fuzzyq-*` regular files of `owner` untouched for [`STALE_AFTER`] (best effort).
-fn remove_stale(dir: &Path, owner: Option<u32>) {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return;
-    };
-    let now = SystemTime::now();
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        if !name.to_string_lossy().starts_with(".fuzzyq-") {
-            continue;
-        }
-        // `symlink_metadata`: a link is not ours to remove.
-        let Ok(m) = std::fs::symlink_metadata(entry.path()) else {
-            continue;
-        };
-        let old = m
-            .modified()
-            .ok()
-            .and_then(|t| now.duration_since(t).ok())
-            .is_some_and(|age| age > STALE_AFTER);
-        if m.is_file() && old && owner.is_some() && owner_of(&entry.path()) == owner {
-            let _ = std::fs::remove_file(entry.path());
-        }
-    }
 }
 
 /// Plans the command's outputs (`(path, flag)`, the absent ones skipped) against its inputs

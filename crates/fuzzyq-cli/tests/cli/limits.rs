@@ -82,11 +82,11 @@ fn values_beyond_single_precision_and_empty_counts_are_refused() {
             ),
             (
                 "train --config one.toml --threads 100000 --out p.fzq",
-                "--threads 100000: at most",
+                "--threads: expected 1 to",
             ),
             (
                 "bench --config one.toml --threads 100000",
-                "--threads 100000: at most",
+                "--threads: expected 1 to",
             ),
             // A kernel only the block backup has.
             (

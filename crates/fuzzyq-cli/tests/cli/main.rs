@@ -10,6 +10,7 @@ use std::time::SystemTime;
 mod deploy;
 mod limits;
 mod outputs;
+mod reference;
 mod resume;
 
 fn fuzzyq(args: &[&str], dir: &Path) -> Output {
@@ -462,7 +463,16 @@ fn khepera_train_rollout_and_starts() {
             // A policy learned from samples acts greedily; VQQL learns the point masses only.
             (
                 "rollout --policy f.fzq --policy-kind interpolated",
-                "greedily",
+                "--policy-kind: a policy learned from samples",
+            ),
+            // Regression: a radius beyond single precision was accepted (inf was refused).
+            (
+                "rollout --policy f.fzq --plant rapier --radius 1e39",
+                "--radius: expected a positive number within single precision",
+            ),
+            (
+                "rollout --policy f.fzq --plant rapier --radius inf",
+                "--radius",
             ),
             (
                 "train --env khepera --learner vqql --out y.fzq",
@@ -1167,7 +1177,7 @@ fn bench_reports_the_machine_and_the_backup_against_the_peak() {
                 "bench --config missing.toml",
                 "cannot read config missing.toml",
             ),
-            ("bench --threads 0", "--threads must be at least 1"),
+            ("bench --threads 0", "--threads: expected 1 to"),
         ],
     );
 }

@@ -268,12 +268,11 @@ where
     {
         return fail("its V is not finite");
     }
-    let full = s.records.iter().filter(|r| !r.evaluation).count();
     let numbered = s.records.iter().enumerate().all(|(i, r)| r.sweep == i + 1);
     if s.records.is_empty() || !numbered {
         return fail("its sweep records are not numbered 1, 2, ...");
     }
-    if full >= config.max_sweeps && s.evaluations_left == 0 {
+    if s.records.len() >= config.max_sweeps {
         return fail("its run already reached the sweep limit");
     }
     if !mpi && (s.evaluations_left != 0 || s.records.iter().any(|r| r.evaluation)) {
@@ -515,11 +514,11 @@ where
         let first_policy = usize::from(self.run.coarse.is_none());
         // Whether the policy buffer already holds the greedy actions of the returned `V`.
         let mut greedy_known = false;
-        loop {
-            let evaluation = evaluations_left > 0;
-            if !evaluation && full >= config.max_sweeps {
-                break;
-            }
+        // Every sweep, of either kind, counts against `max_sweeps`; the last one allowed is a
+        // full backup, so that a run cut short still ends on MacQueen's bound.
+        while records.len() < config.max_sweeps {
+            let last = records.len() + 1 == config.max_sweeps;
+            let evaluation = evaluations_left > 0 && !last;
             let t0 = Instant::now();
             if evaluation {
                 self.sweeps.evaluate(v, next)?;
@@ -581,7 +580,7 @@ where
                     eval_tol = (EVALUATION_PROGRESS * half).max(0.5 * config.xi);
                 }
             }
-            let done = converged || (evaluations_left == 0 && full >= config.max_sweeps);
+            let done = converged || records.len() >= config.max_sweeps;
             let flow = if self.show_state && !done {
                 let state = SolverState {
                     scheme: Scheme::ModifiedPolicy,

@@ -356,7 +356,9 @@ pub struct SolverConfig {
     pub gamma: f64,
     /// Stopping threshold on the sweep's change, `> 0`.
     pub xi: f64,
-    /// Sweep limit, `>= 1`.
+    /// Sweep limit, `>= 1`: every sweep counts, full backups and evaluation sweeps alike.
+    /// Under modified policy iteration the last sweep allowed is a full backup, so that a run
+    /// cut short ends on MacQueen's bound like one that converged.
     pub max_sweeps: usize,
     /// Synchronous or asynchronous sweeps.
     pub sweep: SweepMode,

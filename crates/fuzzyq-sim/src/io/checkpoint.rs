@@ -168,6 +168,49 @@ impl Checkpoint<'static> {
                 "has format version {version}; this build reads version {FORMAT_VERSION}"
             )));
         }
-        postcard::from_bytes(payload).map_err(|e| damaged(format!("cannot be decoded ({e})")))
+        container::decode_postcard(payload).map_err(|e| damaged(format!("cannot be decoded: {e}")))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::borrow::Cow;
+
+    use fuzzyq_core::solver::Scheme;
+
+    use super::*;
+
+    fn checkpoint() -> Checkpoint<'static> {
+        Checkpoint {
+            settings: Cow::Borrowed("gamma = 0.9\n"),
+            state: RunState::Fqi(FqiState::F32(SolverState {
+                scheme: Scheme::Value,
+                v: Cow::Owned(vec![1.0, 2.0]),
+                v_prev: Cow::Owned(vec![0.5, 1.5]),
+                policy: Cow::Owned(Vec::new()),
+                shift: 0.0,
+                evaluations_left: 0,
+                evaluation_tolerance: 0.0,
+                final_delta: 0.5,
+                sweep_seconds: 0.0,
+                evaluation_seconds: 0.0,
+                records: Cow::Owned(Vec::new()),
+            })),
+        }
+    }
+
+    /// Regression (issue 49): bytes appended inside the checksummed payload were ignored.
+    #[test]
+    fn a_payload_with_bytes_after_its_content_is_refused() {
+        let bytes = checkpoint().to_bytes();
+        let path = Path::new("c.ckpt");
+        assert_eq!(Checkpoint::from_bytes(&bytes, path).unwrap(), checkpoint());
+        let mut payload = bytes[container::HEADER_LEN..].to_vec();
+        payload.push(0);
+        let longer = container::encode(&MAGIC, FORMAT_VERSION, &payload);
+        let e = Checkpoint::from_bytes(&longer, path)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("1 bytes after its content"), "{e}");
     }
 }

@@ -306,7 +306,8 @@ pub struct SolverSettings {
     pub gamma: f64,
     /// Stopping threshold, `> 0`.
     pub xi: f64,
-    /// Sweep limit, `>= 1`.
+    /// Sweep limit, `>= 1`: every sweep counts, full backups and evaluation sweeps alike
+    /// ([`SolverConfig::max_sweeps`]).
     pub max_sweeps: usize,
     /// Sweep order.
     pub sweep: SweepMode,
@@ -378,6 +379,66 @@ impl Default for SolverSettings {
             operator: IterationOperator::Values,
             device: Device::Cpu,
         }
+    }
+}
+
+/// The solver settings a user set, each `None` to keep the task's default: what the command
+/// line's flags and Python's `solve` keywords carry. The defaults themselves are decided in
+/// one place, [`TrainConfig::solver_defaults`]; [`apply`](Self::apply) sets what was given
+/// over them, so that the command line and Python run the same settings for the same task.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SolverOverrides {
+    /// Discount factor.
+    pub gamma: Option<f64>,
+    /// Stopping threshold.
+    pub xi: Option<f64>,
+    /// Sweep limit.
+    pub max_sweeps: Option<usize>,
+    /// Sweep order.
+    pub sweep: Option<SweepMode>,
+    /// Absorbing goal states.
+    pub absorbing_goal: Option<bool>,
+    /// Backup implementation.
+    pub backup: Option<BackupPath>,
+    /// Precision.
+    pub precision: Option<Precision>,
+    /// Extrapolation with MacQueen's bounds.
+    pub extrapolate: Option<bool>,
+    /// Evaluation sweeps per full backup.
+    pub evaluation_sweeps: Option<usize>,
+    /// A coarse start.
+    pub coarse_start: Option<bool>,
+    /// A kernel instance.
+    pub kernel: Option<Kernel>,
+    /// The iteration.
+    pub operator: Option<IterationOperator>,
+    /// Where the sweeps compute.
+    pub device: Option<Device>,
+}
+
+impl SolverOverrides {
+    /// Sets every given setting over `s`.
+    pub fn apply(&self, s: &mut SolverSettings) {
+        fn set<T: Clone>(to: &mut T, from: Option<&T>) {
+            if let Some(v) = from {
+                *to = v.clone();
+            }
+        }
+        set(&mut s.gamma, self.gamma.as_ref());
+        set(&mut s.xi, self.xi.as_ref());
+        set(&mut s.max_sweeps, self.max_sweeps.as_ref());
+        set(&mut s.sweep, self.sweep.as_ref());
+        set(&mut s.absorbing_goal, self.absorbing_goal.as_ref());
+        set(&mut s.backup, self.backup.as_ref());
+        set(&mut s.precision, self.precision.as_ref());
+        set(&mut s.extrapolate, self.extrapolate.as_ref());
+        set(&mut s.evaluation_sweeps, self.evaluation_sweeps.as_ref());
+        set(&mut s.coarse_start, self.coarse_start.as_ref());
+        if self.kernel.is_some() {
+            s.kernel = self.kernel;
+        }
+        set(&mut s.operator, self.operator.as_ref());
+        set(&mut s.device, self.device.as_ref());
     }
 }
 
@@ -514,6 +575,37 @@ impl TrainConfig {
                 ..SolverSettings::default()
             },
         };
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// The default solver settings of a task, decided here once for the command line and
+    /// Python alike: the paper's settings (modified policy iteration in `f32`) for the point
+    /// masses, the same with a coarse start and the paper's threshold for the Khepera robots,
+    /// and a classic benchmark's `preset` (its default one if `None`): the preset's `gamma`
+    /// and `xi` with the toolbox's plain sweeps in `f64`.
+    pub fn solver_defaults(
+        env: EnvKind,
+        preset: Option<&str>,
+    ) -> Result<SolverSettings, ConfigError> {
+        Ok(match (env, preset) {
+            (_, Some(p)) => Self::from_preset(env, p)?.solver,
+            (_, None) => Self::default_for(env)?.solver,
+        })
+    }
+
+    /// The configuration of a task: its model, its grid, and its
+    /// [default solver settings](Self::solver_defaults) with `overrides` set over them,
+    /// validated.
+    pub fn for_task(
+        env: EnvConfig,
+        grid: GridConfig,
+        preset: Option<&str>,
+        overrides: &SolverOverrides,
+    ) -> Result<Self, ConfigError> {
+        let mut solver = Self::solver_defaults(env.kind(), preset)?;
+        overrides.apply(&mut solver);
+        let c = Self { env, grid, solver };
         c.validate()?;
         Ok(c)
     }

@@ -38,6 +38,27 @@ pub(crate) fn encode_postcard<T: serde::Serialize + ?Sized>(
     Ok(seal(magic, version, out))
 }
 
+/// The value of a whole payload: postcard decodes a value from the front of its input and
+/// would ignore bytes after it, so a payload with any left over is refused. The error says in
+/// words what is wrong (postcard's own messages, such as "Found a bool that wasn't 0 or 1",
+/// name its internals, not the file).
+pub(crate) fn decode_postcard<T: serde::de::DeserializeOwned>(payload: &[u8]) -> Result<T, String> {
+    use postcard::Error as E;
+    match postcard::take_from_bytes(payload) {
+        Ok((value, [])) => Ok(value),
+        Ok((_, rest)) => Err(format!(
+            "its payload has {} bytes after its content",
+            rest.len()
+        )),
+        Err(E::DeserializeUnexpectedEnd) => Err("its payload ends inside its content".into()),
+        Err(_) => Err(
+            "its payload holds a value of the wrong kind or out of range (a damaged \
+             file, or one a newer fuzzyq wrote)"
+                .into(),
+        ),
+    }
+}
+
 /// Writes the header of the container whose payload follows `HEADER_LEN` placeholder bytes
 /// in `out`.
 fn seal(magic: &[u8; 8], version: u32, mut out: Vec<u8>) -> Vec<u8> {

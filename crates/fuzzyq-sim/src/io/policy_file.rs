@@ -576,17 +576,19 @@ impl PolicyFile {
             return Err(PolicyFileError::Checksum { path: path_buf });
         }
         let payload: Payload<FqiPayload, BlockTables> = match version {
-            1 => postcard::from_bytes(payload).map(Payload::Fqi),
-            3 => postcard::from_bytes(payload).map(|p: Payload<_, BlockTablesV3>| match p {
-                Payload::LearnedFqi(f, tables) => Payload::LearnedFqi(f, tables.into()),
-                Payload::Fqi(f) => Payload::Fqi(f),
-                Payload::PointMass(text) => Payload::PointMass(text),
-                Payload::Khepera(text) => Payload::Khepera(text),
-                Payload::Tabulated(t) => Payload::Tabulated(t),
+            1 => super::container::decode_postcard(payload).map(Payload::Fqi),
+            3 => super::container::decode_postcard(payload).map(|p: Payload<_, BlockTablesV3>| {
+                match p {
+                    Payload::LearnedFqi(f, tables) => Payload::LearnedFqi(f, tables.into()),
+                    Payload::Fqi(f) => Payload::Fqi(f),
+                    Payload::PointMass(text) => Payload::PointMass(text),
+                    Payload::Khepera(text) => Payload::Khepera(text),
+                    Payload::Tabulated(t) => Payload::Tabulated(t),
+                }
             }),
-            _ => postcard::from_bytes(payload),
+            _ => super::container::decode_postcard(payload),
         }
-        .map_err(|e| malformed(path, e.to_string()))?;
+        .map_err(|e| malformed(path, e))?;
         let fqi = |p: FqiPayload, learned: Option<Box<BlockTables>>| {
             let config = TrainConfig::from_toml(&p.config_toml)
                 .map_err(|e| malformed(path, format!("its configuration: {e}")))?;
@@ -877,6 +879,30 @@ mod tests {
         bad.greedy[0] = 625;
         let e = decode(&PolicyFile::Fqi(bad).to_bytes().unwrap()).unwrap_err();
         assert!(e.to_string().contains("out of range"), "{e}");
+    }
+
+    /// Regression (issue 49): bytes appended inside the checksummed payload were ignored, and
+    /// undecodable payloads showed postcard's own messages.
+    #[test]
+    fn a_payload_must_hold_its_content_and_nothing_more() {
+        let bytes = PolicyFile::Fqi(tiny()).to_bytes().unwrap();
+        let version = u32::from_le_bytes(bytes[8..12].try_into().unwrap());
+        let reseal = |payload: &[u8]| super::super::container::encode(&MAGIC, version, payload);
+        let payload = &bytes[super::super::container::HEADER_LEN..];
+        let mut longer = payload.to_vec();
+        longer.extend_from_slice(&[0, 1, 2]);
+        let e = decode(&reseal(&longer)).unwrap_err();
+        assert!(matches!(e, PolicyFileError::Malformed { .. }), "{e}");
+        assert!(e.to_string().contains("3 bytes after its content"), "{e}");
+        let e = decode(&reseal(&payload[..payload.len() - 4])).unwrap_err();
+        assert!(e.to_string().contains("ends inside its content"), "{e}");
+        let mut kind = payload.to_vec();
+        kind[0] = 0x7f; // the payload's kind: no such variant
+        let e = decode(&reseal(&kind)).unwrap_err().to_string();
+        assert!(e.contains("wrong kind or out of range"), "{e}");
+        for leak in ["Serde", "wasn't", "usize", "Deserialization"] {
+            assert!(!e.contains(leak), "{e}");
+        }
     }
 
     /// Files of format version 1 (fuzzy Q-iteration only, no payload kind) still load.

@@ -89,13 +89,26 @@ struct Buffers<T> {
 }
 
 impl<T: Real> Buffers<T> {
-    /// `x` in `T`, and `m` and `d` values of room for `Q(x, .)` and an action vector.
-    fn load(&mut self, x: &[f64], m: usize, d: usize) -> (&[T], &mut [T], &mut [T]) {
+    /// `x` in `T`, and `m` and `d` values of room for `Q(x, .)` and an action vector; a
+    /// finite element of `x` that `T` cannot hold is refused (it would become infinite).
+    #[allow(clippy::type_complexity)] // the three buffers
+    fn load(
+        &mut self,
+        x: &[f64],
+        m: usize,
+        d: usize,
+    ) -> Result<(&[T], &mut [T], &mut [T]), EvalError> {
         self.x.clear();
         self.x.extend(x.iter().map(|&v| T::from_f64(v)));
+        if let Some(index) = (0..x.len()).find(|&i| x[i].is_finite() && !self.x[i].is_finite()) {
+            return Err(EvalError::BeyondPrecision {
+                what: "state",
+                index,
+            });
+        }
         self.q.resize(m, T::ZERO);
         self.u.resize(d, T::ZERO);
-        (&self.x, &mut self.q, &mut self.u)
+        Ok((&self.x, &mut self.q, &mut self.u))
     }
 }
 
@@ -126,7 +139,7 @@ fn q_values<T: Real, M: Model<T> + Sync>(
     out: &mut [f64],
     b: &mut Buffers<T>,
 ) -> Result<(), SolveError> {
-    let (x, q, _) = b.load(x, out.len(), 0);
+    let (x, q, _) = b.load(x, out.len(), 0)?;
     op.q_values(&p.v, x, q)?;
     widen(q, out);
     Ok(())
@@ -144,7 +157,7 @@ fn greedy<T: Real, M: Model<T> + Sync>(
     let best = q::argmax(q).unwrap_or(0);
     let joint = op.joint();
     check_len("joint action vector", joint.dim(), out.len())?;
-    let (_, _, u) = b.load(&[], 0, joint.dim());
+    let (_, _, u) = b.load(&[], 0, joint.dim())?;
     joint.vector(best, u)?;
     widen(u, out);
     Ok(best)
@@ -157,14 +170,14 @@ fn interpolated<T: Real, M: Model<T>>(
     b: &mut Buffers<T>,
 ) -> Result<(), EvalError> {
     let joint = fuzzyq_core::model::joint_actions(&*p.model)?;
-    let (x, _, u) = b.load(x, 0, out.len());
+    let (x, _, u) = b.load(x, 0, out.len())?;
     q::interpolated_action(&p.grid.view(), &joint, &p.greedy, x, u)?;
     widen(u, out);
     Ok(())
 }
 
 fn value<T: Real, M>(p: &Parts<T, M>, x: &[f64], b: &mut Buffers<T>) -> Result<f64, EvalError> {
-    let (x, _, _) = b.load(x, 0, 0);
+    let (x, _, _) = b.load(x, 0, 0)?;
     Ok(p.grid.view().active(x)?.interpolate(&p.v).to_f64())
 }
 

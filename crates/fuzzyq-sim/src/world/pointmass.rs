@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use super::contacts::{Collisions, StepContacts};
 use super::engine::*;
-use crate::error::{ConfigError, SimError, positive, require};
+use crate::error::{ConfigError, SimError, positive, require, single_precision};
 use crate::model::arena::Arena;
 use crate::model::khepera::MAX_ROBOTS;
 use crate::model::pointmass::{FrictionConfig, PointMass, PointMassConfig};
@@ -40,6 +40,8 @@ impl PointMassPlantConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive("plant.radius", self.radius)?;
+        // The physics engine runs in single precision: a radius beyond it would be infinite.
+        single_precision("plant.radius", &[self.radius])?;
         require!(
             (1..=MAX_SUBSTEPS).contains(&self.substeps),
             "plant.substeps",
