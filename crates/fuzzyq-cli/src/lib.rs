@@ -35,7 +35,7 @@ pub struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Train a policy (fuzzy Q-iteration by default) and write the policy file.
-    Train(cmd::train::TrainArgs),
+    Train(Box<cmd::train::TrainArgs>),
     /// Run a trained policy from an initial state; write the trajectory, figures and metrics.
     Rollout(cmd::rollout::RolloutArgs),
     /// Rerun the paper's Table 1: train fuzzy and crisp learners on the point-mass task, roll
@@ -93,7 +93,7 @@ where
         }
     };
     let result = match cli.command {
-        Command::Train(args) => cmd::train::run(args),
+        Command::Train(args) => cmd::train::run(*args),
         Command::Rollout(args) => cmd::rollout::run(args),
         Command::Compare(args) => cmd::compare::run(args),
         Command::Config(args) => cmd::config::run(args),

@@ -167,6 +167,147 @@ impl core::fmt::Debug for GpuSweeps {
 /// Partial results of `max_pass` / `diff_range`: values per workgroup.
 const PER_WG: u64 = 4096;
 
+/// The arrays of every block's transition table, one after the other (row pointers shifted
+/// to the concatenation), and each block's sizes.
+struct BlockArrays {
+    /// `[cores, actions, rows' length, products' length]` of each block.
+    blocks: Vec<[u32; 4]>,
+    /// Where each block's rows start in `ptr`.
+    row_base: Vec<u32>,
+    ptr: Vec<u32>,
+    col: Vec<u32>,
+    weight: Vec<f32>,
+}
+
+impl BlockArrays {
+    fn of(plan: &fuzzyq_core::solver::BlockPlan<'_, f32>) -> Result<Self, GpuError> {
+        let mut a = Self {
+            blocks: Vec::new(),
+            row_base: Vec::new(),
+            ptr: Vec::new(),
+            col: Vec::new(),
+            weight: Vec::new(),
+        };
+        let small = |x: usize| {
+            u32::try_from(x).map_err(|_| GpuError::Unsupported("runs grids of at most 2^32 cores"))
+        };
+        for t in &plan.tables {
+            a.blocks.push([
+                small(t.n_cores)?,
+                small(t.n_actions)?,
+                small(t.r_len)?,
+                small(t.p_len)?,
+            ]);
+            a.row_base.push(a.ptr.len() as u32);
+            let entry_base = a.col.len() as u32;
+            a.ptr.extend(t.ptr.iter().map(|&p| p + entry_base));
+            a.col.extend_from_slice(t.col);
+            a.weight.extend_from_slice(t.weight);
+        }
+        Ok(a)
+    }
+}
+
+/// The rewards on the device: per core (`rho(x_d)`), or per core and joint action (the
+/// model's table, or the rewards `op` computes, tabulated once); `check` refuses a table over
+/// the adapter's binding limit.
+fn reward_buffer<M: Model<f32> + Sync + ?Sized>(
+    gpu: &Gpu,
+    plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
+    op: &Operator<'_, f32, M>,
+    check: impl Fn(&'static str, u64) -> Result<(), GpuError>,
+) -> Result<wgpu::Buffer, GpuError> {
+    Ok(match (plan.rewards, plan.reward_table) {
+        (Some(r), _) => with_data(&gpu.inner, "rewards", r),
+        (None, Some(t)) => {
+            check("the reward table", 4 * t.len() as u64)?;
+            with_data(&gpu.inner, "reward table", t)
+        }
+        (None, None) => {
+            // A reward of the action that the model computes: tabulated once.
+            check("the reward table", 4 * (op.n_cores() * plan.n_joint) as u64)?;
+            with_data(&gpu.inner, "reward table", &op.reward_rows())
+        }
+    })
+}
+
+/// The problem's kernels, compiled with its sizes as constants: the stage kernel of every
+/// stage the passes run as a stage, and the fused last stage (with the cores per workgroup)
+/// where the joint actions are the product's and the reward does not depend on the action.
+/// `sg`: the subgroup size the last stage reduces with, if any.
+#[allow(clippy::type_complexity)] // the pipelines, as GpuSweeps keeps them
+fn compile(
+    gpu: &Gpu,
+    k: &Kernels,
+    shape: &Shape,
+    sg: Option<u32>,
+) -> Result<
+    (
+        Vec<wgpu::ComputePipeline>,
+        Option<(wgpu::ComputePipeline, u32)>,
+    ),
+    GpuError,
+> {
+    let nb = shape.n_blocks();
+    // Every stage the passes run as a stage: those before the last, and the last where it
+    // writes full rows.
+    let compiled = if shape.fused && shape.fused_abs {
+        nb - 1
+    } else {
+        nb
+    };
+    let stage_c = (0..compiled)
+        .map(|b| {
+            let [n_b, a_b, r_b, p_b] = shape.blocks[b];
+            let consts = [
+                ("SB", b as u32),
+                ("SN", n_b),
+                ("SA", a_b),
+                ("SR", r_b),
+                ("SP", p_b),
+            ];
+            let t = (include_str!("stagec.wgsl"), "stage_c");
+            kernels::specialized(&gpu.inner, k, t, &consts, &[], false)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let last1 = if shape.fused_abs {
+        let [nl, al, _, pl] = shape.blocks[nb - 1];
+        // A workgroup of one subgroup (or of 64 threads reducing in memory); a core's
+        // lanes a power of two up to 32 (or the subgroup), each taking J columns.
+        let wgs = sg.unwrap_or(WG);
+        let tpc = pl.next_power_of_two().min(wgs).min(32);
+        let consts = [
+            ("LAST", (nb - 1) as u32),
+            ("NL", nl),
+            ("AL", al),
+            ("PL", pl),
+            ("TPC", tpc),
+            ("J", pl.div_ceil(tpc)),
+            ("CPW", wgs / tpc),
+            ("WGS", wgs),
+        ];
+        let replace: &[(&str, &str)] = if sg.is_some() {
+            &[
+                ("LANE_PARAM", ", @builtin(subgroup_invocation_id) sid: u32"),
+                ("LANE_EXPR", "sid"),
+                ("REDUCE", kernels::REDUCE_SUBGROUP),
+            ]
+        } else {
+            &[
+                ("LANE_PARAM", ""),
+                ("LANE_EXPR", "li"),
+                ("REDUCE", kernels::REDUCE_MEMORY),
+            ]
+        };
+        let t = (include_str!("last1.wgsl"), "last1");
+        let p = kernels::specialized(&gpu.inner, k, t, &consts, replace, sg.is_some())?;
+        Some((p, wgs / tpc))
+    } else {
+        None
+    };
+    Ok((stage_c, last1))
+}
+
 impl GpuSweeps {
     /// Uploads `op`'s block tables and allocates the run's buffers on `gpu`.
     ///
@@ -202,26 +343,13 @@ impl GpuSweeps {
             Ok(())
         };
         check("V", 4 * n as u64)?;
-        let mut blocks = Vec::new();
-        let mut row_base = Vec::new();
-        let (mut ptr, mut col, mut weight) = (Vec::new(), Vec::new(), Vec::new());
-        for t in &plan.tables {
-            let small = |x: usize| {
-                u32::try_from(x)
-                    .map_err(|_| GpuError::Unsupported("runs grids of at most 2^32 cores"))
-            };
-            blocks.push([
-                small(t.n_cores)?,
-                small(t.n_actions)?,
-                small(t.r_len)?,
-                small(t.p_len)?,
-            ]);
-            row_base.push(ptr.len() as u32);
-            let entry_base = col.len() as u32;
-            ptr.extend(t.ptr.iter().map(|&p| p + entry_base));
-            col.extend_from_slice(t.col);
-            weight.extend_from_slice(t.weight);
-        }
+        let BlockArrays {
+            blocks,
+            row_base,
+            ptr,
+            col,
+            weight,
+        } = BlockArrays::of(&plan)?;
         let last = plan.tables.last().expect("at least one block");
         let identity = plan.joint_to_product.is_none();
         let reward_table = plan.rewards.is_none();
@@ -257,18 +385,7 @@ impl GpuSweeps {
 
         let device = &gpu.inner.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let rewards = match (plan.rewards, plan.reward_table) {
-            (Some(r), _) => with_data(&gpu.inner, "rewards", r),
-            (None, Some(t)) => {
-                check("the reward table", 4 * t.len() as u64)?;
-                with_data(&gpu.inner, "reward table", t)
-            }
-            (None, None) => {
-                // A reward of the action that the model computes: tabulated once.
-                check("the reward table", 4 * (n * plan.n_joint) as u64)?;
-                with_data(&gpu.inner, "reward table", &op.reward_rows())
-            }
-        };
+        let rewards = reward_buffer(gpu, &plan, op, check)?;
         let goal: Vec<u32> = plan.goal.iter().map(|&g| u32::from(g)).collect();
         let map = plan.joint_to_product.unwrap_or(&[]);
         let table = [
@@ -291,63 +408,8 @@ impl GpuSweeps {
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = gpu.kernels.clone();
-        // Every stage the passes run as a stage: those before the last, and the last where it
-        // writes full rows.
-        let compiled = if shape.fused && shape.fused_abs {
-            nb - 1
-        } else {
-            nb
-        };
-        let stage_c = (0..compiled)
-            .map(|b| {
-                let [n_b, a_b, r_b, p_b] = shape.blocks[b];
-                let consts = [
-                    ("SB", b as u32),
-                    ("SN", n_b),
-                    ("SA", a_b),
-                    ("SR", r_b),
-                    ("SP", p_b),
-                ];
-                let t = (include_str!("stagec.wgsl"), "stage_c");
-                kernels::specialized(&gpu.inner, &k, t, &consts, &[], false)
-            })
-            .collect::<Result<Vec<_>, _>>()?;
         let sg = gpu.inner.summary.subgroup_size.filter(|_| gpu.subgroups);
-        let last1 = if shape.fused_abs {
-            let [nl, al, _, pl] = shape.blocks[nb - 1];
-            // A workgroup of one subgroup (or of 64 threads reducing in memory); a core's
-            // lanes a power of two up to 32 (or the subgroup), each taking J columns.
-            let wgs = sg.unwrap_or(WG);
-            let tpc = pl.next_power_of_two().min(wgs).min(32);
-            let consts = [
-                ("LAST", (nb - 1) as u32),
-                ("NL", nl),
-                ("AL", al),
-                ("PL", pl),
-                ("TPC", tpc),
-                ("J", pl.div_ceil(tpc)),
-                ("CPW", wgs / tpc),
-                ("WGS", wgs),
-            ];
-            let replace: &[(&str, &str)] = if sg.is_some() {
-                &[
-                    ("LANE_PARAM", ", @builtin(subgroup_invocation_id) sid: u32"),
-                    ("LANE_EXPR", "sid"),
-                    ("REDUCE", kernels::REDUCE_SUBGROUP),
-                ]
-            } else {
-                &[
-                    ("LANE_PARAM", ""),
-                    ("LANE_EXPR", "li"),
-                    ("REDUCE", kernels::REDUCE_MEMORY),
-                ]
-            };
-            let t = (include_str!("last1.wgsl"), "last1");
-            let p = kernels::specialized(&gpu.inner, &k, t, &consts, replace, sg.is_some())?;
-            Some((p, wgs / tpc))
-        } else {
-            None
-        };
+        let (stage_c, last1) = compile(gpu, &k, &shape, sg)?;
         let diff_out = k
             .diff
             .is_some()

@@ -421,65 +421,17 @@ fn solve_(
     } else {
         None
     };
+    let run = Run {
+        threads,
+        callback: callback.as_ref(),
+        progress,
+        limit: &limit,
+    };
     if let Some((env, grid_config, preset)) = builtin {
         let config = TrainConfig::for_task(env, grid_config, preset, &overrides)
             .map_err(|e| config_error(py, &e))?;
-        limit
-            .check(&fuzzyq_sim::memory::train(&config))
-            .map_err(|e| memory_error(py, "max_memory_gb", &e))?;
-        if config.solver.absorbing_goal {
-            let task = config.build_model().map_err(|e| sim_error(py, &e))?;
-            let inner = &g.inner;
-            let any_goal =
-                crate::pool::detach(py, || any_core(inner, |x| F64Model::is_goal(&task, x)));
-            if !any_goal {
-                return Err(no_goal(
-                    py,
-                    &format!(
-                        "no core of the grid is a goal state of the {} model",
-                        task.name()
-                    ),
-                ));
-            }
-        }
-        let data = transitions
-            .map(|t| transitions_from(t, &config))
-            .transpose()?;
-        let run = |limit: Option<usize>,
-                   resume: Option<FqiState<'static>>,
-                   watch: &Watch<'_, FqiState<'static>>| {
-            let mut config = config.clone();
-            config.solver.max_sweeps = limit.unwrap_or(config.solver.max_sweeps);
-            let interrupted = |e| watch.interrupt(e);
-            crate::pool::run_interruptible(py, threads, interrupted, || match &data {
-                None => fuzzyq_sim::train::train_showing(
-                    &config,
-                    resume,
-                    watch.wants_state(),
-                    |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
-                ),
-                Some(d) => fuzzyq_sim::train::train_on_transitions(
-                    &config,
-                    d,
-                    &FitConfig::default(),
-                    watch.plain(),
-                )
-                .map(|r| r.artifact),
-            })
-            .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
-        };
-        let (artifact, stopped) = run_watched(
-            py,
-            callback.as_ref(),
-            progress,
-            config.solver.max_sweeps,
-            run,
-        )?;
-        let mut solution = Solution::from_artifact(py, artifact, Some(grid.clone().unbind()))?;
-        solution.stopped = stopped;
-        return Ok(solution);
+        return solve_builtin(py, grid, &config, transitions, &run);
     }
-
     if transitions.is_some() {
         return Err(error(
             py,
@@ -499,6 +451,90 @@ fn solve_(
             ),
         ));
     };
+    solve_callable(py, cm, grid, &overrides, &run)
+}
+
+/// How a solve runs: its threads, its callback and progress bar, its memory limit.
+struct Run<'a> {
+    threads: Option<usize>,
+    callback: Option<&'a Py<PyAny>>,
+    progress: bool,
+    limit: &'a Limit,
+}
+
+/// Solves a built-in model's task (`config`, as `fuzzyq train` would read it) on `grid`, or
+/// the model learned from `transitions`.
+fn solve_builtin(
+    py: Python<'_>,
+    grid: &Bound<'_, Grid>,
+    config: &TrainConfig,
+    transitions: Option<&Bound<'_, PyAny>>,
+    run: &Run<'_>,
+) -> PyResult<Solution> {
+    let g = grid.get();
+    run.limit
+        .check(&fuzzyq_sim::memory::train(config))
+        .map_err(|e| memory_error(py, "max_memory_gb", &e))?;
+    if config.solver.absorbing_goal {
+        let task = config.build_model().map_err(|e| sim_error(py, &e))?;
+        let inner = &g.inner;
+        let any_goal = crate::pool::detach(py, || any_core(inner, |x| F64Model::is_goal(&task, x)));
+        if !any_goal {
+            return Err(no_goal(
+                py,
+                &format!(
+                    "no core of the grid is a goal state of the {} model",
+                    task.name()
+                ),
+            ));
+        }
+    }
+    let data = transitions
+        .map(|t| transitions_from(t, config))
+        .transpose()?;
+    let solve = |limit: Option<usize>,
+                 resume: Option<FqiState<'static>>,
+                 watch: &Watch<'_, FqiState<'static>>| {
+        let mut config = config.clone();
+        config.solver.max_sweeps = limit.unwrap_or(config.solver.max_sweeps);
+        let interrupted = |e| watch.interrupt(e);
+        crate::pool::run_interruptible(py, run.threads, interrupted, || match &data {
+            None => {
+                fuzzyq_sim::train::train_showing(&config, resume, watch.wants_state(), |p, s| {
+                    watch.see(p, || s.map(|s| s.clone().into_owned()))
+                })
+            }
+            Some(d) => fuzzyq_sim::train::train_on_transitions(
+                &config,
+                d,
+                &FitConfig::default(),
+                watch.plain(),
+            )
+            .map(|r| r.artifact),
+        })
+        .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
+    };
+    let (artifact, stopped) = run_watched(
+        py,
+        run.callback,
+        run.progress,
+        config.solver.max_sweeps,
+        solve,
+    )?;
+    let mut solution = Solution::from_artifact(py, artifact, Some(grid.clone().unbind()))?;
+    solution.stopped = stopped;
+    Ok(solution)
+}
+
+/// Solves a `CallableModel` on `grid`: tabulated first, then solved on the table.
+fn solve_callable(
+    py: Python<'_>,
+    cm: &Bound<'_, CallableModel>,
+    grid: &Bound<'_, Grid>,
+    overrides: &SolverOverrides,
+    run: &Run<'_>,
+) -> PyResult<Solution> {
+    let g = grid.get();
     let mut settings = SolverSettings::default();
     overrides.apply(&mut settings);
     if settings.operator != IterationOperator::Values {
@@ -521,7 +557,7 @@ fn solve_(
     }
     let cm_obj = cm;
     let cm = cm.get();
-    let tables = cm.tabulate(py, &g.inner, settings.precision, &limit)?;
+    let tables = cm.tabulate(py, &g.inner, settings.precision, run.limit)?;
     let config = settings.solver_config();
     macro_rules! run {
         ($t:ty, $variant:ident) => {{
@@ -530,15 +566,15 @@ fn solve_(
                 .map_err(|e| solve_error(py, &e))?;
             let table = Arc::new(table);
             let grid_t = g.to_precision::<$t>(py)?;
-            let run = |limit: Option<usize>,
-                       resume: Option<solver::SolverState<'static, $t>>,
-                       watch: &Watch<'_, solver::SolverState<'static, $t>>| {
+            let solve = |limit: Option<usize>,
+                         resume: Option<solver::SolverState<'static, $t>>,
+                         watch: &Watch<'_, solver::SolverState<'static, $t>>| {
                 let config = solver::SolverConfig {
                     max_sweeps: limit.unwrap_or(config.max_sweeps),
                     ..config
                 };
                 let interrupted = |e| watch.interrupt(e);
-                crate::pool::run_interruptible(py, threads, interrupted, || {
+                crate::pool::run_interruptible(py, run.threads, interrupted, || {
                     <$t as DeviceReal>::solve_on_device(
                         settings.device,
                         &*table,
@@ -552,7 +588,7 @@ fn solve_(
                 .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
             };
             let (s, stopped) =
-                run_watched(py, callback.as_ref(), progress, config.max_sweeps, run)?;
+                run_watched(py, run.callback, run.progress, config.max_sweeps, solve)?;
             let summary = TrainSummary::from_solution(&s);
             let v = PyArray1::from_vec(py, s.v).into_any().unbind();
             let mut solution = Solution::assemble(

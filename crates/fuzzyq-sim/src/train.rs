@@ -123,34 +123,67 @@ where
 {
     crate::slabs::check_shardable(config).map_err(SimError::from)?;
     let model = config.build_model()?;
-    let solver_config = config.solver.solver_config();
     match split_resume(config, resume)? {
         Resume::F32(resume) => {
-            let grid = config.grid::<f32>()?;
-            let s = solver::solve_on(
-                &model,
-                &grid,
-                &solver_config,
-                sweeps,
-                resume,
-                show_state,
-                |p, s| observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref()),
-            )?;
-            Ok(artifact(config, s, Values::F32))
+            solve_on_t(&model, config, sweeps, resume, show_state, &mut observer)
         }
         Resume::F64(resume) => {
-            let grid = config.grid::<f64>()?;
-            let s = solver::solve_on(
-                &model,
-                &grid,
-                &solver_config,
-                sweeps,
-                resume,
-                show_state,
-                |p, s| observer(p, s.map(|s| FqiState::F64(s.clone())).as_ref()),
-            )?;
-            Ok(artifact(config, s, Values::F64))
+            solve_on_t(&model, config, sweeps, resume, show_state, &mut observer)
         }
+    }
+}
+
+/// [`train_on`] in the precision `T`.
+fn solve_on_t<T, S, E>(
+    model: &EnvModel,
+    config: &TrainConfig,
+    sweeps: &mut S,
+    resume: Option<SolverState<'static, T>>,
+    show_state: bool,
+    observer: &mut impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, E>
+where
+    T: Stored,
+    EnvModel: fuzzyq_core::Model<T>,
+    S: solver::Sweeps<T, Error = E>,
+    E: From<SimError> + From<SolveError>,
+{
+    let grid = config.grid::<T>()?;
+    let s = solver::solve_on(
+        model,
+        &grid,
+        &config.solver.solver_config(),
+        sweeps,
+        resume,
+        show_state,
+        |p, s| observer(p, s.map(T::state).as_ref()),
+    )?;
+    Ok(artifact(config, s, T::values))
+}
+
+/// A solver precision as checkpoints and policy files hold it.
+trait Stored: DeviceReal {
+    /// A run's state as a checkpoint holds it.
+    fn state<'a>(s: &SolverState<'a, Self>) -> FqiState<'a>;
+    /// Values as a policy file holds them.
+    fn values(v: Vec<Self>) -> Values;
+}
+
+impl Stored for f32 {
+    fn state<'a>(s: &SolverState<'a, f32>) -> FqiState<'a> {
+        FqiState::F32(s.clone())
+    }
+    fn values(v: Vec<f32>) -> Values {
+        Values::F32(v)
+    }
+}
+
+impl Stored for f64 {
+    fn state<'a>(s: &SolverState<'a, f64>) -> FqiState<'a> {
+        FqiState::F64(s.clone())
+    }
+    fn values(v: Vec<f64>) -> Values {
+        Values::F64(v)
     }
 }
 
@@ -247,38 +280,43 @@ fn solve_and_pack<M>(
     config: &TrainConfig,
     resume: Option<FqiState<'static>>,
     show_state: bool,
-    mut observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
+    observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
 ) -> Result<PolicyArtifact, SimError>
 where
     M: fuzzyq_core::Model<f32> + fuzzyq_core::Model<f64> + Sync,
 {
     match split_resume(config, resume)? {
-        Resume::F32(resume) if config.solver.device == Device::Gpu => {
-            let grid = config.grid::<f32>()?;
-            let s = f32::solve_on_device(
-                Device::Gpu,
-                model,
-                &grid,
-                &config.solver.solver_config(),
-                resume,
-                show_state,
-                |p, s| observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref()),
-            )?;
-            Ok(artifact(config, s, Values::F32))
-        }
-        Resume::F32(resume) => {
-            let s = solve::<f32, M>(model, config, resume, |p, s| {
-                observer(p, s.map(|s| FqiState::F32(s.clone())).as_ref())
-            })?;
-            Ok(artifact(config, s, Values::F32))
-        }
-        Resume::F64(resume) => {
-            let s = solve::<f64, M>(model, config, resume, |p, s| {
-                observer(p, s.map(|s| FqiState::F64(s.clone())).as_ref())
-            })?;
-            Ok(artifact(config, s, Values::F64))
-        }
+        Resume::F32(resume) => solve_and_pack_t(model, config, resume, show_state, observer),
+        Resume::F64(resume) => solve_and_pack_t(model, config, resume, show_state, observer),
     }
+}
+
+/// [`solve_and_pack`] in the precision `T`: on the configured device (the GPU runs `f32`
+/// only), the values operator or the q-values one.
+fn solve_and_pack_t<T: Stored, M: fuzzyq_core::Model<T> + Sync>(
+    model: &M,
+    config: &TrainConfig,
+    resume: Option<SolverState<'static, T>>,
+    show_state: bool,
+    mut observer: impl FnMut(&Progress, Option<&FqiState<'_>>) -> ControlFlow<()>,
+) -> Result<PolicyArtifact, SimError> {
+    let s = if config.solver.device == Device::Gpu {
+        let grid = config.grid::<T>()?;
+        T::solve_on_device(
+            Device::Gpu,
+            model,
+            &grid,
+            &config.solver.solver_config(),
+            resume,
+            show_state,
+            |p, s| observer(p, s.map(T::state).as_ref()),
+        )?
+    } else {
+        solve::<T, M>(model, config, resume, |p, s| {
+            observer(p, s.map(T::state).as_ref())
+        })?
+    };
+    Ok(artifact(config, s, T::values))
 }
 
 fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(

@@ -5,11 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
 import numpy.typing as npt
-from gymnasium import error as gym_error
-from gymnasium import spaces
-from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv  # type: ignore[import-untyped, unused-ignore]
 
 import fuzzyq
@@ -18,12 +14,13 @@ from ._core import (
     Observation,
     SimBacked,
     agent_name,
-    validate_index,
 )
+from ._parallel import ParallelAgents
 from ._render import RENDER_MODES, Frame
 
 
 class PointMassParallelEnv(
+    ParallelAgents,
     SimBacked,
     ParallelEnv[str, Observation, int]  # type: ignore[misc, unused-ignore]
 ):
@@ -80,109 +77,13 @@ class PointMassParallelEnv(
         self, *, max_steps: int | None = 75, render_mode: str | None = None, **model_kwargs: Any
     ) -> None:
         model = self._init_sim(max_steps, render_mode, model_kwargs)
-        self.possible_agents = [agent_name(i) for i in range(model.n_agents)]
-        self.agents: list[str] = []
-        self.observation_spaces = {a: self._sim.observation_space() for a in self.possible_agents}
-        self.action_spaces = {a: spaces.Discrete(model.n_actions) for a in self.possible_agents}
-        #: The space of `state()`: the joint state, as every agent's observation.
-        self.state_space = self._sim.observation_space()
-        self._np_random: np.random.Generator | None = None
-        self._np_random_seed: int | None = None
+        self._init_agents([model.n_actions] * model.n_agents)
 
-    # --- properties --------------------------------------------------------------------------
+    def _joint_index(self, per_agent: list[int]) -> int:
+        return int(self._sim.model.joint_index(per_agent))
 
-    @property
-    def np_random(self) -> np.random.Generator:
-        """The generator of initial states (seeded by ``reset(seed=...)``)."""
-        if self._np_random is None:
-            self._np_random, self._np_random_seed = seeding.np_random()
-        return self._np_random
-
-    @property
-    def np_random_seed(self) -> int | None:
-        """The seed of `np_random` (drawn from entropy when no seed was given)."""
-        if self._np_random is None:
-            self._np_random, self._np_random_seed = seeding.np_random()
-        return self._np_random_seed
-
-    def _check_agent(self, agent: str) -> str:
-        if agent not in self.observation_spaces:
-            raise fuzzyq.InputError(
-                f"unknown agent {agent!r}; possible agents are {self.possible_agents}"
-            )
-        return agent
-
-    def observation_space(self, agent: str) -> spaces.Box:
-        """The Box of joint observations of `agent` (the same object on every call)."""
-        return self.observation_spaces[self._check_agent(agent)]
-
-    def action_space(self, agent: str) -> spaces.Discrete:
-        """``Discrete(model.n_actions)`` for `agent` (the same object on every call)."""
-        return self.action_spaces[self._check_agent(agent)]
-
-    # --- API ---------------------------------------------------------------------------------
-
-    def reset(
-        self, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, Observation], dict[str, dict[str, Any]]]:
-        """Start an episode with all agents; see the class docstring for `options`."""
-        if seed is not None or self._np_random is None:
-            self._np_random, self._np_random_seed = seeding.np_random(seed)
-        self._sim.reset(self._np_random, options)
-        self.agents = self.possible_agents[:]
-        observations = {a: self._sim.observation() for a in self.agents}
-        infos = {a: self._sim.info() for a in self.agents}
-        if self.render_mode == "human":
-            self.render()
-        return observations, infos
-
-    def step(
-        self, actions: dict[str, Any]
-    ) -> tuple[
-        dict[str, Observation],
-        dict[str, float],
-        dict[str, bool],
-        dict[str, bool],
-        dict[str, dict[str, Any]],
-    ]:
-        """Apply every live agent's action at once; see the class docstring."""
-        if not self.agents:
-            raise gym_error.ResetNeeded(
-                "no live agents (the episode was truncated or never started); call reset()"
-            )
-        if not isinstance(actions, Mapping):
-            raise fuzzyq.InputTypeError(
-                f"actions must be a dict mapping each agent to its action index, "
-                f"got {type(actions).__name__}"
-            )
-        missing = [a for a in self.agents if a not in actions]
-        unexpected = [a for a in actions if a not in self.agents]
-        if missing or unexpected:
-            raise fuzzyq.InputError(
-                f"actions must have exactly one entry per live agent {self.agents}; "
-                f"missing {missing}, unexpected {unexpected}"
-            )
-        model = self._sim.model
-        per_agent = [
-            validate_index(actions[a], model.n_actions, f"action of {a}") for a in self.agents
-        ]
-        reward = self._sim.step(model.joint_index(per_agent))
-        truncated = self._sim.truncated
-        agents = self.agents
-        observations = {a: self._sim.observation() for a in agents}
-        rewards = dict.fromkeys(agents, reward)
-        terminations = dict.fromkeys(agents, False)
-        truncations = dict.fromkeys(agents, truncated)
-        infos = {a: self._sim.info() for a in agents}
-        if truncated:
-            self.agents = []
-        if self.render_mode == "human":
-            self.render()
-        return observations, rewards, terminations, truncations, infos
-
-    def state(self) -> Observation:
-        """A fresh float32 copy of the joint state (in `state_space`)."""
-        return self._sim.observation()
+    def _terminal(self) -> bool:
+        return False  # the task is continuing
 
     def render(self) -> Frame | str | None:
         """A picture of the current state, as `render_mode` asks.

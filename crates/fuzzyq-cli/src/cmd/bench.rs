@@ -18,24 +18,17 @@ use anyhow::Context;
 use clap::Args;
 use fuzzyq_core::NamedOption;
 use fuzzyq_core::solver::{self, Device, Kernel, Precision};
-use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::train;
 use serde::Serialize;
 
-use crate::cmd::train::{load_config, start_pool};
+use super::{TaskArgs, start_pool};
 use crate::output::{self, write_json};
 
 #[derive(Args, Debug)]
 pub(crate) struct BenchArgs {
-    /// The environment whose problem is timed.
-    #[arg(long, value_parser = output::env(), default_value = "pointmass")]
-    env: EnvKind,
-    /// A TOML configuration (see `fuzzyq config`) whose problem is timed instead.
-    #[arg(long, value_name = "FILE.toml")]
-    config: Option<PathBuf>,
-    /// A classic benchmark's named grid.
-    #[arg(long, value_name = "NAME")]
-    preset: Option<String>,
+    /// The problem timed.
+    #[command(flatten)]
+    task: TaskArgs,
     /// Kernel instance (default: the fastest this CPU runs).
     #[arg(long, value_parser = output::named::<Kernel>())]
     kernel: Option<Kernel>,
@@ -74,12 +67,8 @@ struct Cache {
 /// The `--json` output.
 #[derive(Debug, Serialize)]
 struct Report {
-    cpu: String,
-    logical_cpus: usize,
-    threads: usize,
-    features: Vec<&'static str>,
-    caches: Vec<Cache>,
-    kernels: Vec<&'static str>,
+    #[serde(flatten)]
+    machine: Machine,
     kernel: &'static str,
     precision: &'static str,
     peak_gfma_per_second: f64,
@@ -112,9 +101,9 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
     }
     output::plan(
         &[(args.json.as_deref(), "--json")],
-        &[(args.config.as_deref(), "--config")],
+        &[(args.task.config.as_deref(), "--config")],
     )?;
-    let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
+    let mut config = args.task.load()?;
     start_pool(args.threads)?;
     if args.device == Device::Gpu {
         if args.kernel.is_some() {
@@ -136,32 +125,7 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
     s.evaluation_sweeps = 0;
     config.validate()?;
 
-    let cpu = cpu_name();
-    let logical_cpus = std::thread::available_parallelism().map_or(1, usize::from);
-    let threads = rayon::current_num_threads();
-    let features = features();
-    let caches = caches();
-    let kernels: Vec<&'static str> = Kernel::ALL
-        .iter()
-        .filter(|k| k.is_available())
-        .map(|k| k.name())
-        .collect();
-    println!("cpu        {cpu} ({logical_cpus} logical CPUs, {threads} threads used)");
-    println!(
-        "features   {}",
-        if features.is_empty() {
-            "none of avx512f, avx512vl, avx2, fma".to_string()
-        } else {
-            features.join(" ")
-        }
-    );
-    println!("caches     {}", fmt_caches(&caches));
-    println!(
-        "kernels    {} (fastest first); timing {}",
-        kernels.join(", "),
-        kernel.name()
-    );
-
+    let machine = Machine::here(kernel);
     let precision = config.solver.precision;
     let measure_peak = |seconds: f64| match precision {
         Precision::F32 => solver::fma_peak::<f32>(Some(kernel), seconds),
@@ -176,111 +140,201 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
         peak.threads,
         args.peak_seconds
     );
-
-    let (cores, joint) = (config.n_cores(), config.n_joint_actions());
-    eprintln!(
-        "timing {} full backups of {}: {cores} cores x {joint} joint actions ...",
-        args.backups + 1,
-        config.env.name()
-    );
-    let start = Instant::now();
-    // After every sweep: its end on the solve's clock, then the peak again, and how long that
-    // measurement took (the solve's clock runs on through it).
-    let (mut ends, mut around, mut spent) = (Vec::new(), Vec::new(), Vec::new());
-    let artifact = train::train(&config, |p| {
-        ends.push(p.record.seconds);
-        let t0 = Instant::now();
-        around.push(measure_peak(args.peak_seconds / 4.0).map_or(f64::NAN, |p| p.gfma_per_second));
-        spent.push(t0.elapsed().as_secs_f64());
-        std::ops::ControlFlow::Continue(())
+    let timed = Backups::time(&config, args.backups, || {
+        measure_peak(args.peak_seconds / 4.0).map_or(f64::NAN, |p| p.gfma_per_second)
     })?;
-    let summary = artifact.summary;
-    // Sweep k's time is the gap between the end of sweep k - 1 and its own, less the peak
-    // measured in between; the first one (after the set-up, from V = 0) is not timed.
-    let times: Vec<f64> = (1..ends.len())
-        .map(|k| ends[k] - ends[k - 1] - spent[k - 1])
-        .collect();
-    if times.is_empty() {
-        anyhow::bail!(
-            "the solve stopped after {} sweep(s) (its values did not change): no full backup to time",
-            ends.len()
-        );
-    }
-    let median_seconds = median(&times);
-    let fma = summary.multiply_adds_per_sweep;
-    let rate = fma.map(|f| f / median_seconds / 1e9);
-    let fractions = fma.map(|f| {
-        (1..ends.len())
-            .map(|k| f / times[k - 1] / 1e9 / (0.5 * (around[k - 1] + around[k])))
-            .collect::<Vec<_>>()
-    });
-    let fraction = fractions.as_deref().map(median);
-    println!(
-        "problem    {}: {cores} cores x {joint} joint actions, {} path{}",
-        config.env.name(),
-        summary.backup,
-        fma.map_or(String::new(), |f| format!(
-            ", {f:.3e} multiply-adds per full backup"
-        )),
-    );
-    let (lo, hi) = min_max(&around);
-    println!(
-        "           {lo:.1}-{hi:.1} GFMA/s in the {} measurements of {} s between the sweeps",
-        around.len(),
-        args.peak_seconds / 4.0
-    );
-    println!(
-        "backup     {:.3} s median of {} full backups (value iteration from V = 0){}",
-        median_seconds,
-        times.len(),
-        match (rate, &fractions, fraction) {
-            (Some(r), Some(fs), Some(f)) => {
-                let (lo, hi) = min_max(fs);
-                format!(
-                    ": {r:.1} GFMA/s, {:.0}% of the peak measured around each backup \
-                     (median; {:.0}-{:.0}%)",
-                    100.0 * f,
-                    100.0 * lo,
-                    100.0 * hi
-                )
-            }
-            _ => " (the generic path: no multiply-add count)".to_string(),
-        }
-    );
-    eprintln!(
-        "(early sweeps from V = 0; full backups of a nearly converged V can take longer: see \
-         BENCHMARKS.md)"
-    );
-    eprintln!(
-        "(run {:.1} s including set-up and the final greedy pass)",
-        start.elapsed().as_secs_f64()
-    );
+    timed.print(&config, args.peak_seconds / 4.0);
     if let Some(path) = &args.json {
+        let (cores, joint) = (config.n_cores(), config.n_joint_actions());
         let report = Report {
-            cpu,
-            logical_cpus,
-            threads,
-            features,
-            caches,
-            kernels,
+            machine,
             kernel: kernel.name(),
             precision: precision.name(),
             peak_gfma_per_second: peak.gfma_per_second,
             env: config.env.name(),
             cores,
             joint_actions: joint,
-            backup: summary.backup,
-            multiply_adds_per_backup: fma,
-            peaks_between_backups: around,
-            backup_seconds: times,
-            median_backup_seconds: median_seconds,
-            gfma_per_second: rate,
-            fractions_of_peak: fractions,
-            fraction_of_peak: fraction,
+            backup: timed.backup,
+            multiply_adds_per_backup: timed.multiply_adds,
+            peaks_between_backups: timed.around,
+            backup_seconds: timed.times,
+            median_backup_seconds: timed.median_seconds,
+            gfma_per_second: timed.rate,
+            fractions_of_peak: timed.fractions,
+            fraction_of_peak: timed.fraction,
         };
         write_json(path, &report)?;
     }
     Ok(())
+}
+
+/// This machine as `bench` reports it: the CPU, its vector features, caches and kernel
+/// instances (printed when gathered).
+#[derive(Debug, Serialize)]
+struct Machine {
+    cpu: String,
+    logical_cpus: usize,
+    threads: usize,
+    features: Vec<&'static str>,
+    caches: Vec<Cache>,
+    kernels: Vec<&'static str>,
+}
+
+impl Machine {
+    /// Gathers and prints what this machine is, and the `kernel` instance timed.
+    fn here(kernel: Kernel) -> Self {
+        let m = Self {
+            cpu: cpu_name(),
+            logical_cpus: std::thread::available_parallelism().map_or(1, usize::from),
+            threads: rayon::current_num_threads(),
+            features: features(),
+            caches: caches(),
+            kernels: Kernel::ALL
+                .iter()
+                .filter(|k| k.is_available())
+                .map(|k| k.name())
+                .collect(),
+        };
+        println!(
+            "cpu        {} ({} logical CPUs, {} threads used)",
+            m.cpu, m.logical_cpus, m.threads
+        );
+        println!(
+            "features   {}",
+            if m.features.is_empty() {
+                "none of avx512f, avx512vl, avx2, fma".to_string()
+            } else {
+                m.features.join(" ")
+            }
+        );
+        println!("caches     {}", fmt_caches(&m.caches));
+        println!(
+            "kernels    {} (fastest first); timing {}",
+            m.kernels.join(", "),
+            kernel.name()
+        );
+        m
+    }
+}
+
+/// Full backups timed, each set against the peak measured just before and just after it.
+struct Backups {
+    /// The backup path (`block` or `generic`).
+    backup: String,
+    multiply_adds: Option<f64>,
+    /// The peak measured after each sweep (the first, untimed one included).
+    around: Vec<f64>,
+    /// Each timed backup's seconds.
+    times: Vec<f64>,
+    median_seconds: f64,
+    /// Billions of multiply-adds per second at the median time.
+    rate: Option<f64>,
+    fractions: Option<Vec<f64>>,
+    fraction: Option<f64>,
+}
+
+impl Backups {
+    /// Solves `config` (plain sweeps, `backups + 1` of them), measuring the peak with `peak`
+    /// after every sweep; the first sweep (the set-up, from `V = 0`) is not timed.
+    fn time(
+        config: &fuzzyq_sim::TrainConfig,
+        backups: usize,
+        mut peak: impl FnMut() -> f64,
+    ) -> anyhow::Result<Self> {
+        eprintln!(
+            "timing {} full backups of {}: {} cores x {} joint actions ...",
+            backups + 1,
+            config.env.name(),
+            config.n_cores(),
+            config.n_joint_actions()
+        );
+        let start = Instant::now();
+        // After every sweep: its end on the solve's clock, then the peak again, and how long
+        // that measurement took (the solve's clock runs on through it).
+        let (mut ends, mut around, mut spent) = (Vec::new(), Vec::new(), Vec::new());
+        let artifact = train::train(config, |p| {
+            ends.push(p.record.seconds);
+            let t0 = Instant::now();
+            around.push(peak());
+            spent.push(t0.elapsed().as_secs_f64());
+            std::ops::ControlFlow::Continue(())
+        })?;
+        let summary = artifact.summary;
+        // Sweep k's time is the gap between the end of sweep k - 1 and its own, less the
+        // peak measured in between.
+        let times: Vec<f64> = (1..ends.len())
+            .map(|k| ends[k] - ends[k - 1] - spent[k - 1])
+            .collect();
+        if times.is_empty() {
+            anyhow::bail!(
+                "the solve stopped after {} sweep(s) (its values did not change): no full backup to time",
+                ends.len()
+            );
+        }
+        let median_seconds = median(&times);
+        let fma = summary.multiply_adds_per_sweep;
+        let fractions = fma.map(|f| {
+            (1..ends.len())
+                .map(|k| f / times[k - 1] / 1e9 / (0.5 * (around[k - 1] + around[k])))
+                .collect::<Vec<_>>()
+        });
+        eprintln!(
+            "(run {:.1} s including set-up and the final greedy pass)",
+            start.elapsed().as_secs_f64()
+        );
+        Ok(Self {
+            backup: summary.backup,
+            multiply_adds: fma,
+            around,
+            rate: fma.map(|f| f / median_seconds / 1e9),
+            fraction: fractions.as_deref().map(median),
+            fractions,
+            times,
+            median_seconds,
+        })
+    }
+
+    /// Prints the problem, the peaks between the sweeps (of `peak_seconds` each) and the
+    /// backups.
+    fn print(&self, config: &fuzzyq_sim::TrainConfig, peak_seconds: f64) {
+        println!(
+            "problem    {}: {} cores x {} joint actions, {} path{}",
+            config.env.name(),
+            config.n_cores(),
+            config.n_joint_actions(),
+            self.backup,
+            self.multiply_adds.map_or(String::new(), |f| format!(
+                ", {f:.3e} multiply-adds per full backup"
+            )),
+        );
+        let (lo, hi) = min_max(&self.around);
+        println!(
+            "           {lo:.1}-{hi:.1} GFMA/s in the {} measurements of {peak_seconds} s between the sweeps",
+            self.around.len(),
+        );
+        println!(
+            "backup     {:.3} s median of {} full backups (value iteration from V = 0){}",
+            self.median_seconds,
+            self.times.len(),
+            match (self.rate, &self.fractions, self.fraction) {
+                (Some(r), Some(fs), Some(f)) => {
+                    let (lo, hi) = min_max(fs);
+                    format!(
+                        ": {r:.1} GFMA/s, {:.0}% of the peak measured around each backup \
+                         (median; {:.0}-{:.0}%)",
+                        100.0 * f,
+                        100.0 * lo,
+                        100.0 * hi
+                    )
+                }
+                _ => " (the generic path: no multiply-add count)".to_string(),
+            }
+        );
+        eprintln!(
+            "(early sweeps from V = 0; full backups of a nearly converged V can take longer: see \
+             BENCHMARKS.md)"
+        );
+    }
 }
 
 /// The `--json` output of `--device gpu`.

@@ -9,7 +9,7 @@ use fuzzyq_sim::compare::{self, CompareConfig, Comparison, Event, Learner};
 use fuzzyq_sim::model::pointmass::Starts;
 use fuzzyq_sim::model::{EnvKind, F64Model};
 
-use crate::cmd::train::load_config;
+use crate::cmd::load_config;
 use crate::output::{self, parse_list, print_stdout, write_file, write_json};
 use crate::plot;
 

@@ -142,6 +142,20 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
     if let Some(n) = args.starts {
         return many_starts(&args, &policy, model, n, steps, seed);
     }
+    one_start(&args, &policy, model, steps, seed)
+}
+
+/// One rollout from `--x0` (or the environment's default start): its trajectory, figure,
+/// metrics and report.
+fn one_start(
+    args: &RolloutArgs,
+    policy: &Policy,
+    model: &EnvModel,
+    steps: usize,
+    seed: u64,
+) -> anyhow::Result<()> {
+    let spec = model.kind().spec();
+    let env = model.kind();
     let x0 = args
         .x0
         .as_deref()
@@ -168,12 +182,12 @@ pub(crate) fn run(args: RolloutArgs) -> anyhow::Result<()> {
         plant,
         seed,
     };
-    match evaluate::run(&policy, &start, &rollout)? {
+    match evaluate::run(policy, &start, &rollout)? {
         Outcome::PointMass {
             trajectory,
             metrics,
             collisions,
-        } => point_mass_outputs(&args, spec, &trajectory, &metrics, collisions.as_ref()),
+        } => point_mass_outputs(args, spec, &trajectory, &metrics, collisions.as_ref()),
         Outcome::Khepera { run, metrics } => {
             let EnvModel::Khepera(k) = model else {
                 unreachable!("a robot run comes from a robot policy")

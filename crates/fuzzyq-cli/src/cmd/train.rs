@@ -6,7 +6,6 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use anyhow::Context;
 use clap::Args;
 use fuzzyq_core::additive::Update;
 use fuzzyq_core::solver::{
@@ -18,29 +17,22 @@ use fuzzyq_sim::io::config::{EnvConfig, SolverOverrides};
 use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary};
 use fuzzyq_sim::io::transitions::read_transitions_csv;
 use fuzzyq_sim::learn::fql::EpisodeRecord;
-use fuzzyq_sim::model::{EnvKind, F64Model};
+use fuzzyq_sim::model::F64Model;
 use fuzzyq_sim::train::{self, Learner, SampleLearning};
 use fuzzyq_sim::{SimError, TrainConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
 use super::checkpoints::{Checkpoints, Episodes};
+use super::{TaskArgs, start_pool};
 use crate::Failure;
 use crate::output::{self, refuse, write_json};
 use crate::plot;
 
 #[derive(Args, Debug)]
 pub(crate) struct TrainArgs {
-    /// The environment.
-    #[arg(long, value_parser = output::env(), default_value = "pointmass")]
-    env: EnvKind,
-    /// A TOML configuration (see `fuzzyq config`); flags below override its values.
-    #[arg(long, value_name = "FILE.toml")]
-    config: Option<PathBuf>,
-    /// A classic benchmark's named grid, actions, gamma and xi (`toolbox-demo`: the toolbox
-    /// demo's coarse grid; `fine`: the toolbox's default fine grid) [default: fine].
-    #[arg(long, value_name = "NAME")]
-    preset: Option<String>,
+    #[command(flatten)]
+    task: TaskArgs,
     /// Discount factor in [0, 1).
     #[arg(long, value_name = "G")]
     gamma: Option<f64>,
@@ -288,48 +280,9 @@ struct SampleSummary {
     seed: u64,
 }
 
-/// The configuration file `path` (or the defaults of `env`, or its named preset), which must
-/// describe `env`.
-pub(crate) fn load_config(
-    path: Option<&Path>,
-    env: EnvKind,
-    preset: Option<&str>,
-) -> anyhow::Result<TrainConfig> {
-    let config = match (path, preset) {
-        (Some(_), Some(_)) => anyhow::bail!("give either --config or --preset, not both"),
-        (Some(path), None) => {
-            let text = fuzzyq_sim::fs::read_text(path, fuzzyq_sim::fs::MAX_TEXT_BYTES)
-                .with_context(|| format!("cannot read config {}", path.display()))?;
-            TrainConfig::from_toml(&text).with_context(|| format!("config {}", path.display()))?
-        }
-        (None, Some(p)) => TrainConfig::from_preset(env, p)?,
-        (None, None) => TrainConfig::default_for(env)?,
-    };
-    if config.env.kind() != env {
-        anyhow::bail!(
-            "the config describes env \"{}\" but --env is {}",
-            config.env.name(),
-            env.name()
-        );
-    }
-    Ok(config)
-}
-
-/// Starts the global thread pool with `threads` workers (default: one per core).
-pub(crate) fn start_pool(threads: Option<usize>) -> anyhow::Result<()> {
-    if let Some(n) = threads {
-        train::check_threads(n).map_err(|e| anyhow::anyhow!("--threads: {e}"))?;
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n)
-            .build_global()
-            .context("cannot start the thread pool")?;
-    }
-    Ok(())
-}
-
 /// The configuration with every flag applied, validated.
 fn build_config(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
-    let mut config = load_config(args.config.as_deref(), args.env, args.preset.as_deref())?;
+    let mut config = args.task.load()?;
     if let Some(path) = &args.arena {
         match &mut config.env {
             EnvConfig::Khepera(k) => k.arena = fuzzyq_sim::model::arena::Arena::from_file(path)?,
@@ -900,7 +853,7 @@ fn plan_outputs(args: &TrainArgs) -> anyhow::Result<()> {
             (args.checkpoint.as_deref(), "--checkpoint"),
         ],
         &[
-            (args.config.as_deref(), "--config"),
+            (args.task.config.as_deref(), "--config"),
             (args.arena.as_deref(), "--arena"),
             (args.transitions.as_deref(), "--transitions"),
             (resume, "--resume"),
@@ -910,29 +863,11 @@ fn plan_outputs(args: &TrainArgs) -> anyhow::Result<()> {
 
 /// `fuzzyq train --learner fql|vqql`: learning from samples with the additive layout.
 fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()> {
-    let mut learning = SampleLearning::defaults(config, args.learner)?;
-    refuse(
-        args.cells.is_some() && args.learner != Learner::Vqql,
-        "--cells",
-        "applies to --learner vqql only",
-    )?;
+    let learning = sample_learning(args, config)?;
     plan_outputs(args)?;
     if let Some(p) = &args.plot {
         plot::check_extension(p, "--plot")?;
     }
-    learning.fql.seed = args.seed;
-    if let Some(n) = args.episodes {
-        learning.fql.episodes = n;
-    }
-    if args.literal {
-        learning.fql.update = Update::Literal;
-    }
-    if let Some(v) = &mut learning.vqql {
-        v.cells = args.cells.unwrap_or(v.cells);
-        v.seed = args.seed;
-        v.validate()?;
-    }
-    learning.fql.validate()?;
     let fql = learning.fql.clone();
     let mut checkpoints = Checkpoints::new(
         args.checkpoint.as_deref(),
@@ -1009,6 +944,44 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
     }
     let seconds = started.elapsed().as_secs_f64();
     output::write_file(&args.out, &learned.file.to_bytes()?)?;
+    sample_outputs(args, config, &fql, outcome, seconds)
+}
+
+/// `--learner fql` or `vqql`: the learner's settings from the environment's defaults and the
+/// flags, checked.
+fn sample_learning(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<SampleLearning> {
+    let mut learning = SampleLearning::defaults(config, args.learner)?;
+    refuse(
+        args.cells.is_some() && args.learner != Learner::Vqql,
+        "--cells",
+        "applies to --learner vqql only",
+    )?;
+    learning.fql.seed = args.seed;
+    if let Some(n) = args.episodes {
+        learning.fql.episodes = n;
+    }
+    if args.literal {
+        learning.fql.update = Update::Literal;
+    }
+    if let Some(v) = &mut learning.vqql {
+        v.cells = args.cells.unwrap_or(v.cells);
+        v.seed = args.seed;
+        v.validate()?;
+    }
+    learning.fql.validate()?;
+    Ok(learning)
+}
+
+/// A learner from samples' outputs besides the policy file: the learning curve (CSV and
+/// figure), the `--json` summary and the closing line.
+fn sample_outputs(
+    args: &TrainArgs,
+    config: &TrainConfig,
+    fql: &fuzzyq_sim::learn::fql::FqlConfig,
+    outcome: &fuzzyq_sim::learn::fql::FqlOutcome,
+    seconds: f64,
+) -> anyhow::Result<()> {
+    let env = config.env.name();
     if let Some(p) = &args.curve {
         let mut text = Vec::new();
         fuzzyq_sim::learn::fql::write_curve_csv(&outcome.curve, &mut text)?;

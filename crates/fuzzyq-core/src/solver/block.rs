@@ -272,6 +272,187 @@ fn x_block<T: Real>(x: &[T], dims: &[usize]) -> Vec<T> {
     dims.iter().map(|&d| x[d]).collect()
 }
 
+/// Checks `model`'s block declarations against a state of `e` variables and joint actions of
+/// `a_dim` components: every block names some variables, all within the state, and action
+/// components within the joint action; every variable belongs to exactly one block.
+fn check_blocks<T: Real, M: Model<T> + ?Sized>(
+    model: &M,
+    e: usize,
+    a_dim: usize,
+) -> Result<(), SolveError> {
+    let nb = model.n_blocks();
+    let mut count = vec![0usize; e];
+    for b in 0..nb {
+        let block = model.block(b);
+        if block.state_dims.is_empty() {
+            return Err(SolveError::BlockDeclaration {
+                block: b,
+                reason: "it has no state variables",
+            });
+        }
+        for &d in block.state_dims {
+            if d >= e {
+                return Err(SolveError::BlockDeclaration {
+                    block: b,
+                    reason: "it names a state variable beyond the state's length",
+                });
+            }
+            count[d] += 1;
+        }
+        if block.action_components.iter().any(|&c| c >= a_dim) {
+            return Err(SolveError::BlockDeclaration {
+                block: b,
+                reason: "it names an action component beyond the joint action's length",
+            });
+        }
+    }
+    if let Some(dim) = count.iter().position(|&c| c != 1) {
+        return Err(SolveError::BlockCoverage {
+            dim,
+            count: count[dim],
+        });
+    }
+
+    Ok(())
+}
+
+/// The distinct tuples of action components `comps` over every joint action of `joint`, in
+/// order of first appearance; `block_action[u]` is joint action `u`'s tuple.
+fn action_tuples<T: Real>(
+    joint: &JointActions<'_, T>,
+    comps: &[usize],
+    block_action: &mut [u32],
+) -> Vec<Vec<T>> {
+    let mut uvec = vec![T::ZERO; joint.dim()];
+    let mut tuples: Vec<Vec<T>> = Vec::new();
+    for (u, slot) in block_action.iter_mut().enumerate() {
+        joint.vector_unchecked(u, &mut uvec);
+        let t: Vec<T> = comps.iter().map(|&c| uvec[c]).collect();
+        let a = match tuples.iter().position(|x| *x == t) {
+            Some(a) => a,
+            None => {
+                tuples.push(t);
+                tuples.len() - 1
+            }
+        };
+        *slot = a as u32;
+    }
+    tuples
+}
+
+/// Block `b`'s table by stepping `model` from every block core under every block action
+/// (`tuples` of components `comps`), the other variables and components held at their first
+/// values; each successor is checked against three other contexts (the last cores and joint
+/// action, the middle ones, and a mix varying with the row): a block whose successor depends
+/// on anything outside it is refused ([`SolveError::BlockMismatch`]).
+#[allow(clippy::too_many_arguments)] // the block and where it sits
+fn stepped_table<T: Real, M: Model<T> + Sync + ?Sized>(
+    model: &M,
+    grid: &ProductPartition<'_, T>,
+    joint: &JointActions<'_, T>,
+    b: usize,
+    dims: Vec<usize>,
+    comps: &[usize],
+    tuples: &[Vec<T>],
+    sub: &ProductPartition<'_, T>,
+) -> Result<BlockTable<T>, SolveError> {
+    let e = grid.n_dims();
+    let m = joint.n_joint();
+    let terminal = model.has_terminal_states();
+    let (n_cores, n_actions) = (sub.n_cores(), tuples.len());
+    let mut base_u = vec![T::ZERO; joint.dim()];
+    joint.vector_unchecked(0, &mut base_u);
+    let base_x: Vec<T> = grid.dims().iter().map(|p| p.first()).collect();
+    // Check contexts: (core index of every variable, joint action), the third varying with
+    // the row `r`.
+    let context = |kind: usize, r: usize, x: &mut [T], u: &mut [T]| {
+        for (e, (xe, p)) in x.iter_mut().zip(grid.dims()).enumerate() {
+            let n = p.n_cores();
+            let k = match kind {
+                0 => n - 1,
+                1 => n / 2,
+                _ => (r * 7 + e * 5 + 3) % n,
+            };
+            *xe = p.cores()[k];
+        }
+        let ju = match kind {
+            0 => m - 1,
+            1 => m / 2,
+            _ => (r * 31 + 17) % m,
+        };
+        joint.vector_unchecked(ju, u);
+    };
+    let mut alt_x = base_x.clone();
+    let mut alt_u = base_u.clone();
+    let mut ptr = Vec::with_capacity(n_cores * n_actions + 1);
+    let mut col = Vec::new();
+    let mut weight = Vec::new();
+    let mut succ = Vec::new();
+    ptr.push(0u32);
+    let mut x = base_x.clone();
+    let mut next = vec![T::ZERO; e];
+    let mut next_alt = vec![T::ZERO; e];
+    let mut sub_x = vec![T::ZERO; dims.len()];
+    let mut ua = base_u.clone();
+    let grid_offset = grid_offsets(sub, grid, &dims)?;
+    for c in 0..n_cores {
+        sub.core_state(c, &mut sub_x)?;
+        for (&d, &v) in dims.iter().zip(&sub_x) {
+            x[d] = v;
+        }
+        for (a, t) in tuples.iter().enumerate() {
+            for (&comp, &v) in comps.iter().zip(t) {
+                ua[comp] = v;
+            }
+            model.step(&x, &ua, &mut next);
+            for (j, &d) in dims.iter().enumerate() {
+                if !next[d].is_finite() {
+                    return Err(SolveError::NonFinite { what: "successor" });
+                }
+                sub_x[j] = next[d];
+            }
+            if terminal {
+                succ.extend_from_slice(&sub_x);
+            }
+            for kind in 0..3 {
+                context(kind, c * n_actions + a, &mut alt_x, &mut alt_u);
+                for (&d, &v) in dims.iter().zip(&x_block(&x, &dims)) {
+                    alt_x[d] = v;
+                }
+                for (&comp, &v) in comps.iter().zip(t) {
+                    alt_u[comp] = v;
+                }
+                model.step(&alt_x, &alt_u, &mut next_alt);
+                if dims.iter().any(|&d| next[d] != next_alt[d]) {
+                    return Err(SolveError::BlockMismatch { block: b });
+                }
+            }
+            sub.active_unchecked(&sub_x).for_each(|k, w| {
+                if w != T::ZERO {
+                    col.push(k as u32);
+                    weight.push(w);
+                }
+            });
+            let len = u32::try_from(col.len()).map_err(|_| SolveError::TooLarge {
+                what: "block transition table",
+            })?;
+            ptr.push(len);
+        }
+    }
+    let rows = RowsBuf::new(ptr, col, weight, n_cores)
+        .expect("rows are built with in-range columns")
+        .with_groups(n_actions);
+    Ok(BlockTable {
+        dims,
+        n_cores,
+        n_actions,
+        grid_offset,
+        rows,
+        succ,
+        strides: sub.strides().to_vec(),
+    })
+}
+
 impl<T: Real> BlockOperator<T> {
     pub(super) fn new<M: Model<T> + Sync + ?Sized>(
         model: &M,
@@ -280,67 +461,9 @@ impl<T: Real> BlockOperator<T> {
     ) -> Result<Self, SolveError> {
         let e = grid.n_dims();
         let nb = model.n_blocks();
-        let mut count = vec![0usize; e];
-        for b in 0..nb {
-            let block = model.block(b);
-            if block.state_dims.is_empty() {
-                return Err(SolveError::BlockDeclaration {
-                    block: b,
-                    reason: "it has no state variables",
-                });
-            }
-            for &d in block.state_dims {
-                if d >= e {
-                    return Err(SolveError::BlockDeclaration {
-                        block: b,
-                        reason: "it names a state variable beyond the state's length",
-                    });
-                }
-                count[d] += 1;
-            }
-            if block.action_components.iter().any(|&c| c >= joint.dim()) {
-                return Err(SolveError::BlockDeclaration {
-                    block: b,
-                    reason: "it names an action component beyond the joint action's length",
-                });
-            }
-        }
-        if let Some(dim) = count.iter().position(|&c| c != 1) {
-            return Err(SolveError::BlockCoverage {
-                dim,
-                count: count[dim],
-            });
-        }
-
+        check_blocks(model, e, joint.dim())?;
         let m = joint.n_joint();
-        let a_dim = joint.dim();
         let terminal = model.has_terminal_states();
-        let mut uvec = vec![T::ZERO; a_dim];
-        let mut base_u = vec![T::ZERO; a_dim];
-        joint.vector_unchecked(0, &mut base_u);
-        let base_x: Vec<T> = grid.dims().iter().map(|p| p.first()).collect();
-        // Check contexts: (core index of every variable, joint action), the third varying
-        // with the row `r`.
-        let context = |kind: usize, r: usize, x: &mut [T], u: &mut [T]| {
-            for (e, (xe, p)) in x.iter_mut().zip(grid.dims()).enumerate() {
-                let n = p.n_cores();
-                let k = match kind {
-                    0 => n - 1,
-                    1 => n / 2,
-                    _ => (r * 7 + e * 5 + 3) % n,
-                };
-                *xe = p.cores()[k];
-            }
-            let ju = match kind {
-                0 => m - 1,
-                1 => m / 2,
-                _ => (r * 31 + 17) % m,
-            };
-            joint.vector_unchecked(ju, u);
-        };
-        let mut alt_x = base_x.clone();
-        let mut alt_u = base_u.clone();
-
         let mut tables = Vec::with_capacity(nb);
         // Per joint action, each block's action index (in contraction order).
         let mut block_action = vec![vec![0u32; m]; nb];
@@ -349,113 +472,47 @@ impl<T: Real> BlockOperator<T> {
             let dims = block.state_dims.to_vec();
             let comps = block.action_components;
             let sub = sub_partition(grid, &dims);
-
-            // Distinct action tuples in order of first appearance over joint indices.
-            let mut tuples: Vec<Vec<T>> = Vec::new();
-            for u in 0..m {
-                joint.vector_unchecked(u, &mut uvec);
-                let t: Vec<T> = comps.iter().map(|&c| uvec[c]).collect();
-                let a = match tuples.iter().position(|x| *x == t) {
-                    Some(a) => a,
-                    None => {
-                        tuples.push(t);
-                        tuples.len() - 1
-                    }
-                };
-                block_action[level][u] = a as u32;
-            }
-
-            let n_cores = sub.n_cores();
-            let n_actions = tuples.len();
-            if let Some(given) = model.block_rows(b) {
-                if terminal {
-                    return Err(SolveError::BlockDeclaration {
-                        block: b,
-                        reason: "a model with terminal states cannot give its block tables",
-                    });
-                }
-                let (rows, grid_offset) = given_rows(&given, comps, &tuples, &sub, grid, &dims)
-                    .map_err(|reason| SolveError::BlockDeclaration { block: b, reason })?;
-                tables.push(BlockTable {
-                    dims,
-                    n_cores,
-                    n_actions,
-                    grid_offset,
-                    rows,
-                    succ: Vec::new(),
-                    strides: sub.strides().to_vec(),
-                });
+            let tuples = action_tuples(joint, comps, &mut block_action[level]);
+            let Some(given) = model.block_rows(b) else {
+                tables.push(stepped_table(
+                    model, grid, joint, b, dims, comps, &tuples, &sub,
+                )?);
                 continue;
+            };
+            if terminal {
+                return Err(SolveError::BlockDeclaration {
+                    block: b,
+                    reason: "a model with terminal states cannot give its block tables",
+                });
             }
-            let mut ptr = Vec::with_capacity(n_cores * n_actions + 1);
-            let mut col = Vec::new();
-            let mut weight = Vec::new();
-            let mut succ = Vec::new();
-            ptr.push(0u32);
-            let mut x = base_x.clone();
-            let mut next = vec![T::ZERO; e];
-            let mut next_alt = vec![T::ZERO; e];
-            let mut sub_x = vec![T::ZERO; dims.len()];
-            let mut ua = base_u.clone();
-            let grid_offset = grid_offsets(&sub, grid, &dims)?;
-            for c in 0..n_cores {
-                sub.core_state(c, &mut sub_x)?;
-                for (&d, &v) in dims.iter().zip(&sub_x) {
-                    x[d] = v;
-                }
-                for (a, t) in tuples.iter().enumerate() {
-                    for (&comp, &v) in comps.iter().zip(t) {
-                        ua[comp] = v;
-                    }
-                    model.step(&x, &ua, &mut next);
-                    for (j, &d) in dims.iter().enumerate() {
-                        if !next[d].is_finite() {
-                            return Err(SolveError::NonFinite { what: "successor" });
-                        }
-                        sub_x[j] = next[d];
-                    }
-                    if terminal {
-                        succ.extend_from_slice(&sub_x);
-                    }
-                    for kind in 0..3 {
-                        context(kind, c * n_actions + a, &mut alt_x, &mut alt_u);
-                        for (&d, &v) in dims.iter().zip(&x_block(&x, &dims)) {
-                            alt_x[d] = v;
-                        }
-                        for (&comp, &v) in comps.iter().zip(t) {
-                            alt_u[comp] = v;
-                        }
-                        model.step(&alt_x, &alt_u, &mut next_alt);
-                        if dims.iter().any(|&d| next[d] != next_alt[d]) {
-                            return Err(SolveError::BlockMismatch { block: b });
-                        }
-                    }
-                    sub.active_unchecked(&sub_x).for_each(|k, w| {
-                        if w != T::ZERO {
-                            col.push(k as u32);
-                            weight.push(w);
-                        }
-                    });
-                    let len = u32::try_from(col.len()).map_err(|_| SolveError::TooLarge {
-                        what: "block transition table",
-                    })?;
-                    ptr.push(len);
-                }
-            }
-            let rows = RowsBuf::new(ptr, col, weight, n_cores)
-                .expect("rows are built with in-range columns")
-                .with_groups(n_actions);
+            let (rows, grid_offset) = given_rows(&given, comps, &tuples, &sub, grid, &dims)
+                .map_err(|reason| SolveError::BlockDeclaration { block: b, reason })?;
             tables.push(BlockTable {
                 dims,
-                n_cores,
-                n_actions,
+                n_cores: sub.n_cores(),
+                n_actions: tuples.len(),
                 grid_offset,
                 rows,
-                succ,
+                succ: Vec::new(),
                 strides: sub.strides().to_vec(),
             });
         }
+        Self::assemble(model, grid, tables, &block_action, m)
+    }
 
+    /// The operator of the block `tables` (contraction order; `block_action[b][u]`: joint
+    /// action `u`'s action of block `b`): the stages' lengths, the joint actions' product
+    /// indices, the decisions' plan, and the terminal successors of a model with terminal
+    /// states.
+    fn assemble<M: Model<T> + Sync + ?Sized>(
+        model: &M,
+        grid: &ProductPartition<'_, T>,
+        tables: Vec<BlockTable<T>>,
+        block_action: &[Vec<u32>],
+        m: usize,
+    ) -> Result<Self, SolveError> {
+        let (e, nb) = (grid.n_dims(), tables.len());
+        let terminal = model.has_terminal_states();
         let mut r_len = vec![1usize; nb];
         let mut p_len = vec![1usize; nb];
         for b in (0..nb.saturating_sub(1)).rev() {
@@ -889,36 +946,8 @@ impl<T: Real> BlockOperator<T> {
             return;
         }
         if last == Last::Eval && level + 4 == nb && self.p_len[level] == 1 {
-            // The first stage action by action (`[a][r]`, as the transposed first stage
-            // computes it), then the stage before the last two for each of the next block's
-            // cores with the prior actions outermost, `[a'][a][r']`: the last block's
-            // successors are then contiguous, and the last two stages share each
-            // (block action, prior actions) pair's contraction among the cores that take it.
-            // The same sums in the same order, so the same bits.
-            let t = &self.tables[level];
-            let (na, r) = (t.n_actions, self.r_len[level]);
-            let rows = self.rows(rows0, level);
-            self.kernels
-                .stage(rows, c * na, na, 1, r, input, &mut out[..na * r]);
-            let next = &self.tables[level + 1];
-            let (na1, r1) = (next.n_actions, self.r_len[level + 1]);
-            let out1 = deeper.first_mut().expect("one buffer per stage");
-            let strides = Strides {
-                k_stride: r1,
-                r_stride: next.n_cores * r1,
-            };
-            // Every action of the next block in one call (their rows merged), into `[a'][a][r']`.
-            let out_strides = OutStrides {
-                r_stride: r1,
-                a_stride: na * r1,
-            };
-            let rows1 = next.rows.view();
-            for c1 in 0..next.n_cores {
-                let o = &mut out1[..na1 * na * r1];
-                (self.kernels.stage_at)(rows1, c1 * na1, na1, na, r1, strides, out_strides, out, o);
-                let local1 = local * next.n_cores + c1;
-                self.eval_pairs(level + 1, out1, (na1 * na, 1), extra, local1, policy, emit);
-            }
+            let bufs = (&mut out[..], &mut *deeper);
+            self.eval_before_three(rows0, level, c, input, bufs, extra, local, policy, emit);
             return;
         }
         if last == Last::Eval && level + 2 == nb && self.p_len[level] == 1 {
@@ -994,6 +1023,52 @@ impl<T: Real> BlockOperator<T> {
                 policy,
                 emit,
             );
+        }
+    }
+
+    /// [`run`](Self::run) evaluating the greedy actions where four blocks remain from
+    /// `level`, whose rows have no prior actions: the first stage action by action (`[a][r]`,
+    /// as the transposed first stage computes it), then the stage before the last two for each
+    /// of the next block's cores with the prior actions outermost, `[a'][a][r']`: the last
+    /// block's successors are then contiguous, and the last two stages share each (block
+    /// action, prior actions) pair's contraction among the cores that take it. The same sums
+    /// in the same order, so the same bits.
+    #[allow(clippy::too_many_arguments)] // run's recursion state
+    fn eval_before_three<E: FnMut(usize, Out<'_, T>)>(
+        &self,
+        rows0: Rows<'_, T>,
+        level: usize,
+        c: usize,
+        input: &[T],
+        (out, deeper): (&mut [T], &mut [Vec<T>]),
+        extra: &mut Extra<T>,
+        local: usize,
+        policy: &[u32],
+        emit: &mut E,
+    ) {
+        let t = &self.tables[level];
+        let (na, r) = (t.n_actions, self.r_len[level]);
+        let rows = self.rows(rows0, level);
+        self.kernels
+            .stage(rows, c * na, na, 1, r, input, &mut out[..na * r]);
+        let next = &self.tables[level + 1];
+        let (na1, r1) = (next.n_actions, self.r_len[level + 1]);
+        let out1 = deeper.first_mut().expect("one buffer per stage");
+        let strides = Strides {
+            k_stride: r1,
+            r_stride: next.n_cores * r1,
+        };
+        // Every action of the next block in one call (their rows merged), into `[a'][a][r']`.
+        let out_strides = OutStrides {
+            r_stride: r1,
+            a_stride: na * r1,
+        };
+        let rows1 = next.rows.view();
+        for c1 in 0..next.n_cores {
+            let o = &mut out1[..na1 * na * r1];
+            (self.kernels.stage_at)(rows1, c1 * na1, na1, na, r1, strides, out_strides, out, o);
+            let local1 = local * next.n_cores + c1;
+            self.eval_pairs(level + 1, out1, (na1 * na, 1), extra, local1, policy, emit);
         }
     }
 

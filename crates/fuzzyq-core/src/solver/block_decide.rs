@@ -87,68 +87,7 @@ impl<T: Real> BlockOperator<T> {
             *s = p.locate(xe);
         }
 
-        // Per block: the active block cores, the mixed rows (one per block action, entries in
-        // increasing block core, zero weights left out) and their support.
-        for (b, t) in self.tables.iter().enumerate() {
-            let mut bseg = seg;
-            for (s, &d) in bseg.iter_mut().zip(&t.dims) {
-                *s = seg[d];
-            }
-            w.act.clear();
-            for_each_core(&bseg[..t.dims.len()], |idx, mu| {
-                let c = idx
-                    .iter()
-                    .zip(&t.strides)
-                    .map(|(i, s)| i * s)
-                    .sum::<usize>();
-                w.act.push((c, mu));
-            });
-            let rows = &mut w.mixed[b];
-            rows.clear();
-            let support = &mut w.support[b];
-            support.clear();
-            for a in 0..t.n_actions {
-                w.hit.clear();
-                for &(c, mu) in &w.act {
-                    let (cols, ws) = t.row(c, a);
-                    for (&k, &wk) in cols.iter().zip(ws) {
-                        let k = k as usize;
-                        if !w.touched[k] {
-                            w.touched[k] = true;
-                            w.dense[k] = T::ZERO;
-                            w.hit.push(k as u32);
-                        }
-                        w.dense[k] += mu * wk;
-                    }
-                }
-                w.hit.sort_unstable();
-                for &k in &w.hit {
-                    let k = k as usize;
-                    w.touched[k] = false;
-                    if !w.in_support[k] {
-                        w.in_support[k] = true;
-                        support.push(k as u32);
-                    }
-                    if w.dense[k] != T::ZERO {
-                        rows.col.push(k as u32);
-                        rows.weight.push(w.dense[k]);
-                    }
-                }
-                rows.ptr.push(rows.col.len() as u32);
-            }
-            support.sort_unstable();
-            let local = &mut w.local[b];
-            let offsets = &mut w.grid_offset[b];
-            offsets.clear();
-            for (i, &k) in support.iter().enumerate() {
-                w.in_support[k as usize] = false;
-                local[k as usize] = i as u32;
-                offsets.push(t.grid_offset[k as usize]);
-            }
-            for k in &mut rows.col {
-                *k = local[*k as usize];
-            }
-        }
+        self.mix_blocks(&seg, w);
 
         // The active cores (internal index, membership), in increasing row-major order.
         w.cores.clear();
@@ -161,49 +100,7 @@ impl<T: Real> BlockOperator<T> {
             w.cores.push((internal, mu));
         });
 
-        // The box of V over the supports, blocks in gather order (the block of the largest
-        // grid strides slowest, the innermost block's values contiguous in the box).
-        let order = &self.q.gather_order;
-        let inner = order[nb - 1];
-        let mut sizes = [0usize; MAX_DIMS];
-        let mut stride = [0usize; MAX_DIMS];
-        let mut box_len = 1;
-        for l in (0..nb).rev() {
-            sizes[l] = w.support[order[l]].len();
-            stride[l] = box_len;
-            box_len *= sizes[l];
-        }
-        w.vbox.resize(box_len + INPUT_PAD, T::ZERO);
-        // Copied an inner row at a time, the outer blocks' combinations visited like an
-        // odometer.
-        {
-            let inner_off = &w.grid_offset[inner];
-            let span = inner_off.iter().max().map_or(0, |&o| o + 1);
-            let mut digit = [0usize; MAX_DIMS];
-            let mut g: usize = order[..nb - 1].iter().map(|&b| w.grid_offset[b][0]).sum();
-            'combos: for dst in w.vbox[..box_len].chunks_exact_mut(sizes[nb - 1]) {
-                let src = &v[g..g + span];
-                for (d, &gi) in dst.iter_mut().zip(inner_off) {
-                    *d = src[gi];
-                }
-                let mut l = nb - 1;
-                loop {
-                    if l == 0 {
-                        break 'combos;
-                    }
-                    l -= 1;
-                    let off = &w.grid_offset[order[l]];
-                    g -= off[digit[l]];
-                    digit[l] += 1;
-                    if digit[l] < sizes[l] {
-                        g += off[digit[l]];
-                        break;
-                    }
-                    digit[l] = 0;
-                    g += off[0];
-                }
-            }
-        }
+        let sizes = self.gather_box(v, w);
         self.contract_box(&w.mixed, &sizes[..nb], &w.vbox, &mut w.ev, &mut w.tmp);
 
         // Rewards of the active cores, and the expectations of goal cores and of transitions
@@ -286,6 +183,122 @@ impl<T: Real> BlockOperator<T> {
             let r = if depends { w.reward[u] } else { reward };
             *o = r + gamma * ev;
         }
+    }
+
+    /// Per block: the active block cores at the state's segments `seg`, the mixed rows (one
+    /// per block action, entries in increasing block core, zero weights left out, columns
+    /// local to the support) and their support with its grid offsets.
+    fn mix_blocks(&self, seg: &[Segment<T>; MAX_DIMS], w: &mut QWork<T>) {
+        for (b, t) in self.tables.iter().enumerate() {
+            let mut bseg = *seg;
+            for (s, &d) in bseg.iter_mut().zip(&t.dims) {
+                *s = seg[d];
+            }
+            w.act.clear();
+            for_each_core(&bseg[..t.dims.len()], |idx, mu| {
+                let c = idx
+                    .iter()
+                    .zip(&t.strides)
+                    .map(|(i, s)| i * s)
+                    .sum::<usize>();
+                w.act.push((c, mu));
+            });
+            let rows = &mut w.mixed[b];
+            rows.clear();
+            let support = &mut w.support[b];
+            support.clear();
+            for a in 0..t.n_actions {
+                w.hit.clear();
+                for &(c, mu) in &w.act {
+                    let (cols, ws) = t.row(c, a);
+                    for (&k, &wk) in cols.iter().zip(ws) {
+                        let k = k as usize;
+                        if !w.touched[k] {
+                            w.touched[k] = true;
+                            w.dense[k] = T::ZERO;
+                            w.hit.push(k as u32);
+                        }
+                        w.dense[k] += mu * wk;
+                    }
+                }
+                w.hit.sort_unstable();
+                for &k in &w.hit {
+                    let k = k as usize;
+                    w.touched[k] = false;
+                    if !w.in_support[k] {
+                        w.in_support[k] = true;
+                        support.push(k as u32);
+                    }
+                    if w.dense[k] != T::ZERO {
+                        rows.col.push(k as u32);
+                        rows.weight.push(w.dense[k]);
+                    }
+                }
+                rows.ptr.push(rows.col.len() as u32);
+            }
+            support.sort_unstable();
+            let local = &mut w.local[b];
+            let offsets = &mut w.grid_offset[b];
+            offsets.clear();
+            for (i, &k) in support.iter().enumerate() {
+                w.in_support[k as usize] = false;
+                local[k as usize] = i as u32;
+                offsets.push(t.grid_offset[k as usize]);
+            }
+            for k in &mut rows.col {
+                *k = local[*k as usize];
+            }
+        }
+    }
+
+    /// Copies the box of `V` over the blocks' supports into `w.vbox`, blocks in gather order
+    /// (the block of the largest grid strides slowest, the innermost block's values
+    /// contiguous), an inner row at a time, the outer blocks' combinations visited like an
+    /// odometer; returns the supports' sizes in gather order.
+    fn gather_box(&self, v: &[T], w: &mut QWork<T>) -> [usize; MAX_DIMS] {
+        let nb = self.tables.len();
+        let order = &self.q.gather_order;
+        let inner = order[nb - 1];
+        let mut sizes = [0usize; MAX_DIMS];
+        let mut stride = [0usize; MAX_DIMS];
+        let mut box_len = 1;
+        for l in (0..nb).rev() {
+            sizes[l] = w.support[order[l]].len();
+            stride[l] = box_len;
+            box_len *= sizes[l];
+        }
+        w.vbox.resize(box_len + INPUT_PAD, T::ZERO);
+        // Copied an inner row at a time, the outer blocks' combinations visited like an
+        // odometer.
+        {
+            let inner_off = &w.grid_offset[inner];
+            let span = inner_off.iter().max().map_or(0, |&o| o + 1);
+            let mut digit = [0usize; MAX_DIMS];
+            let mut g: usize = order[..nb - 1].iter().map(|&b| w.grid_offset[b][0]).sum();
+            'combos: for dst in w.vbox[..box_len].chunks_exact_mut(sizes[nb - 1]) {
+                let src = &v[g..g + span];
+                for (d, &gi) in dst.iter_mut().zip(inner_off) {
+                    *d = src[gi];
+                }
+                let mut l = nb - 1;
+                loop {
+                    if l == 0 {
+                        break 'combos;
+                    }
+                    l -= 1;
+                    let off = &w.grid_offset[order[l]];
+                    g -= off[digit[l]];
+                    digit[l] += 1;
+                    if digit[l] < sizes[l] {
+                        g += off[digit[l]];
+                        break;
+                    }
+                    digit[l] = 0;
+                    g += off[0];
+                }
+            }
+        }
+        sizes
     }
 
     /// Contracts the box `vbox` (block supports of `sizes`, blocks in gather order, the

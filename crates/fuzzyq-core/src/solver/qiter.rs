@@ -23,8 +23,10 @@ use std::time::Instant;
 use std::vec::Vec;
 
 use super::{Grid, SolveError, SolverConfig, Stop};
+use crate::action::JointActions;
 use crate::error::EvalError;
 use crate::model::{Model, joint_actions};
+use crate::partition::ProductPartition;
 use crate::real::Real;
 
 /// The result of [`solve_q`].
@@ -72,6 +74,101 @@ impl<T: Real> QSolution<T> {
     }
 }
 
+/// Every (core, joint action)'s reward and successor memberships, row-major (from the
+/// model's table where it gives one), and which cores are absorbing goals.
+struct QTransitions<T> {
+    /// Where each row's entries start in `entries` (one more than the rows).
+    offsets: Vec<usize>,
+    /// `(core, membership)` of the successors; none for a terminal successor.
+    entries: Vec<(u32, T)>,
+    rewards: Vec<T>,
+    goal: Vec<bool>,
+}
+
+impl<T: Real> QTransitions<T> {
+    fn tabulate<M: Model<T> + ?Sized>(
+        model: &M,
+        view: &ProductPartition<'_, T>,
+        joint: &JointActions<'_, T>,
+        config: &SolverConfig,
+    ) -> Result<Self, SolveError> {
+        let (n, m, e) = (view.n_cores(), joint.n_joint(), view.n_dims());
+        let terminals = model.has_terminal_states();
+        let table = model.tabulated();
+        if let Some(t) = &table {
+            crate::error::check_len("tabulated rewards", n * m, t.rewards.len())?;
+            crate::error::check_len("tabulated next states", n * m * e, t.next_states.len())?;
+        }
+        // Successor memberships of every (core, joint action), row-major, and the rewards.
+        let mut offsets = Vec::with_capacity(n * m + 1);
+        let mut entries: Vec<(u32, T)> = Vec::with_capacity(n * m * 4);
+        let mut rewards = Vec::with_capacity(n * m);
+        let mut goal = Vec::with_capacity(n);
+        let (mut x, mut next, mut u) = (
+            vec![T::ZERO; e],
+            vec![T::ZERO; e],
+            vec![T::ZERO; joint.dim()],
+        );
+        offsets.push(0);
+        for d in 0..n {
+            view.core_state(d, &mut x)?;
+            goal.push(config.absorbing_goal && model.is_goal(&x));
+            for a in 0..m {
+                let row = d * m + a;
+                let r = match &table {
+                    Some(t) => {
+                        next.copy_from_slice(&t.next_states[row * e..(row + 1) * e]);
+                        t.rewards[row]
+                    }
+                    None => {
+                        joint.vector(a, &mut u)?;
+                        model.step(&x, &u, &mut next);
+                        model.reward(&x, &u)
+                    }
+                };
+                if !r.is_finite() {
+                    return Err(SolveError::Eval(EvalError::NotFinite {
+                        what: "reward",
+                        index: row,
+                    }));
+                }
+                rewards.push(r);
+                if !(terminals && model.is_terminal(&next)) {
+                    view.active(&next)?
+                        .for_each(|k, w| entries.push((k as u32, w)));
+                }
+                offsets.push(entries.len());
+            }
+        }
+        Ok(Self {
+            offsets,
+            entries,
+            rewards,
+            goal,
+        })
+    }
+}
+
+/// Each row's maximum (`V`) and its lowest maximising column (the greedy action) of the
+/// `m`-wide rows of `theta`.
+fn maxima<T: Real>(theta: &[T], m: usize) -> (Vec<T>, Vec<u32>) {
+    let n = theta.len() / m;
+    let mut v = Vec::with_capacity(n);
+    let mut greedy = Vec::with_capacity(n);
+    for row in theta.chunks_exact(m) {
+        let (mut best, mut arg) = (row[0], 0u32);
+        for (a, &t) in row.iter().enumerate().skip(1) {
+            if t > best {
+                best = t;
+                arg = a as u32;
+            }
+        }
+        v.push(best);
+        greedy.push(arg);
+    }
+    (v, greedy)
+}
+
 /// Runs Busoniu's fuzzy Q-iteration of `model` on `grid`, with `theta` stored.
 ///
 /// [`solve`](super::solve) interpolates per-core maxima,
@@ -112,60 +209,19 @@ where
         });
     }
     let joint = joint_actions(model)?;
-    let (n, m, e) = (view.n_cores(), joint.n_joint(), view.n_dims());
+    let (n, m) = (view.n_cores(), joint.n_joint());
     let gamma = T::from_f64(config.gamma);
-    let terminals = model.has_terminal_states();
     if (0..model.n_blocks()).any(|b| model.block_rows(b).is_some()) {
         return Err(SolveError::BlockRowsOnly {
             what: "Q-iteration (Busoniu's operator)",
         });
     }
-    let table = model.tabulated();
-    if let Some(t) = &table {
-        crate::error::check_len("tabulated rewards", n * m, t.rewards.len())?;
-        crate::error::check_len("tabulated next states", n * m * e, t.next_states.len())?;
-    }
-    // Successor memberships of every (core, joint action), row-major, and the rewards.
-    let mut offsets = Vec::with_capacity(n * m + 1);
-    let mut entries: Vec<(u32, T)> = Vec::with_capacity(n * m * 4);
-    let mut rewards = Vec::with_capacity(n * m);
-    let mut goal = Vec::with_capacity(n);
-    let (mut x, mut next, mut u) = (
-        vec![T::ZERO; e],
-        vec![T::ZERO; e],
-        vec![T::ZERO; joint.dim()],
-    );
-    offsets.push(0);
-    for d in 0..n {
-        view.core_state(d, &mut x)?;
-        goal.push(config.absorbing_goal && model.is_goal(&x));
-        for a in 0..m {
-            let row = d * m + a;
-            let r = match &table {
-                Some(t) => {
-                    next.copy_from_slice(&t.next_states[row * e..(row + 1) * e]);
-                    t.rewards[row]
-                }
-                None => {
-                    joint.vector(a, &mut u)?;
-                    model.step(&x, &u, &mut next);
-                    model.reward(&x, &u)
-                }
-            };
-            if !r.is_finite() {
-                return Err(SolveError::Eval(EvalError::NotFinite {
-                    what: "reward",
-                    index: row,
-                }));
-            }
-            rewards.push(r);
-            if !(terminals && model.is_terminal(&next)) {
-                view.active(&next)?
-                    .for_each(|k, w| entries.push((k as u32, w)));
-            }
-            offsets.push(entries.len());
-        }
-    }
+    let QTransitions {
+        offsets,
+        entries,
+        rewards,
+        goal,
+    } = QTransitions::tabulate(model, &view, &joint, config)?;
     let mut theta = vec![T::ZERO; n * m];
     let mut new = vec![T::ZERO; n * m];
     let mut deltas = Vec::new();
@@ -231,20 +287,7 @@ where
             break;
         }
     }
-    let mut v = Vec::with_capacity(n);
-    let mut greedy = Vec::with_capacity(n);
-    for d in 0..n {
-        let row = &theta[d * m..(d + 1) * m];
-        let (mut best, mut arg) = (row[0], 0u32);
-        for (a, &t) in row.iter().enumerate().skip(1) {
-            if t > best {
-                best = t;
-                arg = a as u32;
-            }
-        }
-        v.push(best);
-        greedy.push(arg);
-    }
+    let (v, greedy) = maxima(&theta, m);
     Ok(QSolution {
         theta,
         n_joint: m,

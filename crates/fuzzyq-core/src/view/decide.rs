@@ -178,6 +178,52 @@ struct Layout {
     cores: usize,
 }
 
+/// One decision's scratch, carved from the caller's `u64` words by [`Layout::carve`]: values
+/// of the solution's type, `u32` indices and `u64` offsets, each region named for its job.
+struct Scratch<'s, T> {
+    /// A mixed row's sum per block core, while it is built.
+    dense: &'s mut [T],
+    /// The mixed rows' weights (every block's, one after the other).
+    mixed_w: &'s mut [T],
+    /// The memberships of a block's active block cores.
+    mu: &'s mut [T],
+    /// The last stage's input, transposed.
+    transposed: &'s mut [T],
+    /// The stages' outputs, in turn.
+    s0: &'s mut [T],
+    s1: &'s mut [T],
+    /// The memberships of the state's active cores.
+    core_mu: &'s mut [T],
+    /// The block cores a mixed row reaches.
+    hit: &'s mut [u32],
+    /// Marks of the block cores a mixed row has reached.
+    touched: &'s mut [u32],
+    /// Marks of the block cores in a block's support.
+    in_support: &'s mut [u32],
+    /// A support core's position in its support.
+    local: &'s mut [u32],
+    /// Every support block's support cores.
+    support: &'s mut [u32],
+    /// The mixed rows' row pointers and columns.
+    mixed_ptr: &'s mut [u32],
+    mixed_col: &'s mut [u32],
+    /// A block's active block cores.
+    act: &'s mut [u32],
+    /// The support cores' offsets in `V`.
+    offsets: &'s mut [u64],
+    /// The state's active cores.
+    core_index: &'s mut [usize],
+}
+
+/// What [`mix_blocks`](Decisions::mix_blocks) found of each block: the columns of its mixed
+/// rows (`sizes`), the first block core of a range block (`first`) and where its support,
+/// mixed entries and row pointers start in the scratch (`spans`).
+struct Mixing {
+    sizes: [usize; MAX_DIMS],
+    first: [usize; MAX_DIMS],
+    spans: [(usize, usize, usize); MAX_DIMS],
+}
+
 impl Layout {
     /// `(reals, u32s, u64s)` per region, in order.
     fn regions(&self) -> ([usize; 7], [usize; 8], [usize; 2]) {
@@ -203,6 +249,60 @@ impl Layout {
             ],
             [self.support, self.cores],
         )
+    }
+
+    /// The regions of `scratch` (at least [`words`](Self::words) long) for values of type
+    /// `T`.
+    fn carve<'s, T: ViewReal>(&self, scratch: &'s mut [u64]) -> Scratch<'s, T> {
+        let (reals, u32s, u64s) = self.regions();
+        let mut rest = scratch;
+        let mut take_real = |n: usize| {
+            let (a, b) = core::mem::take(&mut rest).split_at_mut((n * size_of::<T>()).div_ceil(8));
+            rest = b;
+            &mut bytemuck::cast_slice_mut::<u64, T>(a)[..n]
+        };
+        let dense = take_real(reals[0]);
+        let mixed_w = take_real(reals[1]);
+        let mu = take_real(reals[2]);
+        let transposed = take_real(reals[3]);
+        let s0 = take_real(reals[4]);
+        let s1 = take_real(reals[5]);
+        let core_mu = take_real(reals[6]);
+        let mut take_u32 = |n: usize| {
+            let (a, b) = core::mem::take(&mut rest).split_at_mut(n.div_ceil(2));
+            rest = b;
+            &mut bytemuck::cast_slice_mut::<u64, u32>(a)[..n]
+        };
+        let hit = take_u32(u32s[0]);
+        let touched = take_u32(u32s[1]);
+        let in_support = take_u32(u32s[2]);
+        let local = take_u32(u32s[3]);
+        let support = take_u32(u32s[4]);
+        let mixed_ptr = take_u32(u32s[5]);
+        let mixed_col = take_u32(u32s[6]);
+        let act = take_u32(u32s[7]);
+        let (offsets, rest) = rest.split_at_mut(u64s[0]);
+        let core_index =
+            &mut bytemuck::cast_slice_mut::<u64, usize>(&mut rest[..u64s[1]])[..u64s[1]];
+        Scratch {
+            dense,
+            mixed_w,
+            mu,
+            transposed,
+            s0,
+            s1,
+            core_mu,
+            hit,
+            touched,
+            in_support,
+            local,
+            support,
+            mixed_ptr,
+            mixed_col,
+            act,
+            offsets,
+            core_index,
+        }
     }
 
     /// Words (`u64`) of scratch for values of `value_bytes` bytes.
@@ -444,169 +544,25 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
         let words = self.scratch_words();
         crate::error::check_at_least("decision scratch (u64 words)", words, scratch.len())?;
         let active = grid.active(x)?;
-        let (reals, u32s, u64s) = self.layout.regions();
-        let mut rest = &mut scratch[..words];
-        let mut take_real = |n: usize| {
-            let (a, b) = core::mem::take(&mut rest).split_at_mut((n * size_of::<T>()).div_ceil(8));
-            rest = b;
-            &mut bytemuck::cast_slice_mut::<u64, T>(a)[..n]
-        };
-        let dense = take_real(reals[0]);
-        let mixed_w = take_real(reals[1]);
-        let mu = take_real(reals[2]);
-        let transposed = take_real(reals[3]);
-        let mut s0 = take_real(reals[4]);
-        let mut s1 = take_real(reals[5]);
-        let core_mu = take_real(reals[6]);
-        let mut take_u32 = |n: usize| {
-            let (a, b) = core::mem::take(&mut rest).split_at_mut(n.div_ceil(2));
-            rest = b;
-            &mut bytemuck::cast_slice_mut::<u64, u32>(a)[..n]
-        };
-        let hit = take_u32(u32s[0]);
-        let touched = take_u32(u32s[1]);
-        let in_support = take_u32(u32s[2]);
-        let local = take_u32(u32s[3]);
-        let support = take_u32(u32s[4]);
-        let mixed_ptr = take_u32(u32s[5]);
-        let mixed_col = take_u32(u32s[6]);
-        let act = take_u32(u32s[7]);
-        let (offsets, rest) = rest.split_at_mut(u64s[0]);
-        let core_index =
-            &mut bytemuck::cast_slice_mut::<u64, usize>(&mut rest[..u64s[1]])[..u64s[1]];
-        touched.fill(0);
-        in_support.fill(0);
-
-        // Per block: the mixed rows (entries in increasing block core, zeros left out), their
-        // columns as the block's role numbers them, and (support blocks) the support's
-        // offsets in `V`.
+        let mut sc = self.layout.carve::<T>(&mut scratch[..words]);
+        sc.touched.fill(0);
+        sc.in_support.fill(0);
         let nb = self.n_blocks;
-        let mut sizes = [0usize; MAX_DIMS];
-        let mut first = [0usize; MAX_DIMS];
-        let (mut at_s, mut at_m, mut at_p) = (0usize, 0usize, 0usize);
-        let mut spans = [(0usize, 0usize, 0usize); MAX_DIMS];
-        for (b, t) in self.blocks[..nb].iter().enumerate() {
-            let mut parts = [grid.dim(0); MAX_DIMS];
-            let mut xb = [T::ZERO; MAX_DIMS];
-            for (j, &d) in t.dims.iter().enumerate() {
-                parts[j] = grid.dim(d as usize);
-                xb[j] = x[d as usize];
-            }
-            let k = t.dims.len();
-            // The tables were checked when read (1 to `MAX_DIMS` distinct variables of a
-            // valid grid), so this cannot fail.
-            let sub = ProductPartition::from_partitions(&parts[..k] as &[Partition<'a, T>])
-                .map_err(|_| EvalError::OutOfRange {
-                    what: "decision block state variables",
-                    index: k,
-                    len: MAX_DIMS,
-                })?;
-            let mut n_act = 0;
-            sub.active_unchecked(&xb[..k]).for_each(|c, m| {
-                act[n_act] = c as u32;
-                mu[n_act] = m;
-                n_act += 1;
-            });
-            let sup = &mut support[at_s..at_s + t.max_support];
-            let mut n_sup = 0;
-            let (mut lo, mut hi) = (u32::MAX, 0u32);
-            let ptr = &mut mixed_ptr[at_p..at_p + t.n_actions + 1];
-            let cols = &mut mixed_col[at_m..at_m + t.n_actions * t.max_support];
-            let ws = &mut mixed_w[at_m..at_m + t.n_actions * t.max_support];
-            let mut nnz = 0;
-            ptr[0] = 0;
-            for a in 0..t.n_actions {
-                let mut n_hit = 0;
-                for (&c, &m) in act[..n_act].iter().zip(&mu[..n_act]) {
-                    let row = c as usize * t.n_actions + a;
-                    let (s, end) = (t.ptr[row] as usize, t.ptr[row + 1] as usize);
-                    for (&kc, &wk) in t.col[s..end].iter().zip(&t.weight[s..end]) {
-                        let kc = kc as usize;
-                        if touched[kc] == 0 {
-                            touched[kc] = 1;
-                            dense[kc] = T::ZERO;
-                            hit[n_hit] = kc as u32;
-                            n_hit += 1;
-                        }
-                        dense[kc] += m * wk;
-                    }
-                }
-                hit[..n_hit].sort_unstable();
-                if n_hit > 0 {
-                    lo = lo.min(hit[0]);
-                    hi = hi.max(hit[n_hit - 1]);
-                }
-                for &kc in &hit[..n_hit] {
-                    let kc = kc as usize;
-                    touched[kc] = 0;
-                    if in_support[kc] == 0 {
-                        in_support[kc] = 1;
-                        // Bounded by the file's support bound, checked against the rows.
-                        let slot = sup.get_mut(n_sup).ok_or(EvalError::OutOfRange {
-                            what: "decision block support",
-                            index: n_sup,
-                            len: t.max_support,
-                        })?;
-                        *slot = kc as u32;
-                        n_sup += 1;
-                    }
-                    if dense[kc] != T::ZERO {
-                        cols[nnz] = kc as u32;
-                        ws[nnz] = dense[kc];
-                        nnz += 1;
-                    }
-                }
-                ptr[a + 1] = nnz as u32;
-            }
-            let sup = &mut sup[..n_sup];
-            for &kc in sup.iter() {
-                in_support[kc as usize] = 0;
-            }
-            match role(b, nb) {
-                Role::First => sizes[b] = t.n_cores,
-                Role::Support => {
-                    sup.sort_unstable();
-                    let offs = &mut offsets[at_s..at_s + n_sup];
-                    for (i, (&kc, o)) in sup.iter().zip(offs.iter_mut()).enumerate() {
-                        local[kc as usize] = i as u32;
-                        *o = (kc as usize * t.stride) as u64;
-                    }
-                    for c in &mut cols[..nnz] {
-                        *c = local[*c as usize];
-                    }
-                    sizes[b] = n_sup;
-                }
-                Role::Range => {
-                    // Every row holds an entry (checked when read), so the range is not empty.
-                    let span = (hi - lo) as usize + 1;
-                    if span > t.max_span {
-                        return Err(EvalError::OutOfRange {
-                            what: "decision block range",
-                            index: span,
-                            len: t.max_span,
-                        });
-                    }
-                    for c in &mut cols[..nnz] {
-                        *c -= lo;
-                    }
-                    sizes[b] = span;
-                    first[b] = lo as usize;
-                }
-            }
-            spans[b] = (at_s, at_m, at_p);
-            at_s += t.max_support;
-            at_m += t.n_actions * t.max_support;
-            at_p += t.n_actions + 1;
-        }
+        let Mixing {
+            sizes,
+            first,
+            spans,
+        } = self.mix_blocks(grid, x, &mut sc)?;
+
         let mixed = |b: usize| {
             let (_, at_m, at_p) = spans[b];
             let a = self.blocks[b].n_actions;
-            let ptr = &mixed_ptr[at_p..at_p + a + 1];
+            let ptr = &sc.mixed_ptr[at_p..at_p + a + 1];
             let nnz = ptr[a] as usize;
             Mixed {
                 ptr,
-                col: &mixed_col[at_m..at_m + nnz],
-                weight: &mixed_w[at_m..at_m + nnz],
+                col: &sc.mixed_col[at_m..at_m + nnz],
+                weight: &sc.mixed_w[at_m..at_m + nnz],
                 n_cols: sizes[b],
             }
         };
@@ -620,9 +576,9 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
         // the blocks between in order, the last block's slowest.
         let mut place = [0usize; MAX_DIMS];
         let ev: &[T] = if nb == 1 {
-            stage(mixed(0), 1, 1, (stride0, 0), v, &mut s0[..a0]);
+            stage(mixed(0), 1, 1, (stride0, 0), v, &mut sc.s0[..a0]);
             place[0] = 1;
-            &s0[..a0]
+            &sc.s0[..a0]
         } else {
             let (r_len, r_stride) = if nb >= 3 {
                 (sizes[nb - 2], self.blocks[nb - 2].stride)
@@ -633,11 +589,11 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
             let tail = first[nb - 1] + if nb >= 3 { first[nb - 2] * r_stride } else { 0 };
             let chunk = r_len * a0 * p_len;
             let inner = 1..nb.saturating_sub(2).max(1);
-            let offs = |b: usize, i: usize| offsets[spans[b].0 + i] as usize;
+            let offs = |b: usize, i: usize| sc.offsets[spans[b].0 + i] as usize;
             let mut digit = [0usize; MAX_DIMS];
             let mut g: usize = inner.clone().map(|b| offs(b, 0)).sum();
             let combos: usize = sizes[inner.clone()].iter().product();
-            for o in s0[..combos * chunk].chunks_exact_mut(chunk) {
+            for o in sc.s0[..combos * chunk].chunks_exact_mut(chunk) {
                 let here = g;
                 // The next combination, the last of the blocks between fastest.
                 for l in inner.clone().rev() {
@@ -666,18 +622,18 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                 let (k, a) = (sizes[b], self.blocks[b].n_actions);
                 rest /= k;
                 for i in 0..lead {
-                    let o = &mut s1[i * a * rest..(i + 1) * a * rest];
-                    stage(mixed(b), 1, rest, (rest, rest), &s0[i * k * rest..], o);
+                    let o = &mut sc.s1[i * a * rest..(i + 1) * a * rest];
+                    stage(mixed(b), 1, rest, (rest, rest), &sc.s0[i * k * rest..], o);
                 }
                 lead *= a;
-                core::mem::swap(&mut s0, &mut s1);
+                core::mem::swap(&mut sc.s0, &mut sc.s1);
             }
             // The last block contracts the lanes: `[m][P]` transposed to `[P][m]`, then one
             // stage gives `[a_B-1][m]`.
             let m = lead * a0;
-            for (i, row) in s0[..m * p_len].chunks_exact(p_len).enumerate() {
+            for (i, row) in sc.s0[..m * p_len].chunks_exact(p_len).enumerate() {
                 for (j, &y) in row.iter().enumerate() {
-                    transposed[j * m + i] = y;
+                    sc.transposed[j * m + i] = y;
                 }
             }
             let a_last = self.blocks[nb - 1].n_actions;
@@ -686,8 +642,8 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                 1,
                 m,
                 (m, m),
-                transposed,
-                &mut s1[..a_last * m],
+                sc.transposed,
+                &mut sc.s1[..a_last * m],
             );
             place[0] = 1;
             let mut step = a0;
@@ -696,14 +652,176 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                 step *= self.blocks[b].n_actions;
             }
             place[nb - 1] = m;
-            core::mem::swap(&mut s0, &mut s1);
-            &s0[..a_last * m]
+            core::mem::swap(&mut sc.s0, &mut sc.s1);
+            &sc.s0[..a_last * m]
         };
 
-        // `E` in the tables' order (`[a_0][a_1]..`, the first slowest), visited like an
-        // odometer, then `Q`.
+        // `E` in the tables' order, then `Q`.
         let n: usize = self.blocks[..nb].iter().map(|t| t.n_actions).product();
-        let by_q = &mut s1[..n];
+        let by_q = &mut sc.s1[..n];
+        self.reorder(ev, &place, by_q);
+        // The active cores listed first (the weights of `for_each`, one product each), so
+        // that the rewards' loads overlap.
+        let n_active = active
+            .write_to(sc.core_index, sc.core_mu)
+            .ok_or(EvalError::Length {
+                what: "decision scratch (active cores)",
+                expected: active.len(),
+                found: sc.core_index.len(),
+            })?;
+        let mut reward = T::ZERO;
+        for (&d, &m) in sc.core_index[..n_active]
+            .iter()
+            .zip(&sc.core_mu[..n_active])
+        {
+            reward += m * self.rewards[d];
+        }
+        for (o, &q) in out.iter_mut().zip(self.q_index) {
+            *o = reward + self.gamma * by_q[q as usize];
+        }
+        Ok(())
+    }
+
+    /// Mixes every block's transition rows at `x` (the rows of its active block cores,
+    /// weighted by their memberships) into `sc`'s mixed rows: entries in increasing block
+    /// core, zeros left out, columns as the block's role numbers them, and (support blocks)
+    /// the support's offsets in `V`.
+    fn mix_blocks(
+        &self,
+        grid: &ProductPartition<'a, T>,
+        x: &[T],
+        sc: &mut Scratch<'_, T>,
+    ) -> Result<Mixing, EvalError> {
+        let nb = self.n_blocks;
+        let mut sizes = [0usize; MAX_DIMS];
+        let mut first = [0usize; MAX_DIMS];
+        let (mut at_s, mut at_m, mut at_p) = (0usize, 0usize, 0usize);
+        let mut spans = [(0usize, 0usize, 0usize); MAX_DIMS];
+        for (b, t) in self.blocks[..nb].iter().enumerate() {
+            let mut parts = [grid.dim(0); MAX_DIMS];
+            let mut xb = [T::ZERO; MAX_DIMS];
+            for (j, &d) in t.dims.iter().enumerate() {
+                parts[j] = grid.dim(d as usize);
+                xb[j] = x[d as usize];
+            }
+            let k = t.dims.len();
+            // The tables were checked when read (1 to `MAX_DIMS` distinct variables of a
+            // valid grid), so this cannot fail.
+            let sub = ProductPartition::from_partitions(&parts[..k] as &[Partition<'a, T>])
+                .map_err(|_| EvalError::OutOfRange {
+                    what: "decision block state variables",
+                    index: k,
+                    len: MAX_DIMS,
+                })?;
+            let mut n_act = 0;
+            sub.active_unchecked(&xb[..k]).for_each(|c, m| {
+                sc.act[n_act] = c as u32;
+                sc.mu[n_act] = m;
+                n_act += 1;
+            });
+            let sup = &mut sc.support[at_s..at_s + t.max_support];
+            let mut n_sup = 0;
+            let (mut lo, mut hi) = (u32::MAX, 0u32);
+            let ptr = &mut sc.mixed_ptr[at_p..at_p + t.n_actions + 1];
+            let cols = &mut sc.mixed_col[at_m..at_m + t.n_actions * t.max_support];
+            let ws = &mut sc.mixed_w[at_m..at_m + t.n_actions * t.max_support];
+            let mut nnz = 0;
+            ptr[0] = 0;
+            for a in 0..t.n_actions {
+                let mut n_hit = 0;
+                for (&c, &m) in sc.act[..n_act].iter().zip(&sc.mu[..n_act]) {
+                    let row = c as usize * t.n_actions + a;
+                    let (s, end) = (t.ptr[row] as usize, t.ptr[row + 1] as usize);
+                    for (&kc, &wk) in t.col[s..end].iter().zip(&t.weight[s..end]) {
+                        let kc = kc as usize;
+                        if sc.touched[kc] == 0 {
+                            sc.touched[kc] = 1;
+                            sc.dense[kc] = T::ZERO;
+                            sc.hit[n_hit] = kc as u32;
+                            n_hit += 1;
+                        }
+                        sc.dense[kc] += m * wk;
+                    }
+                }
+                sc.hit[..n_hit].sort_unstable();
+                if n_hit > 0 {
+                    lo = lo.min(sc.hit[0]);
+                    hi = hi.max(sc.hit[n_hit - 1]);
+                }
+                for &kc in &sc.hit[..n_hit] {
+                    let kc = kc as usize;
+                    sc.touched[kc] = 0;
+                    if sc.in_support[kc] == 0 {
+                        sc.in_support[kc] = 1;
+                        // Bounded by the file's support bound, checked against the rows.
+                        let slot = sup.get_mut(n_sup).ok_or(EvalError::OutOfRange {
+                            what: "decision block sc.support",
+                            index: n_sup,
+                            len: t.max_support,
+                        })?;
+                        *slot = kc as u32;
+                        n_sup += 1;
+                    }
+                    if sc.dense[kc] != T::ZERO {
+                        cols[nnz] = kc as u32;
+                        ws[nnz] = sc.dense[kc];
+                        nnz += 1;
+                    }
+                }
+                ptr[a + 1] = nnz as u32;
+            }
+            let sup = &mut sup[..n_sup];
+            for &kc in sup.iter() {
+                sc.in_support[kc as usize] = 0;
+            }
+            match role(b, nb) {
+                Role::First => sizes[b] = t.n_cores,
+                Role::Support => {
+                    sup.sort_unstable();
+                    let offs = &mut sc.offsets[at_s..at_s + n_sup];
+                    for (i, (&kc, o)) in sup.iter().zip(offs.iter_mut()).enumerate() {
+                        sc.local[kc as usize] = i as u32;
+                        *o = (kc as usize * t.stride) as u64;
+                    }
+                    for c in &mut cols[..nnz] {
+                        *c = sc.local[*c as usize];
+                    }
+                    sizes[b] = n_sup;
+                }
+                Role::Range => {
+                    // Every row holds an entry (checked when read), so the range is not empty.
+                    let span = (hi - lo) as usize + 1;
+                    if span > t.max_span {
+                        return Err(EvalError::OutOfRange {
+                            what: "decision block range",
+                            index: span,
+                            len: t.max_span,
+                        });
+                    }
+                    for c in &mut cols[..nnz] {
+                        *c -= lo;
+                    }
+                    sizes[b] = span;
+                    first[b] = lo as usize;
+                }
+            }
+            spans[b] = (at_s, at_m, at_p);
+            at_s += t.max_support;
+            at_m += t.n_actions * t.max_support;
+            at_p += t.n_actions + 1;
+        }
+        Ok(Mixing {
+            sizes,
+            first,
+            spans,
+        })
+    }
+
+    /// `E`, the last stage's output `ev` (block `b`'s action at stride `place[b]`), into
+    /// `by_q` in the tables' order (`[a_0][a_1]..`, the first slowest), visited like an
+    /// odometer.
+    fn reorder(&self, ev: &[T], place: &[usize; MAX_DIMS], by_q: &mut [T]) {
+        let nb = self.n_blocks;
         let mut digit = [0usize; MAX_DIMS];
         let mut pos = 0usize;
         for y in by_q.iter_mut() {
@@ -718,23 +836,6 @@ impl<'a, T: ViewReal> Decisions<'a, T> {
                 digit[l] = 0;
             }
         }
-        // The active cores listed first (the weights of `for_each`, one product each), so
-        // that the rewards' loads overlap.
-        let n_active = active
-            .write_to(core_index, core_mu)
-            .ok_or(EvalError::Length {
-                what: "decision scratch (active cores)",
-                expected: active.len(),
-                found: core_index.len(),
-            })?;
-        let mut reward = T::ZERO;
-        for (&d, &m) in core_index[..n_active].iter().zip(&core_mu[..n_active]) {
-            reward += m * self.rewards[d];
-        }
-        for (o, &q) in out.iter_mut().zip(self.q_index) {
-            *o = reward + self.gamma * by_q[q as usize];
-        }
-        Ok(())
     }
 }
 

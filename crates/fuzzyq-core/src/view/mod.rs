@@ -292,10 +292,25 @@ pub const fn padding(len: usize) -> usize {
     (8 - len % 8) % 8
 }
 
-impl<'a, T: ViewReal> PolicyView<'a, T> {
-    /// Checks `bytes` (an exported policy in `T`'s precision, at an 8-byte boundary) and
-    /// borrows its parts.
-    pub fn parse(bytes: &'a [u8]) -> Result<Self, ViewError> {
+/// The header of an exported policy, checked (see [`PolicyView::parse`]).
+struct Header {
+    membership: Membership,
+    n_dims: usize,
+    n_agents: usize,
+    n_cores: usize,
+    has_v: bool,
+    has_tables: bool,
+    /// Bytes of a greedy action: 1, 2 or 4.
+    greedy_bytes: u32,
+    /// Where the payload ends (the checksum follows).
+    end: usize,
+}
+
+impl Header {
+    /// Reads and checks the header of `bytes` for values of type `T`: the tag, the
+    /// platform, the alignment, the checksum over the payload (first: a damaged file is
+    /// reported as damaged, whatever else it says), the version and every field's range.
+    fn read<T: ViewReal>(bytes: &[u8]) -> Result<Self, ViewError> {
         if !bytes.starts_with(&MAGIC) {
             return Err(if bytes.len() < MAGIC.len() && MAGIC.starts_with(bytes) {
                 ViewError::Truncated {
@@ -385,6 +400,25 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
                 what: "number of agents",
             });
         }
+        Ok(Self {
+            membership,
+            n_dims,
+            n_agents,
+            n_cores,
+            has_v,
+            has_tables,
+            greedy_bytes,
+            end,
+        })
+    }
+}
+
+impl<'a, T: ViewReal> PolicyView<'a, T> {
+    /// Checks `bytes` (an exported policy in `T`'s precision, at an 8-byte boundary) and
+    /// borrows its parts.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, ViewError> {
+        let h = Header::read::<T>(bytes)?;
+        let (n_dims, n_agents, n_cores, end) = (h.n_dims, h.n_agents, h.n_cores, h.end);
         let body = &bytes[..end];
         let mut r = Reader {
             bytes: body,
@@ -402,7 +436,7 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
         }
         let grid = ProductPartition::try_new(&slices[..n_dims])
             .map_err(ViewError::Grid)?
-            .with_membership(membership);
+            .with_membership(h.membership);
         if grid.n_cores() != n_cores {
             return Err(ViewError::Header { what: "cores" });
         }
@@ -431,7 +465,7 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
             at += len;
         }
         let joint = JointActions::try_new(&sets[..n_agents]).map_err(ViewError::Actions)?;
-        let greedy = match greedy_bytes {
+        let greedy = match h.greedy_bytes {
             1 => Greedy::U8(r.section(n_cores)?),
             2 => Greedy::U16(r.section(n_cores)?),
             4 => Greedy::U32(r.section(n_cores)?),
@@ -441,12 +475,12 @@ impl<'a, T: ViewReal> PolicyView<'a, T> {
                 });
             }
         };
-        let v = if has_v {
+        let v = if h.has_v {
             Some(r.section::<T>(n_cores)?)
         } else {
             None
         };
-        let decisions = if has_tables {
+        let decisions = if h.has_tables {
             Some(Decisions::read(&mut r, &grid, joint.n_joint())?)
         } else {
             None

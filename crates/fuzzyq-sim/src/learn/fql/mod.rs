@@ -678,7 +678,6 @@ fn learn_with<E: Environment, L: Lookup>(
     let mut log = WindowLog::new(config.window, &q.phi);
     let mut rng = Pcg64Mcg::seed_from_u64(config.seed);
     let eval_seed = eval_seed(config.seed);
-    let n = m.len();
 
     let mut curve = Vec::with_capacity(config.episodes.min(1 << 20));
     let mut converged_at = None;
@@ -701,77 +700,21 @@ fn learn_with<E: Environment, L: Lookup>(
     for episode in curve.len()..config.episodes {
         let epsilon = config.epsilon_at(episode);
         let alpha = config.alpha_at(episode);
-        env.reset(&mut rng);
-        let at = At::Learning { episode, step: 0 };
-        observe_all(env, grids, &mut bufs.obs, &mut bufs.active, at)?;
-        for i in 0..n {
-            additive::q_values_unchecked(&bufs.active[i], &q.phi[i], &mut bufs.q[i]);
-        }
-
-        let (mut steps, mut ret, mut discounted, mut discount) = (0usize, 0.0, 0.0, 1.0);
-        let (mut td_sum, mut td_max, mut updates) = (0.0, 0.0_f64, 0usize);
-        let (mut terminal, mut diverged) = (false, false);
-        while steps < config.max_steps {
-            // Epsilon-greedy, independently per agent.
-            for i in 0..n {
-                bufs.actions[i] = if rng.random::<f64>() < epsilon {
-                    rng.random_range(0..m[i])
-                } else {
-                    greedy_index(&bufs.q[i])
-                };
-            }
-            let tr = env.step(&bufs.actions, &mut rng);
-            steps += 1;
-            let at = At::Learning {
-                episode,
-                step: steps,
-            };
-            check_reward(tr.reward, at)?;
-            ret += tr.reward;
-            discounted += discount * tr.reward;
-            discount *= config.gamma;
-            observe_all(env, grids, &mut bufs.next_obs, &mut bufs.next_active, at)?;
-            for i in 0..n {
-                additive::q_values_unchecked(&bufs.next_active[i], &q.phi[i], &mut bufs.q_next[i]);
-            }
-            let step = Step {
-                cur: &bufs.active,
-                next: &bufs.next_active,
-                q: &bufs.q,
-                q_next: &bufs.q_next,
-                actions: &bufs.actions,
-                reward: tr.reward,
-                terminal: tr.terminal,
-            };
-            let result = td_update(
-                config.update,
-                &mut q.phi,
-                &m,
-                &step,
-                config.gamma,
-                alpha,
-                |a, k, old| {
-                    log.record(a, k, old);
-                },
-            );
-            let Some(delta) = result else {
-                diverged = true;
-                break;
-            };
-            moved |= delta != 0.0;
-            td_sum += delta.abs();
-            td_max = td_max.max(delta.abs());
-            updates += 1;
-            std::mem::swap(&mut bufs.obs, &mut bufs.next_obs);
-            std::mem::swap(&mut bufs.active, &mut bufs.next_active);
-            if tr.terminal {
-                terminal = true;
-                break;
-            }
-            for i in 0..n {
-                additive::q_values_unchecked(&bufs.active[i], &q.phi[i], &mut bufs.q[i]);
-            }
-        }
+        let e = learning_episode(
+            env,
+            grids,
+            &mut q.phi,
+            &m,
+            config,
+            &mut bufs,
+            &mut rng,
+            &mut log,
+            (episode, epsilon, alpha),
+        )?;
+        moved |= e.moved;
+        let (steps, ret, discounted, terminal, diverged) =
+            (e.steps, e.ret, e.discounted, e.terminal, e.diverged);
+        let (td_sum, td_max, updates) = (e.td_sum, e.td_max, e.updates);
         steps_total += steps;
 
         let param_change = log.end_episode(&q.phi);
@@ -848,6 +791,122 @@ fn learn_with<E: Environment, L: Lookup>(
         converged_at,
         steps_total,
         stop,
+    })
+}
+
+/// What one learning episode did (see [`learning_episode`]).
+struct EpisodeRun {
+    steps: usize,
+    ret: f64,
+    discounted: f64,
+    td_sum: f64,
+    td_max: f64,
+    updates: usize,
+    terminal: bool,
+    diverged: bool,
+    /// Whether any update changed a parameter.
+    moved: bool,
+}
+
+/// One episode of fuzzy Q-learning from a reset of `env`: epsilon-greedy actions per agent,
+/// a temporal-difference update of `phi` after every step (each change logged), until a
+/// terminal state, `config.max_steps` or a diverging update. `at` is the episode's number,
+/// epsilon and alpha.
+#[allow(clippy::too_many_arguments)] // the learner's state, passed apart so each borrow is its own
+fn learning_episode<E: Environment, L: Lookup>(
+    env: &mut E,
+    grids: &[L],
+    phi: &mut [Vec<f64>],
+    m: &[usize],
+    config: &FqlConfig,
+    bufs: &mut Buffers,
+    rng: &mut Pcg64Mcg,
+    log: &mut WindowLog,
+    (episode, epsilon, alpha): (usize, f64, f64),
+) -> Result<EpisodeRun, SimError> {
+    let n = m.len();
+    let mut moved = false;
+    env.reset(rng);
+    let at = At::Learning { episode, step: 0 };
+    observe_all(env, grids, &mut bufs.obs, &mut bufs.active, at)?;
+    for i in 0..n {
+        additive::q_values_unchecked(&bufs.active[i], &phi[i], &mut bufs.q[i]);
+    }
+
+    let (mut steps, mut ret, mut discounted, mut discount) = (0usize, 0.0, 0.0, 1.0);
+    let (mut td_sum, mut td_max, mut updates) = (0.0, 0.0_f64, 0usize);
+    let (mut terminal, mut diverged) = (false, false);
+    while steps < config.max_steps {
+        // Epsilon-greedy, independently per agent.
+        for i in 0..n {
+            bufs.actions[i] = if rng.random::<f64>() < epsilon {
+                rng.random_range(0..m[i])
+            } else {
+                greedy_index(&bufs.q[i])
+            };
+        }
+        let tr = env.step(&bufs.actions, rng);
+        steps += 1;
+        let at = At::Learning {
+            episode,
+            step: steps,
+        };
+        check_reward(tr.reward, at)?;
+        ret += tr.reward;
+        discounted += discount * tr.reward;
+        discount *= config.gamma;
+        observe_all(env, grids, &mut bufs.next_obs, &mut bufs.next_active, at)?;
+        for i in 0..n {
+            additive::q_values_unchecked(&bufs.next_active[i], &phi[i], &mut bufs.q_next[i]);
+        }
+        let step = Step {
+            cur: &bufs.active,
+            next: &bufs.next_active,
+            q: &bufs.q,
+            q_next: &bufs.q_next,
+            actions: &bufs.actions,
+            reward: tr.reward,
+            terminal: tr.terminal,
+        };
+        let result = td_update(
+            config.update,
+            phi,
+            m,
+            &step,
+            config.gamma,
+            alpha,
+            |a, k, old| {
+                log.record(a, k, old);
+            },
+        );
+        let Some(delta) = result else {
+            diverged = true;
+            break;
+        };
+        moved |= delta != 0.0;
+        td_sum += delta.abs();
+        td_max = td_max.max(delta.abs());
+        updates += 1;
+        std::mem::swap(&mut bufs.obs, &mut bufs.next_obs);
+        std::mem::swap(&mut bufs.active, &mut bufs.next_active);
+        if tr.terminal {
+            terminal = true;
+            break;
+        }
+        for i in 0..n {
+            additive::q_values_unchecked(&bufs.active[i], &phi[i], &mut bufs.q[i]);
+        }
+    }
+    Ok(EpisodeRun {
+        steps,
+        ret,
+        discounted,
+        td_sum,
+        td_max,
+        updates,
+        terminal,
+        diverged,
+        moved,
     })
 }
 
