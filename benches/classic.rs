@@ -8,10 +8,10 @@ use std::ops::ControlFlow;
 
 use criterion::{BenchmarkGroup, Criterion, criterion_group, criterion_main};
 use fuzzyq_core::solver::{solve, solve_q};
-use fuzzyq_sim::model::classic::{Classic, DcMotor, Dynamics, Pendulum, preset};
+use fuzzyq_sim::model::classic::{Benchmark, Classic, DcMotor, Pendulum, preset};
 
 /// Both operators on benchmark `S`'s fine preset.
-fn both_operators<S: Dynamics>(
+fn both_operators<S: Benchmark>(
     g: &mut BenchmarkGroup<'_, criterion::measurement::WallTime>,
     name: &str,
 ) {

@@ -27,7 +27,7 @@ use fuzzyq_sim::io::config::EnvConfig;
 use fuzzyq_sim::io::export::{ExportOptions, ExportedBytes, export_bytes};
 use fuzzyq_sim::io::policy_file::Values;
 use fuzzyq_sim::model::EnvKind;
-use fuzzyq_sim::model::classic::{Classic, DcMotor, Dynamics, preset};
+use fuzzyq_sim::model::classic::{Benchmark, Classic, DcMotor, preset};
 use fuzzyq_sim::{PointMass, PointMassConfig, TrainConfig};
 
 /// Number of pre-drawn states each benchmark cycles through.
@@ -121,7 +121,7 @@ fn decisions(c: &mut Criterion) {
     {
         let p = preset::<DcMotor>("fine").unwrap();
         let model =
-            Classic::<DcMotor>::for_preset(<DcMotor as Dynamics>::Config::default(), &p).unwrap();
+            Classic::<DcMotor>::for_preset(<DcMotor as Benchmark>::Config::default(), &p).unwrap();
         let grid = p.grid::<f64>().unwrap();
         bench_model(&mut g, "dcmotor_fine_f64", &model, &grid, BackupPath::Auto);
     }

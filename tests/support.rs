@@ -273,3 +273,60 @@ pub fn khepera_run(
         other => panic!("not a robot run: {other:?}"),
     }
 }
+
+/// Model `M` with terminal states added: the states where `terminal` holds. Every other method
+/// is the inner model's (its blocks, tables and goals included).
+pub struct WithTerminals<M, F> {
+    /// The model wrapped.
+    pub inner: M,
+    /// Whether a state is terminal.
+    pub terminal: F,
+}
+
+impl<T: Real, M: Model<T>, F: Fn(&[T]) -> bool> Model<T> for WithTerminals<M, F> {
+    fn state_dim(&self) -> usize {
+        self.inner.state_dim()
+    }
+    fn n_agents(&self) -> usize {
+        self.inner.n_agents()
+    }
+    fn action_set(&self, a: usize) -> fuzzyq_core::ActionSet<'_, T> {
+        self.inner.action_set(a)
+    }
+    fn state_bounds(&self, d: usize) -> (T, T) {
+        self.inner.state_bounds(d)
+    }
+    fn step(&self, x: &[T], u: &[T], next: &mut [T]) {
+        self.inner.step(x, u, next);
+    }
+    fn reward(&self, x: &[T], u: &[T]) -> T {
+        self.inner.reward(x, u)
+    }
+    fn reward_depends_on_action(&self) -> bool {
+        self.inner.reward_depends_on_action()
+    }
+    fn is_goal(&self, x: &[T]) -> bool {
+        self.inner.is_goal(x)
+    }
+    fn is_terminal(&self, x: &[T]) -> bool {
+        (self.terminal)(x)
+    }
+    fn has_terminal_states(&self) -> bool {
+        true
+    }
+    fn n_blocks(&self) -> usize {
+        self.inner.n_blocks()
+    }
+    fn block(&self, b: usize) -> fuzzyq_core::Block<'_> {
+        self.inner.block(b)
+    }
+    fn block_rows(&self, b: usize) -> Option<fuzzyq_core::BlockRows<'_, T>> {
+        self.inner.block_rows(b)
+    }
+    fn tabulated(&self) -> Option<fuzzyq_core::Tabulated<'_, T>> {
+        self.inner.tabulated()
+    }
+    fn reward_table(&self) -> Option<&[T]> {
+        self.inner.reward_table()
+    }
+}

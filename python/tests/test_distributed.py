@@ -26,48 +26,28 @@ import pytest
 import fuzzyq
 from fuzzyq.distributed import _tasks
 
-# A reduced paper task (`fuzzyq config` with a coarser grid and xi = 0.01): two point masses
-# on 5 position x 3 velocity cores per axis (50,625 cores, 15 slabs), modified policy
-# iteration as `fuzzyq train` runs it by default (38 sweeps).
-CONFIG = """\
-# fuzzyq training configuration: the point-mass task of Luviano-Cruz et al. 2018, section 3.1.
-# Edit and pass back with `fuzzyq train --env pointmass --config FILE.toml`.
 
-[env]
-kind = "pointmass"
-agents = 2                                  # point masses (1 to 4)
-mass = 0.5                                  # kg, every agent
-sample_time = 0.4                           # s, zero-order hold
-position_limit = 6.0                        # m: positions are clamped to [-6, 6]
-velocity_limit = 3.0                        # m/s: velocities are clamped to [-3, 3]
-force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]  # N per axis; actions are their square (25 per agent)
-goal_radius = 0.1                           # reward region ||x||_2 < 0.1 over the whole state
-goal_reward = 5.0                           # reward inside the region (eq 40)
-integrator = "exact"                        # "exact" (constant friction) or "rk4"
-rk4_substeps = 10                           # substeps per sample time for "rk4"
-velocity_noise = 0.0                        # m/s: std dev of Gaussian process noise on every velocity per step (the plant's; 0 = the paper's)
+def reduced_paper_task() -> str:
+    """A reduced paper task: `fuzzyq config --env pointmass` with a coarser grid and
+    `xi = 0.01`. Two point masses on 5 position x 3 velocity cores per axis (50,625 cores, 15
+    slabs), modified policy iteration as `fuzzyq train` runs it by default (38 sweeps)."""
+    text = subprocess.run(
+        [sys.executable, "-m", "fuzzyq", "config", "--env", "pointmass"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    for key, value in [
+        ("position_cores", "[-6.0, -3.0, 0.0, 3.0, 6.0]"),
+        ("velocity_cores", "[-3.0, 0.0, 3.0]"),
+        ("xi", "0.01"),
+    ]:
+        text, n = re.subn(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
+        assert n == 1, f"the configuration sets {key} once"
+    return text
 
-[env.friction]
-kind = "constant"                           # or "patches" with base = ..., patches = [{ center = [x, y], radius = r, eta = e }]
-eta = 1.0                                   # kg/s
 
-[grid]
-# Triangular membership cores, the same on every agent and axis (paper figure 1).
-position_cores = [-6.0, -3.0, 0.0, 3.0, 6.0]
-velocity_cores = [-3.0, 0.0, 3.0]
-membership = "triangular"                   # "triangular" (fuzzy) or "crisp" (nearest-core boxes)
-
-[solver]
-gamma = 0.96                                # discount factor
-xi = 0.01                                   # stop when ||theta_{k+1} - theta_k||_inf <= xi
-max_sweeps = 1000
-sweep = "sync"                              # "sync" (Jacobi, the paper) or "async" (Gauss-Seidel)
-absorbing_goal = false                      # true: goal states collect their reward, then nothing
-backup = "auto"                             # "auto", "block" or "generic"
-precision = "f32"                           # "f32" or "f64"
-extrapolate = true                          # MacQueen extrapolation: fewer sweeps, same guarantee; false = the paper's plain sweeps
-evaluation_sweeps = 5                       # modified policy iteration: evaluation sweeps per full backup; 0 = value iteration (the paper)
-"""
+CONFIG = reduced_paper_task()
 
 
 def setting(key: str, value: str) -> str:

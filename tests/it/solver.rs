@@ -11,8 +11,8 @@ use fuzzyq_core::solver::{
 use fuzzyq_core::{ActionSet, Backup, Block, Model, Real};
 use fuzzyq_sim::model::pointmass::{FrictionConfig, Integrator, PointMass, PointMassConfig};
 use fuzzyq_tests::{
-    Reference, assert_close, brute_force, max_and_argmax, max_diff, medium_two_agent,
-    small_one_agent, small_two_agent, with_threads,
+    Reference, WithTerminals, assert_close, brute_force, max_and_argmax, max_diff,
+    medium_two_agent, small_one_agent, small_two_agent, with_threads,
 };
 use proptest::prelude::*;
 
@@ -1233,50 +1233,19 @@ fn block_and_generic_agree_with_terminal_states() {
 /// without the declaration, on both paths (the block path keeps its fused kernels).
 #[test]
 fn declared_but_unreached_terminal_states_change_nothing() {
-    struct Never(PointMass);
-    impl Model<f32> for Never {
-        fn state_dim(&self) -> usize {
-            Model::<f32>::state_dim(&self.0)
-        }
-        fn n_agents(&self) -> usize {
-            Model::<f32>::n_agents(&self.0)
-        }
-        fn action_set(&self, a: usize) -> ActionSet<'_, f32> {
-            self.0.action_set(a)
-        }
-        fn state_bounds(&self, d: usize) -> (f32, f32) {
-            self.0.state_bounds(d)
-        }
-        fn step(&self, x: &[f32], u: &[f32], next: &mut [f32]) {
-            self.0.step(x, u, next)
-        }
-        fn reward(&self, x: &[f32], u: &[f32]) -> f32 {
-            self.0.reward(x, u)
-        }
-        fn reward_depends_on_action(&self) -> bool {
-            Model::<f32>::reward_depends_on_action(&self.0)
-        }
-        fn is_terminal(&self, x: &[f32]) -> bool {
-            x.iter().any(|v| v.abs() > 100.0)
-        }
-        fn has_terminal_states(&self) -> bool {
-            true
-        }
-        fn n_blocks(&self) -> usize {
-            Model::<f32>::n_blocks(&self.0)
-        }
-        fn block(&self, b: usize) -> Block<'_> {
-            Model::<f32>::block(&self.0, b)
-        }
-    }
+    let never = |x: &[f32]| x.iter().any(|v| v.abs() > 100.0);
     let (m, g) = medium_two_agent::<f32>();
     let (_, small) = small_one_agent::<f32>();
     let one = fuzzyq_tests::point_mass(1);
-    for (plain, wrapped, grid, path) in [
-        (&m, Never(m.clone()), &g, BackupPath::Block),
-        (&one, Never(one.clone()), &small, BackupPath::Generic),
+    for (plain, inner, grid, path) in [
+        (&m, m.clone(), &g, BackupPath::Block),
+        (&one, one.clone(), &small, BackupPath::Generic),
     ] {
         let c = config(path, SweepMode::Synchronous);
+        let wrapped = WithTerminals {
+            inner,
+            terminal: never,
+        };
         let (a, b) = (run(plain, grid, &c), run(&wrapped, grid, &c));
         assert_eq!(a.v, b.v, "{path:?}");
         assert_eq!(a.greedy, b.greedy);
@@ -1288,38 +1257,7 @@ fn declared_but_unreached_terminal_states_change_nothing() {
 /// tabulates.
 #[test]
 fn tabulated_models_honour_terminal_states() {
-    use fuzzyq_core::Tabulated;
     use fuzzyq_core::solver::TabulatedModel;
-    struct WithTerminals(TabulatedModel<f64>);
-    impl Model<f64> for WithTerminals {
-        fn state_dim(&self) -> usize {
-            self.0.state_dim()
-        }
-        fn n_agents(&self) -> usize {
-            self.0.n_agents()
-        }
-        fn action_set(&self, a: usize) -> ActionSet<'_, f64> {
-            self.0.action_set(a)
-        }
-        fn state_bounds(&self, d: usize) -> (f64, f64) {
-            self.0.state_bounds(d)
-        }
-        fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
-            self.0.step(x, u, next)
-        }
-        fn reward(&self, x: &[f64], u: &[f64]) -> f64 {
-            self.0.reward(x, u)
-        }
-        fn is_terminal(&self, x: &[f64]) -> bool {
-            x.iter().any(|&v| !(0.0..=4.0).contains(&v))
-        }
-        fn has_terminal_states(&self) -> bool {
-            true
-        }
-        fn tabulated(&self) -> Option<Tabulated<'_, f64>> {
-            self.0.tabulated()
-        }
-    }
     let m = Cliff::<f64>::new(2, true);
     let g = m.grid();
     let view = g.view();
@@ -1339,7 +1277,11 @@ fn tabulated_models_honour_terminal_states() {
     }
     let t = TabulatedModel::new(g.clone(), vec![(m.actions.clone(), 2)], next, rewards).unwrap();
     let c = config(BackupPath::Generic, SweepMode::Synchronous);
-    let (a, b) = (run(&m, &g, &c), run(&WithTerminals(t), &g, &c));
+    let t = WithTerminals {
+        inner: t,
+        terminal: |x: &[f64]| x.iter().any(|&v| !(0.0..=4.0).contains(&v)),
+    };
+    let (a, b) = (run(&m, &g, &c), run(&t, &g, &c));
     assert_eq!(a.v, b.v);
     assert_eq!(a.greedy, b.greedy);
 }

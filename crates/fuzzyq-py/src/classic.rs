@@ -11,8 +11,8 @@ use fuzzyq_sim::model::classic::arm::Arm as ArmDynamics;
 use fuzzyq_sim::model::classic::carhill::CarHill as CarHillDynamics;
 use fuzzyq_sim::model::classic::dcmotor::DcMotor as DcMotorDynamics;
 use fuzzyq_sim::model::classic::pendulum::Pendulum as PendulumDynamics;
-use fuzzyq_sim::model::classic::{self, Dynamics, Preset};
-use fuzzyq_sim::model::{EnvModel, F64Model};
+use fuzzyq_sim::model::classic::{self, Benchmark, Preset};
+use fuzzyq_sim::model::{Dynamics, EnvModel, F64Model};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -44,7 +44,7 @@ pub struct ClassicModel {
 /// the exact `"zoh"`).
 fn parameters<S>(py: Python<'_>, params: Option<&Bound<'_, PyDict>>) -> PyResult<S::Config>
 where
-    S: Dynamics,
+    S: Benchmark,
     S::Config: Serialize + DeserializeOwned,
 {
     let name = S::ENV.name();
@@ -97,7 +97,7 @@ impl ClassicModel {
         wrap: fn(ClassicEnv<S::Config>) -> EnvConfig,
     ) -> PyResult<Self>
     where
-        S: Dynamics,
+        S: Benchmark,
         S::Config: Serialize + DeserializeOwned,
     {
         let preset = classic::preset::<S>(preset).map_err(|e| config_error(py, &e))?;
@@ -263,7 +263,7 @@ impl ClassicModel {
     /// Sample time (s).
     #[getter]
     fn sample_time(&self, py: Python<'_>) -> PyResult<f64> {
-        guard(py, || Ok(F64Model::sample_time(self.m())))
+        guard(py, || Ok(Dynamics::sample_time(self.m())))
     }
 
     /// The range `(low, high)` of every state variable, shape `(state_dim, 2)`.
@@ -274,7 +274,7 @@ impl ClassicModel {
                 let e = F64Model::state_dim(self.m());
                 let flat: Vec<f64> = (0..e)
                     .flat_map(|d| {
-                        let (lo, hi) = F64Model::state_bounds(self.m(), d);
+                        let (lo, hi) = Dynamics::state_bounds(self.m(), d);
                         [lo, hi]
                     })
                     .collect();
@@ -327,7 +327,7 @@ impl ClassicModel {
             for i in 0..n {
                 let (x, u) = (&xs[i * e..(i + 1) * e], &us[i * a..(i + 1) * a]);
                 rewards[i] = Model::<f64>::reward(m, x, u);
-                F64Model::step(m, x, u, &mut next[i * e..(i + 1) * e]);
+                Dynamics::step(m, x, u, &mut next[i * e..(i + 1) * e]);
             }
             match bx {
                 None => (PyArray1::from_vec(py, next), rewards[0]).into_pyobject(py),
@@ -356,7 +356,7 @@ impl ClassicModel {
     fn is_terminal(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<bool> {
         guard(py, || {
             let x = finite_vector(x, "x", Some(self.state_dim()))?;
-            Ok(F64Model::has_terminal_states(self.m()) && F64Model::is_terminal(self.m(), &x))
+            Ok(Dynamics::has_terminal_states(self.m()) && Dynamics::is_terminal(self.m(), &x))
         })
     }
 
@@ -396,7 +396,7 @@ impl ClassicModel {
                     "{class}(preset={:?}, actions={}, sample_time={})",
                     self.preset.name,
                     F64Model::actions(self.m()).len(),
-                    F64Model::sample_time(self.m())
+                    Dynamics::sample_time(self.m())
                 )
             })
         })

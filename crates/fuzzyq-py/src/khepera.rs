@@ -5,7 +5,7 @@ use std::sync::Arc;
 use fuzzyq_core::model::joint_actions;
 use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
 use fuzzyq_sim::model::khepera::KheperaConfig;
-use fuzzyq_sim::model::{EnvKind, EnvModel, F64Model};
+use fuzzyq_sim::model::{Dynamics, EnvKind, EnvModel, F64Model};
 use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
@@ -136,7 +136,7 @@ impl Khepera {
     /// The control period, seconds.
     #[getter]
     fn sample_time(&self) -> f64 {
-        F64Model::sample_time(self.m())
+        Dynamics::sample_time(self.m())
     }
 
     /// Every parameter, as the configuration's `[env]` table.
@@ -170,7 +170,7 @@ impl Khepera {
             let x = finite_vector(x, "x", Some(self.state_dim()))?;
             let u = finite_vector(u, "u", Some(self.action_dim(py)?))?;
             let mut next = vec![0.0; x.len()];
-            F64Model::step(self.m(), &x, &u, &mut next);
+            Dynamics::step(self.m(), &x, &u, &mut next);
             Ok(PyArray1::from_vec(py, next))
         })
     }
@@ -181,7 +181,7 @@ impl Khepera {
         guard(py, || {
             let x = finite_vector(x, "x", Some(self.state_dim()))?;
             let u = finite_vector(u, "u", Some(self.action_dim(py)?))?;
-            Ok(F64Model::reward(
+            Ok(Dynamics::reward(
                 self.m(),
                 &x,
                 &u,

@@ -7,7 +7,7 @@ use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::SimError;
 use fuzzyq_sim::learn::tasks::khepera::observation;
-use fuzzyq_sim::model::F64Model;
+use fuzzyq_sim::model::{Dynamics, F64Model};
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use fuzzyq_sim::run::metrics::{KheperaRun, Trajectory};
 use fuzzyq_sim::run::policy::{AdditivePolicy, Policy as SimPolicy, Scratch};
@@ -825,7 +825,7 @@ impl Policy {
                 None if robots => Vec::new(),
                 None => {
                     let (lo, hi): (Vec<f64>, Vec<f64>) =
-                        (0..e).map(|d| F64Model::state_bounds(model, d)).unzip();
+                        (0..e).map(|d| Dynamics::state_bounds(model, d)).unzip();
                     let rng = py
                         .import("numpy")?
                         .getattr("random")?

@@ -25,7 +25,7 @@ use fuzzyq_sim::learn::fit::FitConfig;
 use fuzzyq_sim::learn::samples::{Collection, Exploration, Transitions};
 use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::learned::BlockTables;
-use fuzzyq_sim::model::{EnvModel, F64Model};
+use fuzzyq_sim::model::{Dynamics, EnvModel, F64Model};
 use fuzzyq_sim::run::policy::{FqiPolicy, Policy as SimPolicy};
 use fuzzyq_sim::train::DeviceReal;
 use numpy::ndarray::Array2;
@@ -478,7 +478,7 @@ fn solve_builtin(
     if config.solver.absorbing_goal {
         let task = config.build_model().map_err(|e| sim_error(py, &e))?;
         let inner = &g.inner;
-        let any_goal = crate::pool::detach(py, || any_core(inner, |x| F64Model::is_goal(&task, x)));
+        let any_goal = crate::pool::detach(py, || any_core(inner, |x| Dynamics::is_goal(&task, x)));
         if !any_goal {
             return Err(no_goal(
                 py,

@@ -785,7 +785,7 @@ impl Comparison {
 mod tests {
     use super::*;
     use crate::io::config::GridConfig;
-    use crate::model::F64Model;
+    use crate::model::Dynamics;
 
     /// One agent on a coarse grid: every learner trains in a fraction of a second.
     fn tiny() -> CompareConfig {
@@ -915,7 +915,7 @@ mod tests {
                     .iter()
                     .map(|&f| {
                         let mut next = [0.0; 4];
-                        F64Model::step(model, &[p, 0.0, v, 0.0], &[f, 0.0], &mut next);
+                        Dynamics::step(model, &[p, 0.0, v, 0.0], &[f, 0.0], &mut next);
                         (nearest(pos, next[0]), nearest(vel, next[2]))
                     })
                     .collect()

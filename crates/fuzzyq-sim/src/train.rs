@@ -30,7 +30,7 @@ use crate::learn::tasks::{khepera as khepera_task, pointmass as pointmass_task};
 use crate::learn::vqql::{self, LloydReport, VqqlConfig};
 use crate::model::learned::LearnedModel;
 use crate::model::pointmass::{PointMass, Starts};
-use crate::model::{BlockSpec, EnvModel, F64Model};
+use crate::model::{BlockSpec, Dynamics, EnvModel, F64Model};
 use crate::run::policy::{FqiPolicy, Scratch};
 
 fuzzyq_core::named_option! {
@@ -519,7 +519,7 @@ fn draw_start(model: &EnvModel) -> impl FnMut(&mut rand_pcg::Pcg64Mcg, &mut [f64
         EnvModel::PointMass(_) => starts.draw(rng, x),
         other => {
             for (d, v) in x.iter_mut().enumerate() {
-                let (lo, hi) = F64Model::state_bounds(other, d);
+                let (lo, hi) = Dynamics::state_bounds(other, d);
                 *v = rng.random_range(lo..=hi);
             }
         }
@@ -606,7 +606,7 @@ pub fn train_learned(
 /// environment without terminal states; the error says why not.
 pub fn check_learnable(config: &TrainConfig) -> Result<(), SimError> {
     let task = config.build_model()?;
-    if F64Model::has_terminal_states(&task) {
+    if Dynamics::has_terminal_states(&task) {
         return Err(ConfigError::invalid(
             "learner",
             format!(

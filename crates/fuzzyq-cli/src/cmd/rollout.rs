@@ -11,7 +11,7 @@ use clap::{Args, ValueEnum};
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::model::khepera::random_starts;
 use fuzzyq_sim::model::pointmass::{START_POSITION, random_starts as point_mass_starts};
-use fuzzyq_sim::model::{EnvKind, EnvModel, EnvSpec, F64Model, StartsKind};
+use fuzzyq_sim::model::{Dynamics, EnvKind, EnvModel, EnvSpec, F64Model, StartsKind};
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use fuzzyq_sim::run::metrics::{PointMassReport, RolloutMetrics, Trajectory};
 use fuzzyq_sim::run::policy::Policy;
@@ -588,7 +588,7 @@ fn maps(
     };
     let spec = model.kind().spec();
     let axis = |d: usize| {
-        let (lo, hi) = F64Model::state_bounds(model, d);
+        let (lo, hi) = Dynamics::state_bounds(model, d);
         (0..N)
             .map(|i| lo + (hi - lo) * i as f64 / (N - 1) as f64)
             .collect::<Vec<f64>>()

@@ -17,7 +17,7 @@ use crate::model::classic::arm::{Arm, ArmConfig};
 use crate::model::classic::carhill::{CarHill, CarHillConfig};
 use crate::model::classic::dcmotor::{DcMotor, DcMotorConfig};
 use crate::model::classic::pendulum::{Pendulum, PendulumConfig};
-use crate::model::classic::{self, Classic, Dynamics};
+use crate::model::classic::{self, Benchmark, Classic};
 use crate::model::khepera::{self, KheperaConfig, KheperaModel};
 use crate::model::pointmass::{PointMass, PointMassConfig};
 use crate::model::{EnvKind, EnvModel};
@@ -240,7 +240,7 @@ impl EnvConfig {
 impl<C: Clone> ClassicEnv<C> {
     /// The benchmark: the dynamics of `[env.model]` with the `actions` (errors name
     /// `env.*`).
-    pub fn build<S: Dynamics<Config = C>>(&self) -> Result<Classic<S>, ConfigError> {
+    pub fn build<S: Benchmark<Config = C>>(&self) -> Result<Classic<S>, ConfigError> {
         let dynamics = S::new(self.model.clone())?;
         let table = dynamics.action_table("env.actions", &self.actions)?;
         Ok(Classic::from_table(dynamics, table))
@@ -542,7 +542,7 @@ impl TrainConfig {
     /// classic model parameters, and the toolbox's iteration (synchronous plain sweeps, at
     /// most 1000, in `f64`).
     pub fn from_preset(env: EnvKind, preset: &str) -> Result<Self, ConfigError> {
-        fn with<S: Dynamics>(
+        fn with<S: Benchmark>(
             name: &str,
             wrap: fn(ClassicEnv<S::Config>) -> EnvConfig,
         ) -> Result<(classic::Preset, EnvConfig), ConfigError> {

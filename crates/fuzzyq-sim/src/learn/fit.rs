@@ -28,7 +28,7 @@
 //!   `m_c + r_i` with the kernel weights. Rows stay non-negative and sum to 1, so the backup
 //!   remains a gamma-contraction. Without noise every residual is rounding, and the row is the
 //!   memberships of `m_c` (entries below `1e-9` are dropped and the row renormalised).
-//! - **Periodic variables.** A variable the task declares periodic ([`F64Model::is_periodic`],
+//! - **Periodic variables.** A variable the task declares periodic ([`Dynamics::is_periodic`],
 //!   a robot's heading) is fitted on wrapped differences: offsets from the core and steps
 //!   `x'_j - x_j` are taken the short way round, so a successor across the range's ends
 //!   continues the core's side, and the row's successors are wrapped back into the range
@@ -55,7 +55,7 @@ use serde::Serialize;
 use crate::error::{ConfigError, require};
 use crate::learn::samples::Transitions;
 use crate::model::learned::{BlockTable, BlockTables};
-use crate::model::{BlockSpec, EnvModel, F64Model};
+use crate::model::{BlockSpec, Dynamics, EnvModel, F64Model};
 
 /// Settings of [`fit`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -209,7 +209,7 @@ pub fn fit(
         let bounds: Vec<(f64, f64)> = spec
             .state_dims
             .iter()
-            .map(|&d| F64Model::state_bounds(task, d))
+            .map(|&d| Dynamics::state_bounds(task, d))
             .collect();
         let block = BlockFitter {
             cores: spec.state_dims.iter().map(|&d| &cores[d][..]).collect(),
@@ -217,7 +217,7 @@ pub fn fit(
             periodic: spec
                 .state_dims
                 .iter()
-                .map(|&d| F64Model::is_periodic(task, d))
+                .map(|&d| Dynamics::is_periodic(task, d))
                 .collect(),
             bounds,
             config,
@@ -229,7 +229,7 @@ pub fn fit(
     let reward_mismatches = (0..data.len())
         .filter(|&i| {
             let (x, u, _, r) = data.get(i);
-            (F64Model::reward(task, x, u, fuzzyq_core::solver::Precision::F64) - r).abs() > 1e-9
+            (Dynamics::reward(task, x, u, fuzzyq_core::solver::Precision::F64) - r).abs() > 1e-9
         })
         .count();
     Ok((
@@ -753,9 +753,9 @@ pub fn table_error(tables: &BlockTables, truth: &EnvModel) -> Result<Vec<TableEr
                 .state_dims
                 .iter()
                 .map(|&d| {
-                    let (lo, hi) = F64Model::state_bounds(truth, d);
+                    let (lo, hi) = Dynamics::state_bounds(truth, d);
                     let c = &tables.cores[d];
-                    F64Model::is_periodic(truth, d)
+                    Dynamics::is_periodic(truth, d)
                         && c.len() > 1
                         && c[0] == lo
                         && c[c.len() - 1] == hi
@@ -957,9 +957,9 @@ mod tests {
                     k += 1e-4;
                     let x = [centre[0] + k, 0.0, centre[1] - k, 0.0];
                     let u = actions.action(a);
-                    F64Model::step(&task, &x, u, &mut next);
+                    Dynamics::step(&task, &x, u, &mut next);
                     task.add_process_noise(&mut next, &mut rng);
-                    let r = F64Model::reward(&task, &x, u, fuzzyq_core::solver::Precision::F64);
+                    let r = Dynamics::reward(&task, &x, u, fuzzyq_core::solver::Precision::F64);
                     d.push(&x, u, &next, r);
                 }
             }

@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, non_negative, positive, require};
 use crate::model::arena::{Arena, norm_clearly_below};
-use crate::model::{ActionTable, BlockSpec, F64Model};
+use crate::model::{ActionTable, BlockSpec, Dynamics, F64Model};
 
 /// Optional sensor and actuator noise (the paper's future work: stochastic dynamics).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -591,19 +591,7 @@ pub fn random_starts(
     Ok(out)
 }
 
-impl F64Model for KheperaModel {
-    fn state_dim(&self) -> usize {
-        self.config.state_dim()
-    }
-
-    fn n_agents(&self) -> usize {
-        self.config.agents
-    }
-
-    fn actions(&self) -> &ActionTable {
-        &self.actions
-    }
-
+impl Dynamics for KheperaModel {
     fn sample_time(&self) -> f64 {
         self.config.sample_time
     }
@@ -635,6 +623,20 @@ impl F64Model for KheperaModel {
 
     fn is_goal(&self, x: &[f64]) -> bool {
         self.in_region(x)
+    }
+}
+
+impl F64Model for KheperaModel {
+    fn state_dim(&self) -> usize {
+        self.config.state_dim()
+    }
+
+    fn n_agents(&self) -> usize {
+        self.config.agents
+    }
+
+    fn actions(&self) -> &ActionTable {
+        &self.actions
     }
 
     fn blocks(&self) -> &[BlockSpec] {

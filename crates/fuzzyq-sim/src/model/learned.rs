@@ -9,7 +9,7 @@
 //! action sets, state bounds) is the task's, which the agents are told: they learn how the
 //! world moves, not what they are asked to do.
 //!
-//! [`F64Model::step`] of a learned model is its mean successor: per block, the fuzzy
+//! [`Dynamics::step`] of a learned model is its mean successor: per block, the fuzzy
 //! interpolation of the rows' mean successors over the active block cores (for a discrete
 //! block action; any other action vector takes the nearest block action; a periodic
 //! variable takes the circular mean, wrapped into its range).
@@ -19,7 +19,7 @@ use fuzzyq_core::{Membership, Partition, ProductPartition};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, require};
-use crate::model::{ActionTable, BlockSpec, EnvModel, F64Model, WideBlockRows};
+use crate::model::{ActionTable, BlockSpec, Dynamics, EnvModel, F64Model, WideBlockRows};
 
 /// One block's learned transition table (see [`fuzzyq_core::BlockRows`] for the layout).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -157,7 +157,7 @@ impl LearnedModel {
     /// refused: a terminal test needs the joint successor, which block tables do not keep.
     pub fn new(task: EnvModel, tables: BlockTables) -> Result<Self, ConfigError> {
         require!(
-            !F64Model::has_terminal_states(&task),
+            !Dynamics::has_terminal_states(&task),
             "learner",
             format!(
                 "learned-model cannot learn {}: its episodes end in terminal states, which \
@@ -221,24 +221,15 @@ impl LearnedModel {
     }
 }
 
-impl F64Model for LearnedModel {
-    fn state_dim(&self) -> usize {
-        F64Model::state_dim(&self.task)
-    }
-    fn n_agents(&self) -> usize {
-        F64Model::n_agents(&self.task)
-    }
-    fn actions(&self) -> &ActionTable {
-        F64Model::actions(&self.task)
-    }
+impl Dynamics for LearnedModel {
     fn sample_time(&self) -> f64 {
-        F64Model::sample_time(&self.task)
+        Dynamics::sample_time(&self.task)
     }
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        F64Model::state_bounds(&self.task, dim)
+        Dynamics::state_bounds(&self.task, dim)
     }
     fn is_periodic(&self, dim: usize) -> bool {
-        F64Model::is_periodic(&self.task, dim)
+        Dynamics::is_periodic(&self.task, dim)
     }
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
         for t in &self.tables.blocks {
@@ -259,8 +250,8 @@ impl F64Model for LearnedModel {
                 .state_dims
                 .iter()
                 .map(|&d| {
-                    let (lo, hi) = F64Model::state_bounds(&self.task, d);
-                    F64Model::is_periodic(&self.task, d).then_some((lo, hi - lo))
+                    let (lo, hi) = Dynamics::state_bounds(&self.task, d);
+                    Dynamics::is_periodic(&self.task, d).then_some((lo, hi - lo))
                 })
                 .collect();
             let mut mean = vec![0.0; t.state_dims.len()];
@@ -296,13 +287,25 @@ impl F64Model for LearnedModel {
         }
     }
     fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64 {
-        F64Model::reward(&self.task, x, u, precision)
+        Dynamics::reward(&self.task, x, u, precision)
     }
     fn reward_depends_on_action(&self) -> bool {
-        F64Model::reward_depends_on_action(&self.task)
+        Dynamics::reward_depends_on_action(&self.task)
     }
     fn is_goal(&self, x: &[f64]) -> bool {
-        F64Model::is_goal(&self.task, x)
+        Dynamics::is_goal(&self.task, x)
+    }
+}
+
+impl F64Model for LearnedModel {
+    fn state_dim(&self) -> usize {
+        F64Model::state_dim(&self.task)
+    }
+    fn n_agents(&self) -> usize {
+        F64Model::n_agents(&self.task)
+    }
+    fn actions(&self) -> &ActionTable {
+        F64Model::actions(&self.task)
     }
     fn blocks(&self) -> &[BlockSpec] {
         &self.specs

@@ -315,15 +315,11 @@ impl ActionTable {
     }
 }
 
-/// A model computed in `f64`: what every built-in model implements.
-/// `impl_model!` turns it into [`fuzzyq_core::Model`] for `f32` and `f64`.
-pub trait F64Model {
-    /// Length of the state vector.
-    fn state_dim(&self) -> usize;
-    /// Number of agents.
-    fn n_agents(&self) -> usize;
-    /// Every agent's discrete actions.
-    fn actions(&self) -> &ActionTable;
+/// The dynamics of a model computed in `f64`: its transition `f` and reward `rho`, and what it
+/// says about single states (bounds, periodic variables, goals, terminal states). The one place
+/// these are declared for every built-in model: [`F64Model`] adds the agents, actions and
+/// blocks; [`classic::Benchmark`] adds a classic benchmark's parameters and presets.
+pub trait Dynamics {
     /// The sample time of one step (s).
     fn sample_time(&self) -> f64;
     /// The range of state variable `dim`.
@@ -358,6 +354,24 @@ pub trait F64Model {
     fn has_terminal_states(&self) -> bool {
         false
     }
+}
+
+/// The symmetric range `[-lim, lim]` (a state variable's bounds in most models).
+#[must_use]
+pub fn symmetric(lim: f64) -> (f64, f64) {
+    (-lim, lim)
+}
+
+/// A model computed in `f64`: what every built-in model implements, its [`Dynamics`] with the
+/// agents, their discrete actions and the dynamics blocks. `impl_model!` turns it into
+/// [`fuzzyq_core::Model`] for `f32` and `f64`.
+pub trait F64Model: Dynamics {
+    /// Length of the state vector.
+    fn state_dim(&self) -> usize;
+    /// Number of agents.
+    fn n_agents(&self) -> usize;
+    /// Every agent's discrete actions.
+    fn actions(&self) -> &ActionTable;
     /// The independent dynamics blocks (see [`Model::block`]).
     fn blocks(&self) -> &[BlockSpec];
     /// Block `b`'s transition table, if the model gives it directly (a learned model, see
@@ -367,7 +381,7 @@ pub trait F64Model {
         None
     }
     /// Adds the plant's process noise to a successor `x` drawn from `rng` (the default has
-    /// none). The model's [`step`](Self::step) stays the noise-free transition; plants and
+    /// none). The model's [`step`](Dynamics::step) stays the noise-free transition; plants and
     /// data collection call this after it.
     fn add_process_noise(&self, x: &mut [f64], rng: &mut rand_pcg::Pcg64Mcg) {
         let _ = (x, rng);
@@ -485,34 +499,34 @@ macro_rules! impl_model {
                 $crate::model::F64Model::actions(self).set::<T>()
             }
             fn state_bounds(&self, dim: usize) -> (T, T) {
-                let (lo, hi) = $crate::model::F64Model::state_bounds(self, dim);
+                let (lo, hi) = $crate::model::Dynamics::state_bounds(self, dim);
                 (T::from_f64(lo), T::from_f64(hi))
             }
             fn step(&self, x: &[T], u: &[T], next: &mut [T]) {
                 T::widened(x, |x| {
                     T::widened(u, |u| {
-                        T::narrowed(next, |next| $crate::model::F64Model::step(self, x, u, next))
+                        T::narrowed(next, |next| $crate::model::Dynamics::step(self, x, u, next))
                     })
                 });
             }
             fn reward(&self, x: &[T], u: &[T]) -> T {
                 T::from_f64(T::widened(x, |x| {
                     T::widened(u, |u| {
-                        $crate::model::F64Model::reward(self, x, u, T::PRECISION)
+                        $crate::model::Dynamics::reward(self, x, u, T::PRECISION)
                     })
                 }))
             }
             fn reward_depends_on_action(&self) -> bool {
-                $crate::model::F64Model::reward_depends_on_action(self)
+                $crate::model::Dynamics::reward_depends_on_action(self)
             }
             fn is_goal(&self, x: &[T]) -> bool {
-                T::widened(x, |x| $crate::model::F64Model::is_goal(self, x))
+                T::widened(x, |x| $crate::model::Dynamics::is_goal(self, x))
             }
             fn is_terminal(&self, x: &[T]) -> bool {
-                T::widened(x, |x| $crate::model::F64Model::is_terminal(self, x))
+                T::widened(x, |x| $crate::model::Dynamics::is_terminal(self, x))
             }
             fn has_terminal_states(&self) -> bool {
-                $crate::model::F64Model::has_terminal_states(self)
+                $crate::model::Dynamics::has_terminal_states(self)
             }
             fn n_blocks(&self) -> usize {
                 $crate::model::F64Model::blocks(self).len()
@@ -607,6 +621,36 @@ macro_rules! dispatch {
     };
 }
 
+impl Dynamics for EnvModel {
+    fn sample_time(&self) -> f64 {
+        dispatch!(self, m => Dynamics::sample_time(m))
+    }
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        dispatch!(self, m => Dynamics::state_bounds(m, dim))
+    }
+    fn is_periodic(&self, dim: usize) -> bool {
+        dispatch!(self, m => Dynamics::is_periodic(m, dim))
+    }
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        dispatch!(self, m => Dynamics::step(m, x, u, next))
+    }
+    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64 {
+        dispatch!(self, m => Dynamics::reward(m, x, u, precision))
+    }
+    fn reward_depends_on_action(&self) -> bool {
+        dispatch!(self, m => Dynamics::reward_depends_on_action(m))
+    }
+    fn is_goal(&self, x: &[f64]) -> bool {
+        dispatch!(self, m => Dynamics::is_goal(m, x))
+    }
+    fn is_terminal(&self, x: &[f64]) -> bool {
+        dispatch!(self, m => Dynamics::is_terminal(m, x))
+    }
+    fn has_terminal_states(&self) -> bool {
+        dispatch!(self, m => Dynamics::has_terminal_states(m))
+    }
+}
+
 impl F64Model for EnvModel {
     fn state_dim(&self) -> usize {
         dispatch!(self, m => F64Model::state_dim(m))
@@ -616,33 +660,6 @@ impl F64Model for EnvModel {
     }
     fn actions(&self) -> &ActionTable {
         dispatch!(self, m => F64Model::actions(m))
-    }
-    fn sample_time(&self) -> f64 {
-        dispatch!(self, m => F64Model::sample_time(m))
-    }
-    fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        dispatch!(self, m => F64Model::state_bounds(m, dim))
-    }
-    fn is_periodic(&self, dim: usize) -> bool {
-        dispatch!(self, m => F64Model::is_periodic(m, dim))
-    }
-    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
-        dispatch!(self, m => F64Model::step(m, x, u, next))
-    }
-    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64 {
-        dispatch!(self, m => F64Model::reward(m, x, u, precision))
-    }
-    fn reward_depends_on_action(&self) -> bool {
-        dispatch!(self, m => F64Model::reward_depends_on_action(m))
-    }
-    fn is_goal(&self, x: &[f64]) -> bool {
-        dispatch!(self, m => F64Model::is_goal(m, x))
-    }
-    fn is_terminal(&self, x: &[f64]) -> bool {
-        dispatch!(self, m => F64Model::is_terminal(m, x))
-    }
-    fn has_terminal_states(&self) -> bool {
-        dispatch!(self, m => F64Model::has_terminal_states(m))
     }
     fn blocks(&self) -> &[BlockSpec] {
         dispatch!(self, m => F64Model::blocks(m))

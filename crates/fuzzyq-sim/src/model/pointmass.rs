@@ -31,7 +31,7 @@ use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, non_negative, positive, require};
-use crate::model::{ActionTable, BlockSpec, F64Model, check_state_as};
+use crate::model::{ActionTable, BlockSpec, Dynamics, F64Model, check_state_as, symmetric};
 use crate::paper;
 
 /// A friction field `eta(s_x, s_y)` in kg/s, as written in a config file.
@@ -499,30 +499,17 @@ fn rk4_step(
     y
 }
 
-impl F64Model for PointMass {
-    fn state_dim(&self) -> usize {
-        self.config.state_dim()
-    }
-
-    fn n_agents(&self) -> usize {
-        self.config.agents
-    }
-
-    fn actions(&self) -> &ActionTable {
-        &self.actions
-    }
-
+impl Dynamics for PointMass {
     fn sample_time(&self) -> f64 {
         self.config.sample_time
     }
 
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        let lim = if dim % 4 < 2 {
+        symmetric(if dim % 4 < 2 {
             self.config.position_limit
         } else {
             self.config.velocity_limit
-        };
-        (-lim, lim)
+        })
     }
 
     fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
@@ -543,6 +530,20 @@ impl F64Model for PointMass {
 
     fn is_goal(&self, x: &[f64]) -> bool {
         self.in_goal_f64(x)
+    }
+}
+
+impl F64Model for PointMass {
+    fn state_dim(&self) -> usize {
+        self.config.state_dim()
+    }
+
+    fn n_agents(&self) -> usize {
+        self.config.agents
+    }
+
+    fn actions(&self) -> &ActionTable {
+        &self.actions
     }
 
     fn blocks(&self) -> &[BlockSpec] {

@@ -13,7 +13,7 @@ use fuzzyq_core::q::PolicyKind;
 
 use crate::error::{ConfigError, SimError};
 use crate::model::khepera::{poses_from_paper, random_starts};
-use crate::model::{EnvModel, F64Model};
+use crate::model::{Dynamics, EnvModel, F64Model};
 use crate::run::metrics::{
     KheperaMetrics, KheperaRun, MonteCarlo, RolloutMetrics, RunSummary, SuccessReport, Trajectory,
     measure_khepera, measure_point_masses,
@@ -309,7 +309,7 @@ pub fn lattice(model: &EnvModel, per_dim: usize) -> Result<Vec<Vec<f64>>, SimErr
     };
     let axes: Vec<Vec<f64>> = (0..e)
         .map(|d| {
-            let (lo, hi) = F64Model::state_bounds(model, d);
+            let (lo, hi) = Dynamics::state_bounds(model, d);
             (0..per_dim)
                 .map(|i| lo + (hi - lo) * i as f64 / (per_dim - 1) as f64)
                 .collect()

@@ -17,7 +17,7 @@ use rand_pcg::Pcg64Mcg;
 use crate::error::SimError;
 use crate::model::khepera::{KheperaConfig, KheperaModel, N_ACTIONS};
 use crate::model::pointmass::PointMass;
-use crate::model::{F64Model, check_state};
+use crate::model::{Dynamics, F64Model, check_state};
 use crate::run::metrics::{KheperaRun, Trajectory};
 use crate::world::{Collisions, KheperaWorld, PointMassPlant, PointMassPlantConfig};
 
@@ -109,10 +109,10 @@ impl<M: F64Model + Model<f64>> Plant for ModelPlant<'_, M> {
         Model::<f64>::reward(self.model, &self.x, u)
     }
     fn step(&mut self, u: &[f64]) -> Result<bool, SimError> {
-        F64Model::step(self.model, &self.x, u, &mut self.next);
+        Dynamics::step(self.model, &self.x, u, &mut self.next);
         F64Model::add_process_noise(self.model, &mut self.next, &mut self.rng);
         std::mem::swap(&mut self.x, &mut self.next);
-        Ok(F64Model::has_terminal_states(self.model) && F64Model::is_terminal(self.model, &self.x))
+        Ok(Dynamics::has_terminal_states(self.model) && Dynamics::is_terminal(self.model, &self.x))
     }
 }
 

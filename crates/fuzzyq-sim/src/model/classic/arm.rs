@@ -53,9 +53,9 @@ use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
 use super::octave::{rk4_step_sizes, wrap_angle_floor};
-use super::{Classic, Dynamics, Integrator, Preset, validate_actions};
+use super::{Benchmark, Classic, Integrator, Preset, validate_actions};
 use crate::error::{ConfigError, non_negative, positive, require};
-use crate::model::{ActionTable, EnvKind};
+use crate::model::{ActionTable, Dynamics, EnvKind, symmetric};
 
 /// The names of the arm's presets.
 pub const PRESETS: [&str; 2] = ["fine", "coarse"];
@@ -317,6 +317,32 @@ impl Arm {
 }
 
 impl Dynamics for Arm {
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        symmetric(match dim {
+            1 => self.config.max_velocity[0],
+            3 => self.config.max_velocity[1],
+            _ => PI,
+        })
+    }
+
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_f64([x[0], x[1], x[2], x[3]], [u[0], u[1]]));
+    }
+
+    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
+        self.reward_f64([x[0], x[1], x[2], x[3]], [u[0], u[1]])
+    }
+
+    fn reward_depends_on_action(&self) -> bool {
+        self.config.r != [0.0, 0.0]
+    }
+}
+
+impl Benchmark for Arm {
     const ENV: EnvKind = EnvKind::Arm;
     const STATE_DIM: usize = 4;
     const ACTION_DIM: usize = 2;
@@ -345,13 +371,13 @@ impl Dynamics for Arm {
             _ => return Err(Self::ENV.unknown_preset(name)),
         };
         let (th, om) = (radians(angles), radians(velocities));
-        Ok(Preset {
-            name: name.to_owned(),
-            cores: vec![th.clone(), om.clone(), th, om],
-            actions: CLASSIC_LEVELS.to_vec(),
-            gamma: 0.98,
+        Ok(Preset::new(
+            name,
+            vec![th.clone(), om.clone(), th, om],
+            CLASSIC_LEVELS.to_vec(),
+            0.98,
             xi,
-        })
+        ))
     }
 
     /// The classic levels `[-1, 0, 1]` of each joint's maximum torque.
@@ -373,31 +399,6 @@ impl Dynamics for Arm {
         let tau1: Vec<f64> = levels.iter().map(|&l| l * t1).collect();
         let tau2: Vec<f64> = levels.iter().map(|&l| l * t2).collect();
         self.torque_table(field, &tau1, &tau2)
-    }
-
-    fn sample_time(&self) -> f64 {
-        self.config.sample_time
-    }
-
-    fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        let lim = match dim {
-            1 => self.config.max_velocity[0],
-            3 => self.config.max_velocity[1],
-            _ => PI,
-        };
-        (-lim, lim)
-    }
-
-    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
-        next.copy_from_slice(&self.step_f64([x[0], x[1], x[2], x[3]], [u[0], u[1]]));
-    }
-
-    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
-        self.reward_f64([x[0], x[1], x[2], x[3]], [u[0], u[1]])
-    }
-
-    fn reward_depends_on_action(&self) -> bool {
-        self.config.r != [0.0, 0.0]
     }
 }
 

@@ -50,9 +50,9 @@ use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
 use super::octave::{colon, rk4, symequidgrid};
-use super::{Classic, Dynamics, Integrator, Preset};
+use super::{Benchmark, Classic, Integrator, Preset};
 use crate::error::{ConfigError, non_negative, positive, require};
-use crate::model::EnvKind;
+use crate::model::{Dynamics, EnvKind, symmetric};
 
 /// The names of the car's presets.
 pub const PRESETS: [&str; 2] = ["fine", "coarse"];
@@ -228,52 +228,16 @@ impl CarHill {
 }
 
 impl Dynamics for CarHill {
-    const ENV: EnvKind = EnvKind::Carhill;
-    const STATE_DIM: usize = 2;
-    const ACTION_DIM: usize = 1;
-    type Config = CarHillConfig;
-
-    fn new(config: CarHillConfig) -> Result<Self, ConfigError> {
-        CarHill::new(config)
-    }
-
-    /// See the [module docs](self) for where each value comes from.
-    fn preset(name: &str) -> Result<Preset, ConfigError> {
-        match name {
-            "fine" => Ok(Preset {
-                name: name.to_owned(),
-                cores: vec![colon(-1.0, 0.05, 1.0)?, colon(-3.0, 0.2, 3.0)?],
-                actions: CLASSIC_ACTIONS.to_vec(),
-                gamma: 0.95,
-                xi: 0.01,
-            }),
-            "coarse" => Ok(Preset {
-                name: name.to_owned(),
-                cores: vec![symequidgrid(1.0, 17)?, symequidgrid(3.0, 17)?],
-                actions: CLASSIC_ACTIONS.to_vec(),
-                gamma: 0.95,
-                xi: 0.01,
-            }),
-            _ => Err(Self::ENV.unknown_preset(name)),
-        }
-    }
-
-    /// The classic forces `{-4, 4}`.
-    fn default_actions() -> Vec<f64> {
-        CLASSIC_ACTIONS.to_vec()
-    }
-
     fn sample_time(&self) -> f64 {
         self.config.sample_time
     }
 
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        let lim = if dim == 0 {
+        symmetric(if dim == 0 {
             self.config.position_limit
         } else {
             self.config.velocity_limit
-        };
-        (-lim, lim)
+        })
     }
 
     /// The unclipped successor.
@@ -299,6 +263,43 @@ impl Dynamics for CarHill {
 
     fn has_terminal_states(&self) -> bool {
         true
+    }
+}
+
+impl Benchmark for CarHill {
+    const ENV: EnvKind = EnvKind::Carhill;
+    const STATE_DIM: usize = 2;
+    const ACTION_DIM: usize = 1;
+    type Config = CarHillConfig;
+
+    fn new(config: CarHillConfig) -> Result<Self, ConfigError> {
+        CarHill::new(config)
+    }
+
+    /// See the [module docs](self) for where each value comes from.
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        match name {
+            "fine" => Ok(Preset::new(
+                name,
+                vec![colon(-1.0, 0.05, 1.0)?, colon(-3.0, 0.2, 3.0)?],
+                CLASSIC_ACTIONS.to_vec(),
+                0.95,
+                0.01,
+            )),
+            "coarse" => Ok(Preset::new(
+                name,
+                vec![symequidgrid(1.0, 17)?, symequidgrid(3.0, 17)?],
+                CLASSIC_ACTIONS.to_vec(),
+                0.95,
+                0.01,
+            )),
+            _ => Err(Self::ENV.unknown_preset(name)),
+        }
+    }
+
+    /// The classic forces `{-4, 4}`.
+    fn default_actions() -> Vec<f64> {
+        CLASSIC_ACTIONS.to_vec()
     }
 }
 

@@ -33,10 +33,10 @@ use std::f64::consts::PI;
 use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::octave::{colon, rk4, rk4_step_sizes, sat, symequidgrid};
-use super::{Classic, Dynamics, Integrator, Preset};
+use super::octave::{rk4, rk4_step_sizes, sat};
+use super::{Benchmark, Classic, Integrator, Preset, RotaryPresets, lqr_reward};
 use crate::error::{ConfigError, non_negative, positive, require};
-use crate::model::EnvKind;
+use crate::model::{Dynamics, EnvKind, symmetric};
 
 /// The names of the DC motor's presets.
 pub const PRESETS: [&str; 2] = ["toolbox-demo", "fine"];
@@ -219,12 +219,44 @@ impl DcMotor {
     /// The reward at the current state `x` under voltage `u`: `-x' Q x - R u^2`.
     #[must_use]
     pub fn reward_f64(&self, x: [f64; 2], u: f64) -> f64 {
-        let c = &self.config;
-        -(c.q[0] * x[0] * x[0] + c.q[1] * x[1] * x[1]) - c.r * u * u
+        lqr_reward(self.config.q, self.config.r, x, u)
     }
 }
 
+/// The DC motor's presets (see the [module docs](self)).
+const DCMOTOR_PRESETS: RotaryPresets = RotaryPresets {
+    env: EnvKind::Dcmotor,
+    demo_cores: [21, 21],
+    max_velocity: 16.0 * PI,
+    max_voltage: 10.0,
+    velocity_step: PI / 6.0,
+    fine_actions: || Ok(vec![-10.0, -5.0, -1.0, -0.1, 0.0, 0.1, 1.0, 5.0, 10.0]),
+    fine_gamma: 0.95,
+};
+
 impl Dynamics for DcMotor {
+    fn sample_time(&self) -> f64 {
+        self.config.sample_time
+    }
+
+    fn state_bounds(&self, dim: usize) -> (f64, f64) {
+        symmetric(if dim == 0 {
+            self.config.max_angle
+        } else {
+            self.config.max_velocity
+        })
+    }
+
+    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
+        next.copy_from_slice(&self.step_f64([x[0], x[1]], u[0]));
+    }
+
+    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
+        self.reward_f64([x[0], x[1]], u[0])
+    }
+}
+
+impl Benchmark for DcMotor {
     const ENV: EnvKind = EnvKind::Dcmotor;
     const STATE_DIM: usize = 2;
     const ACTION_DIM: usize = 1;
@@ -236,52 +268,12 @@ impl Dynamics for DcMotor {
 
     /// See the [module docs](self) for where each value comes from.
     fn preset(name: &str) -> Result<Preset, ConfigError> {
-        match name {
-            "toolbox-demo" => Ok(Preset {
-                name: name.to_owned(),
-                cores: vec![symequidgrid(PI, 21)?, symequidgrid(16.0 * PI, 21)?],
-                actions: symequidgrid(10.0, 5)?,
-                gamma: 0.98,
-                xi: 0.01,
-            }),
-            "fine" => Ok(Preset {
-                name: name.to_owned(),
-                cores: vec![
-                    colon(-PI, 5.0 * PI / 180.0, PI)?,
-                    colon(-16.0 * PI, PI / 6.0, 16.0 * PI)?,
-                ],
-                actions: vec![-10.0, -5.0, -1.0, -0.1, 0.0, 0.1, 1.0, 5.0, 10.0],
-                gamma: 0.95,
-                xi: 0.01,
-            }),
-            _ => Err(Self::ENV.unknown_preset(name)),
-        }
+        DCMOTOR_PRESETS.preset(name)
     }
 
     /// The `"toolbox-demo"` actions: 5 equidistant voltages on `[-10, 10]`.
     fn default_actions() -> Vec<f64> {
-        symequidgrid(10.0, 5).expect("a valid grid")
-    }
-
-    fn sample_time(&self) -> f64 {
-        self.config.sample_time
-    }
-
-    fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        let lim = if dim == 0 {
-            self.config.max_angle
-        } else {
-            self.config.max_velocity
-        };
-        (-lim, lim)
-    }
-
-    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]) {
-        next.copy_from_slice(&self.step_f64([x[0], x[1]], u[0]));
-    }
-
-    fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
-        self.reward_f64([x[0], x[1]], u[0])
+        DCMOTOR_PRESETS.demo_actions().expect("a valid grid")
     }
 }
 

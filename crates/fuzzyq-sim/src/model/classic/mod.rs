@@ -14,7 +14,7 @@
 //! - [`arm`]: the two-link robot arm (`rarm_problem`): state of two angles and their
 //!   velocities, a torque per joint.
 //!
-//! Every benchmark is one [`Dynamics`] implementation wrapped by the generic [`Classic`]
+//! Every benchmark is one [`Benchmark`] (with its [`Dynamics`]) wrapped by the generic [`Classic`]
 //! (the action table, [`F64Model`] and so [`fuzzyq_core::Model`] for `f32` and `f64`, one
 //! agent), computes in `f64` whatever the solver's precision, and comes with named
 //! [`Preset`]s: the grid, actions, `gamma` and stopping threshold of a toolbox run. The
@@ -26,7 +26,7 @@
 //! - The reward is evaluated at the **current** state with the applied action:
 //!   `rho(x, u) = -x' Q x - R u^2`.
 //! - Grids are built the way the toolbox builds them, with Octave's colon ranges
-//!   ([`colon`](octave::colon), [`symequidgrid`](octave::symequidgrid)): the cores are the same doubles, bit for bit.
+//!   ([`colon`], [`symequidgrid`]): the cores are the same doubles, bit for bit.
 //! - The toolbox numbers cores in MATLAB's column-major order (first state variable fastest);
 //!   fuzzyq numbers them row-major (last variable fastest). [`toolbox_core_index`](octave::toolbox_core_index) and
 //!   [`core_index_from_toolbox`](octave::core_index_from_toolbox) convert.
@@ -40,12 +40,15 @@ pub mod pendulum;
 pub use dcmotor::{DcMotor, DcMotorConfig};
 pub use pendulum::{Pendulum, PendulumConfig};
 
+use std::f64::consts::PI;
+
 use fuzzyq_core::Real;
 use fuzzyq_core::solver::{Grid, Precision, SolverConfig};
 use serde::{Deserialize, Serialize};
 
+use self::octave::{colon, symequidgrid};
 use crate::error::{ConfigError, SimError, discount, positive, require};
-use crate::model::{ActionTable, BlockSpec, EnvKind, F64Model};
+use crate::model::{ActionTable, BlockSpec, Dynamics, EnvKind, F64Model};
 
 /// The preset of a classic benchmark when none is named: the toolbox's default fine grid.
 pub const DEFAULT_PRESET: &str = "fine";
@@ -102,6 +105,19 @@ pub struct Preset {
 }
 
 impl Preset {
+    /// The preset `name`: the cores of each state variable, the discrete actions, `gamma` and
+    /// `xi` of a toolbox run.
+    #[must_use]
+    pub fn new(name: &str, cores: Vec<Vec<f64>>, actions: Vec<f64>, gamma: f64, xi: f64) -> Self {
+        Self {
+            name: name.to_owned(),
+            cores,
+            actions,
+            gamma,
+            xi,
+        }
+    }
+
     /// Checks the grid, actions, `gamma` and `xi`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         require!(
@@ -161,6 +177,71 @@ impl Preset {
     }
 }
 
+/// The toolbox's quadratic reward `-x' Q x - R u^2` with a diagonal `Q = diag(q)`, for two state
+/// variables and one action component (the DC motor and the pendulum).
+#[must_use]
+pub(crate) fn lqr_reward(q: [f64; 2], r: f64, x: [f64; 2], u: f64) -> f64 {
+    -(q[0] * x[0] * x[0] + q[1] * x[1] * x[1]) - r * u * u
+}
+
+/// The presets of a motor-driven rotary benchmark (the DC motor and the pendulum), which the
+/// toolbox builds alike: `"toolbox-demo"` has `demo_cores` equidistant cores on
+/// `[-pi, pi] x [-max_velocity, max_velocity]` (`symequidgrid`), 5 equidistant voltages on
+/// `[-max_voltage, max_voltage]`, `gamma = 0.98`; `"fine"` has cores every 5 degrees and every
+/// `velocity_step` rad/s (Octave's colon ranges), `fine_actions` and `fine_gamma`. Both stop at
+/// `xi = 0.01`.
+pub(crate) struct RotaryPresets {
+    /// The environment (for the error on an unknown name).
+    pub env: EnvKind,
+    /// Core counts of the demo grid (angle, velocity).
+    pub demo_cores: [usize; 2],
+    /// The velocity bound of both grids.
+    pub max_velocity: f64,
+    /// The bound of the demo's voltages.
+    pub max_voltage: f64,
+    /// The fine grid's velocity spacing.
+    pub velocity_step: f64,
+    /// The fine preset's actions.
+    pub fine_actions: fn() -> Result<Vec<f64>, ConfigError>,
+    /// The fine preset's discount factor.
+    pub fine_gamma: f64,
+}
+
+impl RotaryPresets {
+    /// The preset `name`.
+    pub fn preset(&self, name: &str) -> Result<Preset, ConfigError> {
+        let v = self.max_velocity;
+        match name {
+            "toolbox-demo" => Ok(Preset::new(
+                name,
+                vec![
+                    symequidgrid(PI, self.demo_cores[0])?,
+                    symequidgrid(v, self.demo_cores[1])?,
+                ],
+                self.demo_actions()?,
+                0.98,
+                0.01,
+            )),
+            "fine" => Ok(Preset::new(
+                name,
+                vec![
+                    colon(-PI, 5.0 * PI / 180.0, PI)?,
+                    colon(-v, self.velocity_step, v)?,
+                ],
+                (self.fine_actions)()?,
+                self.fine_gamma,
+                0.01,
+            )),
+            _ => Err(self.env.unknown_preset(name)),
+        }
+    }
+
+    /// The demo's actions: 5 equidistant voltages on `[-max_voltage, max_voltage]`.
+    pub fn demo_actions(&self) -> Result<Vec<f64>, ConfigError> {
+        symequidgrid(self.max_voltage, 5)
+    }
+}
+
 /// Checks a discrete action list: 1 to 4096 finite values.
 pub(crate) fn validate_actions(field: &str, actions: &[f64]) -> Result<(), ConfigError> {
     require!(
@@ -171,10 +252,11 @@ pub(crate) fn validate_actions(field: &str, actions: &[f64]) -> Result<(), Confi
     crate::error::single_precision(field, actions)
 }
 
-/// The dynamics of a classic benchmark, computed in `f64`: what distinguishes the four.
-/// [`Classic`] adds what they share (the discrete actions, presets, the one dynamics block and
-/// the [`Model`](fuzzyq_core::Model) implementation).
-pub trait Dynamics: Clone + std::fmt::Debug + Send + Sync + Sized {
+/// A classic benchmark's definition beyond its [`Dynamics`]: its registry entry, sizes,
+/// physical parameters and presets: what distinguishes the four. [`Classic`] adds what they
+/// share (the discrete actions, the one dynamics block and the
+/// [`Model`](fuzzyq_core::Model) implementation).
+pub trait Benchmark: Dynamics + Clone + std::fmt::Debug + Send + Sync + Sized {
     /// The environment (its name and presets in the registry).
     const ENV: EnvKind;
     /// Length of the state vector.
@@ -196,48 +278,16 @@ pub trait Dynamics: Clone + std::fmt::Debug + Send + Sync + Sized {
         validate_actions(field, listed)?;
         Ok(ActionTable::new(listed.to_vec(), 1))
     }
-    /// The sample time (s).
-    fn sample_time(&self) -> f64;
-    /// The range of state variable `dim`.
-    fn state_bounds(&self, dim: usize) -> (f64, f64);
-    /// See [`F64Model::is_periodic`].
-    fn is_periodic(&self, dim: usize) -> bool {
-        let _ = dim;
-        false
-    }
-    /// The successor of `x` (length [`STATE_DIM`](Self::STATE_DIM)) under `u` (length
-    /// [`ACTION_DIM`](Self::ACTION_DIM)).
-    fn step(&self, x: &[f64], u: &[f64], next: &mut [f64]);
-    /// The reward of `u` at `x` (see [`F64Model::reward`] for `precision`).
-    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64;
-    /// See [`F64Model::reward_depends_on_action`].
-    fn reward_depends_on_action(&self) -> bool {
-        true
-    }
-    /// See [`F64Model::is_goal`].
-    fn is_goal(&self, x: &[f64]) -> bool {
-        let _ = x;
-        false
-    }
-    /// See [`F64Model::is_terminal`].
-    fn is_terminal(&self, x: &[f64]) -> bool {
-        let _ = x;
-        false
-    }
-    /// See [`F64Model::has_terminal_states`].
-    fn has_terminal_states(&self) -> bool {
-        false
-    }
 }
 
 /// The named preset `name` of benchmark `S`, or an error listing its presets.
-pub fn preset<S: Dynamics>(name: &str) -> Result<Preset, ConfigError> {
+pub fn preset<S: Benchmark>(name: &str) -> Result<Preset, ConfigError> {
     S::preset(name)
 }
 
 /// Every preset of benchmark `S`, in registry order.
 #[must_use]
-pub fn presets<S: Dynamics>() -> Vec<Preset> {
+pub fn presets<S: Benchmark>() -> Vec<Preset> {
     S::ENV
         .spec()
         .presets
@@ -246,7 +296,7 @@ pub fn presets<S: Dynamics>() -> Vec<Preset> {
         .collect()
 }
 
-/// A classic benchmark: its [`Dynamics`] with a discrete action set. One agent; one dynamics
+/// A classic benchmark: its [`Benchmark`] dynamics with a discrete action set. One agent; one dynamics
 /// block (the whole state and action), which lets the solver tabulate the transitions once
 /// (the toolbox's precomputed activation matrix) instead of stepping the model every sweep.
 /// Dereferences to the dynamics (`config()`, `step_f64`, ...).
@@ -257,14 +307,14 @@ pub struct Classic<S> {
     blocks: [BlockSpec; 1],
 }
 
-impl<S: Dynamics> Classic<S> {
-    /// The benchmark with the action list `actions` (see [`Dynamics::action_table`]).
+impl<S: Benchmark> Classic<S> {
+    /// The benchmark with the action list `actions` (see [`Benchmark::action_table`]).
     pub fn new(dynamics: S, actions: &[f64]) -> Result<Self, ConfigError> {
         let table = dynamics.action_table("actions", actions)?;
         Ok(Self::from_table(dynamics, table))
     }
 
-    /// The benchmark with an action table built by [`Dynamics::action_table`].
+    /// The benchmark with an action table built by [`Benchmark::action_table`].
     #[must_use]
     pub fn from_table(dynamics: S, actions: ActionTable) -> Self {
         Self {
@@ -314,16 +364,7 @@ impl<S> std::ops::Deref for Classic<S> {
     }
 }
 
-impl<S: Dynamics> F64Model for Classic<S> {
-    fn state_dim(&self) -> usize {
-        S::STATE_DIM
-    }
-    fn n_agents(&self) -> usize {
-        1
-    }
-    fn actions(&self) -> &ActionTable {
-        &self.actions
-    }
+impl<S: Benchmark> Dynamics for Classic<S> {
     fn sample_time(&self) -> f64 {
         self.dynamics.sample_time()
     }
@@ -361,12 +402,24 @@ impl<S: Dynamics> F64Model for Classic<S> {
     fn has_terminal_states(&self) -> bool {
         self.dynamics.has_terminal_states()
     }
+}
+
+impl<S: Benchmark> F64Model for Classic<S> {
+    fn state_dim(&self) -> usize {
+        S::STATE_DIM
+    }
+    fn n_agents(&self) -> usize {
+        1
+    }
+    fn actions(&self) -> &ActionTable {
+        &self.actions
+    }
     fn blocks(&self) -> &[BlockSpec] {
         &self.blocks
     }
 }
 
-crate::model::impl_model!(Classic<S> where S: Dynamics);
+crate::model::impl_model!(Classic<S> where S: Benchmark);
 
 #[cfg(test)]
 mod tests {

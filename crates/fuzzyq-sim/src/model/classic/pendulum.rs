@@ -29,10 +29,10 @@ use std::f64::consts::PI;
 use fuzzyq_core::solver::Precision;
 use serde::{Deserialize, Serialize};
 
-use super::octave::{colon, rk4, rk4_step_sizes, sat, symequidgrid, symloggrid, wrap_angle_octave};
-use super::{Classic, Dynamics, Integrator, Preset};
+use super::octave::{rk4, rk4_step_sizes, sat, symloggrid, wrap_angle_octave};
+use super::{Benchmark, Classic, Integrator, Preset, RotaryPresets, lqr_reward};
 use crate::error::{ConfigError, non_negative, positive, require};
-use crate::model::EnvKind;
+use crate::model::{Dynamics, EnvKind, symmetric};
 
 /// The names of the pendulum's presets.
 pub const PRESETS: [&str; 2] = ["toolbox-demo", "fine"];
@@ -215,8 +215,7 @@ impl Pendulum {
     #[must_use]
     pub fn reward_f64(&self, x: [f64; 2], u: f64) -> f64 {
         let u = self.limit(u);
-        let c = &self.config;
-        -(c.q[0] * x[0] * x[0] + c.q[1] * x[1] * x[1]) - c.r * u * u
+        lqr_reward(self.config.q, self.config.r, x, u)
     }
 
     fn limit(&self, u: f64) -> f64 {
@@ -224,57 +223,28 @@ impl Pendulum {
     }
 }
 
+/// The swing-up's presets (see the [module docs](self)).
+const PENDULUM_PRESETS: RotaryPresets = RotaryPresets {
+    env: EnvKind::Pendulum,
+    demo_cores: [41, 21],
+    max_velocity: 15.0 * PI,
+    max_voltage: 3.0,
+    velocity_step: PI / 3.0,
+    fine_actions: || symloggrid(15, 3.0, -1.0, 1.0),
+    fine_gamma: 0.98,
+};
+
 impl Dynamics for Pendulum {
-    const ENV: EnvKind = EnvKind::Pendulum;
-    const STATE_DIM: usize = 2;
-    const ACTION_DIM: usize = 1;
-    type Config = PendulumConfig;
-
-    fn new(config: PendulumConfig) -> Result<Self, ConfigError> {
-        Pendulum::new(config)
-    }
-
-    /// See the [module docs](self) for where each value comes from.
-    fn preset(name: &str) -> Result<Preset, ConfigError> {
-        match name {
-            "toolbox-demo" => Ok(Preset {
-                name: name.to_owned(),
-                cores: vec![symequidgrid(PI, 41)?, symequidgrid(15.0 * PI, 21)?],
-                actions: symequidgrid(3.0, 5)?,
-                gamma: 0.98,
-                xi: 0.01,
-            }),
-            "fine" => Ok(Preset {
-                name: name.to_owned(),
-                cores: vec![
-                    colon(-PI, 5.0 * PI / 180.0, PI)?,
-                    colon(-15.0 * PI, PI / 3.0, 15.0 * PI)?,
-                ],
-                actions: symloggrid(15, 3.0, -1.0, 1.0)?,
-                gamma: 0.98,
-                xi: 0.01,
-            }),
-            _ => Err(Self::ENV.unknown_preset(name)),
-        }
-    }
-
-    /// The `"toolbox-demo"` actions: 5 equidistant voltages on `[-3, 3]` (values beyond the
-    /// voltage bound act as the bound).
-    fn default_actions() -> Vec<f64> {
-        symequidgrid(3.0, 5).expect("a valid grid")
-    }
-
     fn sample_time(&self) -> f64 {
         self.config.sample_time
     }
 
     fn state_bounds(&self, dim: usize) -> (f64, f64) {
-        let lim = if dim == 0 {
+        symmetric(if dim == 0 {
             PI
         } else {
             self.config.max_velocity
-        };
-        (-lim, lim)
+        })
     }
 
     fn is_periodic(&self, dim: usize) -> bool {
@@ -287,6 +257,28 @@ impl Dynamics for Pendulum {
 
     fn reward(&self, x: &[f64], u: &[f64], _precision: Precision) -> f64 {
         self.reward_f64([x[0], x[1]], u[0])
+    }
+}
+
+impl Benchmark for Pendulum {
+    const ENV: EnvKind = EnvKind::Pendulum;
+    const STATE_DIM: usize = 2;
+    const ACTION_DIM: usize = 1;
+    type Config = PendulumConfig;
+
+    fn new(config: PendulumConfig) -> Result<Self, ConfigError> {
+        Pendulum::new(config)
+    }
+
+    /// See the [module docs](self) for where each value comes from.
+    fn preset(name: &str) -> Result<Preset, ConfigError> {
+        PENDULUM_PRESETS.preset(name)
+    }
+
+    /// The `"toolbox-demo"` actions: 5 equidistant voltages on `[-3, 3]` (values beyond the
+    /// voltage bound act as the bound).
+    fn default_actions() -> Vec<f64> {
+        PENDULUM_PRESETS.demo_actions().expect("a valid grid")
     }
 }
 
