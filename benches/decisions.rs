@@ -64,10 +64,7 @@ fn bench_model<T: Real, M: Model<T> + Sync>(
     path: BackupPath,
 ) {
     let view = grid.view();
-    let backup = Backup {
-        gamma: T::from_f64(0.96),
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(T::from_f64(0.96));
     let op = Operator::new(model, view, backup, path).unwrap();
     let joint = joint_actions(model).unwrap();
     let m = joint.n_joint();

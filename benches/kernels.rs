@@ -9,10 +9,7 @@ use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::solver::{BackupPath, Kernel, Operator};
 use fuzzyq_core::{Backup, q};
 
-const BACKUP: Backup<f32> = Backup {
-    gamma: 0.96,
-    absorbing_goal: false,
-};
+const BACKUP: Backup<f32> = Backup::discounted(0.96);
 
 fn memberships(c: &mut Criterion) {
     let grid = paper_grid::<f32>();

@@ -13,10 +13,7 @@ pub fn block_operator<'a, T: Real, M: Model<T> + Sync>(
     g: &'a Grid<T>,
     gamma: T,
 ) -> fuzzyq_core::solver::Operator<'a, T, M> {
-    let backup = fuzzyq_core::Backup {
-        gamma,
-        absorbing_goal: false,
-    };
+    let backup = fuzzyq_core::Backup::discounted(gamma);
     fuzzyq_core::solver::Operator::new(m, g.view(), backup, fuzzyq_core::solver::BackupPath::Block)
         .expect("a block operator")
 }

@@ -10,7 +10,11 @@ discrete-action multi-agent systems, solved in Rust:
 [2.0, -2.0]
 
 Models are the built-in `PointMass`, the classic benchmarks `DcMotor`, `Pendulum`, `CarHill`
-and `Arm` (with their presets' grids), or any `CallableModel` (a vectorised Python function);
+and `Arm` (with their presets' grids), or any `CallableModel` (a vectorised Python function).
+A system known only through its transitions (a Gymnasium environment, a simulator, logged
+data) is declared as a `Task` and learned from interaction: `collect` and `learn`, the model
+estimated as ``fuzzyq train --learner learned-model`` estimates it; `evaluate` and `rollout`
+run a policy on it.
 `solve` returns a `Solution` with `V`, the greedy actions, policies, and `save` in the format
 of the `fuzzyq` command line tool. `load` reads every policy file the command line writes: a
 `Solution` for fuzzy Q-iteration, a `Policy` for a policy learned from samples (fuzzy
@@ -65,12 +69,14 @@ from fuzzyq._fuzzyq import (
     SlabProblem,
     Solution,
     SolverError,
+    Task,
     __version__,
     available_kernels,
-    collect,
     load,
     solve,
 )
+from fuzzyq import _interact
+from fuzzyq._interact import collect, learn
 
 __all__ = [
     "Arm",
@@ -93,10 +99,12 @@ __all__ = [
     "SlabProblem",
     "Solution",
     "SolverError",
+    "Task",
     "__version__",
     "available_kernels",
     "collect",
     "evaluate",
+    "learn",
     "load",
     "rollout",
     "solve",
@@ -105,47 +113,88 @@ __all__ = [
 
 def rollout(
     policy: Policy,
-    x0: npt.ArrayLike | None = None,
+    source: Any = None,
     steps: int | None = None,
+    *,
+    x0: Any = None,
+    task: Task | None = None,
     **kwargs: Any,
 ) -> dict[str, Any]:
-    """Runs `policy` on its environment from `x0`, as `fuzzyq rollout` does.
+    """Runs `policy` from `x0`: on its environment as `fuzzyq rollout` does, or on a system
+    of your own.
 
     Args:
-        policy: a policy of a built-in model.
-        x0: the start (default: the environment's).
-        steps: steps to run (default: the environment's).
+        policy: a policy of a built-in model, or of a system of your own.
+        source: the system to run on, a `CallableModel` or a Gymnasium environment; None (or,
+            as before, the start itself): the policy's own environment.
+        steps: steps to run (default: the environment's; until the episode ends for a
+            Gymnasium environment; required for a `CallableModel`).
+        x0: the start (default: the environment's; a Gymnasium environment starts from its
+            reset with `seed`).
+        task: a Gymnasium environment's `Task` (its actions).
         **kwargs: `Policy.rollout`'s keyword arguments (`seed`, `headings`, `plant`,
-            `radius`).
+            `radius`); for a system of your own, `seed` only.
 
     Returns:
-        `Policy.rollout`'s dict of numpy arrays and metrics.
+        `Policy.rollout`'s dict of numpy arrays and metrics; for a system of your own, its
+        ``states``, ``actions``, ``rewards``, ``return``, ``steps``, ``done`` and ``success``.
     """
-    return policy.rollout(x0, steps, **kwargs)
+    if _is_system(source):
+        return _interact.rollout(policy, source, x0, steps, task=task, **kwargs)
+    return policy.rollout(_own_environment("x0", source, x0, task), steps, **kwargs)
 
 
 def evaluate(
     policy: Policy,
-    starts: npt.ArrayLike | None = None,
+    source: Any = None,
     steps: int | None = None,
     *,
     count: int = 100,
     seed: int = 0,
+    starts: Any = None,
+    task: Task | None = None,
 ) -> dict[str, Any]:
-    """Monte-Carlo evaluation of `policy` from many starts (`Policy.evaluate`).
+    """Monte-Carlo evaluation of `policy` from many starts: on its environment
+    (`Policy.evaluate`), or over episodes of a system of your own.
 
     Args:
-        policy: a policy of a built-in model.
-        starts: model states, shape ``(n, state_dim)`` (default: `count` random starts).
-        steps: steps per run (default: the environment's).
-        count: number of random starts when `starts` is not given.
-        seed: seed of the random starts.
+        policy: a policy of a built-in model, or of a system of your own.
+        source: the system to run on, a `CallableModel` or a Gymnasium environment; None (or,
+            as before, the starts themselves): the policy's own environment.
+        steps: steps per run (default: the environment's; until the episode ends for a
+            Gymnasium environment; required for a `CallableModel`).
+        count: number of random starts (episodes).
+        seed: seed of the random starts (episode ``i`` of a Gymnasium environment resets with
+            ``seed + i``).
+        starts: model states, shape ``(n, state_dim)`` (default: `count` random starts); for
+            a `CallableModel`, its starts as `fuzzyq.collect` takes them.
+        task: a Gymnasium environment's `Task` (its actions).
 
     Returns:
         Every run's metrics as numpy columns under ``"runs"``, the summary under
         ``"summary"``.
     """
+    if _is_system(source):
+        return _interact.evaluate(
+            policy, source, count=count, steps=steps, seed=seed, starts=starts, task=task
+        )
+    starts = _own_environment("starts", source, starts, task)
     return policy.evaluate(starts, steps, count=count, seed=seed)
+
+
+def _own_environment(name: str, positional: Any, keyword: Any, task: Task | None) -> Any:
+    """The start argument `name` of a run on the policy's own environment, given positionally
+    (as before systems of your own) or by keyword; a one-line error for both, or a task."""
+    if task is not None:
+        raise ConfigError("task: only a system of your own (a Gymnasium environment) needs one")
+    if positional is not None and keyword is not None:
+        raise ConfigError(f"{name}: given twice (positionally and by keyword)")
+    return keyword if positional is None else positional
+
+
+def _is_system(obj: Any) -> bool:
+    """Whether `obj` is a system of the user's own: a `CallableModel` or a Gymnasium env."""
+    return isinstance(obj, CallableModel) or _interact._is_gym_env(obj)
 
 
 def _register_gymnasium_envs() -> None:

@@ -36,6 +36,7 @@ __all__ = [
     "Solution",
     "Policy",
     "SlabProblem",
+    "Task",
     "solve",
     "load",
     "collect",
@@ -997,6 +998,18 @@ class Solution:
         """
 
     @property
+    def fit(self) -> dict[str, Any] | None:
+        """How a `Task`'s model was learned from its transitions (None for every other model).
+
+        ``samples``; ``blocks``, per block its ``state_dims`` and ``action_components``, its
+        ``rows``, ``samples_per_action``, ``entries_per_row``, ``residual_rms`` per variable,
+        ``under_sampled_rows`` and the first of them (``under_sampled``: rows that needed a
+        wider kernel); ``reward``: None with a reward function, else ``depends_on_action``,
+        ``pairs_without_samples``, ``cores_without_samples``, ``fallback`` (the lowest reward
+        recorded, used where no transition reached) and ``residual_rms``.
+        """
+
+    @property
     def kernel(self) -> Literal["avx512", "avx2", "portable", "scalar", "generic", "q-values"]:
         """The kernel instance used.
 
@@ -1248,10 +1261,13 @@ class Policy:
         *,
         seed: int = 0,
         headings: npt.ArrayLike | None = None,
-        plant: Literal["model", "rapier"] | None = None,
+        plant: Literal["model", "rapier"] | CallableModel | Any | None = None,
         radius: float | None = None,
+        task: Task | None = None,
     ) -> dict[str, Any]:
-        """Runs the policy on its environment, as ``fuzzyq rollout`` does (the same code).
+        """Runs the policy on its environment, as ``fuzzyq rollout`` does (the same code), or
+        on a system of your own given as `plant` (a `CallableModel` or a Gymnasium
+        environment: then see `fuzzyq.rollout`).
 
         Args:
             x0: the start in the state the environment reports (default: the environment's,
@@ -1266,8 +1282,11 @@ class Policy:
             plant: None (the environment's own), ``"model"`` (the point masses on their
                 model) or ``"rapier"`` (the point masses as colliding discs on rapier2d
                 physics). The robots always run on their rapier plant, the classic benchmarks
-                on their model (a run may end early at a terminal state).
+                on their model (a run may end early at a terminal state). A `CallableModel`
+                (its function as the plant, from `x0` for `steps`) or a Gymnasium environment
+                (from its reset with `seed`, with `task`) runs a policy of your own system.
             radius: the discs' radius (m) with ``plant="rapier"`` for the point masses.
+            task: the `Task` of a Gymnasium environment given as `plant` (its actions).
 
         Returns:
             A dict of numpy arrays: ``states`` (K+1, E) as ``fuzzyq rollout --csv`` writes
@@ -1277,8 +1296,8 @@ class Policy:
             dict with the fields of ``fuzzyq rollout --json``.
 
         Raises:
-            ConfigError: a policy of a `CallableModel` (no plant to run on), an option that
-                does not apply to the environment, or ``steps=0``.
+            ConfigError: a policy of a `CallableModel` or a `Task` without a `plant`, an
+                option that does not apply to the environment, or ``steps=0``.
             InputError: `x0` or `headings` of the wrong shape.
             SolverError: the trajectory would exceed the memory limit.
         """
@@ -1290,9 +1309,12 @@ class Policy:
         *,
         count: int = 100,
         seed: int = 0,
+        plant: CallableModel | Any | None = None,
+        task: Task | None = None,
     ) -> dict[str, Any]:
         """Monte-Carlo evaluation on the policy's environment, as ``fuzzyq compare`` evaluates
-        policies: runs from many starts, each as `rollout` runs one.
+        policies: runs from many starts, each as `rollout` runs one; or over episodes of a
+        system of your own given as `plant` (see `fuzzyq.evaluate`).
 
         Args:
             starts: model states, shape ``(n, state_dim)`` (the point masses and the classic
@@ -1303,6 +1325,9 @@ class Policy:
             steps: steps per run; default: the environment's.
             count: number of random starts when `starts` is not given.
             seed: seed of the random starts.
+            plant: a `CallableModel` (its function as the plant) or a Gymnasium environment
+                to evaluate on instead of the policy's own environment.
+            task: the `Task` of a Gymnasium environment given as `plant` (its actions).
 
         Returns:
             A dict: ``"runs"``, every run's metrics as columns (a numpy array per numeric
@@ -1311,8 +1336,8 @@ class Policy:
             and maximum discounted return, or None for the point masses.
 
         Raises:
-            ConfigError: a policy of a `CallableModel`, ``steps`` or ``count`` of 0, or
-                `starts` given for the robots.
+            ConfigError: a policy of a `CallableModel` or a `Task` without a `plant`,
+                ``steps`` or ``count`` of 0, or `starts` given for the robots.
             InputError: `starts` of the wrong shape or with non-finite values.
         """
 
@@ -1425,7 +1450,7 @@ class Khepera:
         """
 
 def solve(
-    model: PointMass | Khepera | ClassicModel | CallableModel,
+    model: PointMass | Khepera | ClassicModel | CallableModel | Task,
     grid: Grid,
     *,
     gamma: float | None = None,
@@ -1581,6 +1606,104 @@ def load(path: str | PathLike[str], model: CallableModel | None = None) -> Solut
 
 _Values = npt.NDArray[np.float32] | npt.NDArray[np.float64]
 _Actions = npt.NDArray[np.uint32]
+
+@final
+class Task:
+    """A system known only through its transitions: a Gymnasium environment, a simulator or
+    logged data, declared by what the learner is told about it.
+
+    ``solve(task, grid, transitions=...)`` learns its model from the transitions with the
+    estimator ``fuzzyq train --learner learned-model`` uses, then solves it: per block, the
+    distribution of the block's successor from each block core under each block action,
+    estimated by local linear regression around the core (kernels widen where samples are
+    scarce; `Solution.fit` reports where); the reward at each core and joint action as the
+    membership-weighted mean of the recorded rewards (or `reward` at the cores when given),
+    with the lowest recorded reward where no transition reached. `fuzzyq.collect` and
+    `fuzzyq.learn` gather the transitions by interaction.
+
+    Args:
+        state_bounds: the range of each state variable, a ``(state_dim, 2)`` array of
+            ``[low, high]`` rows (a successor at an edge counts as clamped there).
+        actions: each agent's discrete actions, as `CallableModel` takes them.
+        blocks: independent dynamics blocks as `CallableModel` declares them (each is
+            learned separately, from far fewer samples); None: one block of the whole state.
+        periodic: the state variables that are angles periodic over their range.
+        reward: a vectorised ``reward(states, actions) -> rewards`` evaluated at the cores
+            instead of learning the reward; None: learned from the transitions.
+        reward_depends_on_action: whether the reward depends on the action (False: one
+            learned reward per core, from all transitions at once).
+
+    Raises:
+        InputTypeError: an argument of the wrong type.
+        ConfigError: bounds with ``low >= high``, bad actions or blocks, a periodic variable
+            out of range.
+    """
+
+    def __new__(
+        cls,
+        *,
+        state_bounds: npt.ArrayLike,
+        actions: Sequence[npt.ArrayLike],
+        blocks: Sequence[tuple[Sequence[int], Sequence[int]]] | None = None,
+        periodic: Sequence[int] | None = None,
+        reward: Callable[
+            [npt.NDArray[np.float64], npt.NDArray[np.float64]], npt.ArrayLike
+        ]
+        | None = None,
+        reward_depends_on_action: bool = True,
+    ) -> Task:
+        """Creates the task (see the class docstring for the arguments)."""
+
+    @property
+    def state_dim(self) -> int:
+        """Length of the state vector."""
+
+    @property
+    def n_agents(self) -> int:
+        """Number of agents."""
+
+    @property
+    def action_dim(self) -> int:
+        """Length of the joint action vector."""
+
+    @property
+    def state_bounds(self) -> npt.NDArray[np.float64]:
+        """The range of each state variable, shape ``(state_dim, 2)``."""
+
+    @property
+    def periodic(self) -> list[int]:
+        """The periodic state variables."""
+
+    @property
+    def actions(self) -> list[npt.NDArray[np.float64]]:
+        """Each agent's actions, shape ``(n_actions, components)``."""
+
+    @property
+    def joint_actions(self) -> npt.NDArray[np.float64]:
+        """Every joint action vector, shape ``(n_joint_actions, action_dim)``, agent 0 most
+        significant."""
+
+    @property
+    def blocks(self) -> list[tuple[list[int], list[int]]]:
+        """The blocks (one block of everything when none were declared)."""
+
+    @property
+    def reward(
+        self,
+    ) -> Callable[[npt.NDArray[np.float64], npt.NDArray[np.float64]], npt.ArrayLike] | None:
+        """The reward function, or None (learned from the transitions)."""
+
+    @property
+    def reward_depends_on_action(self) -> bool:
+        """Whether the reward is learned per joint action (else per core)."""
+
+    def __getnewargs_ex__(self) -> tuple[tuple[Any, ...], dict[str, Any]]:
+        """Pickling support: the constructor's arguments.
+
+        Returns:
+            ``((), kwargs)``: the declaration as keyword arguments (a reward function is
+            pickled by reference, so a module-level function).
+        """
 
 @final
 class SlabProblem:

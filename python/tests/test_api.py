@@ -488,8 +488,11 @@ def test_a_ten_line_custom_system() -> None:
     assert solution.converged
     assert policy.act([0.8, 0.0])[0] == -1.0 and policy.act([-0.8, 0.0])[0] == 1.0
     assert solution.env is None and policy.env is None
-    with pytest.raises(fuzzyq.ConfigError, match="no plant"):
+    with pytest.raises(fuzzyq.ConfigError, match="plant="):
         policy.rollout([0.5, 0.0])
+    # With the model as its plant, the policy runs on the model's function.
+    run = policy.rollout([0.5, 0.0], 20, plant=model)
+    assert run["states"].shape == (21, 2) and run["success"] is None
     with pytest.raises(fuzzyq.ConfigError, match="q-values"):
         fuzzyq.solve(model, grid, operator="q-values")
 

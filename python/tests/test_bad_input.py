@@ -178,7 +178,9 @@ CASES: list[Case] = [
     ("collect-samples-beyond-memory", lambda: fuzzyq.collect(point_mass(), 10**15), fuzzyq.SolverError, "samples"),
     ("collect-seed-negative", lambda: fuzzyq.collect(point_mass(), 10, seed=-1), fuzzyq.ConfigError, "seed"),
     ("collect-episode_steps-zero", lambda: fuzzyq.collect(point_mass(), 10, episode_steps=0), fuzzyq.ConfigError, "episode_steps"),
-    ("collect-model-callable", lambda: fuzzyq.collect(callable_model(), 10), fuzzyq.InputTypeError, "model"),
+    ("collect-callable-no-starts", lambda: fuzzyq.collect(callable_model(), 10), fuzzyq.ConfigError, "starts"),
+    ("collect-source-int", lambda: fuzzyq.collect(3, 10), fuzzyq.InputTypeError, "source"),
+    ("collect-episode_steps-float", lambda: fuzzyq.collect(callable_model(), 10, starts=[[0.0]], episode_steps=1.5), fuzzyq.InputTypeError, "episode_steps"),
     # files
     ("load-path-int", lambda: fuzzyq.load(3), fuzzyq.InputTypeError, "path"),
     ("load-path-none", lambda: fuzzyq.load(None), fuzzyq.InputTypeError, "path"),

@@ -640,10 +640,7 @@ fn theta_from_v<M: Model<f64> + Sync>(
 fn check_solver<M: Model<f64> + Sync>(case: &Case, model: &M, preset: &Preset) {
     let grid = preset.grid::<f64>().unwrap();
     let m = preset.actions.len();
-    let backup = Backup {
-        gamma: preset.gamma,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(preset.gamma);
     let op = Operator::new(model, grid.view(), backup, BackupPath::Auto).unwrap();
     assert_eq!(
         op.path(),

@@ -186,10 +186,7 @@ where
     assert!(view.has_decision_tables());
     let model = artifact.config.build_model().unwrap();
     let grid = artifact.config.grid::<T>().unwrap();
-    let backup = fuzzyq_core::Backup {
-        gamma: T::from_f64(artifact.config.solver.gamma),
-        absorbing_goal: false,
-    };
+    let backup = fuzzyq_core::Backup::discounted(T::from_f64(artifact.config.solver.gamma));
     let op = Operator::new(&model, grid.view(), backup, BackupPath::Auto).unwrap();
     let m = view.joint().n_joint();
     let mut scratch = vec![0u64; view.decision_scratch_len().unwrap()];

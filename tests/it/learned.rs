@@ -56,15 +56,7 @@ fn learned_with(sigma: f64, membership: Membership) -> (EnvModel, LearnedModel) 
 }
 
 fn values(n: usize, seed: u64) -> Vec<f64> {
-    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..n)
-        .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            -50.0 + 170.0 * ((s >> 11) as f64 / (1u64 << 53) as f64)
-        })
-        .collect()
+    crate::solver::values(n, seed, -50.0, 120.0)
 }
 
 fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
@@ -78,10 +70,7 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 fn given_rows_without_noise_reduce_to_the_stepping_backup() {
     let (task, model) = learned(0.0);
     let g = grid::<f64>(2, &POS, &VEL);
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     let stepping = Operator::new(&task, g.view(), backup, BackupPath::Block).unwrap();
     let given = Operator::new(&model, g.view(), backup, BackupPath::Auto).unwrap();
     assert_eq!(given.path(), BackupPath::Block);
@@ -108,10 +97,7 @@ fn stochastic_backups_are_gamma_contractions() {
     let op = Operator::new(
         &model,
         g.view(),
-        Backup {
-            gamma,
-            absorbing_goal: false,
-        },
+        Backup::discounted(gamma),
         BackupPath::Block,
     )
     .unwrap();
@@ -133,10 +119,7 @@ fn stochastic_backups_are_gamma_contractions() {
 fn crisp_rows_reduce_to_the_stepping_backup_on_a_crisp_grid() {
     let (task, model) = learned_with(0.0, Membership::Crisp);
     let g = grid::<f64>(2, &POS, &VEL).with_membership(Membership::Crisp);
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     let stepping = Operator::new(&task, g.view(), backup, BackupPath::Block).unwrap();
     let given = Operator::new(&model, g.view(), backup, BackupPath::Block).unwrap();
     let v = values(g.n_cores(), 5);

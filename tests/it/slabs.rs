@@ -133,10 +133,7 @@ fn every_shard_computed_from_its_halo_gives_the_full_sweeps_bits() {
 
 #[test]
 fn bad_slab_ranges_halos_and_buffers_are_refused() {
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     let (m, g) = medium_two_agent::<f32>();
     let generic = Operator::new(&m, g.view(), backup, BackupPath::Generic).unwrap();
     assert!(generic.slab_layout().is_none());

@@ -43,16 +43,26 @@ pub(crate) fn values<T: Real>(n: usize, seed: u64, lo: f64, hi: f64) -> Vec<T> {
 
 /// The generic path is the paper's iteration: same sweeps, bit-identical V, the exact
 /// stopping rule, the same greedy actions.
+/// A synchronous run of the small one-agent problem on `path` and the brute-force reference
+/// of the same settings.
+fn against_brute_force(
+    path: BackupPath,
+    absorbing: bool,
+) -> (Solution<f64>, Reference<f64>, SolverConfig) {
+    let (m, g) = small_one_agent::<f64>();
+    let c = SolverConfig {
+        absorbing_goal: absorbing,
+        ..config(path, SweepMode::Synchronous)
+    };
+    let s = run(&m, &g, &c);
+    let r = brute_force(&m, &g, c.gamma, c.xi, absorbing);
+    (s, r, c)
+}
+
 #[test]
 fn generic_path_matches_brute_force_exactly() {
     for absorbing in [false, true] {
-        let (m, g) = small_one_agent::<f64>();
-        let c = SolverConfig {
-            absorbing_goal: absorbing,
-            ..config(BackupPath::Generic, SweepMode::Synchronous)
-        };
-        let s = run(&m, &g, &c);
-        let r = brute_force(&m, &g, c.gamma, c.xi, absorbing);
+        let (s, r, c) = against_brute_force(BackupPath::Generic, absorbing);
         assert_eq!(s.sweeps.len(), r.deltas.len(), "absorbing {absorbing}");
         assert!(s.converged());
         let (v, _) = max_and_argmax(&r.theta, 25);
@@ -77,14 +87,8 @@ fn generic_path_matches_brute_force_exactly() {
 #[test]
 fn block_path_matches_brute_force() {
     for absorbing in [false, true] {
-        let (m, g) = small_one_agent::<f64>();
-        let c = SolverConfig {
-            absorbing_goal: absorbing,
-            ..config(BackupPath::Block, SweepMode::Synchronous)
-        };
-        let s = run(&m, &g, &c);
+        let (s, r, _) = against_brute_force(BackupPath::Block, absorbing);
         assert_eq!(s.path, BackupPath::Block);
-        let r = brute_force(&m, &g, c.gamma, c.xi, absorbing);
         assert_eq!(s.sweeps.len(), r.deltas.len());
         let (v, _) = max_and_argmax(&r.theta, 25);
         assert_close(&s.v, &v, 1e-10);
@@ -96,10 +100,7 @@ fn block_path_matches_brute_force() {
 fn block_and_generic_backups_agree_on_two_agents() {
     let (m, g) = small_two_agent::<f64>();
     let view = g.view();
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     let block = Operator::new(&m, view, backup, BackupPath::Block).unwrap();
     let generic = Operator::new(&m, view, backup, BackupPath::Generic).unwrap();
     let v = values::<f64>(g.n_cores(), 7, -50.0, 120.0);
@@ -126,10 +127,7 @@ fn block_and_generic_backups_agree_on_two_agents() {
 #[test]
 fn greedy_backups_give_the_backup_and_the_greedy_actions_on_both_paths() {
     let (m, g) = small_two_agent::<f64>();
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     for path in [BackupPath::Block, BackupPath::Generic] {
         let op = Operator::new(&m, g.view(), backup, path).unwrap();
         let v = values::<f64>(g.n_cores(), 7, -50.0, 120.0);
@@ -604,10 +602,7 @@ fn evaluating_the_greedy_policy_gives_the_full_backup() {
             fuzzyq_tests::grid::<f32>(3, &[-6.0, 0.0, 6.0], &[-3.0, 0.0, 3.0]),
         ),
     ];
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     for (m, g) in &problems {
         let v = run(
             m,
@@ -711,16 +706,7 @@ fn modified_policy_iteration_stops_within_the_same_bound_in_fewer_full_backups()
             mpi.full_backups(),
             value.sweeps.len()
         );
-        let op = Operator::new(
-            &m,
-            g.view(),
-            Backup {
-                gamma,
-                absorbing_goal: false,
-            },
-            BackupPath::Block,
-        )
-        .unwrap();
+        let op = Operator::new(&m, g.view(), Backup::discounted(gamma), BackupPath::Block).unwrap();
         assert_eq!(op.greedy(&mpi.v).unwrap(), mpi.greedy);
         // Which `V` the run returned: the last full backup's input (final delta = its change
         // over gamma) or its midpoint-shifted result (final delta = its half-span).
@@ -797,10 +783,7 @@ fn tabulated_model_matches_the_model_it_tabulates() {
     assert_eq!(a.v, b.v);
     assert_eq!(a.sweeps.len(), b.sweeps.len());
     // Decisions at states between cores.
-    let backup = Backup {
-        gamma: 0.96,
-        absorbing_goal: false,
-    };
+    let backup = Backup::discounted(0.96);
     let oa = Operator::new(&m, g.view(), backup, BackupPath::Generic).unwrap();
     let ob = Operator::new(&t, g.view(), backup, BackupPath::Auto).unwrap();
     let (mut qa, mut qb) = (vec![0.0; 25], vec![0.0; 25]);

@@ -5,9 +5,9 @@
 use std::ops::ControlFlow;
 
 use fuzzyq_core::solver::{
-    self, BackupPath, BlockTable, Grid, Operator, SolverConfig, TabulatedModel,
+    self, BackupPath, BlockTable, Grid, Operator, RowsTable, SolverConfig, TabulatedModel,
 };
-use fuzzyq_core::{Backup, Model};
+use fuzzyq_core::{Backup, Model, ProductPartition};
 
 const LEVELS: [f64; 3] = [-1.0, 0.0, 1.0];
 
@@ -126,10 +126,7 @@ fn a_block_declared_table_gives_the_values_of_the_full_table() {
             assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
         }
         // Q-values at off-core states agree too (decisions use them).
-        let backup = Backup {
-            gamma: 0.9,
-            absorbing_goal: false,
-        };
+        let backup = Backup::discounted(0.9);
         let op_a = Operator::new(&plain, g.view(), backup, BackupPath::Auto).expect("op");
         let op_b = Operator::new(&blocked, g.view(), backup, BackupPath::Auto).expect("op");
         let (mut qa, mut qb) = (vec![0.0; 9], vec![0.0; 9]);
@@ -187,4 +184,85 @@ fn malformed_block_tables_are_refused() {
     let mut actions_wrong = blocks(&g);
     actions_wrong[0].actions = vec![1.0, 0.0, -1.0];
     assert!(TabulatedModel::with_blocks(g.clone(), actions(), actions_wrong, rewards).is_err());
+}
+
+/// The block tables as rows: each block successor's memberships over its block's cores (a
+/// deterministic model is the one-point case of a learned distribution).
+fn rows(grid: &Grid<f64>) -> Vec<RowsTable<f64>> {
+    blocks(grid)
+        .into_iter()
+        .map(|t| {
+            let cores: Vec<&[f64]> = t.state_dims.iter().map(|&d| &grid.cores()[d][..]).collect();
+            let part = ProductPartition::try_new(&cores).expect("block partition");
+            let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
+            for succ in t.next.chunks(2) {
+                part.active(succ).expect("in range").for_each(|c, mu| {
+                    col.push(c as u32);
+                    weight.push(mu);
+                });
+                ptr.push(col.len() as u32);
+            }
+            RowsTable {
+                state_dims: t.state_dims,
+                action_components: t.action_components,
+                actions: t.actions,
+                ptr,
+                col,
+                weight,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn a_table_of_rows_gives_the_values_of_its_successors() {
+    let g = grid();
+    let (_, rewards, _) = full(&g);
+    let blocked = TabulatedModel::with_blocks(g.clone(), actions(), blocks(&g), rewards.clone())
+        .expect("blocks");
+    let learned =
+        TabulatedModel::with_block_rows(g.clone(), actions(), rows(&g), rewards).expect("rows");
+    assert!(learned.has_blocks() && learned.block_rows(1).is_some());
+    let config = SolverConfig {
+        gamma: 0.9,
+        xi: 1e-10,
+        max_sweeps: 2000,
+        ..SolverConfig::default()
+    };
+    let a = solver::solve(&blocked, &g, &config, |_| ControlFlow::Continue(())).expect("blocks");
+    let b = solver::solve(&learned, &g, &config, |_| ControlFlow::Continue(())).expect("rows");
+    assert_eq!(b.path, BackupPath::Block);
+    for (x, y) in a.v.iter().zip(&b.v) {
+        assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{x} vs {y}");
+    }
+    assert_eq!(a.greedy, b.greedy);
+    // Rows have no successors: a step is NaN, a successor an error naming why.
+    let mut next = [0.0; 4];
+    learned.step(&[0.0; 4], &[0.0, 0.0], &mut next);
+    assert!(next.iter().all(|v| v.is_nan()));
+    let e = learned.successor(0, 0, &mut next).unwrap_err();
+    assert!(e.to_string().contains("block tables"), "{e}");
+    // The generic path cannot read rows.
+    let generic = SolverConfig {
+        path: BackupPath::Generic,
+        ..config
+    };
+    assert!(solver::solve(&learned, &g, &generic, |_| ControlFlow::Continue(())).is_err());
+}
+
+#[test]
+fn a_table_of_rows_is_checked() {
+    let g = grid();
+    let (_, rewards, _) = full(&g);
+    let mut short = rows(&g);
+    short[0].ptr.pop();
+    assert!(TabulatedModel::with_block_rows(g.clone(), actions(), short, rewards.clone()).is_err());
+    let mut overlap = rows(&g);
+    overlap[1].state_dims = vec![0, 1];
+    assert!(
+        TabulatedModel::with_block_rows(g.clone(), actions(), overlap, rewards.clone()).is_err()
+    );
+    let mut nan = rows(&g);
+    nan[0].weight[0] = f64::NAN;
+    assert!(TabulatedModel::with_block_rows(g, actions(), nan, rewards).is_err());
 }

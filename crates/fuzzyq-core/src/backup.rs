@@ -31,6 +31,17 @@ pub struct Backup<T> {
     pub absorbing_goal: bool,
 }
 
+impl<T> Backup<T> {
+    /// The plain discounted backup: discount `gamma`, no absorbing goal.
+    #[must_use]
+    pub const fn discounted(gamma: T) -> Self {
+        Self {
+            gamma,
+            absorbing_goal: false,
+        }
+    }
+}
+
 /// Scratch length [`q_values_from_v`] needs: `2 E + A` for state length `E` and joint action
 /// vector length `A`. [`expected_values`] and [`theta_row`] need `E + A`.
 #[inline]

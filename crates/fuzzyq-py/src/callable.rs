@@ -398,7 +398,7 @@ impl CallableModel {
 
     /// The declared blocks of `obj`: pairs of state indices and action components, a
     /// partition of the state variables.
-    fn parse_blocks(
+    pub(crate) fn parse_blocks(
         py: Python<'_>,
         obj: &Bound<'_, PyAny>,
         e: usize,
@@ -465,6 +465,71 @@ impl CallableModel {
         }
         Ok(blocks)
     }
+}
+
+/// Each agent's discrete actions of `obj` (a sequence of one array per agent, of shape
+/// `(n_actions, components)` or `(n_actions,)`), checked: finite, distinct, 1 to
+/// [`fuzzyq_core::MAX_AGENTS`] agents, at most `u32::MAX` joint actions.
+pub(crate) fn parse_actions(
+    py: Python<'_>,
+    actions: &Bound<'_, PyAny>,
+) -> PyResult<Vec<(Vec<f64>, usize)>> {
+    let items = actions.try_iter().map_err(|_| {
+        error(
+            py,
+            Kind::InputType,
+            "actions: expected a sequence of arrays, one per agent",
+        )
+    })?;
+    let mut sets = Vec::new();
+    for (i, item) in items.enumerate() {
+        let item = item?;
+        let what = format!("actions[{i}]");
+        let (values, dim) = match matrix(&item, &what, None, None) {
+            Ok((_, c, v)) => (v, c),
+            Err(_) => (finite_vector(&item, &what, None)?, 1),
+        };
+        crate::convert::check_finite(py, &what, &values)?;
+        ActionSet::try_new(&values, dim)
+            .map_err(|e| error(py, Kind::Config, format!("{what}: {e}")))?;
+        distinct(py, &what, "action", &values, dim)?;
+        sets.push((values, dim));
+    }
+    if sets.is_empty() || sets.len() > fuzzyq_core::MAX_AGENTS {
+        return Err(error(
+            py,
+            Kind::Config,
+            format!(
+                "actions: expected 1 to {} agents, got {}",
+                fuzzyq_core::MAX_AGENTS,
+                sets.len()
+            ),
+        ));
+    }
+    let n: Option<usize> = sets
+        .iter()
+        .try_fold(1usize, |acc, (v, d)| acc.checked_mul(v.len() / d));
+    if n.is_none_or(|n| n > u32::MAX as usize) {
+        return Err(error(py, Kind::Config, "actions: too many joint actions"));
+    }
+    Ok(sets)
+}
+
+/// Each agent's actions (values, components per action) as arrays of shape
+/// `(n_actions, components)`.
+pub(crate) fn action_arrays<'py>(
+    py: Python<'py>,
+    actions: &[(Vec<f64>, usize)],
+) -> Vec<Bound<'py, PyArray2<f64>>> {
+    actions
+        .iter()
+        .map(|(v, d)| {
+            PyArray2::from_owned_array(
+                py,
+                Array2::from_shape_vec((v.len() / d, *d), v.clone()).expect("rows"),
+            )
+        })
+        .collect()
 }
 
 /// The boolean flags of a terminal array of `b` entries (dtype bool, or integers 0 and 1).
@@ -565,44 +630,7 @@ impl CallableModel {
             if batch_size == 0 {
                 return Err(error(py, Kind::Config, "batch_size: must be at least 1"));
             }
-            let items = actions.try_iter().map_err(|_| {
-                error(
-                    py,
-                    Kind::InputType,
-                    "actions: expected a sequence of arrays, one per agent",
-                )
-            })?;
-            let mut sets = Vec::new();
-            for (i, item) in items.enumerate() {
-                let item = item?;
-                let what = format!("actions[{i}]");
-                let (values, dim) = match matrix(&item, &what, None, None) {
-                    Ok((_, c, v)) => (v, c),
-                    Err(_) => (finite_vector(&item, &what, None)?, 1),
-                };
-                crate::convert::check_finite(py, &what, &values)?;
-                ActionSet::try_new(&values, dim)
-                    .map_err(|e| error(py, Kind::Config, format!("{what}: {e}")))?;
-                distinct(py, &what, "action", &values, dim)?;
-                sets.push((values, dim));
-            }
-            if sets.is_empty() || sets.len() > fuzzyq_core::MAX_AGENTS {
-                return Err(error(
-                    py,
-                    Kind::Config,
-                    format!(
-                        "actions: expected 1 to {} agents, got {}",
-                        fuzzyq_core::MAX_AGENTS,
-                        sets.len()
-                    ),
-                ));
-            }
-            let n: Option<usize> = sets
-                .iter()
-                .try_fold(1usize, |acc, (v, d)| acc.checked_mul(v.len() / d));
-            if n.is_none_or(|n| n > u32::MAX as usize) {
-                return Err(error(py, Kind::Config, "actions: too many joint actions"));
-            }
+            let sets = parse_actions(py, actions)?;
             let a: usize = sets.iter().map(|(_, d)| d).sum();
             let blocks = match blocks {
                 None => Vec::new(),
@@ -652,15 +680,7 @@ impl CallableModel {
     /// Each agent's actions, one array of shape `(n_actions, components)` per agent.
     #[getter]
     fn actions<'py>(&self, py: Python<'py>) -> Vec<Bound<'py, PyArray2<f64>>> {
-        self.actions
-            .iter()
-            .map(|(v, d)| {
-                PyArray2::from_owned_array(
-                    py,
-                    Array2::from_shape_vec((v.len() / d, *d), v.clone()).expect("rows"),
-                )
-            })
-            .collect()
+        action_arrays(py, &self.actions)
     }
 
     /// The declared blocks, `(state_indices, action_components)` pairs (empty: none).

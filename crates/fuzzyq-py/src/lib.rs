@@ -19,6 +19,7 @@ mod policy;
 mod pool;
 mod slabs;
 mod solve;
+mod task;
 
 use pyo3::prelude::*;
 
@@ -39,6 +40,7 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<solve::Solution>()?;
     m.add_class::<policy::Policy>()?;
     m.add_class::<slabs::SlabProblem>()?;
+    m.add_class::<task::Task>()?;
     m.add_function(wrap_pyfunction!(solve::solve, m)?)?;
     m.add_function(wrap_pyfunction!(solve::load, m)?)?;
     m.add_function(wrap_pyfunction!(solve::collect, m)?)?;

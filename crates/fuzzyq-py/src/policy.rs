@@ -15,7 +15,7 @@ use fuzzyq_sim::world::PointMassPlantConfig;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray1, PyArray2, PyArray3};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::types::{PyDict, PyString, PyTuple};
 use serde_json::Value;
 
 use crate::convert::{arg, finite_vector, one_or_batch, vector};
@@ -619,25 +619,40 @@ impl Policy {
     /// robots also `poses` (K+1, n, 3), `sonar` (K+1, n, S), `observations` (K+1, n, S+2)
     /// (what a policy learned on the robots acts on) and `action_indices` (K, n); and
     /// `metrics`, a dict with the fields of `fuzzyq rollout --json`.
-    #[pyo3(signature = (x0 = None, steps = None, *, seed = 0, headings = None, plant = None, radius = None))]
+    #[pyo3(signature = (x0 = None, steps = None, *, seed = 0, headings = None, plant = None, radius = None, task = None))]
     #[allow(clippy::too_many_arguments)] // the rollout's settings, as keyword arguments
     fn rollout<'py>(
-        &self,
+        slf: &Bound<'py, Self>,
         py: Python<'py>,
         x0: Option<&Bound<'py, PyAny>>,
         #[pyo3(from_py_with = arg)] steps: Option<usize>,
         #[pyo3(from_py_with = arg)] seed: u64,
         headings: Option<&Bound<'py, PyAny>>,
-        #[pyo3(from_py_with = arg)] plant: Option<&str>,
+        plant: Option<&Bound<'py, PyAny>>,
         #[pyo3(from_py_with = arg)] radius: Option<f64>,
+        task: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        if let Some(system) = plant.filter(|p| !p.is_instance_of::<PyString>()) {
+            system_plant(system)?;
+            let kwargs = PyDict::new(py);
+            kwargs.set_item("seed", seed)?;
+            kwargs.set_item("task", task)?;
+            return Ok(py
+                .import("fuzzyq._interact")?
+                .getattr("rollout")?
+                .call((slf, system, x0, steps), Some(&kwargs))?
+                .cast_into::<PyDict>()?);
+        }
+        let plant: Option<String> = plant.map(|p| p.extract()).transpose()?;
+        let plant = plant.as_deref();
+        let this = slf.get();
         guard(py, || {
-            let Some(model) = self.inner.model() else {
+            let Some(model) = this.inner.model() else {
                 return Err(error(
                     py,
                     Kind::Config,
-                    "rollout: a policy of a CallableModel has no plant to run on; step the model \
-                 with act()",
+                    "rollout: a policy of a CallableModel or a Task runs on the system given as \
+                     plant= (the CallableModel, or a Gymnasium environment with task=)",
                 ));
             };
             let env = model.kind();
@@ -690,7 +705,7 @@ impl Policy {
             }
             // The trajectory (states, actions, rewards) and its copies into numpy arrays, as
             // `fuzzyq rollout` estimates it.
-            let per_step = 3.0 * 8.0 * (self.state_dim_() + self.action_dim_() + 2) as f64;
+            let per_step = 3.0 * 8.0 * (this.state_dim_() + this.action_dim_() + 2) as f64;
             machine_limit(py)?
                 .check(&fuzzyq_sim::memory::rollouts(
                     1.0,
@@ -713,16 +728,16 @@ impl Policy {
                 PlantChoice::Model
             };
             let rollout = RolloutSpec {
-                kind: self.kind,
+                kind: this.kind,
                 steps,
                 plant,
                 seed,
             };
-            let policy = &*self.inner;
+            let policy = &*this.inner;
             let outcome = crate::pool::detach(py, || evaluate::run(policy, &start, &rollout))
                 .map_err(|e| sim_error(py, &e))?;
             let out = PyDict::new(py);
-            let a = self.action_dim_();
+            let a = this.action_dim_();
             let metrics = match &outcome {
                 Outcome::PointMass {
                     trajectory,
@@ -768,21 +783,40 @@ impl Policy {
     /// Returns a dict: `runs`, every run's metrics as columns (a numpy array per numeric
     /// field, one entry per run, with the names of `fuzzyq rollout --json`), and `summary`: the
     /// robots' success report, or the classic benchmarks' mean discounted return (a dict).
-    #[pyo3(signature = (starts = None, steps = None, *, count = 100, seed = 0))]
+    #[pyo3(signature = (starts = None, steps = None, *, count = 100, seed = 0, plant = None, task = None))]
+    #[allow(clippy::too_many_arguments)] // the evaluation's settings, as keyword arguments
     fn evaluate<'py>(
-        &self,
+        slf: &Bound<'py, Self>,
         py: Python<'py>,
         starts: Option<&Bound<'py, PyAny>>,
         #[pyo3(from_py_with = arg)] steps: Option<usize>,
         #[pyo3(from_py_with = arg)] count: usize,
         #[pyo3(from_py_with = arg)] seed: u64,
+        plant: Option<&Bound<'py, PyAny>>,
+        task: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        if let Some(system) = plant {
+            system_plant(system)?;
+            let kwargs = PyDict::new(py);
+            kwargs.set_item("count", count)?;
+            kwargs.set_item("steps", steps)?;
+            kwargs.set_item("seed", seed)?;
+            kwargs.set_item("starts", starts)?;
+            kwargs.set_item("task", task)?;
+            return Ok(py
+                .import("fuzzyq._interact")?
+                .getattr("evaluate")?
+                .call((slf, system), Some(&kwargs))?
+                .cast_into::<PyDict>()?);
+        }
+        let this = slf.get();
         guard(py, || {
-            let Some(model) = self.inner.model() else {
+            let Some(model) = this.inner.model() else {
                 return Err(error(
                     py,
                     Kind::Config,
-                    "evaluate: a policy of a CallableModel has no environment to run on",
+                    "evaluate: a policy of a CallableModel or a Task runs on the system given as \
+                     plant= (the CallableModel, or a Gymnasium environment with task=)",
                 ));
             };
             let spec = model.kind().spec();
@@ -835,8 +869,8 @@ impl Policy {
                     xs.chunks_exact(e).map(<[f64]>::to_vec).collect()
                 }
             };
-            let kind = self.kind;
-            let inner = &self.inner;
+            let kind = this.kind;
+            let inner = &this.inner;
             let (runs, summary) =
                 crate::pool::detach(py, || -> Result<(Value, Value), SimError> {
                     fn json<T: serde::Serialize>(v: &T) -> Value {
@@ -896,4 +930,25 @@ impl Policy {
             })
         })
     }
+}
+
+/// Checks that `plant` is a system a policy can run on besides its own environment: a
+/// `CallableModel` or a Gymnasium environment (an object with `action_space`, `reset` and
+/// `step`).
+fn system_plant(plant: &Bound<'_, PyAny>) -> PyResult<()> {
+    let gym = ["action_space", "reset", "step"]
+        .iter()
+        .all(|a| plant.hasattr(*a).unwrap_or(false));
+    if plant.is_instance_of::<crate::callable::CallableModel>() || gym {
+        return Ok(());
+    }
+    Err(error(
+        plant.py(),
+        Kind::InputType,
+        format!(
+            "plant: expected \"model\", \"rapier\", a fuzzyq.CallableModel or a Gymnasium \
+             environment, got {}",
+            crate::convert::describe(plant)
+        ),
+    ))
 }

@@ -42,6 +42,7 @@ use crate::errors::{
 };
 use crate::model::{Grid, PointMass};
 use crate::policy::Policy;
+use crate::task::Task;
 
 /// The option named `got`, or a `ConfigError` naming `field` and the accepted names.
 pub(crate) fn parse_option<T: FromStr<Err = UnknownName>>(
@@ -432,12 +433,23 @@ fn solve_(
             .map_err(|e| config_error(py, &e))?;
         return solve_builtin(py, grid, &config, transitions, &run);
     }
+    if let Ok(task) = model.cast::<Task>() {
+        let Some(data) = transitions else {
+            return Err(error(
+                py,
+                Kind::Config,
+                "transitions: a fuzzyq.Task is learned from transitions; pass \
+                 transitions=fuzzyq.collect(...) or logged data",
+            ));
+        };
+        return solve_learned(py, task, grid, data, &overrides, &run);
+    }
     if transitions.is_some() {
         return Err(error(
             py,
             Kind::Config,
             "transitions: a model learned from transitions takes its reward, actions and blocks \
-             from a built-in model (fuzzyq.PointMass or a classic benchmark)",
+             from a built-in model (fuzzyq.PointMass or a classic benchmark) or a fuzzyq.Task",
         ));
     }
     let Ok(cm) = model.cast::<CallableModel>() else {
@@ -446,7 +458,8 @@ fn solve_(
             Kind::InputType,
             format!(
                 "model: expected a fuzzyq.PointMass, a fuzzyq.Khepera, a classic benchmark (fuzzyq.DcMotor, \
-                 fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm) or a fuzzyq.CallableModel, got {}",
+                 fuzzyq.Pendulum, fuzzyq.CarHill, fuzzyq.Arm), a fuzzyq.CallableModel or a \
+                 fuzzyq.Task, got {}",
                 describe(model)
             ),
         ));
@@ -526,27 +539,28 @@ fn solve_builtin(
     Ok(solution)
 }
 
-/// Solves a `CallableModel` on `grid`: tabulated first, then solved on the table.
-fn solve_callable(
+/// The settings of a model known only at the cores (a `CallableModel`, a `Task`): the
+/// overrides over the defaults, with the options such a model cannot take refused. `what`
+/// names the model in errors.
+fn table_settings(
     py: Python<'_>,
-    cm: &Bound<'_, CallableModel>,
-    grid: &Bound<'_, Grid>,
     overrides: &SolverOverrides,
-    run: &Run<'_>,
-) -> PyResult<Solution> {
-    let g = grid.get();
+    what: &str,
+) -> PyResult<SolverSettings> {
     let mut settings = SolverSettings::default();
     overrides.apply(&mut settings);
     if settings.operator != IterationOperator::Values {
         return Err(error(
             py,
             Kind::Config,
-            "operator: \"q-values\" solves the built-in models; a CallableModel is solved with \
-             \"values\"",
+            format!(
+                "operator: \"q-values\" solves the built-in models; a {what} is solved with \
+                 \"values\""
+            ),
         ));
     }
     if settings.absorbing_goal {
-        return Err(no_goal(py, "a CallableModel has no goal states"));
+        return Err(no_goal(py, &format!("a {what} has no goal states")));
     }
     if settings.device == Device::Gpu && settings.precision != Precision::F32 {
         return Err(error(
@@ -555,62 +569,163 @@ fn solve_callable(
             "device: \"gpu\" runs in float32; pass precision=\"f32\"",
         ));
     }
-    let cm_obj = cm;
-    let cm = cm.get();
-    let tables = cm.tabulate(py, &g.inner, settings.precision, run.limit)?;
-    let config = settings.solver_config();
-    macro_rules! run {
-        ($t:ty, $variant:ident) => {{
-            let grid_t = g.to_precision::<$t>(py)?;
-            let table = crate::pool::detach(py, || tables.model::<$t>(grid_t, &cm.actions))
-                .map_err(|e| solve_error(py, &e))?;
-            let table = Arc::new(table);
-            let grid_t = g.to_precision::<$t>(py)?;
-            let solve = |limit: Option<usize>,
-                         resume: Option<solver::SolverState<'static, $t>>,
-                         watch: &Watch<'_, solver::SolverState<'static, $t>>| {
-                let config = solver::SolverConfig {
-                    max_sweeps: limit.unwrap_or(config.max_sweeps),
-                    ..config
-                };
-                let interrupted = |e| watch.interrupt(e);
-                crate::pool::run_interruptible(py, run.threads, interrupted, || {
-                    <$t as DeviceReal>::solve_on_device(
-                        settings.device,
-                        &*table,
-                        &grid_t,
-                        &config,
-                        resume,
-                        watch.wants_state(),
-                        |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
-                    )
-                })
-                .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
-            };
-            let (s, stopped) =
-                run_watched(py, run.callback, run.progress, config.max_sweeps, solve)?;
-            let summary = TrainSummary::from_solution(&s);
-            let v = PyArray1::from_vec(py, s.v).into_any().unbind();
-            let mut solution = Solution::assemble(
-                py,
-                v,
-                s.greedy,
-                grid.clone().unbind(),
-                summary,
-                &settings,
-                Source::Callable(
-                    cm_obj.clone().unbind(),
-                    OnceLock::from(Table::$variant(table)),
-                ),
-            )?;
-            solution.stopped = stopped;
-            Ok(solution)
-        }};
-    }
+    Ok(settings)
+}
+
+/// Solves a `CallableModel` on `grid`: tabulated first, then solved on the table.
+fn solve_callable(
+    py: Python<'_>,
+    cm: &Bound<'_, CallableModel>,
+    grid: &Bound<'_, Grid>,
+    overrides: &SolverOverrides,
+    run: &Run<'_>,
+) -> PyResult<Solution> {
+    let settings = table_settings(py, overrides, "CallableModel")?;
+    let g = grid.get();
+    let tables = cm
+        .get()
+        .tabulate(py, &g.inner, settings.precision, run.limit)?;
+    let source = |t| Source::Callable(cm.clone().unbind(), OnceLock::from(t));
+    let actions = &cm.get().actions;
     match settings.precision {
-        Precision::F32 => run!(f32, F32),
-        Precision::F64 => run!(f64, F64),
+        Precision::F32 => {
+            let table = callable_table::<f32>(py, tables, g, actions)?;
+            solve_table(py, table, grid, &settings, run, source)
+        }
+        Precision::F64 => {
+            let table = callable_table::<f64>(py, tables, g, actions)?;
+            solve_table(py, table, grid, &settings, run, source)
+        }
     }
+}
+
+/// The solver's model of a `CallableModel`'s `tables` on `grid`, in precision `T`.
+fn callable_table<T: TableReal>(
+    py: Python<'_>,
+    tables: crate::callable::Tables,
+    grid: &Grid,
+    actions: &[(Vec<f64>, usize)],
+) -> PyResult<TabulatedModel<T>> {
+    let grid_t = grid.to_precision::<T>(py)?;
+    crate::pool::detach(py, || tables.model(grid_t, actions)).map_err(|e| solve_error(py, &e))
+}
+
+/// Solves the model of a `Task` learned from `transitions` on `grid`.
+fn solve_learned(
+    py: Python<'_>,
+    task: &Bound<'_, Task>,
+    grid: &Bound<'_, Grid>,
+    transitions: &Bound<'_, PyAny>,
+    overrides: &SolverOverrides,
+    run: &Run<'_>,
+) -> PyResult<Solution> {
+    let settings = table_settings(py, overrides, "Task")?;
+    let t = task.get();
+    let data = transitions_of(transitions, t.shape.state_dim(), t.action_dim())?;
+    let data = Arc::new(data);
+    match settings.precision {
+        Precision::F32 => learn_and_solve::<f32>(py, task, grid, data, &settings, run),
+        Precision::F64 => learn_and_solve::<f64>(py, task, grid, data, &settings, run),
+    }
+}
+
+/// Learns `task`'s model from `data` on `grid` in precision `T` and solves it.
+fn learn_and_solve<T: TableReal>(
+    py: Python<'_>,
+    task: &Bound<'_, Task>,
+    grid: &Bound<'_, Grid>,
+    data: Arc<Transitions>,
+    settings: &SolverSettings,
+    run: &Run<'_>,
+) -> PyResult<Solution> {
+    let g = grid.get();
+    let learned = task
+        .get()
+        .learn::<T>(py, &g.inner, g.to_precision::<T>(py)?, &data)?;
+    let source = learned_source(task, &data, learned.report);
+    solve_table(py, learned.model, grid, settings, run, source)
+}
+
+/// The source of a solution of `task` learned from `data` (with the estimation's `report`).
+fn learned_source<'a>(
+    task: &'a Bound<'_, Task>,
+    data: &'a Arc<Transitions>,
+    report: serde_json::Value,
+) -> impl FnOnce(Table) -> Source + 'a {
+    move |t| Source::Learned {
+        task: task.clone().unbind(),
+        data: data.clone(),
+        report,
+        table: OnceLock::from(t),
+    }
+}
+
+/// A precision tabulated models are solved in.
+trait TableReal: DeviceReal + numpy::Element {
+    /// The table in the precision-tagged form a solution keeps.
+    fn table(t: Arc<TabulatedModel<Self>>) -> Table;
+}
+
+impl TableReal for f32 {
+    fn table(t: Arc<TabulatedModel<f32>>) -> Table {
+        Table::F32(t)
+    }
+}
+
+impl TableReal for f64 {
+    fn table(t: Arc<TabulatedModel<f64>>) -> Table {
+        Table::F64(t)
+    }
+}
+
+/// Solves a model known only at the cores (`table`) on `grid`; `source` makes the solution's
+/// source from the table.
+fn solve_table<T: TableReal>(
+    py: Python<'_>,
+    table: TabulatedModel<T>,
+    grid: &Bound<'_, Grid>,
+    settings: &SolverSettings,
+    run: &Run<'_>,
+    source: impl FnOnce(Table) -> Source,
+) -> PyResult<Solution> {
+    let config = settings.solver_config();
+    let table = Arc::new(table);
+    let grid_t = grid.get().to_precision::<T>(py)?;
+    let solve = |limit: Option<usize>,
+                 resume: Option<solver::SolverState<'static, T>>,
+                 watch: &Watch<'_, solver::SolverState<'static, T>>| {
+        let config = solver::SolverConfig {
+            max_sweeps: limit.unwrap_or(config.max_sweeps),
+            ..config
+        };
+        let interrupted = |e| watch.interrupt(e);
+        crate::pool::run_interruptible(py, run.threads, interrupted, || {
+            T::solve_on_device(
+                settings.device,
+                &*table,
+                &grid_t,
+                &config,
+                resume,
+                watch.wants_state(),
+                |p, s| watch.see(p, || s.map(|s| s.clone().into_owned())),
+            )
+        })
+        .map_err(|e| error(py, Kind::Config, format!("threads: {e}")))
+    };
+    let (s, stopped) = run_watched(py, run.callback, run.progress, config.max_sweeps, solve)?;
+    let summary = TrainSummary::from_solution(&s);
+    let v = PyArray1::from_vec(py, s.v).into_any().unbind();
+    let mut solution = Solution::assemble(
+        py,
+        v,
+        s.greedy,
+        grid.clone().unbind(),
+        summary,
+        settings,
+        source(T::table(table)),
+    )?;
+    solution.stopped = stopped;
+    Ok(solution)
 }
 
 /// Runs a solve (`run(limit, resume, watch)`) watched by `callback` and the `progress` bar.
@@ -687,6 +802,13 @@ fn transitions_from(obj: &Bound<'_, PyAny>, config: &TrainConfig) -> PyResult<Tr
     let task = config.build_model().map_err(|e| sim_error(py, &e))?;
     let e = F64Model::state_dim(&task);
     let d = F64Model::actions(&task).dim() * F64Model::n_agents(&task);
+    transitions_of(obj, e, d)
+}
+
+/// The transitions of `obj` (see [`transitions_from`]) for states of `e` and joint action
+/// vectors of `d` values.
+pub(crate) fn transitions_of(obj: &Bound<'_, PyAny>, e: usize, d: usize) -> PyResult<Transitions> {
+    let py = obj.py();
     let field = |name: &str| -> PyResult<Bound<'_, PyAny>> {
         obj.get_item(name).map_err(|_| {
             error(
@@ -760,19 +882,7 @@ pub(crate) fn collect<'py>(
             fuzzyq_sim::train::collect_from_plant(&task, &collection, &mut Exploration::Random)
         })
         .map_err(|e| sim_error(py, &e))?;
-        let (e, d, n) = (data.state_dim(), data.action_dim(), data.len());
-        let (x, u, next, r) = data.columns();
-        let out = PyDict::new(py);
-        let array = |v: &[f64], cols: usize| -> PyResult<Bound<'py, PyArray2<f64>>> {
-            let a = Array2::from_shape_vec((n, cols), v.to_vec())
-                .map_err(|err| error(py, Kind::Input, err.to_string()))?;
-            Ok(PyArray2::from_owned_array(py, a))
-        };
-        out.set_item("states", array(x, e)?)?;
-        out.set_item("actions", array(u, d)?)?;
-        out.set_item("next_states", array(next, e)?)?;
-        out.set_item("rewards", PyArray1::from_slice(py, r))?;
-        Ok(out)
+        transitions_dict(py, &data)
     })
 }
 
@@ -864,6 +974,15 @@ enum Source {
     /// A `CallableModel`, with its table in the solver's precision (tabulated again on first
     /// use when the solution was unpickled).
     Callable(Py<CallableModel>, OnceLock<Table>),
+    /// A `Task` learned from transitions: the task, the transitions, the estimation's report
+    /// and the learned table in the solver's precision (learned again on first use when the
+    /// solution was unpickled).
+    Learned {
+        task: Py<Task>,
+        data: Arc<Transitions>,
+        report: serde_json::Value,
+        table: OnceLock<Table>,
+    },
 }
 
 /// A tabulated model in the solver's precision.
@@ -976,35 +1095,8 @@ impl Solution {
                     FqiPolicy::with_model(config, learned, values, greedy).and_then(prepared)
                 })
             }
-            (Source::Callable(model, table), values) => {
-                let table = match table.get() {
-                    Some(t) => t.clone(),
-                    None => {
-                        let g = self.grid.get();
-                        let tables = model.get().tabulate(
-                            py,
-                            &g.inner,
-                            self.precision,
-                            &Limit::new(None).map_err(|e| sim_error(py, &e))?,
-                        )?;
-                        let built = match self.precision {
-                            Precision::F32 => {
-                                let grid = g.to_precision::<f32>(py)?;
-                                let actions = &model.get().actions;
-                                crate::pool::detach(py, || tables.model(grid, actions))
-                                    .map(|t| Table::F32(Arc::new(t)))
-                            }
-                            Precision::F64 => {
-                                let grid = g.to_precision::<f64>(py)?;
-                                let actions = &model.get().actions;
-                                crate::pool::detach(py, || tables.model(grid, actions))
-                                    .map(|t| Table::F64(Arc::new(t)))
-                            }
-                        }
-                        .map_err(|e| solve_error(py, &e))?;
-                        table.get_or_init(|| built).clone()
-                    }
-                };
+            (_, values) => {
+                let table = self.table(py)?;
                 match (table, values) {
                     (Table::F32(t), Values::F32(v)) => {
                         let grid = self.grid.get().to_precision::<f32>(py)?;
@@ -1029,6 +1121,49 @@ impl Solution {
             .policy
             .get_or_init(|| Arc::new(SimPolicy::Fqi(policy)))
             .clone())
+    }
+}
+
+impl Solution {
+    /// The table of a solution of a model known only at the cores: kept from the solve, or
+    /// computed again (a `CallableModel` tabulated, a `Task` learned) after unpickling.
+    fn table(&self, py: Python<'_>) -> PyResult<Table> {
+        let (cell, grid) = match &self.source {
+            Source::Env(..) => unreachable!("a built-in model's solution has no table"),
+            Source::Callable(_, t) | Source::Learned { table: t, .. } => (t, self.grid.get()),
+        };
+        if let Some(t) = cell.get() {
+            return Ok(t.clone());
+        }
+        let built = match &self.source {
+            Source::Callable(model, _) => {
+                let limit = Limit::new(None).map_err(|e| sim_error(py, &e))?;
+                let tables = model
+                    .get()
+                    .tabulate(py, &grid.inner, self.precision, &limit)?;
+                let actions = &model.get().actions;
+                match self.precision {
+                    Precision::F32 => {
+                        Table::F32(Arc::new(callable_table(py, tables, grid, actions)?))
+                    }
+                    Precision::F64 => {
+                        Table::F64(Arc::new(callable_table(py, tables, grid, actions)?))
+                    }
+                }
+            }
+            Source::Learned { task, data, .. } => match self.precision {
+                Precision::F32 => {
+                    let g = grid.to_precision::<f32>(py)?;
+                    Table::F32(Arc::new(task.get().learn(py, &grid.inner, g, data)?.model))
+                }
+                Precision::F64 => {
+                    let g = grid.to_precision::<f64>(py)?;
+                    Table::F64(Arc::new(task.get().learn(py, &grid.inner, g, data)?.model))
+                }
+            },
+            Source::Env(..) => unreachable!("handled above"),
+        };
+        Ok(cell.get_or_init(|| built).clone())
     }
 }
 
@@ -1115,7 +1250,7 @@ impl Solution {
             #[allow(clippy::type_complexity)] // the pickled fields, in order
             let (_, model, grid, v, greedy, summary, gamma, xi, absorbing_goal, precision, stopped): (
                 String,
-                Py<CallableModel>,
+                Bound<'_, PyAny>,
                 Py<Grid>,
                 Bound<'_, PyAny>,
                 Vec<u32>,
@@ -1144,7 +1279,7 @@ impl Solution {
                 xi,
                 absorbing_goal,
                 precision,
-                source: Source::Callable(model, OnceLock::new()),
+                source: restored_source(py, &tag, &model)?,
                 policy: OnceLock::new(),
                 stopped,
             }
@@ -1152,6 +1287,46 @@ impl Solution {
         solution.policy = OnceLock::new();
         Ok(Py::new(py, solution)?.into_any())
     }
+}
+
+/// The source of a pickled solution of a `CallableModel` (`tag` `"callable"`: the model) or
+/// of a `Task` (`"learned"`: the task, its transitions and the estimation's report).
+fn restored_source(py: Python<'_>, tag: &str, model: &Bound<'_, PyAny>) -> PyResult<Source> {
+    if tag == "callable" {
+        return Ok(Source::Callable(model.extract()?, OnceLock::new()));
+    }
+    let (task, data, report): (Py<Task>, Bound<'_, PyAny>, String) = model.extract()?;
+    let t = task.get();
+    let data = transitions_of(&data, t.shape.state_dim(), t.action_dim())?;
+    let report = serde_json::from_str(&report)
+        .map_err(|e| error(py, Kind::Input, format!("_restore: {e}")))?;
+    Ok(Source::Learned {
+        task,
+        data: Arc::new(data),
+        report,
+        table: OnceLock::new(),
+    })
+}
+
+/// `data` as the dict `collect` returns: `states`, `actions`, `next_states`, `rewards`.
+pub(crate) fn transitions_dict<'py>(
+    py: Python<'py>,
+    data: &Transitions,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (x, u, next, r) = data.columns();
+    let (n, e, a) = (data.len(), data.state_dim(), data.action_dim());
+    let rows = |v: &[f64], k: usize| {
+        PyArray2::from_owned_array(
+            py,
+            Array2::from_shape_vec((n, k), v.to_vec()).expect("rows"),
+        )
+    };
+    let d = PyDict::new(py);
+    d.set_item("states", rows(x, e))?;
+    d.set_item("actions", rows(u, a))?;
+    d.set_item("next_states", rows(next, e))?;
+    d.set_item("rewards", PyArray1::from_slice(py, r))?;
+    Ok(d)
 }
 
 /// The fuzzy Q-iteration policy inside a sim policy built by [`Solution::sim_policy`].
@@ -1261,6 +1436,21 @@ impl Solution {
             .transpose()
     }
 
+    /// How a `Task`'s model was learned from its transitions (None for every other model):
+    /// ``samples``; per block, ``blocks`` (its ``state_dims`` and ``action_components``, its
+    /// ``rows``, ``samples_per_action``, ``entries_per_row``, ``residual_rms`` per variable,
+    /// ``under_sampled_rows`` and the first of them, ``under_sampled``: the rows that needed a
+    /// wider kernel); and ``reward`` (None with a reward function, else
+    /// ``depends_on_action``, ``pairs_without_samples``, ``cores_without_samples``,
+    /// ``fallback`` and ``residual_rms``).
+    #[getter]
+    fn fit<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        match &self.source {
+            Source::Learned { report, .. } => crate::json::to_python(py, report).map(Some),
+            _ => Ok(None),
+        }
+    }
+
     /// The kernel instance used (`"avx512"`, `"avx2"`, `"portable"`, `"scalar"`, `"generic"` or
     /// `"q-values"`).
     #[getter]
@@ -1351,8 +1541,21 @@ impl Solution {
                     .into_any()
             }
             None => {
-                let Source::Callable(model, _) = &self.source else {
-                    unreachable!("a solution without an artifact is of a CallableModel")
+                let (tag, model) = match &self.source {
+                    Source::Callable(model, _) => ("callable", model.bind(py).clone().into_any()),
+                    Source::Learned {
+                        task, data, report, ..
+                    } => (
+                        "learned",
+                        (
+                            task.clone_ref(py),
+                            transitions_dict(py, data)?,
+                            report.to_string(),
+                        )
+                            .into_pyobject(py)?
+                            .into_any(),
+                    ),
+                    Source::Env(..) => unreachable!("a built-in model's solution has an artifact"),
                 };
                 let summary = serde_json::to_string(&self.summary)
                     .map_err(|e| error(py, Kind::Internal, e.to_string()))?;
@@ -1360,8 +1563,8 @@ impl Solution {
                 PyTuple::new(
                     py,
                     [
-                        "callable".into_pyobject(py)?.into_any(),
-                        model.bind(py).clone().into_any(),
+                        tag.into_pyobject(py)?.into_any(),
+                        model,
                         self.grid.bind(py).clone().into_any(),
                         self.v.bind(py).clone(),
                         greedy.into_pyobject(py)?.into_any(),
@@ -1389,7 +1592,12 @@ impl Solution {
         guard(py, || {
             let Some(artifact) = self.artifact(py)? else {
                 let Source::Callable(model, _) = &self.source else {
-                    unreachable!("a solution without an artifact is of a CallableModel")
+                    return Err(error(
+                        py,
+                        Kind::Config,
+                        "save: a solution learned for a fuzzy.Task is kept by pickling it (its \
+                         policy file format holds built-in models and CallableModels)",
+                    ));
                 };
                 let m = model.get();
                 let g = &self.grid.get().inner;

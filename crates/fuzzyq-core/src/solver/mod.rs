@@ -108,7 +108,7 @@ pub use qiter::{QSolution, solve_q};
 pub use slabs::SlabLayout;
 pub use state::SolverState;
 pub use sweeps::{Buf, DiffStats, Local, Sweeps, diff_stats, shift};
-pub use table::{BlockTable, TabulatedModel};
+pub use table::{BlockTable, RowsTable, TabulatedModel};
 
 use std::time::Instant;
 use std::vec::Vec;

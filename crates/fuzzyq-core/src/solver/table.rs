@@ -72,6 +72,34 @@ impl<T: Real> BlockTable<T> {
     }
 }
 
+/// One independent dynamics block's transitions given as rows (a learned or stochastic table):
+/// the owned form of [`BlockRows`](crate::model::BlockRows), whose docs define the layout.
+/// Block cores are those of the grid's cores of [`state_dims`](Self::state_dims).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RowsTable<T> {
+    /// The block's state variables, increasing.
+    pub state_dims: Vec<usize>,
+    /// The joint-action-vector components driving the block.
+    pub action_components: Vec<usize>,
+    /// The block actions, as [`BlockTable::block_actions`] gives them.
+    pub actions: Vec<T>,
+    /// Row starts, `n_block_cores * n_actions + 1` values.
+    pub ptr: Vec<u32>,
+    /// Block core of each entry.
+    pub col: Vec<u32>,
+    /// Expected membership of each entry.
+    pub weight: Vec<T>,
+}
+
+impl<T: Real> RowsTable<T> {
+    fn n_actions(&self) -> usize {
+        match self.action_components.len() {
+            0 => 1,
+            k => self.actions.len() / k,
+        }
+    }
+}
+
 /// What a [`TabulatedModel`] stores of its successors.
 #[derive(Clone, Debug)]
 enum Successors<T> {
@@ -79,6 +107,8 @@ enum Successors<T> {
     Full(Vec<T>),
     /// Per independent dynamics block, its successors at its block cores.
     Blocks(Vec<BlockTable<T>>),
+    /// Per independent dynamics block, its rows of expected memberships.
+    Rows(Vec<RowsTable<T>>),
 }
 
 /// Successors and rewards of every (core, joint action) pair of one grid, and the terminal
@@ -120,6 +150,54 @@ fn key<T: Real>(x: &[T]) -> Vec<u64> {
     x.iter().map(|v| v.to_f64().to_bits()).collect()
 }
 
+/// Checks blocks (state variables, action components, block actions) against the grid and
+/// the action sets: each names valid variables in increasing order, the blocks partition the
+/// state, and each block's actions are the joint actions' distinct values. Returns each
+/// block's number of block cores.
+fn check_layout<'a, T: Real + 'a>(
+    grid: &Grid<T>,
+    actions: &[(Vec<T>, usize)],
+    blocks: impl Iterator<Item = (&'a [usize], &'a [usize], &'a [T])>,
+) -> Result<Vec<usize>, SolveError> {
+    let e = grid.n_dims();
+    let a_dim: usize = actions.iter().map(|(_, d)| *d).sum();
+    let mut count = vec![0usize; e];
+    let mut n_cores = Vec::new();
+    for (b, (state_dims, components, block_actions)) in blocks.enumerate() {
+        let bad = |reason| SolveError::BlockDeclaration { block: b, reason };
+        if state_dims.is_empty() || state_dims.windows(2).any(|w| w[0] >= w[1]) {
+            return Err(bad(
+                "its state variables must be given in increasing order, at least one",
+            ));
+        }
+        for &d in state_dims {
+            if d >= e {
+                return Err(bad("it names a state variable beyond the state's length"));
+            }
+            count[d] += 1;
+        }
+        if components.iter().any(|&c| c >= a_dim) {
+            return Err(bad(
+                "it names an action component beyond the joint action's length",
+            ));
+        }
+        let (tuples, _) = BlockTable::block_actions(actions, components)?;
+        if tuples != block_actions {
+            return Err(bad(
+                "its block actions are not the joint actions' distinct values",
+            ));
+        }
+        n_cores.push(state_dims.iter().map(|&d| grid.cores()[d].len()).product());
+    }
+    if let Some(dim) = count.iter().position(|&c| c != 1) {
+        return Err(SolveError::BlockCoverage {
+            dim,
+            count: count[dim],
+        });
+    }
+    Ok(n_cores)
+}
+
 impl<T: Real> TabulatedModel<T> {
     /// Builds the table. `actions[i]` holds agent `i`'s actions (`values`, action-major, and the
     /// number of components per action); `next_states` has `N * M * E` values and `rewards`
@@ -155,38 +233,11 @@ impl<T: Real> TabulatedModel<T> {
         rewards: Vec<T>,
     ) -> Result<Self, SolveError> {
         let (n_joint, _) = Self::check(&grid, &actions, &rewards)?;
-        let e = grid.n_dims();
-        let a_dim: usize = actions.iter().map(|(_, d)| *d).sum();
-        let mut count = vec![0usize; e];
-        for (b, t) in blocks.iter().enumerate() {
-            let bad = |reason| SolveError::BlockDeclaration { block: b, reason };
-            if t.state_dims.is_empty() || t.state_dims.windows(2).any(|w| w[0] >= w[1]) {
-                return Err(bad(
-                    "its state variables must be given in increasing order, at least one",
-                ));
-            }
-            for &d in &t.state_dims {
-                if d >= e {
-                    return Err(bad("it names a state variable beyond the state's length"));
-                }
-                count[d] += 1;
-            }
-            if t.action_components.iter().any(|&c| c >= a_dim) {
-                return Err(bad(
-                    "it names an action component beyond the joint action's length",
-                ));
-            }
-            let (tuples, _) = BlockTable::block_actions(&actions, &t.action_components)?;
-            if tuples != t.actions {
-                return Err(bad(
-                    "its block actions are not the joint actions' distinct values",
-                ));
-            }
-            let cores: usize = t
-                .state_dims
-                .iter()
-                .map(|&d| grid.cores()[d].len())
-                .product();
+        let layout = blocks
+            .iter()
+            .map(|t| (&t.state_dims[..], &t.action_components[..], &t.actions[..]));
+        let n_cores = check_layout(&grid, &actions, layout)?;
+        for (t, cores) in blocks.iter().zip(n_cores) {
             crate::error::check_len(
                 "block successors",
                 cores * t.n_actions() * t.state_dims.len(),
@@ -196,17 +247,42 @@ impl<T: Real> TabulatedModel<T> {
                 return Err(SolveError::NonFinite { what: "successor" });
             }
         }
-        if let Some(dim) = count.iter().position(|&c| c != 1) {
-            return Err(SolveError::BlockCoverage {
-                dim,
-                count: count[dim],
-            });
-        }
         Ok(Self::assemble(
             grid,
             actions,
             n_joint,
             Successors::Blocks(blocks),
+            rewards,
+        ))
+    }
+
+    /// Builds the table of a model whose blocks' transitions are given as rows (a model
+    /// learned from transitions): `rows` partition the state variables as in
+    /// [`with_blocks`](Self::with_blocks), `rewards` as in [`new`](Self::new). Only the block
+    /// backup reads it (the solver checks the rows); [`Model::step`] gives NaN.
+    pub fn with_block_rows(
+        grid: Grid<T>,
+        actions: Vec<(Vec<T>, usize)>,
+        rows: Vec<RowsTable<T>>,
+        rewards: Vec<T>,
+    ) -> Result<Self, SolveError> {
+        let (n_joint, _) = Self::check(&grid, &actions, &rewards)?;
+        let layout = rows
+            .iter()
+            .map(|t| (&t.state_dims[..], &t.action_components[..], &t.actions[..]));
+        let n_cores = check_layout(&grid, &actions, layout)?;
+        for (t, cores) in rows.iter().zip(n_cores) {
+            crate::error::check_len("block rows", cores * t.n_actions() + 1, t.ptr.len())?;
+            crate::error::check_len("block row weights", t.col.len(), t.weight.len())?;
+            if t.weight.iter().any(|v| !v.is_finite()) {
+                return Err(SolveError::NonFinite { what: "successor" });
+            }
+        }
+        Ok(Self::assemble(
+            grid,
+            actions,
+            n_joint,
+            Successors::Rows(rows),
             rewards,
         ))
     }
@@ -271,13 +347,16 @@ impl<T: Real> TabulatedModel<T> {
         self.n_joint
     }
 
-    /// Whether the successors are stored per independent dynamics block.
+    /// Whether the transitions are stored per independent dynamics block (successors or
+    /// rows).
     #[must_use]
     pub fn has_blocks(&self) -> bool {
-        matches!(self.successors, Successors::Blocks(_))
+        !matches!(self.successors, Successors::Full(_))
     }
 
-    /// The successor of core `d` (row-major) under joint action `j`, into `next`.
+    /// The successor of core `d` (row-major) under joint action `j`, into `next`. A table of
+    /// rows ([`with_block_rows`](Self::with_block_rows)) has distributions, not successors:
+    /// [`SolveError::BlockRowsOnly`].
     pub fn successor(&self, d: usize, j: usize, next: &mut [T]) -> Result<(), SolveError> {
         let (n, e) = (self.grid.n_cores(), self.grid.n_dims());
         if d >= n {
@@ -309,6 +388,11 @@ impl<T: Real> TabulatedModel<T> {
                 let sets = action_sets(&self.actions)?;
                 crate::action::JointActions::try_new(&sets)?.vector_unchecked(j, &mut u);
                 self.step_blocks(blocks, &x, &u, next);
+            }
+            Successors::Rows(_) => {
+                return Err(SolveError::BlockRowsOnly {
+                    what: "a successor state",
+                });
             }
         }
         Ok(())
@@ -413,11 +497,12 @@ impl<T: Real> Model<T> for TabulatedModel<T> {
 
     /// The tabulated successor; NaN unless `x` is a core and `u` a joint action (for a model
     /// with blocks: unless each block's variables are cores and its components a block
-    /// action).
+    /// action). Always NaN for a table of rows, which has no successors.
     fn step(&self, x: &[T], u: &[T], next: &mut [T]) {
         let e = self.grid.n_dims();
         match &self.successors {
             Successors::Blocks(blocks) => self.step_blocks(blocks, x, u, next),
+            Successors::Rows(_) => next.fill(T::from_f64(f64::NAN)),
             Successors::Full(all) => match (self.core_of(x), self.joint_of(u)) {
                 (Some(d), Some(j)) => {
                     let i = (d * self.n_joint + j) * e;
@@ -455,13 +540,15 @@ impl<T: Real> Model<T> for TabulatedModel<T> {
                 next_states: all,
                 rewards: &self.rewards,
             }),
-            Successors::Blocks(_) => None,
+            Successors::Blocks(_) | Successors::Rows(_) => None,
         }
     }
 
     fn reward_table(&self) -> Option<&[T]> {
         match &self.successors {
-            Successors::Blocks(_) if self.depends_on_action => Some(&self.rewards),
+            Successors::Blocks(_) | Successors::Rows(_) if self.depends_on_action => {
+                Some(&self.rewards)
+            }
             _ => None,
         }
     }
@@ -469,6 +556,7 @@ impl<T: Real> Model<T> for TabulatedModel<T> {
     fn n_blocks(&self) -> usize {
         match &self.successors {
             Successors::Blocks(b) => b.len(),
+            Successors::Rows(r) => r.len(),
             Successors::Full(_) => 0,
         }
     }
@@ -479,10 +567,27 @@ impl<T: Real> Model<T> for TabulatedModel<T> {
                 state_dims: &blocks[b].state_dims,
                 action_components: &blocks[b].action_components,
             },
+            Successors::Rows(rows) => Block {
+                state_dims: &rows[b].state_dims,
+                action_components: &rows[b].action_components,
+            },
             Successors::Full(_) => Block {
                 state_dims: &[],
                 action_components: &[],
             },
+        }
+    }
+
+    fn block_rows(&self, b: usize) -> Option<crate::model::BlockRows<'_, T>> {
+        match &self.successors {
+            Successors::Rows(rows) => rows.get(b).map(|t| crate::model::BlockRows {
+                n_actions: t.n_actions(),
+                actions: &t.actions,
+                ptr: &t.ptr,
+                col: &t.col,
+                weight: &t.weight,
+            }),
+            _ => None,
         }
     }
 }

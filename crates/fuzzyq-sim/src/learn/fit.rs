@@ -46,7 +46,6 @@
 //!   ([`BlockFit::under_sampled`]) with the widening per variable it needed. A block action
 //!   with no sample at all is an error: there is nothing to estimate from.
 
-use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::{Membership, Model, Partition, ProductPartition};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -148,9 +147,64 @@ impl FitReport {
     }
 }
 
+/// What [`fit`] needs of a task: each state variable's range and periodicity and each
+/// agent's actions. A built-in task gives it ([`TaskShape::of`]); a user's system known only
+/// through its transitions declares it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaskShape {
+    /// The range of each state variable.
+    pub bounds: Vec<(f64, f64)>,
+    /// Whether each state variable is periodic over its range (see
+    /// [`Dynamics::is_periodic`]).
+    pub periodic: Vec<bool>,
+    /// Per agent: its actions' components (action-major) and components per action.
+    pub actions: Vec<(Vec<f64>, usize)>,
+}
+
+impl TaskShape {
+    /// The shape of a built-in task.
+    #[must_use]
+    pub fn of(task: &EnvModel) -> Self {
+        let e = F64Model::state_dim(task);
+        let table = F64Model::actions(task);
+        Self {
+            bounds: (0..e).map(|d| Dynamics::state_bounds(task, d)).collect(),
+            periodic: (0..e).map(|d| Dynamics::is_periodic(task, d)).collect(),
+            actions: vec![(table.values().to_vec(), table.dim()); F64Model::n_agents(task)],
+        }
+    }
+
+    /// Length of the state vector.
+    #[must_use]
+    pub fn state_dim(&self) -> usize {
+        self.bounds.len()
+    }
+
+    /// The joint actions' vectors, joint-action-major (agent 0 most significant), and their
+    /// length.
+    pub fn joint_vectors(&self) -> Result<(Vec<f64>, usize), ConfigError> {
+        let sets = self
+            .actions
+            .iter()
+            .map(|(v, k)| fuzzyq_core::ActionSet::try_new(v, *k))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|err| ConfigError::invalid("actions", err.to_string()))?;
+        let joint = fuzzyq_core::JointActions::try_new(&sets)
+            .map_err(|err| ConfigError::invalid("actions", err.to_string()))?;
+        let mut out = vec![0.0; joint.n_joint() * joint.dim()];
+        for (u, chunk) in out.chunks_mut(joint.dim().max(1)).enumerate() {
+            joint
+                .vector(u, chunk)
+                .map_err(|err| ConfigError::invalid("actions", err.to_string()))?;
+        }
+        Ok((out, joint.dim()))
+    }
+}
+
 /// Estimates the block tables of `task` on the grid `cores` from `data` (see the
 /// [module docs](self)); `blocks` declares the independent blocks (usually the task's own,
-/// [`F64Model::blocks`], or one block of everything for a task without blocks).
+/// [`F64Model::blocks`], or one block of everything for a task without blocks). The report
+/// counts the transitions whose reward differs from the task's.
 pub fn fit(
     task: &EnvModel,
     cores: &[Vec<f64>],
@@ -158,17 +212,40 @@ pub fn fit(
     data: &Transitions,
     config: &FitConfig,
 ) -> Result<(BlockTables, FitReport), ConfigError> {
-    let e = F64Model::state_dim(task);
-    let joint = joint_actions::<f64, _>(task)
-        .map_err(|err| ConfigError::invalid("env", err.to_string()))?;
+    let (tables, fits) = fit_shape(&TaskShape::of(task), cores, blocks, data, config)?;
+    let reward_mismatches = (0..data.len())
+        .filter(|&i| {
+            let (x, u, _, r) = data.get(i);
+            (Dynamics::reward(task, x, u, fuzzyq_core::solver::Precision::F64) - r).abs() > 1e-9
+        })
+        .count();
+    Ok((
+        tables,
+        FitReport {
+            samples: data.len(),
+            blocks: fits,
+            reward_mismatches,
+        },
+    ))
+}
+
+/// [`fit`] for a task given by its [`TaskShape`]: the tables and each block's report.
+pub fn fit_shape(
+    shape: &TaskShape,
+    cores: &[Vec<f64>],
+    blocks: &[BlockSpec],
+    data: &Transitions,
+    config: &FitConfig,
+) -> Result<(BlockTables, Vec<BlockFit>), ConfigError> {
+    let e = shape.state_dim();
+    let (vectors, dim) = shape.joint_vectors()?;
     require!(
-        data.state_dim() == e && data.action_dim() == joint.dim(),
+        data.state_dim() == e && data.action_dim() == dim,
         "transitions",
         format!(
-            "have states of {} and actions of {} values; the task has {e} and {}",
+            "have states of {} and actions of {} values; the task has {e} and {dim}",
             data.state_dim(),
             data.action_dim(),
-            joint.dim()
         ),
     );
     require!(!data.is_empty(), "transitions", "there are none");
@@ -188,7 +265,6 @@ pub fn fit(
             ),
         );
     }
-    let mut uvec = vec![0.0; joint.dim()];
     let mut tables = Vec::with_capacity(blocks.len());
     let mut fits = Vec::with_capacity(blocks.len());
     for spec in blocks {
@@ -196,53 +272,31 @@ pub fn fit(
         let k = spec.action_components.len();
         let mut actions: Vec<f64> = Vec::new();
         let mut n_actions = 0;
-        for u in 0..joint.n_joint() {
-            joint
-                .vector(u, &mut uvec)
-                .map_err(|err| ConfigError::invalid("env", err.to_string()))?;
-            let t: Vec<f64> = spec.action_components.iter().map(|&c| uvec[c]).collect();
+        for u in vectors.chunks(dim.max(1)) {
+            let t: Vec<f64> = spec.action_components.iter().map(|&c| u[c]).collect();
             if !(0..n_actions).any(|a| actions[a * k..(a + 1) * k] == t[..]) {
                 actions.extend_from_slice(&t);
                 n_actions += 1;
             }
         }
-        let bounds: Vec<(f64, f64)> = spec
-            .state_dims
-            .iter()
-            .map(|&d| Dynamics::state_bounds(task, d))
-            .collect();
         let block = BlockFitter {
             cores: spec.state_dims.iter().map(|&d| &cores[d][..]).collect(),
             spec,
-            periodic: spec
-                .state_dims
-                .iter()
-                .map(|&d| Dynamics::is_periodic(task, d))
-                .collect(),
-            bounds,
+            periodic: spec.state_dims.iter().map(|&d| shape.periodic[d]).collect(),
+            bounds: spec.state_dims.iter().map(|&d| shape.bounds[d]).collect(),
             config,
         };
         let (table, report) = block.run(data, &actions, n_actions)?;
         tables.push(table);
         fits.push(report);
     }
-    let reward_mismatches = (0..data.len())
-        .filter(|&i| {
-            let (x, u, _, r) = data.get(i);
-            (Dynamics::reward(task, x, u, fuzzyq_core::solver::Precision::F64) - r).abs() > 1e-9
-        })
-        .count();
     Ok((
         BlockTables {
             cores: cores.to_vec(),
             blocks: tables,
             membership: config.membership,
         },
-        FitReport {
-            samples: data.len(),
-            blocks: fits,
-            reward_mismatches,
-        },
+        fits,
     ))
 }
 
@@ -725,7 +779,7 @@ pub struct TableError {
 /// periodic variable's two end cores, one state, count as one.
 pub fn table_error(tables: &BlockTables, truth: &EnvModel) -> Result<Vec<TableError>, ConfigError> {
     let e = F64Model::state_dim(truth);
-    let joint = joint_actions::<f64, _>(truth)
+    let joint = fuzzyq_core::model::joint_actions::<f64, _>(truth)
         .map_err(|err| ConfigError::invalid("env", err.to_string()))?;
     let mut u = vec![0.0; joint.dim()];
     joint

@@ -9,7 +9,9 @@
 //! - [`vqql`]: the Generalized Lloyd algorithm and VQQL on the point masses;
 //! - [`tasks`]: the point masses and the robots as learning environments;
 //! - [`samples`]: transitions `(x, u, x', r)` and their collection from a plant;
-//! - [`fit`]: the learned fuzzy model, block transition tables estimated from transitions.
+//! - [`fit`]: the learned fuzzy model, block transition tables estimated from transitions;
+//! - [`reward`]: rewards at the cores estimated from transitions (a system without a known
+//!   reward function).
 
 pub mod additive;
 pub mod codebook;
@@ -17,6 +19,7 @@ pub mod env;
 pub mod features;
 pub mod fit;
 pub mod fql;
+pub mod reward;
 pub mod samples;
 pub mod tasks;
 pub mod vqql;

@@ -14,8 +14,8 @@
 //! block action; any other action vector takes the nearest block action; a periodic
 //! variable takes the circular mean, wrapped into its range).
 
-use fuzzyq_core::solver::Precision;
-use fuzzyq_core::{Membership, Partition, ProductPartition};
+use fuzzyq_core::solver::{Precision, RowsTable};
+use fuzzyq_core::{Membership, Partition, ProductPartition, Real};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, require};
@@ -69,6 +69,25 @@ pub struct BlockTables {
 }
 
 impl BlockTables {
+    /// The tables as the core's [`RowsTable`]s in precision `T`, for
+    /// [`TabulatedModel::with_block_rows`](fuzzyq_core::solver::TabulatedModel::with_block_rows)
+    /// (a learned model known only at the cores, such as one learned from a Python system).
+    #[must_use]
+    pub fn rows<T: Real>(&self) -> Vec<RowsTable<T>> {
+        let narrow = |v: &[f64]| v.iter().map(|&x| T::from_f64(x)).collect();
+        self.blocks
+            .iter()
+            .map(|t| RowsTable {
+                state_dims: t.state_dims.clone(),
+                action_components: t.action_components.clone(),
+                actions: narrow(&t.actions),
+                ptr: t.ptr.clone(),
+                col: t.col.clone(),
+                weight: narrow(&t.weight),
+            })
+            .collect()
+    }
+
     /// Checks the tables against `task` (state and action dimensions, coverage of the state
     /// variables, one row per (block core, block action), rows of non-negative weights that
     /// sum to 1); errors name `learned_model`.

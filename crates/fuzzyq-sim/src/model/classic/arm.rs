@@ -709,10 +709,7 @@ mod tests {
         let op = fuzzyq_core::solver::Operator::new(
             &m,
             grid.view(),
-            Backup {
-                gamma: p.gamma,
-                absorbing_goal: false,
-            },
+            Backup::discounted(p.gamma),
             BackupPath::Auto,
         )
         .unwrap();

@@ -512,10 +512,7 @@ mod tests {
         x: [f64; 2],
         steps: usize,
     ) -> Option<usize> {
-        let backup = Backup {
-            gamma: 0.95,
-            absorbing_goal: false,
-        };
+        let backup = Backup::discounted(0.95);
         let op = Operator::new(m, grid.view(), backup, BackupPath::Auto).unwrap();
         let mut x = x;
         let mut qx = [0.0; 2];
