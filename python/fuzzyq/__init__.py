@@ -208,15 +208,9 @@ def _register_gymnasium_envs() -> None:
         import gymnasium
     except ImportError:  # a broken gymnasium install must not break `import fuzzyq`
         return
-    if "FuzzyQ/PointMass-v0" not in gymnasium.registry:
-        gymnasium.register(
-            id="FuzzyQ/PointMass-v0",
-            entry_point="fuzzyq.envs.point_mass_gym:PointMassEnv",
-            # The paper's 30 s episodes, as Gymnasium's TimeLimit (so that `gymnasium.make(...,
-            # max_episode_steps=n)` overrides it): the made env does not truncate on its own.
-            max_episode_steps=75,
-            kwargs={"max_steps": None},
-        )
+    from fuzzyq import _gym_ids
+
+    _gym_ids.register(gymnasium)
 
 
 _register_gymnasium_envs()

@@ -12,6 +12,13 @@ Requires the optional dependencies: gymnasium and pettingzoo (``pip install gymn
   from ``Discrete(25)``; all agents share the reward.
 - `greedy_actions(policy, observations)`: the parallel env's actions under a greedy policy from
   `fuzzyq.solve`. For `PointMassEnv` the joint action is ``policy.act_index(observation)``.
+- Every built-in task has Gymnasium ids, registered by ``import fuzzyq`` (see
+  `fuzzyq.envs.registry`): ``FuzzyQ/DcMotor-v0``, ``FuzzyQ/Pendulum-v0``,
+  ``FuzzyQ/CarHill-v0``, ``FuzzyQ/Arm-v0`` (joint action indices), and a continuous-action
+  variant of each task, ``FuzzyQ/<Name>Continuous-v0`` (``PointMassContinuous`` too).
+- `ContinuousModelEnv(model, ...)`: `ModelEnv` whose actions are joint action vectors in a
+  `Box` spanning the model's actions (for the interpolated policy and continuous-control
+  learners).
 - `ModelEnv(model, *, start=None, max_steps="default", bounds=None, render_mode=None)` and
   `ModelParallelEnv(...)` (same arguments): any fuzzyq model (`fuzzyq.PointMass`, the classic
   `DcMotor`, `Pendulum`, `CarHill`, `Arm`, or a `CallableModel`) as a Gymnasium `Env` with
@@ -49,7 +56,7 @@ except ImportError as exc:  # pragma: no cover - exercised by a test that hides 
 
 from ._model_sim import default_episode_steps
 from ._render import AGENT_COLOURS
-from .model_env import ModelEnv
+from .model_env import ContinuousModelEnv, ModelEnv
 from .model_parallel import ModelParallelEnv
 from .point_mass_gym import PointMassEnv
 from .point_mass_parallel import PointMassParallelEnv, greedy_actions, parallel_env
@@ -60,6 +67,7 @@ ENV_ID = "FuzzyQ/PointMass-v0"
 __all__ = [
     "AGENT_COLOURS",
     "ENV_ID",
+    "ContinuousModelEnv",
     "ModelEnv",
     "ModelParallelEnv",
     "PointMassEnv",

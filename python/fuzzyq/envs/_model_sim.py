@@ -17,6 +17,7 @@ from gymnasium import error as gym_error
 from gymnasium import spaces
 
 import fuzzyq
+from fuzzyq._gym_ids import EPISODE_STEPS
 
 from ._core import OBS_DTYPE, Observation, Rendering, State, validate_max_steps
 from ._render import Frame, point_mass_frame, state_bars_frame
@@ -26,15 +27,8 @@ StartSpec = npt.ArrayLike | Callable[[np.random.Generator], npt.ArrayLike] | Non
 #: `max_steps` as the envs take it: a positive int, None (never truncate) or ``"default"``.
 MaxSteps = int | Literal["default"] | None
 
-#: The default episode lengths of the built-in models, in steps: those of ``fuzzyq rollout``
-#: (fuzzyq-sim's `EnvSpec::default_steps`; test_envs.py checks them against `Policy.rollout`).
-DEFAULT_EPISODE_STEPS: dict[str, int] = {
-    "pointmass": 75,
-    "dcmotor": 400,
-    "pendulum": 600,
-    "carhill": 100,
-    "arm": 200,
-}
+#: The default episode lengths of the built-in models, in steps: those of ``fuzzyq rollout``.
+DEFAULT_EPISODE_STEPS = EPISODE_STEPS
 
 
 def default_episode_steps(model: object) -> int | None:
@@ -102,9 +96,22 @@ class ModelAdapter:
         return int(self.model.joint_index(per_agent))
 
     def step(self, x: State, joint: int) -> tuple[State, float, bool]:
-        """The next state, the reward and whether the next state is terminal."""
-        next_state, reward, terminal = self.model.step(x, self.model.joint_action(joint))
+        """The next state, the reward and whether the next state is terminal, under joint
+        action `joint`."""
+        return self.step_vector(x, np.asarray(self.model.joint_action(joint), dtype=np.float64))
+
+    def step_vector(self, x: State, u: npt.NDArray[np.float64]) -> tuple[State, float, bool]:
+        """`step` under the joint action vector `u` (any vector, not only a joint action's)."""
+        next_state, reward, terminal = self.model.step(x, u)
         return np.asarray(next_state, dtype=np.float64), float(reward), bool(terminal)
+
+    def action_bounds(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Each joint action vector component's smallest and largest value over the joint
+        actions: the box the continuous-action variant acts in."""
+        vectors = np.array(
+            [self.model.joint_action(j) for j in range(self.n_joint_actions)], dtype=np.float64
+        )
+        return vectors.min(axis=0), vectors.max(axis=0)
 
     def info(self, x: State) -> dict[str, Any]:
         """Model-specific info entries at state `x`."""
@@ -136,10 +143,10 @@ class PointMassAdapter(ModelAdapter):
         state[:, :2] = rng.uniform(-limit, limit, size=(n, 2))
         return state.reshape(-1)
 
-    def step(self, x: State, joint: int) -> tuple[State, float, bool]:
+    def step_vector(self, x: State, u: npt.NDArray[np.float64]) -> tuple[State, float, bool]:
         """The next state, the paper's reward rho(x) of `x`, and False (never terminal)."""
         reward = float(self.model.reward(x))
-        next_state = self.model.step(x, self.model.joint_action(joint))
+        next_state = self.model.step(x, u)
         return np.asarray(next_state, dtype=np.float64), reward, False
 
     def info(self, x: State) -> dict[str, Any]:
@@ -172,9 +179,9 @@ class ClassicAdapter(ModelAdapter):
         """One agent: its action index."""
         return per_agent[0]
 
-    def step(self, x: State, joint: int) -> tuple[State, float, bool]:
+    def step_vector(self, x: State, u: npt.NDArray[np.float64]) -> tuple[State, float, bool]:
         """``model.step(x, u)`` and ``model.is_terminal`` of the next state."""
-        next_state, reward = self.model.step(x, self.model.joint_action(joint))
+        next_state, reward = self.model.step(x, u)
         next_state = np.asarray(next_state, dtype=np.float64)
         return next_state, float(reward), bool(self.model.is_terminal(next_state))
 
@@ -312,8 +319,9 @@ class ModelSim:
         """Whether the episode reached `max_steps`."""
         return self.max_steps is not None and self.steps >= self.max_steps
 
-    def step(self, joint: int) -> float:
-        """Apply joint action `joint` (already validated); return the reward."""
+    def step(self, joint: int | npt.NDArray[np.float64]) -> float:
+        """Apply joint action `joint` (an index, or a joint action vector; already validated);
+        return the reward."""
         state = self.require_state()
         if self.terminal:
             raise gym_error.ResetNeeded("the episode reached a terminal state; call reset()")
@@ -321,7 +329,10 @@ class ModelSim:
             raise gym_error.ResetNeeded(
                 f"the episode was truncated after max_steps={self.max_steps} steps; call reset()"
             )
-        self.state, reward, self.terminal = self.adapter.step(state, joint)
+        if isinstance(joint, np.ndarray):
+            self.state, reward, self.terminal = self.adapter.step_vector(state, joint)
+        else:
+            self.state, reward, self.terminal = self.adapter.step(state, joint)
         self.steps += 1
         return reward
 

@@ -130,8 +130,13 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
         Returns:
             ``(observation, reward, terminated, truncated, info)``; see the class docstring.
         """
-        index = validate_index(action, self._sim.adapter.n_joint_actions, "action")
-        reward = self._sim.step(index)
+        return self._apply(validate_index(action, self._sim.adapter.n_joint_actions, "action"))
+
+    def _apply(
+        self, joint: int | npt.NDArray[np.float64]
+    ) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
+        """Steps the simulation under a validated joint action (index or vector)."""
+        reward = self._sim.step(joint)
         if self.render_mode == "human":
             self.render()
         truncated = self._sim.truncated
@@ -153,3 +158,55 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
             gymnasium.error.ResetNeeded: before the first `reset` (with a render mode).
         """
         return self._render()
+
+
+class ContinuousModelEnv(ModelEnv):
+    """`ModelEnv` with continuous actions: the joint action vector itself.
+
+    The action space is ``Box(low, high, (action_dim,), float32)``, each component's range
+    over the model's joint actions (the point masses' forces, the DC motor's and the
+    pendulum's voltages, the car's force, the arm's torques). An action is clipped into the
+    box and applied as given, so the interpolated policy (the paper's eq 22,
+    ``solution.policy("interpolated").act(x)``) and continuous-control learners act here.
+    Everything else (observations, rewards, termination, starts, rendering) is `ModelEnv`'s.
+
+    >>> import fuzzyq, fuzzyq.envs
+    >>> env = fuzzyq.envs.ContinuousModelEnv(fuzzyq.DcMotor())
+    >>> obs, info = env.reset(seed=0)
+    >>> obs, reward, terminated, truncated, info = env.step([2.5])
+
+    Args:
+        model: the model to simulate (a `fuzzyq.PointMass`, a classic benchmark or a
+            `fuzzyq.CallableModel`, whose function must accept any action vector).
+        **kwargs: `ModelEnv`'s keyword arguments.
+
+    Raises:
+        fuzzyq.InputTypeError: an action that is not a numeric vector (from `step`).
+        fuzzyq.InputError: an action of the wrong length or with non-finite values.
+    """
+
+    def __init__(self, model: Any, **kwargs: Any) -> None:
+        super().__init__(model, **kwargs)
+        low, high = self._sim.adapter.action_bounds()
+        self._action_bounds = (low, high)
+        box = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        self.action_space = cast("spaces.Space[np.int64]", box)
+
+    def step(self, action: Any) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
+        """Apply joint action vector `action`, clipped into the action box.
+
+        Args:
+            action: ``action_dim`` finite numbers.
+
+        Returns:
+            ``(observation, reward, terminated, truncated, info)``, as `ModelEnv.step`.
+        """
+        low, high = self._action_bounds
+        expected = f"action must be {len(low)} finite numbers (a joint action vector)"
+        try:
+            u = np.array(action, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise fuzzyq.InputTypeError(f"{expected}, got {action!r}") from exc
+        if u.shape != low.shape or not np.all(np.isfinite(u)):
+            raise fuzzyq.InputError(f"{expected}, got {np.asarray(action).tolist()}")
+        return self._apply(np.clip(u, low, high))
