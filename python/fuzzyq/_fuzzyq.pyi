@@ -44,6 +44,7 @@ __all__ = [
     "train_sharded",
     "_restore",
     "_cli",
+    "_step_batch",
 ]
 
 __version__: str
@@ -1923,4 +1924,21 @@ def _cli(argv: list[str]) -> int:
 
     Returns:
         The exit code: 0 on success, 2 for an error, 130 when Ctrl-C stopped a training run.
+    """
+
+def _step_batch(
+    model: PointMass | ClassicModel, states: npt.ArrayLike, actions: npt.ArrayLike
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Steps a batch of a built-in model's states in Rust with the GIL released (what
+    `fuzzyq.envs.ModelVectorEnv` steps with; not for direct use).
+
+    Args:
+        model: a `PointMass` or a classic benchmark.
+        states: shape ``(n, state_dim)``.
+        actions: joint action vectors, shape ``(n, action_dim)`` (any vectors).
+
+    Returns:
+        ``(next_states, rewards, terminal)`` of shapes ``(n, state_dim)``, ``(n,)`` and
+        ``(n,)``: the reward at each state under its action, and whether each next state is
+        terminal.
     """

@@ -25,6 +25,10 @@ NAMES: dict[str, str] = {
 }
 
 
+#: Where ``gymnasium.make_vec`` builds the natively vectorised environments of every id.
+VECTOR_ENTRY_POINT = "fuzzyq.envs.vector:make_vector"
+
+
 def ids() -> dict[str, tuple[str, bool]]:
     """Every id `fuzzyq.envs.registry.make` serves: ``id -> (env, continuous)``. The point
     masses' discrete id, ``FuzzyQ/PointMass-v0``, is `fuzzyq.envs.PointMassEnv` instead."""
@@ -38,11 +42,13 @@ def ids() -> dict[str, tuple[str, bool]]:
 
 def register(gymnasium: Any) -> None:
     """Registers every id not registered yet, each limited to its environment's
-    `EPISODE_STEPS` by Gymnasium's `TimeLimit` (``max_episode_steps=n`` overrides it)."""
+    `EPISODE_STEPS` by Gymnasium's `TimeLimit` (``max_episode_steps=n`` overrides it), with
+    `fuzzyq.envs.ModelVectorEnv` as its vector entry point."""
     if "FuzzyQ/PointMass-v0" not in gymnasium.registry:
         gymnasium.register(
             id="FuzzyQ/PointMass-v0",
             entry_point="fuzzyq.envs.point_mass_gym:PointMassEnv",
+            vector_entry_point=VECTOR_ENTRY_POINT,
             max_episode_steps=EPISODE_STEPS["pointmass"],
             kwargs={"max_steps": None},
         )
@@ -51,6 +57,7 @@ def register(gymnasium: Any) -> None:
             gymnasium.register(
                 id=env_id,
                 entry_point="fuzzyq.envs.registry:make",
+                vector_entry_point=VECTOR_ENTRY_POINT,
                 max_episode_steps=EPISODE_STEPS[env],
                 kwargs={"env": env, "continuous": continuous},
             )

@@ -16,6 +16,7 @@ gymnasium = pytest.importorskip("gymnasium", reason="pip install gymnasium")
 pytest.importorskip("pettingzoo", reason="pip install pettingzoo")
 from gymnasium.utils.env_checker import check_env  # noqa: E402
 
+import fuzzyq.envs  # noqa: E402
 from fuzzyq import _gym_ids  # noqa: E402
 
 IDS = ["FuzzyQ/PointMass-v0", *_gym_ids.ids()]
@@ -104,3 +105,52 @@ def test_make_passes_model_arguments() -> None:
         from fuzzyq.envs import registry
 
         registry.make("rocket")
+
+
+@pytest.mark.parametrize("env", CLASSIC)
+@pytest.mark.parametrize("continuous", [False, True])
+def test_the_native_vector_env_steps_as_the_sync_one(env: str, continuous: bool) -> None:
+    name = _gym_ids.NAMES[env] + ("Continuous" if continuous else "")
+    env_id = f"FuzzyQ/{name}-v0"
+    native = gymnasium.make_vec(env_id, num_envs=4, vectorization_mode="vector_entry_point",
+                                max_episode_steps=30)  # fmt: skip
+    sync = gymnasium.make_vec(env_id, num_envs=4, vectorization_mode="sync", max_episode_steps=30)
+    assert isinstance(native.unwrapped, fuzzyq.envs.ModelVectorEnv)
+    assert native.action_space == sync.action_space
+    # The classic benchmarks start at their default start: the same in both.
+    a, _ = native.reset(seed=1)
+    b, _ = sync.reset(seed=1)
+    assert np.array_equal(a, b)
+    space = native.action_space
+    space.seed(5)
+    for _ in range(70):  # past two truncations: the autoresets agree too
+        actions = space.sample()
+        got = native.step(actions)
+        want = sync.step(actions)
+        for x, y in zip(got[:4], want[:4]):
+            assert np.array_equal(x, y)
+
+
+def test_the_vector_env_refuses_bad_actions() -> None:
+    env = fuzzyq.envs.ModelVectorEnv(fuzzyq.DcMotor(), 3)
+    env.reset(seed=0)
+    with pytest.raises(fuzzyq.InputError, match="actions"):
+        env.step(np.array([0, 1]))
+    with pytest.raises(fuzzyq.InputError, match="actions"):
+        env.step(np.array([0, 1, 99]))
+    with pytest.raises(fuzzyq.ConfigError, match="num_envs"):
+        fuzzyq.envs.ModelVectorEnv(fuzzyq.DcMotor(), 0)
+
+
+def test_a_callable_model_vectorises_through_its_own_function() -> None:
+    def transition(x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        nx = np.clip(x + 0.1 * u, -1.0, 1.0)
+        return nx, -np.abs(x[:, 0])
+
+    model = fuzzyq.CallableModel(transition, state_dim=1, actions=[[-1.0, 1.0]])
+    env = fuzzyq.envs.ModelVectorEnv(model, 2, bounds=[[-1.0, 1.0]], max_steps=3)
+    obs, _ = env.reset(seed=0)
+    obs2, rewards, terminated, truncated, _ = env.step(np.array([0, 1]))
+    assert np.allclose(obs2[:, 0], np.clip(obs[:, 0] + np.array([-0.1, 0.1]), -1, 1), atol=1e-6)
+    assert np.allclose(rewards, -np.abs(obs[:, 0]), atol=1e-6)
+    assert not terminated.any() and not truncated.any()

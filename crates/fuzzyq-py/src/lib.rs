@@ -20,6 +20,7 @@ mod pool;
 mod slabs;
 mod solve;
 mod task;
+mod vector;
 
 use pyo3::prelude::*;
 
@@ -47,6 +48,7 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;
     m.add_function(wrap_pyfunction!(slabs::train_sharded, m)?)?;
     m.add_function(wrap_pyfunction!(restore, m)?)?;
+    m.add_function(wrap_pyfunction!(vector::_step_batch, m)?)?;
     m.add_function(wrap_pyfunction!(cli, m)?)?;
     Ok(())
 }

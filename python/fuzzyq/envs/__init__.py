@@ -16,6 +16,9 @@ Requires the optional dependencies: gymnasium and pettingzoo (``pip install gymn
   `fuzzyq.envs.registry`): ``FuzzyQ/DcMotor-v0``, ``FuzzyQ/Pendulum-v0``,
   ``FuzzyQ/CarHill-v0``, ``FuzzyQ/Arm-v0`` (joint action indices), and a continuous-action
   variant of each task, ``FuzzyQ/<Name>Continuous-v0`` (``PointMassContinuous`` too).
+- `ModelVectorEnv(model, num_envs, *, continuous=False, ...)`: `num_envs` copies stepped
+  as one batch (in Rust with the GIL released for the built-in models); every id's
+  ``vector_entry_point``, so ``gymnasium.make_vec(id, num_envs=n)`` builds it.
 - `ContinuousModelEnv(model, ...)`: `ModelEnv` whose actions are joint action vectors in a
   `Box` spanning the model's actions (for the interpolated policy and continuous-control
   learners).
@@ -60,6 +63,7 @@ from .model_env import ContinuousModelEnv, ModelEnv
 from .model_parallel import ModelParallelEnv
 from .point_mass_gym import PointMassEnv
 from .point_mass_parallel import PointMassParallelEnv, greedy_actions, parallel_env
+from .vector import ModelVectorEnv
 
 #: The Gymnasium id of `PointMassEnv` (registered by ``import fuzzyq``).
 ENV_ID = "FuzzyQ/PointMass-v0"
@@ -70,6 +74,7 @@ __all__ = [
     "ContinuousModelEnv",
     "ModelEnv",
     "ModelParallelEnv",
+    "ModelVectorEnv",
     "PointMassEnv",
     "PointMassParallelEnv",
     "default_episode_steps",

@@ -170,10 +170,11 @@ class ClassicAdapter(ModelAdapter):
         bounds = np.asarray(model.state_bounds, dtype=np.float64)
         self.low, self.high = bounds[:, 0].copy(), bounds[:, 1].copy()
         self.sample_time = model.sample_time
+        self._start = np.asarray(model.default_start, dtype=np.float64)
 
     def default_start(self, rng: np.random.Generator) -> State:
-        """The model's `default_start` (that of ``fuzzyq rollout``)."""
-        return np.asarray(self.model.default_start, dtype=np.float64)
+        """The model's `default_start` (that of ``fuzzyq rollout``), a new array."""
+        return self._start.copy()
 
     def joint_index(self, per_agent: list[int]) -> int:
         """One agent: its action index."""
