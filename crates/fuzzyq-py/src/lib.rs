@@ -18,6 +18,7 @@ mod pickle;
 mod policy;
 mod pool;
 mod slabs;
+mod solution;
 mod solve;
 mod task;
 mod vector;
@@ -38,7 +39,7 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<classic::Pendulum>()?;
     m.add_class::<classic::CarHill>()?;
     m.add_class::<classic::Arm>()?;
-    m.add_class::<solve::Solution>()?;
+    m.add_class::<solution::Solution>()?;
     m.add_class::<policy::Policy>()?;
     m.add_class::<slabs::SlabProblem>()?;
     m.add_class::<task::Task>()?;
@@ -71,7 +72,7 @@ fn restore(py: Python<'_>, kind: &str, data: &Bound<'_, PyAny>) -> PyResult<Py<P
         "grid" => model::Grid::restore(py, data),
         "pointmass" => model::PointMass::restore(py, data),
         "khepera" => khepera::Khepera::restore(py, data),
-        "solution" => solve::Solution::restore(py, data),
+        "solution" => solution::Solution::restore(py, data),
         "policy" => policy::Policy::restore(py, data),
         other => Err(errors::error(
             py,

@@ -21,7 +21,7 @@ use pyo3::types::PyDict;
 
 use crate::convert::arg;
 use crate::errors::{Kind, config_error, error, guard, sim_error, solve_error};
-use crate::solve::Solution;
+use crate::solution::Solution;
 
 /// The block operator of a training configuration (TOML text, as `fuzzyq config` writes
 /// it), for computing sweeps in shards: each method computes one pass for the output slabs
