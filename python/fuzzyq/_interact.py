@@ -51,9 +51,10 @@ class _Episodes(Protocol):
         """The start state of episode `episode`."""
 
     def step(
-        self, x: npt.NDArray[np.float64], joint: int
+        self, x: npt.NDArray[np.float64], action: int | npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.float64], float, bool, bool | None]:
-        """``(next_state, reward, done, success)``: success is None where undefined."""
+        """``(next_state, reward, done, success)`` under a joint action index or a joint action
+        vector: success is None where undefined."""
 
 
 def _joint_of(indices: Sequence[int], n_actions: Sequence[int]) -> int:
@@ -76,19 +77,23 @@ class _CallableEpisodes:
     ) -> None:
         self.model = model
         self.n_actions = [len(a) for a in model.actions]
+        self.vectors = np.array(
+            [model.joint_action(j) for j in range(model.n_joint_actions)], dtype=np.float64
+        )
         self.rng = rng
         self.start = _start_function(model.state_dim, task, starts)
 
     def vector(self, joint: int) -> npt.NDArray[np.float64]:
-        return self.model.joint_action(joint)
+        return np.asarray(self.vectors[joint], dtype=np.float64)
 
     def reset(self, episode: int) -> npt.NDArray[np.float64]:
         return self.start(episode, self.rng)
 
     def step(
-        self, x: npt.NDArray[np.float64], joint: int
+        self, x: npt.NDArray[np.float64], action: int | npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.float64], float, bool, bool | None]:
-        nx, r, terminal = self.model.step(x, self.vector(joint))
+        u = self.vectors[action] if isinstance(action, int) else action
+        nx, r, terminal = self.model.step(x, u)
         return np.asarray(nx, dtype=np.float64), float(r), bool(terminal), None
 
 
@@ -137,6 +142,7 @@ class _GymEpisodes:
         self.vectors = np.asarray(task.joint_actions)
         self.n_actions = [len(a) for a in task.actions]
         space = env.action_space
+        self.space = space
         m = len(self.vectors)
         if isinstance(space, spaces.Discrete):
             if int(space.n) != m:
@@ -180,9 +186,20 @@ class _GymEpisodes:
         return _state(obs, self.task.state_dim, "observation")
 
     def step(
-        self, x: npt.NDArray[np.float64], joint: int
+        self, x: npt.NDArray[np.float64], action: int | npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.float64], float, bool, bool | None]:
-        obs, r, terminated, truncated, info = self.env.step(self.action(joint))
+        from gymnasium import spaces
+
+        if isinstance(action, int):
+            act = self.action(action)
+        elif isinstance(self.space, spaces.Box):
+            act = action.astype(self.space.dtype).reshape(self.space.shape)
+        else:
+            raise ConfigError(
+                "policy: an interpolated policy acts with joint action vectors; this "
+                f"environment takes {type(self.space).__name__} actions (use the greedy policy)"
+            )
+        obs, r, terminated, truncated, info = self.env.step(act)
         success = info.get("is_success") if isinstance(info, Mapping) else None
         done = bool(terminated or truncated)
         return (
@@ -394,7 +411,9 @@ def rollout(
     task: Task | None = None,
     seed: int = 0,
 ) -> dict[str, Any]:
-    """Runs `policy`'s greedy actions on a system of your own.
+    """Runs `policy` on a system of your own: the greedy policy's joint actions, or the
+    interpolated policy's action vectors (a `CallableModel`, or a Gymnasium environment with
+    `Box` actions).
 
     Args:
         policy: a policy whose joint actions are the system's.
@@ -433,11 +452,14 @@ def _run(policy: Policy, src: _Episodes, episode: int, steps: int | None) -> dic
     actions: list[npt.NDArray[np.float64]] = []
     rewards: list[float] = []
     done, success, total = False, None, 0.0
+    interpolated = policy.kind == "interpolated"
     while steps is None or len(rewards) < steps:
-        j = int(policy.act_index(x))
-        x, r, done, success = src.step(x, j)
+        # The greedy policy picks a joint action; the interpolated one (eq 22) a vector.
+        u = np.asarray(policy.act(x), dtype=np.float64) if interpolated else None
+        action: int | npt.NDArray[np.float64] = int(policy.act_index(x)) if u is None else u
+        x, r, done, success = src.step(x, action)
         states.append(x)
-        actions.append(src.vector(j))
+        actions.append(src.vector(action) if isinstance(action, int) else action)
         rewards.append(r)
         total += r  # in step order, as a plain loop adds them
         if done:

@@ -5,6 +5,7 @@ alone, and as a `CallableModel`."""
 from __future__ import annotations
 
 import pickle
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -168,3 +169,26 @@ def test_a_learned_solution_is_not_saved_as_a_file(tmp_path: Path) -> None:
     with pytest.raises(fuzzyq.ConfigError, match="pickling"):
         sol.save(tmp_path / "p.fzq")
     assert not (tmp_path / "p.fzq").exists()
+
+
+def test_an_interpolated_policy_acts_with_vectors(learned: fuzzyq.Solution) -> None:
+    policy = learned.policy("interpolated")
+    model = two_carts.callable_model()
+    x0 = np.array([0.3, 0.0, -0.6, 0.0])
+    run = fuzzyq.rollout(policy, model, x0=x0, steps=5)
+    for t in range(5):
+        assert np.array_equal(run["actions"][t], policy.act(run["states"][t]))
+        nx, r, _ = model.step(run["states"][t], run["actions"][t])
+        assert np.array_equal(run["states"][t + 1], nx) and run["rewards"][t] == r
+    # The carts' environment takes force indices: a vector cannot be applied.
+    with pytest.raises(fuzzyq.ConfigError, match="interpolated"):
+        fuzzyq.rollout(policy, two_carts.TwoCartsEnv(), task=two_carts.task())
+
+
+def test_the_docs_single_cart_example_runs_as_it_says(capsys: pytest.CaptureFixture[str]) -> None:
+    page = Path(__file__).resolve().parents[2] / "docs" / "site" / "python" / "own-system.md"
+    (block,) = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
+    scope: dict[str, Any] = {}
+    exec(compile(block, str(page), "exec"), scope)
+    assert scope["result"]["summary"]["success_rate"] == 1.0
+    assert "success_rate" in capsys.readouterr().out

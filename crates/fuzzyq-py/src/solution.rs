@@ -637,7 +637,7 @@ impl Solution {
                     return Err(error(
                         py,
                         Kind::Config,
-                        "save: a solution learned for a fuzzy.Task is kept by pickling it (its \
+                        "save: a solution learned for a fuzzyq.Task is kept by pickling it (its \
                          policy file format holds built-in models and CallableModels)",
                     ));
                 };

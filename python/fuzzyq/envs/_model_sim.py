@@ -105,12 +105,16 @@ class ModelAdapter:
         next_state, reward, terminal = self.model.step(x, u)
         return np.asarray(next_state, dtype=np.float64), float(reward), bool(terminal)
 
+    def joint_vectors(self) -> npt.NDArray[np.float64]:
+        """Every joint action's vector, shape ``(n_joint_actions, action_dim)``."""
+        return np.array(
+            [self.model.joint_action(j) for j in range(self.n_joint_actions)], dtype=np.float64
+        )
+
     def action_bounds(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
         """Each joint action vector component's smallest and largest value over the joint
         actions: the box the continuous-action variant acts in."""
-        vectors = np.array(
-            [self.model.joint_action(j) for j in range(self.n_joint_actions)], dtype=np.float64
-        )
+        vectors = self.joint_vectors()
         return vectors.min(axis=0), vectors.max(axis=0)
 
     def info(self, x: State) -> dict[str, Any]:

@@ -57,10 +57,8 @@ class ModelVectorEnv(gymnasium.vector.VectorEnv[Any, Any, Any]):
         self.action_space = batch_space(self.single_action_space, num_envs)
         adapter = self._sim.adapter
         self._continuous = continuous
-        self._vectors = np.array(
-            [model.joint_action(j) for j in range(adapter.n_joint_actions)], dtype=np.float64
-        )
-        self._action_low, self._action_high = adapter.action_bounds()
+        self._vectors = adapter.joint_vectors()
+        self._action_low, self._action_high = self._vectors.min(axis=0), self._vectors.max(axis=0)
         self._builtin = isinstance(model, (fuzzyq.PointMass, fuzzyq.ClassicModel))
         self._states = np.zeros((num_envs, adapter.state_dim))
         self._steps = np.zeros(num_envs, dtype=np.int64)
