@@ -64,6 +64,18 @@ enum Successors {
 }
 
 impl Tables {
+    /// The solver's model on `grid` in precision `T` (built with the GIL released).
+    pub(crate) fn model_on<T: Real>(
+        self,
+        py: Python<'_>,
+        grid: &crate::model::Grid,
+        actions: &[(Vec<f64>, usize)],
+    ) -> PyResult<TabulatedModel<T>> {
+        let grid_t = grid.to_precision::<T>(py)?;
+        crate::pool::detach(py, || self.model(grid_t, actions))
+            .map_err(|e| crate::errors::solve_error(py, &e))
+    }
+
     /// The solver's model in precision `T` on `grid` (the grid tabulated, in `T`).
     pub(crate) fn model<T: Real>(
         self,

@@ -12,13 +12,17 @@
 //! [`one_or_batch`]), whose errors name the argument themselves.
 
 use std::path::PathBuf;
+use std::str::FromStr;
 
-use numpy::{PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use fuzzyq_core::options::UnknownName;
+use fuzzyq_sim::learn::samples::Transitions;
+use numpy::ndarray::Array2;
+use numpy::{PyArray1, PyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyInt, PyString};
 
-use crate::errors::{Kind, error};
+use crate::errors::{Kind, config_error, error};
 
 /// A Python argument as a Rust value of this type, or a typed error (see the module docs).
 pub(crate) trait Arg<'a, 'py>: Sized {
@@ -397,4 +401,64 @@ pub(crate) fn distinct(
             ),
         )),
     }
+}
+
+/// The option named `got`, or a `ConfigError` naming `field` and the accepted names.
+pub(crate) fn parse_option<T: FromStr<Err = UnknownName>>(
+    py: Python<'_>,
+    field: &str,
+    got: &str,
+) -> PyResult<T> {
+    got.parse()
+        .map_err(|e: UnknownName| error(py, Kind::Config, format!("{field}: {e}, got {got:?}")))
+}
+
+/// The transitions of `obj` (a mapping with `states`, `actions`, `next_states` and
+/// `rewards`, as `collect` returns them) for states of `e` and joint action
+/// vectors of `d` values.
+pub(crate) fn transitions_of(obj: &Bound<'_, PyAny>, e: usize, d: usize) -> PyResult<Transitions> {
+    let py = obj.py();
+    let field = |name: &str| -> PyResult<Bound<'_, PyAny>> {
+        obj.get_item(name).map_err(|_| {
+            error(
+                py,
+                Kind::InputType,
+                format!(
+                    "transitions: expected a mapping with states, actions, next_states and \
+                     rewards (as fuzzyq.collect returns); {name} is missing"
+                ),
+            )
+        })
+    };
+    let (n, _, x) = matrix(&field("states")?, "transitions.states", None, Some(e))?;
+    let (_, _, u) = matrix(&field("actions")?, "transitions.actions", Some(n), Some(d))?;
+    let (_, _, next) = matrix(
+        &field("next_states")?,
+        "transitions.next_states",
+        Some(n),
+        Some(e),
+    )?;
+    let r = finite_vector(&field("rewards")?, "transitions.rewards", Some(n))?;
+    Transitions::from_columns(e, d, x, u, next, r).map_err(|err| config_error(py, &err))
+}
+
+/// `data` as the dict `collect` returns: `states`, `actions`, `next_states`, `rewards`.
+pub(crate) fn transitions_dict<'py>(
+    py: Python<'py>,
+    data: &Transitions,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (x, u, next, r) = data.columns();
+    let (n, e, a) = (data.len(), data.state_dim(), data.action_dim());
+    let rows = |v: &[f64], k: usize| {
+        PyArray2::from_owned_array(
+            py,
+            Array2::from_shape_vec((n, k), v.to_vec()).expect("rows"),
+        )
+    };
+    let d = PyDict::new(py);
+    d.set_item("states", rows(x, e))?;
+    d.set_item("actions", rows(u, a))?;
+    d.set_item("next_states", rows(next, e))?;
+    d.set_item("rewards", PyArray1::from_slice(py, r))?;
+    Ok(d)
 }

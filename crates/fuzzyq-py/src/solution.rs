@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 
 use fuzzyq_core::q::PolicyKind;
-use fuzzyq_core::solver::{Precision, TabulatedModel};
+use fuzzyq_core::solver::{CoarseStart, Precision, TabulatedModel};
 use fuzzyq_sim::io::config::{SolverSettings, TrainConfig};
 use fuzzyq_sim::io::policy_file::{
     PolicyArtifact, PolicyFile, TabulatedArtifact, TrainSummary, Values,
@@ -27,7 +27,7 @@ use crate::model::Grid;
 use crate::policy::Policy;
 use crate::task::Task;
 
-use crate::solve::{callable_table, coarse_dict, parse_option, transitions_dict, transitions_of};
+use crate::convert::{parse_option, transitions_dict, transitions_of};
 
 /// What a solution's policy needs besides `V` and the greedy actions.
 pub(crate) enum Source {
@@ -206,12 +206,8 @@ impl Solution {
                     .tabulate(py, &grid.inner, self.precision, &limit)?;
                 let actions = &model.get().actions;
                 match self.precision {
-                    Precision::F32 => {
-                        Table::F32(Arc::new(callable_table(py, tables, grid, actions)?))
-                    }
-                    Precision::F64 => {
-                        Table::F64(Arc::new(callable_table(py, tables, grid, actions)?))
-                    }
+                    Precision::F32 => Table::F32(Arc::new(tables.model_on(py, grid, actions)?)),
+                    Precision::F64 => Table::F64(Arc::new(tables.model_on(py, grid, actions)?)),
                 }
             }
             Source::Learned { task, data, .. } => match self.precision {
@@ -687,4 +683,14 @@ impl Solution {
             })
         })
     }
+}
+
+/// A coarse start as a dict: the coarse grid's `cores`, its `sweeps` and the `seconds` of its
+/// solve and interpolation.
+pub(crate) fn coarse_dict<'py>(py: Python<'py>, c: &CoarseStart) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("cores", c.cores)?;
+    d.set_item("sweeps", c.sweeps)?;
+    d.set_item("seconds", c.seconds)?;
+    Ok(d)
 }

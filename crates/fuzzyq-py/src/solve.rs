@@ -13,7 +13,7 @@ use fuzzyq_core::NamedOption;
 use fuzzyq_core::options::UnknownName;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
-    self, CoarseStart, Device, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError,
+    self, Device, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError,
     TabulatedModel,
 };
 use fuzzyq_sim::SimError;
@@ -26,32 +26,22 @@ use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::{Dynamics, EnvModel, F64Model};
 use fuzzyq_sim::run::policy::Policy as SimPolicy;
 use fuzzyq_sim::train::DeviceReal;
-use numpy::ndarray::Array2;
-use numpy::{PyArray1, PyArray2};
+use numpy::PyArray1;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::callable::CallableModel;
 use crate::classic::ClassicModel;
-use crate::convert::{arg, describe, finite_vector, matrix};
+use crate::convert::{arg, describe};
+use crate::convert::{parse_option, transitions_dict, transitions_of};
 use crate::errors::{
     Kind, config_error, error, guard, machine_limit, memory_error, policy_file_error, sim_error,
     solve_error,
 };
 use crate::model::{Grid, PointMass};
 use crate::policy::Policy;
-use crate::solution::{Solution, Source, Table};
+use crate::solution::{Solution, Source, Table, coarse_dict};
 use crate::task::Task;
-
-/// The option named `got`, or a `ConfigError` naming `field` and the accepted names.
-pub(crate) fn parse_option<T: FromStr<Err = UnknownName>>(
-    py: Python<'_>,
-    field: &str,
-    got: &str,
-) -> PyResult<T> {
-    got.parse()
-        .map_err(|e: UnknownName| error(py, Kind::Config, format!("{field}: {e}, got {got:?}")))
-}
 
 /// The solver settings as given to `solve` (`None`: the task's default, decided by
 /// [`TrainConfig::solver_defaults`] as for `fuzzyq train`).
@@ -588,25 +578,14 @@ fn solve_callable(
     let actions = &cm.get().actions;
     match settings.precision {
         Precision::F32 => {
-            let table = callable_table::<f32>(py, tables, g, actions)?;
+            let table = tables.model_on::<f32>(py, g, actions)?;
             solve_table(py, table, grid, &settings, run, source)
         }
         Precision::F64 => {
-            let table = callable_table::<f64>(py, tables, g, actions)?;
+            let table = tables.model_on::<f64>(py, g, actions)?;
             solve_table(py, table, grid, &settings, run, source)
         }
     }
-}
-
-/// The solver's model of a `CallableModel`'s `tables` on `grid`, in precision `T`.
-pub(crate) fn callable_table<T: TableReal>(
-    py: Python<'_>,
-    tables: crate::callable::Tables,
-    grid: &Grid,
-    actions: &[(Vec<f64>, usize)],
-) -> PyResult<TabulatedModel<T>> {
-    let grid_t = grid.to_precision::<T>(py)?;
-    crate::pool::detach(py, || tables.model(grid_t, actions)).map_err(|e| solve_error(py, &e))
 }
 
 /// Solves the model of a `Task` learned from `transitions` on `grid`.
@@ -660,7 +639,7 @@ fn learned_source<'a>(
 }
 
 /// A precision tabulated models are solved in.
-pub(crate) trait TableReal: DeviceReal + numpy::Element {
+trait TableReal: DeviceReal + numpy::Element {
     /// The table in the precision-tagged form a solution keeps.
     fn table(t: Arc<TabulatedModel<Self>>) -> Table;
 }
@@ -804,55 +783,6 @@ fn transitions_from(obj: &Bound<'_, PyAny>, config: &TrainConfig) -> PyResult<Tr
     transitions_of(obj, e, d)
 }
 
-/// The transitions of `obj` (see [`transitions_from`]) for states of `e` and joint action
-/// vectors of `d` values.
-pub(crate) fn transitions_of(obj: &Bound<'_, PyAny>, e: usize, d: usize) -> PyResult<Transitions> {
-    let py = obj.py();
-    let field = |name: &str| -> PyResult<Bound<'_, PyAny>> {
-        obj.get_item(name).map_err(|_| {
-            error(
-                py,
-                Kind::InputType,
-                format!(
-                    "transitions: expected a mapping with states, actions, next_states and \
-                     rewards (as fuzzyq.collect returns); {name} is missing"
-                ),
-            )
-        })
-    };
-    let (n, _, x) = matrix(&field("states")?, "transitions.states", None, Some(e))?;
-    let (_, _, u) = matrix(&field("actions")?, "transitions.actions", Some(n), Some(d))?;
-    let (_, _, next) = matrix(
-        &field("next_states")?,
-        "transitions.next_states",
-        Some(n),
-        Some(e),
-    )?;
-    let r = finite_vector(&field("rewards")?, "transitions.rewards", Some(n))?;
-    Transitions::from_columns(e, d, x, u, next, r).map_err(|err| config_error(py, &err))
-}
-
-/// `data` as the dict `collect` returns: `states`, `actions`, `next_states`, `rewards`.
-pub(crate) fn transitions_dict<'py>(
-    py: Python<'py>,
-    data: &Transitions,
-) -> PyResult<Bound<'py, PyDict>> {
-    let (x, u, next, r) = data.columns();
-    let (n, e, a) = (data.len(), data.state_dim(), data.action_dim());
-    let rows = |v: &[f64], k: usize| {
-        PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((n, k), v.to_vec()).expect("rows"),
-        )
-    };
-    let d = PyDict::new(py);
-    d.set_item("states", rows(x, e))?;
-    d.set_item("actions", rows(u, a))?;
-    d.set_item("next_states", rows(next, e))?;
-    d.set_item("rewards", PyArray1::from_slice(py, r))?;
-    Ok(d)
-}
-
 /// Collects `samples` transitions on the plant of a built-in `model` as
 /// `fuzzyq train --learner learned-model` does: seeded episodes of `episode_steps` random
 /// joint actions from the task's random starts, with the model's process noise (for example
@@ -984,16 +914,6 @@ pub(crate) fn available_kernels() -> Vec<&'static str> {
         .filter(|k| k.is_available())
         .map(Kernel::name)
         .collect()
-}
-
-/// A coarse start as a dict: the coarse grid's `cores`, its `sweeps` and the `seconds` of its
-/// solve and interpolation.
-pub(crate) fn coarse_dict<'py>(py: Python<'py>, c: &CoarseStart) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("cores", c.cores)?;
-    d.set_item("sweeps", c.sweeps)?;
-    d.set_item("seconds", c.seconds)?;
-    Ok(d)
 }
 
 /// Sets what the solver chose for a run in a progress record `d` (the same after every
