@@ -27,6 +27,7 @@ __all__ = [
     "Grid",
     "PointMass",
     "Khepera",
+    "KheperaPlant",
     "CallableModel",
     "ClassicModel",
     "DcMotor",
@@ -40,6 +41,7 @@ __all__ = [
     "solve",
     "load",
     "collect",
+    "learn_from_samples",
     "available_kernels",
     "train_sharded",
     "_restore",
@@ -1412,6 +1414,47 @@ class Khepera:
             InputError: `index` out of range.
         """
 
+    def joint_index(self, per_agent: Sequence[int]) -> int:
+        """The joint action index of per-robot action indices (robot 0 most significant).
+
+        Args:
+            per_agent: one action index in ``[0, 4)`` per robot.
+
+        Returns:
+            The joint action index.
+
+        Raises:
+            InputError: wrong length or an index out of range.
+        """
+
+    def agent_indices(self, index: int) -> list[int]:
+        """The per-robot action indices of joint action `index`.
+
+        Args:
+            index: a joint action index.
+
+        Returns:
+            One action index per robot.
+
+        Raises:
+            InputError: `index` out of range.
+        """
+
+    def random_starts(self, count: int, seed: int = 0) -> npt.NDArray[np.float64]:
+        """Random starts as ``fuzzyq rollout --starts`` draws them.
+
+        Args:
+            count: number of starts.
+            seed: seed of the draw.
+
+        Returns:
+            Shape ``(count, state_dim)``: flat poses, at least 0.5 m inside the walls, 0.3 m
+            clear of the obstacles and 0.5 m apart.
+
+        Raises:
+            ConfigError: the arena leaves no room for such starts.
+        """
+
     def step(self, x: npt.ArrayLike, u: npt.ArrayLike) -> npt.NDArray[np.float64]:
         """The kinematic model's successor of poses `x` under wheel speeds `u`.
 
@@ -1449,6 +1492,85 @@ class Khepera:
         Returns:
             ``(_restore, ("khepera", json))``: the configuration as JSON.
         """
+
+@final
+class KheperaPlant:
+    """The Khepera robots on the rapier plant: colliding discs with ray-cast sonars and the
+    configured noise, one control period per `step` (what `Policy.rollout` runs the robots on,
+    and what ``fuzzyq.envs.ModelEnv(fuzzyq.Khepera())`` steps).
+
+    >>> import fuzzyq
+    >>> robots = fuzzyq.Khepera(agents=2)
+    >>> plant = fuzzyq.KheperaPlant(robots, seed=0)
+    >>> plant.reset(robots.random_starts(1, seed=0)[0])
+    >>> contacts = plant.step(robots.joint_action(0))
+    >>> plant.poses.shape, plant.sonar.shape
+    ((6,), (2, 5))
+
+    Args:
+        robots: the robots' model (its parameters, arena and noise).
+        seed: seed of the plant's noise (wheels and sonars).
+
+    Raises:
+        ConfigError: the robots' configuration cannot be built as a plant.
+    """
+
+    def __new__(cls, robots: Khepera, seed: int = 0) -> KheperaPlant:
+        """Creates the plant (see the class docstring for the arguments)."""
+
+    def reset(self, poses: npt.ArrayLike, seed: int | None = None) -> None:
+        """Places the robots at rest and clears the collision counts.
+
+        Args:
+            poses: ``[x, y, heading]`` per robot, flat, shape ``(3 * agents,)``.
+            seed: restarts the noise generator from this seed (None: continue it).
+
+        Raises:
+            InputError: wrong length, non-finite values, or a robot overlapping a wall, an
+                obstacle or another robot.
+        """
+
+    def step(self, u: npt.ArrayLike) -> int:
+        """Drives every robot for one sample time.
+
+        Args:
+            u: joint wheel speeds ``[v_left, v_right]`` per robot, flat, shape
+                ``(2 * agents,)``; limited to ``+-max_wheel_speed``.
+
+        Returns:
+            The number of contacts (robot-robot, robot-wall, robot-obstacle) that started.
+
+        Raises:
+            ConfigError: before the first `reset`.
+            InputError: wrong length or non-finite values.
+        """
+
+    @property
+    def poses(self) -> npt.NDArray[np.float64]:
+        """The flat poses ``[x, y, heading, ...]`` (heading in ``(-pi, pi]``), a new array."""
+
+    @property
+    def paper_state(self) -> npt.NDArray[np.float64]:
+        """The paper's state ``[s_x, s_y, v_x, v_y]`` per robot, flat (velocity: displacement
+        over the last sample time; zero after a reset), a new array."""
+
+    @property
+    def sonar(self) -> npt.NDArray[np.float64]:
+        """Sonar readings (m) after the last reset or step, shape ``(agents, n_sonars)``."""
+
+    @property
+    def reward(self) -> float:
+        """The reward of the current poses: the goal reward in the region, minus the
+        collision penalty where robots overlap or touch the arena, else 0."""
+
+    @property
+    def in_goal(self) -> bool:
+        """Whether the current poses are in the reward region (False before a reset)."""
+
+    @property
+    def collisions(self) -> dict[str, Any]:
+        """Collisions since the last reset: ``total``, ``robot_robot``, ``robot_wall``,
+        ``robot_obstacle`` (ints) and ``per_agent`` (a list)."""
 
 def solve(
     model: PointMass | Khepera | ClassicModel | CallableModel | Task,
@@ -1586,6 +1708,61 @@ def collect(
     Raises:
         InputTypeError: `model` is not a built-in model.
         SolverError: the samples would exceed the memory limit.
+    """
+
+def learn_from_samples(
+    model: PointMass | Khepera,
+    learner: Literal["fql", "vqql"] = "fql",
+    *,
+    episodes: int | None = None,
+    literal: bool = False,
+    cells: int | None = None,
+    seed: int = 0,
+    progress: bool = False,
+) -> tuple[Policy, dict[str, Any]]:
+    """Learns a built-in multi-agent task from samples, without its model, as
+    ``fuzzyq train --learner fql|vqql`` does (the same code: the same seed gives the same
+    policy file and learning curve).
+
+    ``"fql"`` is model-free fuzzy Q-learning (the paper's section 2.5) with the additive
+    layout: each agent's own Q-function over its own observation (a point mass's
+    ``[s_x, s_y, v_x, v_y]`` fuzzified on the paper's cores; a robot's quantised sonars, goal
+    distance and angle), epsilon-greedy episodes from random starts, greedy evaluations along
+    the way. ``"vqql"`` (the point masses only) is vector-quantised Q-learning, the crisp
+    learner of the paper's Table 1: k-means cells per agent, tabular Q-learning over them.
+
+    >>> import fuzzyq
+    >>> policy, report = fuzzyq.learn_from_samples(fuzzyq.PointMass(agents=1), episodes=20)
+    >>> policy.learner, len(report["curve"]["return"])
+    ('fql', 20)
+
+    Args:
+        model: a `PointMass` (its parameters) or `Khepera` robots.
+        learner: ``"fql"`` or ``"vqql"``.
+        episodes: learning episodes (default: the task's, 3000 for the point masses, 2000
+            for the robots).
+        literal: the update as printed in the paper (eqs 24-26) instead of the corrected
+            one (kept to measure what the printed form learns).
+        cells: VQQL's cells per agent (default: as many as the grid has own-state cores).
+        seed: seed of exploration, starts, the plant's noise and VQQL's quantiser.
+        progress: show a tqdm bar of episodes.
+
+    Returns:
+        ``(policy, report)``: the greedy, decentralised `Policy` (``policy.learner`` is
+        ``"fql"`` or ``"vqql"``; it acts on the agents' observations concatenated, and rolls
+        out with `Policy.rollout` and `Policy.evaluate`) and a dict: ``curve`` (numpy columns
+        named as ``fuzzyq train --curve``'s CSV: ``episode``, ``steps``, ``return``,
+        ``discounted_return``, ``mean_abs_td``, ``max_abs_td``, ``epsilon``, ``alpha``,
+        ``param_change``, ``terminal``, ``eval_mean_return``, ``eval_success_rate``; NaN
+        where an episode had no evaluation), ``converged_at`` (the first episode that passed
+        the convergence test, or None), ``steps_total``, ``stop`` (``"episode-limit"``,
+        ``"converged"`` or ``"diverged"``), ``seconds`` and ``lloyd`` (VQQL's quantiser
+        report, or None).
+
+    Raises:
+        ConfigError: another model, another learner, ``"vqql"`` for the robots, `cells`
+            with ``"fql"``, or ``episodes=0``.
+        KeyboardInterrupt: Ctrl-C (the run stops after its current episode).
     """
 
 def load(path: str | PathLike[str], model: CallableModel | None = None) -> Solution | Policy:

@@ -13,6 +13,7 @@ EPISODE_STEPS: dict[str, int] = {
     "pendulum": 600,
     "carhill": 100,
     "arm": 200,
+    "khepera": 250,
 }
 
 #: Each environment's name in its ids.
@@ -22,8 +23,13 @@ NAMES: dict[str, str] = {
     "pendulum": "Pendulum",
     "carhill": "CarHill",
     "arm": "Arm",
+    "khepera": "Khepera",
 }
 
+
+#: Environments whose plant is a stateful simulation (the robots' rapier world): no native
+#: vectorisation; ``gymnasium.make_vec`` builds Gymnasium's own vector of copies for them.
+STATEFUL = {"khepera"}
 
 #: Where ``gymnasium.make_vec`` builds the natively vectorised environments of every id.
 VECTOR_ENTRY_POINT = "fuzzyq.envs.vector:make_vector"
@@ -43,7 +49,7 @@ def ids() -> dict[str, tuple[str, bool]]:
 def register(gymnasium: Any) -> None:
     """Registers every id not registered yet, each limited to its environment's
     `EPISODE_STEPS` by Gymnasium's `TimeLimit` (``max_episode_steps=n`` overrides it), with
-    `fuzzyq.envs.ModelVectorEnv` as its vector entry point."""
+    `fuzzyq.envs.ModelVectorEnv` as its vector entry point (except the `STATEFUL` ones)."""
     if "FuzzyQ/PointMass-v0" not in gymnasium.registry:
         gymnasium.register(
             id="FuzzyQ/PointMass-v0",
@@ -57,7 +63,7 @@ def register(gymnasium: Any) -> None:
             gymnasium.register(
                 id=env_id,
                 entry_point="fuzzyq.envs.registry:make",
-                vector_entry_point=VECTOR_ENTRY_POINT,
+                vector_entry_point=None if env in STATEFUL else VECTOR_ENTRY_POINT,
                 max_episode_steps=EPISODE_STEPS[env],
                 kwargs={"env": env, "continuous": continuous},
             )

@@ -344,3 +344,56 @@ def test_the_cli_refuses_a_callable_models_solution_by_name(tmp_path: Path) -> N
     )
     assert run.returncode == 2
     assert "fuzzyq.load(path, model=...)" in run.stderr and run.stderr.count("\n") == 1
+
+
+def read_curve(path: Path) -> dict[str, np.ndarray]:
+    """`fuzzyq train --curve`'s CSV as columns (empty fields NaN)."""
+    with open(path, newline="") as f:
+        header, *rows = list(csv.reader(f))
+    columns: dict[str, np.ndarray] = {}
+    for j, name in enumerate(header):
+        cells = [r[j] for r in rows]
+        if name == "terminal":
+            columns[name] = np.array([c == "true" for c in cells])
+        else:
+            columns[name] = np.array([float(c) if c else np.nan for c in cells])
+    return columns
+
+
+@pytest.mark.parametrize(
+    "case", [c for c in CASES if c.learner != "fqi"], ids=lambda c: str(c.name)
+)
+def test_learn_from_samples_is_the_cli_run(work: Path, case: Case) -> None:
+    out, curve = work / f"{case.name}-seed3.fzq", work / f"{case.name}-seed3.csv"
+    args = [a.format(work=work) for a in case.train]
+    cli("train", *args, "--seed", 3, "--out", out, "--curve", curve, "-q")
+    model: Any = fuzzyq.PointMass(agents=1) if case.env == "pointmass" else fuzzyq.Khepera(agents=1)
+    cells = 16 if case.learner == "vqql" else None
+    policy, report = fuzzyq.learn_from_samples(model, case.learner, episodes=5, cells=cells, seed=3)
+    assert (policy.learner, policy.env, policy.kind) == (case.learner, case.env, "greedy")
+    # The same policy file, byte for byte (a learned policy pickles as its file's bytes).
+    assert policy.__reduce__()[1][1][0] == out.read_bytes()
+    expected = read_curve(curve)
+    assert list(report["curve"]) == list(expected)
+    for name, column in expected.items():
+        np.testing.assert_array_equal(report["curve"][name], column, err_msg=name)
+    assert report["stop"] == "episode-limit" and report["steps_total"] == expected["steps"].sum()
+    assert (report["lloyd"] is not None) == (case.learner == "vqql")
+
+
+def test_learn_from_samples_refuses_what_the_cli_refuses() -> None:
+    one = fuzzyq.PointMass(agents=1)
+    with pytest.raises(fuzzyq.ConfigError, match="learner: expected"):
+        fuzzyq.learn_from_samples(one, "fqi")  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="learner"):
+        fuzzyq.learn_from_samples(one, "sarsa")  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="model: fuzzy Q-learning"):
+        fuzzyq.learn_from_samples(fuzzyq.DcMotor())  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="vqql is available for the pointmass"):
+        fuzzyq.learn_from_samples(fuzzyq.Khepera(agents=1), "vqql")
+    with pytest.raises(fuzzyq.ConfigError, match="cells"):
+        fuzzyq.learn_from_samples(one, "fql", cells=8)
+    with pytest.raises(fuzzyq.ConfigError, match="episodes"):
+        fuzzyq.learn_from_samples(one, episodes=0)
+    with pytest.raises(fuzzyq.InputTypeError, match="seed"):
+        fuzzyq.learn_from_samples(one, seed="1")  # type: ignore[arg-type]

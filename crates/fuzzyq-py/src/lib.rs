@@ -17,6 +17,7 @@ mod model;
 mod pickle;
 mod policy;
 mod pool;
+mod samples;
 mod slabs;
 mod solution;
 mod solve;
@@ -33,6 +34,7 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<model::Grid>()?;
     m.add_class::<model::PointMass>()?;
     m.add_class::<khepera::Khepera>()?;
+    m.add_class::<khepera::KheperaPlant>()?;
     m.add_class::<callable::CallableModel>()?;
     m.add_class::<classic::ClassicModel>()?;
     m.add_class::<classic::DcMotor>()?;
@@ -46,6 +48,7 @@ fn _fuzzyq(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(solve::solve, m)?)?;
     m.add_function(wrap_pyfunction!(solve::load, m)?)?;
     m.add_function(wrap_pyfunction!(solve::collect, m)?)?;
+    m.add_function(wrap_pyfunction!(samples::learn_from_samples, m)?)?;
     m.add_function(wrap_pyfunction!(solve::available_kernels, m)?)?;
     m.add_function(wrap_pyfunction!(slabs::train_sharded, m)?)?;
     m.add_function(wrap_pyfunction!(restore, m)?)?;

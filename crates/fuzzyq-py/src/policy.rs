@@ -72,6 +72,21 @@ impl Policy {
         }
     }
 
+    /// The greedy policy of a file learned from samples (fuzzy Q-learning, VQQL).
+    pub(crate) fn from_learned(
+        py: Python<'_>,
+        file: fuzzyq_sim::io::policy_file::PolicyFile,
+    ) -> PyResult<Self> {
+        let bytes = file.to_bytes().map_err(|e| sim_error(py, &e))?;
+        let policy = crate::pool::detach(py, || SimPolicy::from_file(file))
+            .map_err(|e| sim_error(py, &e))?;
+        Ok(Self::new(
+            Arc::new(policy),
+            PolicyKind::Greedy,
+            Origin::File(bytes),
+        ))
+    }
+
     /// Rebuilds a pickled policy: `(solution, kind)` or `(file bytes, "greedy")`.
     pub(crate) fn restore(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
         let (origin, kind): (Bound<'_, PyAny>, String) = data.extract()?;

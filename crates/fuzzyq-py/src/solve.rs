@@ -11,7 +11,6 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use fuzzyq_core::NamedOption;
 use fuzzyq_core::options::UnknownName;
-use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{
     self, Device, IterationOperator, Kernel, Precision, Progress, Scheme, SolveError,
     TabulatedModel,
@@ -24,7 +23,6 @@ use fuzzyq_sim::learn::fit::FitConfig;
 use fuzzyq_sim::learn::samples::{Collection, Exploration, Transitions};
 use fuzzyq_sim::memory::{Estimate, Limit};
 use fuzzyq_sim::model::{Dynamics, EnvModel, F64Model};
-use fuzzyq_sim::run::policy::Policy as SimPolicy;
 use fuzzyq_sim::train::DeviceReal;
 use numpy::PyArray1;
 use pyo3::prelude::*;
@@ -890,17 +888,7 @@ pub(crate) fn load(
                 Ok(Py::new(py, Solution::from_artifact(py, a, None)?)?.into_any())
             }
             PolicyFile::Tabulated(_) => unreachable!("returned above"),
-            learned => {
-                let bytes = learned.to_bytes().map_err(|e| sim_error(py, &e))?;
-                let policy = crate::pool::detach(py, || SimPolicy::from_file(learned))
-                    .map_err(|e| sim_error(py, &e))?;
-                let policy = Policy::new(
-                    Arc::new(policy),
-                    PolicyKind::Greedy,
-                    crate::policy::Origin::File(bytes),
-                );
-                Ok(Py::new(py, policy)?.into_any())
-            }
+            learned => Ok(Py::new(py, Policy::from_learned(py, learned)?)?.into_any()),
         }
     })
 }

@@ -716,6 +716,49 @@ impl SampleLearning {
     }
 }
 
+/// What a run of a learner from samples may change from [`SampleLearning::defaults`]: the
+/// options of `fuzzyq train --learner fql|vqql` and of Python's `learn_from_samples`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SampleOptions {
+    /// Number of episodes (default: the task's).
+    pub episodes: Option<usize>,
+    /// The update as printed in the paper (eqs 24-26) instead of the corrected one.
+    pub literal: bool,
+    /// VQQL's cells per agent (default: the own-state cores of the grid); VQQL only.
+    pub cells: Option<usize>,
+    /// Seed of exploration, starts, the plant's noise and VQQL's quantiser.
+    pub seed: u64,
+}
+
+impl SampleLearning {
+    /// [`defaults`](Self::defaults) changed by `options`, validated; `cells` for a learner
+    /// other than VQQL is an error.
+    pub fn with_options(
+        config: &TrainConfig,
+        learner: Learner,
+        options: &SampleOptions,
+    ) -> Result<Self, SimError> {
+        if options.cells.is_some() && learner != Learner::Vqql {
+            return Err(ConfigError::invalid("cells", "applies to the vqql learner only").into());
+        }
+        let mut learning = Self::defaults(config, learner)?;
+        learning.fql.seed = options.seed;
+        if let Some(n) = options.episodes {
+            learning.fql.episodes = n;
+        }
+        if options.literal {
+            learning.fql.update = fuzzyq_core::additive::Update::Literal;
+        }
+        if let Some(v) = &mut learning.vqql {
+            v.cells = options.cells.unwrap_or(v.cells);
+            v.seed = options.seed;
+            v.validate()?;
+        }
+        learning.fql.validate()?;
+        Ok(learning)
+    }
+}
+
 /// Whether `learner` learns from samples on `env`; the error says why not.
 fn check_available(env: &EnvConfig, learner: Learner) -> Result<(), ConfigError> {
     match (env, learner) {

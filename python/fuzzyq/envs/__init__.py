@@ -15,7 +15,9 @@ Requires the optional dependencies: gymnasium and pettingzoo (``pip install gymn
 - Every built-in task has Gymnasium ids, registered by ``import fuzzyq`` (see
   `fuzzyq.envs.registry`): ``FuzzyQ/DcMotor-v0``, ``FuzzyQ/Pendulum-v0``,
   ``FuzzyQ/CarHill-v0``, ``FuzzyQ/Arm-v0`` (joint action indices), and a continuous-action
-  variant of each task, ``FuzzyQ/<Name>Continuous-v0`` (``PointMassContinuous`` too).
+  variant of each task, ``FuzzyQ/<Name>Continuous-v0`` (``PointMassContinuous`` too), and
+  ``FuzzyQ/Khepera-v0`` / ``FuzzyQ/KheperaContinuous-v0``: the robots on their rapier plant
+  with sonars (observing their poses, or the paper's state with ``observation="paper"``).
 - `ModelVectorEnv(model, num_envs, *, continuous=False, ...)`: `num_envs` copies stepped
   as one batch (in Rust with the GIL released for the built-in models); every id's
   ``vector_entry_point``, so ``gymnasium.make_vec(id, num_envs=n)`` builds it.
@@ -24,7 +26,8 @@ Requires the optional dependencies: gymnasium and pettingzoo (``pip install gymn
   learners).
 - `ModelEnv(model, *, start=None, max_steps="default", bounds=None, render_mode=None)` and
   `ModelParallelEnv(...)` (same arguments): any fuzzyq model (`fuzzyq.PointMass`, the classic
-  `DcMotor`, `Pendulum`, `CarHill`, `Arm`, or a `CallableModel`) as a Gymnasium `Env` with
+  `DcMotor`, `Pendulum`, `CarHill`, `Arm`, the `fuzzyq.Khepera` robots, or a `CallableModel`)
+  as a Gymnasium `Env` with
   ``Discrete(n_joint_actions)`` actions, or as a PettingZoo `ParallelEnv` with each agent's own
   ``Discrete(n_i)``; `default_episode_steps(model)` is their default `max_steps`.
 

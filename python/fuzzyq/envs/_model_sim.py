@@ -1,8 +1,9 @@
 """One simulation over every kind of fuzzyq model, shared by `ModelEnv` and `ModelParallelEnv`.
 
 Internal: `adapt(model)` wraps a `fuzzyq.PointMass`, a classic benchmark (`fuzzyq.DcMotor`,
-`Pendulum`, `CarHill`, `Arm`: any `fuzzyq.ClassicModel`) or a `fuzzyq.CallableModel` (or an
-object with the same methods) in one interface; `ModelSim` adds the episode (start states,
+`Pendulum`, `CarHill`, `Arm`: any `fuzzyq.ClassicModel`), the `fuzzyq.Khepera` robots (on
+their rapier plant) or a `fuzzyq.CallableModel` (or an object with the same methods) in one
+interface; `ModelSim` adds the episode (start states,
 step counting, truncation) and the outputs both environments return.
 """
 
@@ -20,12 +21,14 @@ import fuzzyq
 from fuzzyq._gym_ids import EPISODE_STEPS
 
 from ._core import OBS_DTYPE, Observation, Rendering, State, validate_max_steps
-from ._render import Frame, point_mass_frame, state_bars_frame
+from ._render import Frame, khepera_frame, point_mass_frame, state_bars_frame
 
 #: A start state, or a function of the env's random generator that draws one.
 StartSpec = npt.ArrayLike | Callable[[np.random.Generator], npt.ArrayLike] | None
 #: `max_steps` as the envs take it: a positive int, None (never truncate) or ``"default"``.
 MaxSteps = int | Literal["default"] | None
+#: What the robots' environments observe: None (the poses) or ``"paper"``.
+ObservationKind = Literal["paper"] | None
 
 #: The default episode lengths of the built-in models, in steps: those of ``fuzzyq rollout``.
 DEFAULT_EPISODE_STEPS = EPISODE_STEPS
@@ -40,11 +43,14 @@ def default_episode_steps(model: object) -> int | None:
     Returns:
         The length of a ``fuzzyq rollout`` of the built-in model, in steps: 75 for
         `fuzzyq.PointMass` (the paper's 30 s), 400 for `fuzzyq.DcMotor`, 600 for
-        `fuzzyq.Pendulum`, 100 for `fuzzyq.CarHill` and 200 for `fuzzyq.Arm`; None (never
+        `fuzzyq.Pendulum`, 100 for `fuzzyq.CarHill`, 200 for `fuzzyq.Arm` and 250 for
+        `fuzzyq.Khepera` (the paper's 100 s); None (never
         truncate) for a `fuzzyq.CallableModel` or any other model.
     """
     if isinstance(model, fuzzyq.PointMass):
         return DEFAULT_EPISODE_STEPS["pointmass"]
+    if isinstance(model, fuzzyq.Khepera):
+        return DEFAULT_EPISODE_STEPS["khepera"]
     if isinstance(model, fuzzyq.ClassicModel):
         return DEFAULT_EPISODE_STEPS.get(model.env)
     return None
@@ -94,6 +100,17 @@ class ModelAdapter:
     def joint_index(self, per_agent: list[int]) -> int:
         """The joint action index of per-agent action indices (agent 0 most significant)."""
         return int(self.model.joint_index(per_agent))
+
+    def start(self, x: State, rng: np.random.Generator) -> None:
+        """An episode starts at `x` (the stateful plants place themselves there)."""
+
+    def observe(self, x: State) -> State:
+        """The observation at state `x`: the state itself."""
+        return x
+
+    def observation_bounds(self) -> tuple[State, State]:
+        """Elementwise bounds of `observe`'s values: the state's."""
+        return self.low, self.high
 
     def step(self, x: State, joint: int) -> tuple[State, float, bool]:
         """The next state, the reward and whether the next state is terminal, under joint
@@ -191,6 +208,80 @@ class ClassicAdapter(ModelAdapter):
         return next_state, float(reward), bool(self.model.is_terminal(next_state))
 
 
+class KheperaAdapter(ModelAdapter):
+    """The `fuzzyq.Khepera` robots on their rapier plant (a `fuzzyq.KheperaPlant`: contacts,
+    sonars and the configured noise), not on the kinematic model they are solved on.
+
+    The state is the robots' poses ``[x, y, heading]`` (bounded by the walls and
+    ``[-pi, pi]``); the observation is the state, or with ``observation="paper"`` the paper's
+    ``[s_x, s_y, v_x, v_y]`` per robot. The reward is the plant's of the poses before the
+    step; episodes start at `fuzzyq.Khepera.random_starts`' draws and never terminate.
+    """
+
+    def __init__(self, model: fuzzyq.Khepera, observation: ObservationKind) -> None:
+        self.model = model
+        self.params = model.params
+        self.plant = fuzzyq.KheperaPlant(model)
+        n = model.n_agents
+        self.state_dim = model.state_dim
+        self.agent_sizes = [4] * n
+        self.n_joint_actions = model.n_joint_actions
+        (x0, x1), (y0, y1) = self.params["arena"]["x"], self.params["arena"]["y"]
+        self.low = np.tile([x0, y0, -np.pi], n)
+        self.high = np.tile([x1, y1, np.pi], n)
+        self.sample_time = model.sample_time
+        self.paper = observation == "paper"
+        self.speed = float(self.params["max_wheel_speed"])
+
+    def default_start(self, rng: np.random.Generator) -> State:
+        """One of `fuzzyq.Khepera.random_starts`, drawn with a seed from `rng`."""
+        seed = int(rng.integers(2**63))
+        return np.asarray(self.model.random_starts(1, seed=seed)[0], dtype=np.float64)
+
+    def start(self, x: State, rng: np.random.Generator) -> None:
+        """Places the robots at `x` at rest; the plant's noise is seeded from `rng`."""
+        self.plant.reset(x, seed=int(rng.integers(2**63)))
+
+    def observe(self, x: State) -> State:
+        """The poses, or the paper's positions and velocities."""
+        return self.plant.paper_state if self.paper else x
+
+    def observation_bounds(self) -> tuple[State, State]:
+        """The walls and ``[-pi, pi]``; the paper's velocities within the top wheel speed."""
+        if not self.paper:
+            return self.low, self.high
+        n, s = self.model.n_agents, self.speed
+        return np.tile([self.low[0], self.low[1], -s, -s], n), np.tile(
+            [self.high[0], self.high[1], s, s], n
+        )
+
+    def step_vector(self, x: State, u: npt.NDArray[np.float64]) -> tuple[State, float, bool]:
+        """One sample time of the plant under wheel speeds `u`; the reward of the poses before
+        it; never terminal."""
+        reward = float(self.plant.reward)
+        self.plant.step(u)
+        return np.asarray(self.plant.poses, dtype=np.float64), reward, False
+
+    def action_bounds(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """Every wheel within ``+-max_wheel_speed``."""
+        n = self.model.action_dim
+        return np.full(n, -self.speed), np.full(n, self.speed)
+
+    def info(self, x: State) -> dict[str, Any]:
+        """``in_goal``, the ``sonar`` readings (one row per robot), the ``paper_state`` and
+        the ``collisions`` since the start (`fuzzyq.KheperaPlant.collisions`)."""
+        return {
+            "in_goal": bool(self.plant.in_goal),
+            "sonar": self.plant.sonar,
+            "paper_state": self.plant.paper_state,
+            "collisions": self.plant.collisions,
+        }
+
+    def frame(self, x: State, terminal: bool) -> Frame:
+        """The arena from above (`khepera_frame`)."""
+        return khepera_frame(self.params, x)
+
+
 def _bounds_array(bounds: object, state_dim: int) -> npt.NDArray[np.float64]:
     """`bounds` (a ``(state_dim, 2)`` array of ``[low, high]`` rows, or a `fuzzyq.Grid`, whose
     first and last cores are used) as a float64 array, or a one-line error."""
@@ -211,8 +302,19 @@ def _bounds_array(bounds: object, state_dim: int) -> npt.NDArray[np.float64]:
     return array
 
 
-def adapt(model: object, bounds: object) -> ModelAdapter:
+def adapt(model: object, bounds: object, observation: object = None) -> ModelAdapter:
     """The adapter of `model`, or a one-line error naming what it should be."""
+    if observation is not None and not (
+        isinstance(model, fuzzyq.Khepera) and observation == "paper"
+    ):
+        raise fuzzyq.ConfigError(
+            f"observation: expected None (the state) or 'paper' (fuzzyq.Khepera only), got "
+            f"{observation!r} for a {type(model).__name__}"
+        )
+    if isinstance(model, fuzzyq.Khepera):
+        if bounds is not None:
+            raise fuzzyq.ConfigError("bounds: the robots' arena bounds their state")
+        return KheperaAdapter(model, observation)
     if isinstance(model, fuzzyq.PointMass | fuzzyq.ClassicModel):
         if bounds is not None:
             raise fuzzyq.ConfigError(
@@ -226,8 +328,9 @@ def adapt(model: object, bounds: object) -> ModelAdapter:
     missing = [name for name in needed if not hasattr(model, name)]
     if missing:
         raise fuzzyq.InputTypeError(
-            "model must be a fuzzyq.PointMass, a classic model (DcMotor, Pendulum, CarHill, "
-            f"Arm) or a fuzzyq.CallableModel; {type(model).__name__} lacks {missing}"
+            "model must be a fuzzyq.PointMass, fuzzyq.Khepera, a classic model (DcMotor, "
+            f"Pendulum, CarHill, Arm) or a fuzzyq.CallableModel; {type(model).__name__} lacks "
+            f"{missing}"
         )
     state_dim = int(model.state_dim)  # type: ignore[attr-defined]
     return ModelAdapter(model, None if bounds is None else _bounds_array(bounds, state_dim))
@@ -237,9 +340,14 @@ class ModelSim:
     """An adapted model plus the episode state: what `ModelEnv` and `ModelParallelEnv` step."""
 
     def __init__(
-        self, model: object, start: StartSpec, max_steps: MaxSteps, bounds: object
+        self,
+        model: object,
+        start: StartSpec,
+        max_steps: MaxSteps,
+        bounds: object,
+        observation: object = None,
     ) -> None:
-        self.adapter = adapt(model, bounds)
+        self.adapter = adapt(model, bounds, observation)
         if max_steps == "default":
             self.max_steps = default_episode_steps(model)
         else:
@@ -257,8 +365,8 @@ class ModelSim:
                 "uniformly within them)"
             )
         #: Observation bounds as float32 (rounding to nearest keeps every state inside them).
-        self.obs_low = self.adapter.low.astype(OBS_DTYPE)
-        self.obs_high = self.adapter.high.astype(OBS_DTYPE)
+        low, high = self.adapter.observation_bounds()
+        self.obs_low, self.obs_high = low.astype(OBS_DTYPE), high.astype(OBS_DTYPE)
         self.state: State | None = None
         self.steps = 0
         self.terminal = False
@@ -309,6 +417,7 @@ class ModelSim:
             drawn = self.adapter.default_start(rng)
             assert drawn is not None  # checked in __init__
             state = drawn
+        self.adapter.start(state, rng)
         self.state = state
         self.steps = 0
         self.terminal = False
@@ -346,7 +455,7 @@ class ModelSim:
     def observation(self) -> Observation:
         """A new float32 array of the state, clipped into the observation space (a terminal
         state may lie beyond the bounds: the exact state is in the info)."""
-        obs = self.require_state().astype(OBS_DTYPE)
+        obs = self.adapter.observe(self.require_state()).astype(OBS_DTYPE)
         np.clip(obs, self.obs_low, self.obs_high, out=obs)
         return obs
 
@@ -388,9 +497,10 @@ class ModelBacked:
         max_steps: MaxSteps,
         bounds: object,
         render_mode: str | None,
+        observation: object = None,
     ) -> ModelAdapter:
         """Builds the simulation and the per-instance metadata; returns the adapter."""
-        self._sim = ModelSim(model, start, max_steps, bounds)
+        self._sim = ModelSim(model, start, max_steps, bounds, observation)
         self.metadata = {**type(self).metadata, "render_fps": self._sim.render_fps}
         title = f"fuzzyq {type(model).__name__}"
         self._rendering = Rendering(render_mode, self.metadata["render_modes"], title)

@@ -157,6 +157,64 @@ def point_mass_frame(model: fuzzyq.PointMass, state: npt.NDArray[np.float64]) ->
     return img
 
 
+# --- the Khepera arena ---------------------------------------------------------------------------
+
+#: Colour of the arena's obstacles.
+OBSTACLE: Colour = (120, 120, 120)
+
+
+def _obstacle_mask(
+    obstacle: dict[str, Any], x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]
+) -> npt.NDArray[np.bool_]:
+    """Which arena points (x, y) lie inside `obstacle` (a ``box`` or a ``disc``)."""
+    cx, cy = obstacle["center"]
+    if obstacle["shape"] == "disc":
+        return np.asarray((x - cx) ** 2 + (y - cy) ** 2 <= obstacle["radius"] ** 2)
+    a = np.radians(obstacle.get("angle_deg", 0.0))
+    u = (x - cx) * np.cos(a) + (y - cy) * np.sin(a)
+    v = -(x - cx) * np.sin(a) + (y - cy) * np.cos(a)
+    hx, hy = obstacle["half_extents"]
+    return np.asarray((np.abs(u) <= hx) & (np.abs(v) <= hy))
+
+
+def khepera_frame(params: dict[str, Any], poses: npt.NDArray[np.float64]) -> Frame:
+    """The ``"rgb_array"`` picture of the Khepera robots: a ``(400, 400, 3)`` uint8 image.
+
+    The arena (walls at ``params["arena"]``'s ``x`` and ``y``, square pixels) is grey with its
+    obstacles darker, the reward region the green disc at the origin, and robot `i` a disc of
+    its true radius (at least `AGENT_RADIUS` pixels) in ``AGENT_COLOURS[i]`` with a darker
+    tick along its heading.
+    """
+    arena = params["arena"]
+    (x0, x1), (y0, y1) = arena["x"], arena["y"]
+    size = FRAME_SIZE
+    scale = (size - 1 - 2 * MARGIN) / max(x1 - x0, y1 - y0)
+    img = blank(size, size)
+
+    def pixel(x: float, y: float) -> tuple[float, float]:
+        return MARGIN + (y1 - y) * scale, MARGIN + (x - x0) * scale
+
+    top, left = pixel(x0, y1)
+    bottom, right = pixel(x1, y0)
+    fill_rect(img, round(top) - 2, round(bottom) + 2, round(left) - 2, round(right) + 2, ARENA_BORDER)
+    fill_rect(img, round(top), round(bottom), round(left), round(right), ARENA)
+    rows, cols = np.mgrid[0:size, 0:size]
+    ax, ay = x0 + (cols - MARGIN) / scale, y1 - (rows - MARGIN) / scale
+    for obstacle in arena.get("obstacle", []):
+        img[_obstacle_mask(obstacle, ax, ay)] = OBSTACLE
+    centre = pixel(0.0, 0.0)
+    goal = max(params["goal_radius"] * scale, MIN_GOAL_RADIUS)
+    fill_disc(img, *centre, goal, GOAL)
+    fill_disc(img, *centre, goal, GOAL_BORDER, inner=goal - 1.5)
+    radius = max(params["radius"] * scale, AGENT_RADIUS)
+    for i, (x, y, heading) in enumerate(np.asarray(poses, dtype=np.float64).reshape(-1, 3)):
+        row, col = pixel(float(x), float(y))
+        fill_disc(img, row, col, radius, agent_colour(i))
+        tip = (row - np.sin(heading) * radius, col + np.cos(heading) * radius)
+        draw_line(img, (row, col), tip, tick_colour(i), 3.0)
+    return img
+
+
 # --- any other model: one gauge per state variable ------------------------------------------------
 
 #: Height of one state variable's gauge, in pixels.

@@ -22,8 +22,10 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
     action a joint action index.
 
     Works with `fuzzyq.PointMass`, the classic benchmarks (`fuzzyq.DcMotor`,
-    `fuzzyq.Pendulum`, `fuzzyq.CarHill`, `fuzzyq.Arm`) and `fuzzyq.CallableModel` (which needs
-    its ``step``, ``actions`` and ``joint_index``). A policy from ``fuzzyq.solve(model, grid)``
+    `fuzzyq.Pendulum`, `fuzzyq.CarHill`, `fuzzyq.Arm`), the `fuzzyq.Khepera` robots (on their
+    rapier plant, a `fuzzyq.KheperaPlant`: contacts, sonars and noise, as ``fuzzyq rollout``
+    runs them) and `fuzzyq.CallableModel` (which needs its ``step``, ``actions`` and
+    ``joint_index``). A policy from ``fuzzyq.solve(model, grid)``
     drives it: the action is ``policy.act_index(observation)``.
 
     >>> import fuzzyq, fuzzyq.envs
@@ -37,29 +39,38 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
             ``start(rng) -> state`` called by each `reset` with the env's `np_random` (a
             `numpy.random.Generator`). Default (None): the model's own start — random
             positions at rest for `fuzzyq.PointMass` (as `PointMassEnv`), ``model.default_start``
-            for a classic model, uniform within `bounds` for a `CallableModel` (which needs
-            `start` or `bounds`). A start must lie within the state bounds.
+            for a classic model, ``model.random_starts`` for the robots, uniform within
+            `bounds` for a `CallableModel` (which needs `start` or `bounds`). A start must lie
+            within the state bounds (for the robots: poses clear of walls, obstacles and each
+            other).
         max_steps: the episode is truncated after this many steps; None never truncates;
             ``"default"`` (the default) uses `default_episode_steps(model)`: the length of a
             ``fuzzyq rollout`` (75 for the point masses, 400 for the DC motor, 600 for the
-            pendulum, 100 for the car, 200 for the arm) and None for a `CallableModel`.
+            pendulum, 100 for the car, 200 for the arm, 250 for the robots) and None for a
+            `CallableModel`.
         bounds: for a `CallableModel` only (the other models know theirs): the state bounds, a
             ``(state_dim, 2)`` array of ``[low, high]`` rows or a `fuzzyq.Grid` (its first and
             last cores). They bound the observation space and the default start.
         render_mode: None, ``"rgb_array"``, ``"human"`` (a matplotlib window, updated on every
             `reset` and `step`; needs ``pip install matplotlib``) or ``"ansi"``. See `render`.
+        observation: None observes the state; ``"paper"`` (the robots only) observes the
+            paper's ``[s_x, s_y, v_x, v_y]`` per robot (velocity: displacement over the last
+            sample time) instead of the poses ``[x, y, heading]``.
 
     Raises:
         fuzzyq.InputTypeError: `model` is not a fuzzyq model, or an argument has a wrong type.
         fuzzyq.ConfigError: no start is known (a `CallableModel` without `start` or
-            `bounds`), or `bounds` given for a model with its own.
+            `bounds`), `bounds` given for a model with its own, or ``observation="paper"``
+            for a model other than the robots.
         fuzzyq.InputError: `start`, `bounds`, `max_steps` or `render_mode` has a bad value.
         ImportError: ``render_mode="human"`` without matplotlib.
 
     Spaces:
         observation_space: ``Box(low, high, (state_dim,), float32)``: the position and velocity
             limits of a `PointMass`, ``model.state_bounds`` of a classic model (rows
-            ``[low, high]``), `bounds` of a `CallableModel` (unbounded without them).
+            ``[low, high]``), the walls and ``[-pi, pi]`` for the robots' poses (their top
+            wheel speed bounds the paper's velocities), `bounds` of a `CallableModel`
+            (unbounded without them).
             Observations are float32 copies of the float64 state, clipped into the box (a
             terminal state of the car lies beyond it); the exact state is in ``info["state"]``.
         action_space: ``Discrete(model.n_joint_actions)``: index `i` applies
@@ -70,15 +81,18 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
         reset(seed=None, options=None): seeds `np_random` when `seed` is given and starts at
             ``options["x0"]`` if given (validated like `start`), else at `start`.
         step(action): the model's transition. The reward is the model's: ``model.reward(x)`` of
-            the state before the step for a `PointMass` (the paper's rho), the reward of
-            ``model.step(x, u)`` for the others. `terminated` is True when the next state is
+            the state before the step for a `PointMass` (the paper's rho) and the robots (the
+            plant's `fuzzyq.KheperaPlant.reward`), the reward of ``model.step(x, u)`` for the
+            others. `terminated` is True when the next state is
             terminal (``model.is_terminal`` of a classic model, the third value of a
             `CallableModel`'s step; never for a `PointMass`); `truncated` on the `max_steps`-th
             step. Stepping after either (or before `reset`) raises
             `gymnasium.error.ResetNeeded`; invalid actions raise `fuzzyq.InputError` (out of
             range) or `fuzzyq.InputTypeError` (not an integer).
         info: ``"state"`` (a float64 copy of the exact state), ``"steps"`` (steps taken in this
-            episode) and, for a `PointMass`, ``"in_goal"``.
+            episode), for a `PointMass` ``"in_goal"``, and for the robots ``"in_goal"``,
+            ``"sonar"`` (readings in m, one row per robot), ``"paper_state"`` and
+            ``"collisions"`` (`fuzzyq.KheperaPlant.collisions`).
         metadata["render_fps"]: one frame per sample time (``1 / model.sample_time``; 30 for a
             `CallableModel`).
     """
@@ -87,14 +101,15 @@ class ModelEnv(ModelBacked, gymnasium.Env[Observation, np.int64]):
 
     def __init__(
         self,
-        model: fuzzyq.PointMass | fuzzyq.ClassicModel | fuzzyq.CallableModel,
+        model: fuzzyq.PointMass | fuzzyq.ClassicModel | fuzzyq.Khepera | fuzzyq.CallableModel,
         *,
         start: npt.ArrayLike | Callable[[np.random.Generator], npt.ArrayLike] | None = None,
         max_steps: int | Literal["default"] | None = "default",
         bounds: npt.ArrayLike | fuzzyq.Grid | None = None,
         render_mode: str | None = None,
+        observation: Literal["paper"] | None = None,
     ) -> None:
-        adapter = self._init_sim(model, start, max_steps, bounds, render_mode)
+        adapter = self._init_sim(model, start, max_steps, bounds, render_mode, observation)
         self.observation_space = cast("spaces.Space[Observation]", self._sim.observation_space())
         self.action_space = spaces.Discrete(adapter.n_joint_actions)
 
@@ -166,7 +181,8 @@ class ContinuousModelEnv(ModelEnv):
     The action space is ``Box(low, high, (action_dim,), float32)``, each component's range
     over the model's joint actions (the point masses' forces, the DC motor's and the
     pendulum's voltages, the car's force, the arm's torques). An action is clipped into the
-    box and applied as given, so the interpolated policy (the paper's eq 22,
+    box and applied as given (the robots' box is every wheel within ``+-max_wheel_speed``),
+    so the interpolated policy (the paper's eq 22,
     ``solution.policy("interpolated").act(x)``) and continuous-control learners act here.
     Everything else (observations, rewards, termination, starts, rendering) is `ModelEnv`'s.
 

@@ -25,7 +25,7 @@ class ModelParallelEnv(
     """Any fuzzyq model as a PettingZoo `ParallelEnv`: each of the model's agents is an agent.
 
     The agents are ``"agent_0"``, ``"agent_1"``, ... (`possible_agents`; one for a classic
-    model). Every agent observes the whole state and all share one reward, as in the paper;
+    model, one per robot for `fuzzyq.Khepera`, each choosing from its four actions). Every agent observes the whole state and all share one reward, as in the paper;
     agent `i` chooses from ``Discrete(n_i)``, its own action set (``model.n_actions`` for a
     `fuzzyq.PointMass`, ``len(model.actions[i])`` for a `fuzzyq.CallableModel`, all actions of
     a classic model). The joint action is ``model.joint_index([a_0, a_1, ...])`` (agent 0 most
@@ -43,6 +43,7 @@ class ModelParallelEnv(
             `ModelEnv`.
         bounds: the state bounds of a `CallableModel`; see `ModelEnv`.
         render_mode: None, ``"rgb_array"``, ``"human"`` or ``"ansi"``; see `ModelEnv.render`.
+        observation: None or ``"paper"`` (the robots); see `ModelEnv`.
 
     Raises:
         fuzzyq.InputTypeError: `model` is not a fuzzyq model, or an argument has a wrong type.
@@ -73,14 +74,15 @@ class ModelParallelEnv(
 
     def __init__(
         self,
-        model: fuzzyq.PointMass | fuzzyq.ClassicModel | fuzzyq.CallableModel,
+        model: fuzzyq.PointMass | fuzzyq.ClassicModel | fuzzyq.Khepera | fuzzyq.CallableModel,
         *,
         start: npt.ArrayLike | Callable[[np.random.Generator], npt.ArrayLike] | None = None,
         max_steps: int | Literal["default"] | None = "default",
         bounds: npt.ArrayLike | fuzzyq.Grid | None = None,
         render_mode: str | None = None,
+        observation: Literal["paper"] | None = None,
     ) -> None:
-        adapter = self._init_sim(model, start, max_steps, bounds, render_mode)
+        adapter = self._init_sim(model, start, max_steps, bounds, render_mode, observation)
         self._init_agents(list(adapter.agent_sizes))
 
     def _joint_index(self, per_agent: list[int]) -> int:

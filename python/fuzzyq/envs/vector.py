@@ -40,7 +40,7 @@ class ModelVectorEnv(gymnasium.vector.VectorEnv[Any, Any, Any]):
         **kwargs: `ModelEnv`'s keyword arguments (`start`, `max_steps`, `bounds`).
 
     Raises:
-        fuzzyq.ConfigError: ``num_envs`` below 1.
+        fuzzyq.ConfigError: ``num_envs`` below 1, or the `fuzzyq.Khepera` robots.
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -48,6 +48,11 @@ class ModelVectorEnv(gymnasium.vector.VectorEnv[Any, Any, Any]):
     def __init__(self, model: Any, num_envs: int, *, continuous: bool = False, **kwargs: Any):
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise fuzzyq.ConfigError(f"num_envs: expected a positive integer, got {num_envs!r}")
+        if isinstance(model, fuzzyq.Khepera):
+            raise fuzzyq.ConfigError(
+                "model: the robots' rapier plant is stateful and has no native vector; use "
+                "gymnasium.vector.SyncVectorEnv (gymnasium.make_vec does for their ids)"
+            )
         single = (ContinuousModelEnv if continuous else ModelEnv)(model, **kwargs)
         self._sim = single._sim
         self.num_envs = num_envs

@@ -18,7 +18,7 @@ use fuzzyq_sim::io::policy_file::{PolicyArtifact, PolicyFile, TrainSummary};
 use fuzzyq_sim::io::transitions::read_transitions_csv;
 use fuzzyq_sim::learn::fql::EpisodeRecord;
 use fuzzyq_sim::model::F64Model;
-use fuzzyq_sim::train::{self, Learner, SampleLearning};
+use fuzzyq_sim::train::{self, Learner, SampleLearning, SampleOptions};
 use fuzzyq_sim::{SimError, TrainConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
@@ -950,26 +950,24 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
 /// `--learner fql` or `vqql`: the learner's settings from the environment's defaults and the
 /// flags, checked.
 fn sample_learning(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<SampleLearning> {
-    let mut learning = SampleLearning::defaults(config, args.learner)?;
+    // Which learners apply to the environment first, then which flags apply to the learner.
+    SampleLearning::defaults(config, args.learner)?;
     refuse(
         args.cells.is_some() && args.learner != Learner::Vqql,
         "--cells",
         "applies to --learner vqql only",
     )?;
-    learning.fql.seed = args.seed;
-    if let Some(n) = args.episodes {
-        learning.fql.episodes = n;
-    }
-    if args.literal {
-        learning.fql.update = Update::Literal;
-    }
-    if let Some(v) = &mut learning.vqql {
-        v.cells = args.cells.unwrap_or(v.cells);
-        v.seed = args.seed;
-        v.validate()?;
-    }
-    learning.fql.validate()?;
-    Ok(learning)
+    let options = SampleOptions {
+        episodes: args.episodes,
+        literal: args.literal,
+        cells: args.cells,
+        seed: args.seed,
+    };
+    Ok(SampleLearning::with_options(
+        config,
+        args.learner,
+        &options,
+    )?)
 }
 
 /// A learner from samples' outputs besides the policy file: the learning curve (CSV and
