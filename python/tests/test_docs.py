@@ -38,6 +38,8 @@ def test_doctests_pass(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     if name.startswith("fuzzyq.envs"):
         pytest.importorskip("gymnasium")
         pytest.importorskip("pettingzoo")
+    if name == "fuzzyq.plot":
+        pytest.importorskip("matplotlib")
     monkeypatch.chdir(tmp_path)  # an example may write files
     module = importlib.import_module(name)
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS, verbose=False)
