@@ -1711,25 +1711,40 @@ def collect(
     """
 
 def learn_from_samples(
-    model: PointMass | Khepera,
+    source: PointMass | Khepera | CallableModel | Any,
     learner: Literal["fql", "vqql"] = "fql",
     *,
+    task: Task | None = None,
+    grid: Grid | None = None,
     episodes: int | None = None,
+    episode_steps: int | None = None,
+    gamma: float | None = None,
     literal: bool = False,
     cells: int | None = None,
     seed: int = 0,
+    starts: npt.ArrayLike | Callable[[np.random.Generator], npt.ArrayLike] | None = None,
     progress: bool = False,
 ) -> tuple[Policy, dict[str, Any]]:
-    """Learns a built-in multi-agent task from samples, without its model, as
+    """Learns a task from samples, without its model: the point masses or the robots as
     ``fuzzyq train --learner fql|vqql`` does (the same code: the same seed gives the same
-    policy file and learning curve).
+    policy file and learning curve), or a system of your own: a `CallableModel` (its function
+    as the simulator) or a Gymnasium environment, declared by a `Task`.
 
     ``"fql"`` is model-free fuzzy Q-learning (the paper's section 2.5) with the additive
-    layout: each agent's own Q-function over its own observation (a point mass's
-    ``[s_x, s_y, v_x, v_y]`` fuzzified on the paper's cores; a robot's quantised sonars, goal
-    distance and angle), epsilon-greedy episodes from random starts, greedy evaluations along
-    the way. ``"vqql"`` (the point masses only) is vector-quantised Q-learning, the crisp
-    learner of the paper's Table 1: k-means cells per agent, tabular Q-learning over them.
+    layout: each agent's own Q-function over its own observation, epsilon-greedy episodes,
+    greedy evaluations along the way. A point mass observes its ``[s_x, s_y, v_x, v_y]``
+    (fuzzified on the paper's cores), a robot its quantised sonars, goal distance and angle,
+    and an agent of your own system the state variables of its own block (when the task's
+    `blocks` give every agent one; the whole state otherwise), fuzzified on `grid`'s cores of
+    those variables. ``"vqql"`` is vector-quantised Q-learning, the crisp learner of the
+    paper's Table 1: k-means cells per agent over explored observations, tabular Q-learning
+    over them (not for the robots).
+
+    A system of your own learns with `FqlConfig`'s defaults (1000 episodes of at most 200
+    steps, step size 0.1, epsilon from 0.3 to 0.05 over 500 episodes, 10 greedy evaluation
+    episodes every 50, stopping when the parameters settle); its episodes start as
+    `collect`'s do (a Gymnasium environment's ``reset(seed=seed + k)``), and one ends at a
+    terminal state, when the environment truncates it, or after `episode_steps`.
 
     >>> import fuzzyq
     >>> policy, report = fuzzyq.learn_from_samples(fuzzyq.PointMass(agents=1), episodes=20)
@@ -1737,31 +1752,43 @@ def learn_from_samples(
     ('fql', 20)
 
     Args:
-        model: a `PointMass` (its parameters) or `Khepera` robots.
+        source: a `PointMass` (its parameters), `Khepera` robots, a `CallableModel` or a
+            Gymnasium environment (see `collect`).
         learner: ``"fql"`` or ``"vqql"``.
-        episodes: learning episodes (default: the task's, 3000 for the point masses, 2000
-            for the robots).
+        task: a system of your own's `Task` (its state bounds, actions and blocks).
+        grid: a system of your own's `Grid` over the task's state.
+        episodes: learning episodes (default: 3000 for the point masses, 2000 for the
+            robots, 1000 for a system of your own).
+        episode_steps: a system of your own's steps per episode at most (default 200).
+        gamma: a system of your own's discount (default 0.96, the paper's).
         literal: the update as printed in the paper (eqs 24-26) instead of the corrected
             one (kept to measure what the printed form learns).
-        cells: VQQL's cells per agent (default: as many as the grid has own-state cores).
+        cells: VQQL's cells per agent (default: as many as the fuzzy partition has cores: the
+            grid's own-state cores for the point masses, the largest agent's for your own
+            system).
         seed: seed of exploration, starts, the plant's noise and VQQL's quantiser.
+        starts: a `CallableModel`'s starts (see `collect`).
         progress: show a tqdm bar of episodes.
 
     Returns:
         ``(policy, report)``: the greedy, decentralised `Policy` (``policy.learner`` is
-        ``"fql"`` or ``"vqql"``; it acts on the agents' observations concatenated, and rolls
-        out with `Policy.rollout` and `Policy.evaluate`) and a dict: ``curve`` (numpy columns
-        named as ``fuzzyq train --curve``'s CSV: ``episode``, ``steps``, ``return``,
-        ``discounted_return``, ``mean_abs_td``, ``max_abs_td``, ``epsilon``, ``alpha``,
-        ``param_change``, ``terminal``, ``eval_mean_return``, ``eval_success_rate``; NaN
-        where an episode had no evaluation), ``converged_at`` (the first episode that passed
-        the convergence test, or None), ``steps_total``, ``stop`` (``"episode-limit"``,
-        ``"converged"`` or ``"diverged"``), ``seconds`` and ``lloyd`` (VQQL's quantiser
-        report, or None).
+        ``"fql"`` or ``"vqql"``; on a built-in task it acts on the agents' observations
+        concatenated and rolls out with `Policy.rollout` and `Policy.evaluate`; on your own
+        system it acts on the state, ``fuzzyq.evaluate(policy, source, task=task)`` runs it, and
+        it pickles) and a dict: ``curve`` (numpy columns named as ``fuzzyq train --curve``'s
+        CSV: ``episode``, ``steps``, ``return``, ``discounted_return``, ``mean_abs_td``,
+        ``max_abs_td``, ``epsilon``, ``alpha``, ``param_change``, ``terminal``,
+        ``eval_mean_return``, ``eval_success_rate``; NaN where an episode had no
+        evaluation), ``converged_at`` (the first episode that passed the convergence test, or
+        None), ``steps_total``, ``stop`` (``"episode-limit"``, ``"converged"`` or
+        ``"diverged"``), ``seconds`` and ``lloyd`` (VQQL's quantiser report, or None).
 
     Raises:
-        ConfigError: another model, another learner, ``"vqql"`` for the robots, `cells`
-            with ``"fql"``, or ``episodes=0``.
+        ConfigError: a classic benchmark, another learner, ``"vqql"`` for the robots, `cells`
+            with ``"fql"``, ``episodes=0``; a system of your own without `task` or `grid`, or
+            a grid of another dimension; `task`, `grid`, `episode_steps`, `gamma` or `starts`
+            for a built-in task.
+        InputTypeError: an argument of the wrong type, or a source that is no system.
         KeyboardInterrupt: Ctrl-C (the run stops after its current episode).
     """
 

@@ -52,9 +52,10 @@ class _Episodes(Protocol):
 
     def step(
         self, x: npt.NDArray[np.float64], action: int | npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.float64], float, bool, bool | None]:
-        """``(next_state, reward, done, success)`` under a joint action index or a joint action
-        vector: success is None where undefined."""
+    ) -> tuple[npt.NDArray[np.float64], float, bool, bool, bool | None]:
+        """``(next_state, reward, terminated, truncated, success)`` under a joint action index
+        or a joint action vector: terminated at an absorbing state, truncated where the
+        system cut the episode (a time limit); success is None where undefined."""
 
 
 def _joint_of(indices: Sequence[int], n_actions: Sequence[int]) -> int:
@@ -91,10 +92,10 @@ class _CallableEpisodes:
 
     def step(
         self, x: npt.NDArray[np.float64], action: int | npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.float64], float, bool, bool | None]:
+    ) -> tuple[npt.NDArray[np.float64], float, bool, bool, bool | None]:
         u = self.vectors[action] if isinstance(action, int) else action
         nx, r, terminal = self.model.step(x, u)
-        return np.asarray(nx, dtype=np.float64), float(r), bool(terminal), None
+        return np.asarray(nx, dtype=np.float64), float(r), bool(terminal), False, None
 
 
 def _start_function(
@@ -187,7 +188,7 @@ class _GymEpisodes:
 
     def step(
         self, x: npt.NDArray[np.float64], action: int | npt.NDArray[np.float64]
-    ) -> tuple[npt.NDArray[np.float64], float, bool, bool | None]:
+    ) -> tuple[npt.NDArray[np.float64], float, bool, bool, bool | None]:
         from gymnasium import spaces
 
         if isinstance(action, int):
@@ -201,11 +202,11 @@ class _GymEpisodes:
             )
         obs, r, terminated, truncated, info = self.env.step(act)
         success = info.get("is_success") if isinstance(info, Mapping) else None
-        done = bool(terminated or truncated)
         return (
             _state(obs, self.task.state_dim, "observation"),
             float(r),
-            done,
+            bool(terminated),
+            bool(truncated),
             None if success is None else bool(success),
         )
 
@@ -306,13 +307,13 @@ def collect(
         t = 0
         while steps is None or t < steps:
             j = _choose(src, x, rng, policy, epsilon)
-            nx, r, done, _ = src.step(x, j)
+            nx, r, terminated, truncated, _ = src.step(x, j)
             xs.append(x)
             us.append(src.vector(j))
             nxs.append(nx)
             rs.append(r)
             t += 1
-            if done or len(rs) >= samples:
+            if terminated or truncated or len(rs) >= samples:
                 break
             x = nx
         episode += 1
@@ -457,7 +458,8 @@ def _run(policy: Policy, src: _Episodes, episode: int, steps: int | None) -> dic
         # The greedy policy picks a joint action; the interpolated one (eq 22) a vector.
         u = np.asarray(policy.act(x), dtype=np.float64) if interpolated else None
         action: int | npt.NDArray[np.float64] = int(policy.act_index(x)) if u is None else u
-        x, r, done, success = src.step(x, action)
+        x, r, terminated, truncated, success = src.step(x, action)
+        done = terminated or truncated
         states.append(x)
         actions.append(src.vector(action) if isinstance(action, int) else action)
         rewards.append(r)

@@ -387,8 +387,10 @@ def test_learn_from_samples_refuses_what_the_cli_refuses() -> None:
         fuzzyq.learn_from_samples(one, "fqi")  # type: ignore[arg-type]
     with pytest.raises(fuzzyq.ConfigError, match="learner"):
         fuzzyq.learn_from_samples(one, "sarsa")  # type: ignore[arg-type]
-    with pytest.raises(fuzzyq.ConfigError, match="model: fuzzy Q-learning"):
-        fuzzyq.learn_from_samples(fuzzyq.DcMotor())  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="source: of the built-in tasks"):
+        fuzzyq.learn_from_samples(fuzzyq.DcMotor())
+    with pytest.raises(fuzzyq.ConfigError, match="task: applies to a system of your own"):
+        fuzzyq.learn_from_samples(one, task=fuzzyq.Task(state_bounds=[[0, 1]] * 4, actions=[[0.0, 1.0]]))
     with pytest.raises(fuzzyq.ConfigError, match="vqql is available for the pointmass"):
         fuzzyq.learn_from_samples(fuzzyq.Khepera(agents=1), "vqql")
     with pytest.raises(fuzzyq.ConfigError, match="cells"):

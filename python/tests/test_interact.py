@@ -185,10 +185,96 @@ def test_an_interpolated_policy_acts_with_vectors(learned: fuzzyq.Solution) -> N
         fuzzyq.rollout(policy, two_carts.TwoCartsEnv(), task=two_carts.task())
 
 
-def test_the_docs_single_cart_example_runs_as_it_says(capsys: pytest.CaptureFixture[str]) -> None:
-    page = Path(__file__).resolve().parents[2] / "docs" / "site" / "python" / "own-system.md"
-    (block,) = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
+#: The page of the docs on your own system.
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "site" / "python" / "own-system.md"
+
+
+def run_docs_block(index: int) -> dict[str, Any]:
+    """Runs python block `index` of `PAGE` as written; returns its variables."""
+    blocks = re.findall(r"```python\n(.*?)```", PAGE.read_text(), flags=re.S)
+    assert len(blocks) == 2
     scope: dict[str, Any] = {}
-    exec(compile(block, str(page), "exec"), scope)
+    exec(compile(blocks[index], str(PAGE), "exec"), scope)
+    return scope
+
+
+def test_the_docs_single_cart_example_runs_as_it_says(capsys: pytest.CaptureFixture[str]) -> None:
+    scope = run_docs_block(0)
     assert scope["result"]["summary"]["success_rate"] == 1.0
     assert "success_rate" in capsys.readouterr().out
+
+
+def test_fuzzy_q_learning_learns_the_carts_from_the_environment_alone() -> None:
+    """The docs' example of fuzzy Q-learning on the carts, run as written."""
+    scope = run_docs_block(1)
+    policy, report = scope["policy"], scope["report"]
+    assert (policy.learner, policy.env, policy.n_agents) == ("fql", None, 2)
+    steps = report["curve"]["steps"]
+    # The environment truncates at 100 steps, before the learner's own limit of 200.
+    assert steps.max() == two_carts.EPISODE_STEPS and report["steps_total"] == steps.sum()
+    assert not report["curve"]["terminal"].any()
+    assert scope["result"]["summary"]["success_rate"] >= 0.9, scope["result"]["summary"]
+
+
+@pytest.mark.parametrize("learner", ["fql", "vqql"])
+def test_learning_your_own_system_is_deterministic_and_pickles(learner: Any) -> None:
+    task, grid = two_carts.task(), two_carts.grid()
+    runs = [
+        fuzzyq.learn_from_samples(
+            two_carts.TwoCartsEnv(), learner, task=task, grid=grid, episodes=30, seed=4
+        )
+        for _ in range(2)
+    ]
+    (policy, report), (again, _) = runs
+    assert pickle.dumps(policy) == pickle.dumps(again)
+    copy = pickle.loads(pickle.dumps(policy))
+    states = np.random.default_rng(0).uniform(-1, 1, (50, 4))
+    assert np.array_equal(copy.act_index(states), policy.act_index(states))
+    assert np.array_equal(copy.q_values(states), policy.q_values(states))
+    assert (report["lloyd"] is not None) == (learner == "vqql")
+    run = policy.rollout(plant=two_carts.TwoCartsEnv(), task=task, seed=3)
+    assert run["steps"] == two_carts.EPISODE_STEPS
+
+
+def test_a_callable_model_learns_from_samples_too() -> None:
+    policy, report = fuzzyq.learn_from_samples(
+        two_carts.callable_model(),
+        task=two_carts.task(),
+        grid=two_carts.grid(),
+        episodes=20,
+        episode_steps=50,
+    )
+    assert report["curve"]["steps"].max() == 50
+    # Decentralised and greedy: the joint action maximises the joint Q-values.
+    for x in np.random.default_rng(1).uniform(-1, 1, (20, 4)):
+        q = policy.q_values(x)
+        assert q[policy.act_index(x)] == q.max()
+        assert policy.act_index(x) == two_carts.callable_model().joint_index(policy.agent_actions(x))
+
+
+def test_learning_your_own_system_refuses_what_it_lacks() -> None:
+    env, task, grid = two_carts.TwoCartsEnv(), two_carts.task(), two_carts.grid()
+    with pytest.raises(fuzzyq.ConfigError, match="task: learning"):
+        fuzzyq.learn_from_samples(env, grid=grid)
+    with pytest.raises(fuzzyq.ConfigError, match="grid: a system of your own"):
+        fuzzyq.learn_from_samples(env, task=task)
+    with pytest.raises(fuzzyq.ConfigError, match="grid: the task's state has 4 variables"):
+        fuzzyq.learn_from_samples(env, task=task, grid=fuzzyq.Grid([[-1, 1]] * 3))
+    with pytest.raises(fuzzyq.InputTypeError, match="task: expected a fuzzyq.Task"):
+        fuzzyq.learn_from_samples(env, task=grid, grid=grid)  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="cells"):
+        fuzzyq.learn_from_samples(env, task=task, grid=grid, cells=4)
+    with pytest.raises(fuzzyq.ConfigError, match="gamma"):
+        fuzzyq.learn_from_samples(env, task=task, grid=grid, gamma=1.5)
+
+
+def test_an_exception_in_the_environment_is_raised() -> None:
+    class Broken(two_carts.TwoCartsEnv):
+        def step(self, action: Any) -> Any:
+            if self.t == 7:
+                raise RuntimeError("the carts derailed")
+            return super().step(action)
+
+    task, grid = two_carts.task(), two_carts.grid()
+    with pytest.raises(RuntimeError, match="derailed"):
+        fuzzyq.learn_from_samples(Broken(), task=task, grid=grid, episodes=5)

@@ -1,16 +1,16 @@
 //! `Policy`: the sim crate's policy of any learner, acting on states and observations and
 //! rolling out through the command line's one rollout path ([`evaluate::run`]).
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
-use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_sim::SimError;
 use fuzzyq_sim::learn::tasks::khepera::observation;
 use fuzzyq_sim::model::{Dynamics, F64Model};
 use fuzzyq_sim::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use fuzzyq_sim::run::metrics::{KheperaRun, Trajectory};
-use fuzzyq_sim::run::policy::{AdditivePolicy, Policy as SimPolicy, Scratch};
+use fuzzyq_sim::run::policy::{AdditivePolicy, Policy as SimPolicy, Scratch, TaskPolicyData};
 use fuzzyq_sim::world::PointMassPlantConfig;
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray1, PyArray2, PyArray3};
@@ -47,20 +47,19 @@ pub(crate) enum Origin {
     Solution(Py<PyAny>),
     /// A policy file learned from samples (its bytes).
     File(Vec<u8>),
+    /// A policy learned from samples of a system of your own, as JSON
+    /// ([`fuzzyq_sim::run::policy::TaskPolicyData`]).
+    Task(String),
 }
 
-/// Each agent's slice of a joint observation of a policy learned from samples.
-fn split<'a>(p: &AdditivePolicy, x: &'a [f64]) -> Vec<&'a [f64]> {
-    let features = p.q().features();
-    let mut start = 0;
-    (0..p.q().n_agents())
-        .map(|i| {
-            let d = features.obs_dim(i).unwrap_or(0);
-            let s = &x[start..start + d];
-            start += d;
-            s
-        })
-        .collect()
+/// Each agent's observation in an input of a policy learned from samples.
+fn split<'a>(p: &AdditivePolicy, x: &'a [f64]) -> Result<Vec<Cow<'a, [f64]>>, SimError> {
+    p.split(x)
+}
+
+/// [`split`]'s observations as the Q-function takes them.
+fn slices<'a>(obs: &'a [Cow<'_, [f64]>]) -> Vec<&'a [f64]> {
+    obs.iter().map(AsRef::as_ref).collect()
 }
 
 impl Policy {
@@ -87,9 +86,27 @@ impl Policy {
         ))
     }
 
-    /// Rebuilds a pickled policy: `(solution, kind)` or `(file bytes, "greedy")`.
+    /// The greedy policy learned from samples of a system of your own.
+    pub(crate) fn from_task(py: Python<'_>, data: TaskPolicyData) -> PyResult<Self> {
+        let json =
+            serde_json::to_string(&data).map_err(|e| error(py, Kind::Internal, e.to_string()))?;
+        let policy = AdditivePolicy::for_task(data).map_err(|e| sim_error(py, &e))?;
+        Ok(Self::new(
+            Arc::new(SimPolicy::Additive(policy)),
+            PolicyKind::Greedy,
+            Origin::Task(json),
+        ))
+    }
+
+    /// Rebuilds a pickled policy: `(solution, kind)`, `(file bytes, "greedy")` or
+    /// `(task policy JSON, "greedy")`.
     pub(crate) fn restore(py: Python<'_>, data: &Bound<'_, PyAny>) -> PyResult<Py<PyAny>> {
         let (origin, kind): (Bound<'_, PyAny>, String) = data.extract()?;
+        if let Ok(json) = origin.extract::<String>() {
+            let data: TaskPolicyData = serde_json::from_str(&json)
+                .map_err(|e| error(py, Kind::Input, format!("_restore: {e}")))?;
+            return Ok(Py::new(py, Self::from_task(py, data)?)?.into_any());
+        }
         let Ok(bytes) = crate::pickle::bytes(&origin) else {
             // A solution's policy: the solution rebuilds it.
             return Ok(origin.call_method1("policy", (kind,))?.unbind());
@@ -108,19 +125,14 @@ impl Policy {
     fn state_dim_(&self) -> usize {
         match &*self.inner {
             SimPolicy::Fqi(p) => p.state_dim(),
-            SimPolicy::Additive(p) => {
-                let f = p.q().features();
-                (0..p.q().n_agents())
-                    .map(|i| f.obs_dim(i).unwrap_or(0))
-                    .sum()
-            }
+            SimPolicy::Additive(p) => p.input_dim(),
         }
     }
 
     fn action_dim_(&self) -> usize {
         match &*self.inner {
             SimPolicy::Fqi(p) => p.action_dim(),
-            SimPolicy::Additive(p) => p.q().n_agents() * F64Model::actions(p.model()).dim(),
+            SimPolicy::Additive(p) => p.action_dim(),
         }
     }
 
@@ -160,12 +172,9 @@ impl Policy {
             SimPolicy::Fqi(p) => p.act_with(self.kind, x, q, u, scratch),
             SimPolicy::Additive(p) => {
                 let mut idx = vec![0; p.q().n_agents()];
-                p.q().greedy_joint(&split(p, x), &mut idx)?;
-                let d = F64Model::actions(p.model()).dim();
-                for (i, &a) in idx.iter().enumerate() {
-                    u[d * i..d * (i + 1)].copy_from_slice(p.action(a));
-                }
-                Ok(Some(joint_actions::<f64, _>(p.model())?.compose(&idx)?))
+                p.q().greedy_joint(&slices(&split(p, x)?), &mut idx)?;
+                p.write_actions(&idx, u);
+                Ok(Some(p.joint()?.compose(&idx)?))
             }
         }
     }
@@ -257,7 +266,7 @@ impl Policy {
                 Ok(q)
             }
             SimPolicy::Additive(p) => {
-                let obs = split(p, x);
+                let obs = split(p, x)?;
                 let per_agent = p
                     .q()
                     .actions()
@@ -265,10 +274,10 @@ impl Policy {
                     .enumerate()
                     .map(|(i, &m)| {
                         let mut qi = vec![0.0; m];
-                        p.q().q_agent(i, obs[i], &mut qi).map(|()| qi)
+                        p.q().q_agent(i, &obs[i], &mut qi).map(|()| qi)
                     })
                     .collect::<Result<Vec<_>, _>>()?;
-                let joint = joint_actions::<f64, _>(p.model())?;
+                let joint = p.joint()?;
                 let mut idx = vec![0; joint.n_agents()];
                 (0..joint.n_joint())
                     .map(|u| {
@@ -560,7 +569,8 @@ impl Policy {
             let mut out = vec![0; self.n_agents_()];
             let r = match &*self.inner {
                 SimPolicy::Fqi(p) => p.agent_indices(u, &mut out),
-                SimPolicy::Additive(p) => joint_actions::<f64, _>(p.model())
+                SimPolicy::Additive(p) => p
+                    .joint()
                     .and_then(|j| j.decompose(u, &mut out))
                     .map_err(SimError::from),
             };
@@ -611,7 +621,7 @@ impl Policy {
             let x = finite_vector(x, "x", Some(self.state_dim_()))?;
             let r = match &*self.inner {
                 SimPolicy::Fqi(p) => p.value(&x),
-                SimPolicy::Additive(p) => p.q().value(&split(p, &x)),
+                SimPolicy::Additive(p) => split(p, &x).and_then(|o| p.q().value(&slices(&o))),
             };
             r.map_err(|e| sim_error(py, &e))
         })
@@ -924,6 +934,7 @@ impl Policy {
         let origin = match &self.origin {
             Origin::Solution(s) => s.bind(py).clone().into_any(),
             Origin::File(b) => pyo3::types::PyBytes::new(py, b).into_any(),
+            Origin::Task(json) => json.into_pyobject(py)?.into_any(),
         };
         let data = (origin, self.kind.name()).into_pyobject(py)?.into_any();
         crate::pickle::reduce(py, "policy", data)

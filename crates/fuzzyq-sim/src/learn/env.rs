@@ -28,6 +28,12 @@ pub trait Environment {
     fn success(&self) -> bool {
         false
     }
+    /// Whether the environment cut the episode at the last step (a time limit of its own,
+    /// such as a Gymnasium `TimeLimit`): the episode ends there, and the last transition
+    /// bootstraps as one cut at the learner's step limit does. The default never cuts.
+    fn truncated(&self) -> bool {
+        false
+    }
 }
 
 /// The outcome of one [`Environment::step`].

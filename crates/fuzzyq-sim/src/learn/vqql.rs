@@ -194,16 +194,34 @@ pub fn explore(
     steps: usize,
     rng: &mut Pcg64Mcg,
 ) -> Result<Vec<Vec<f64>>, SimError> {
+    let mut env = PointMassEnv::new(model, starts.clone())?;
+    let out = explore_env(&mut env, samples, steps, rng)?;
+    if let Some(e) = env.take_error() {
+        return Err(e);
+    }
+    Ok(out)
+}
+
+/// Explores any environment with uniformly random actions (every agent independently, every
+/// action alike): `samples` observations per agent, row-major, from episodes of at most
+/// `steps` steps (an episode also ends at a terminal transition or when the environment cuts
+/// it), each episode's first observation included, drawing from `rng`.
+pub fn explore_env<E: Environment>(
+    env: &mut E,
+    samples: usize,
+    steps: usize,
+    rng: &mut Pcg64Mcg,
+) -> Result<Vec<Vec<f64>>, SimError> {
     if steps == 0 {
         return Err(ConfigError::invalid("vqql.explore_steps", "must be at least 1").into());
     }
-    let mut env = PointMassEnv::new(model, starts.clone())?;
     let agents = env.n_agents();
     let m: Vec<usize> = (0..agents).map(|i| env.n_actions(i)).collect();
+    let dims: Vec<usize> = (0..agents).map(|i| env.obs_dim(i)).collect();
     let mut out = Vec::with_capacity(agents);
-    for _ in 0..agents {
+    for &d in &dims {
         let mut v = Vec::new();
-        v.try_reserve_exact(samples.saturating_mul(4))
+        v.try_reserve_exact(samples.saturating_mul(d))
             .map_err(|_| {
                 ConfigError::invalid(
                     "vqql.samples",
@@ -214,14 +232,16 @@ pub fn explore(
     }
     let mut actions = vec![0; agents];
     let mut collected = 0;
-    let record = |env: &PointMassEnv, out: &mut [Vec<f64>]| {
+    let record = |env: &E, out: &mut [Vec<f64>]| {
         for (i, o) in out.iter_mut().enumerate() {
-            o.extend_from_slice(&env.state()[4 * i..4 * i + 4]);
+            let at = o.len();
+            o.resize(at + dims[i], 0.0);
+            env.observe(i, &mut o[at..]);
         }
     };
     while collected < samples {
         env.reset(rng);
-        record(&env, &mut out);
+        record(env, &mut out);
         collected += 1;
         for _ in 0..steps {
             if collected == samples {
@@ -230,13 +250,13 @@ pub fn explore(
             for (a, &mi) in actions.iter_mut().zip(&m) {
                 *a = rng.random_range(0..mi);
             }
-            env.step(&actions, rng);
-            record(&env, &mut out);
+            let ended = env.step(&actions, rng).terminal;
+            record(env, &mut out);
             collected += 1;
+            if ended || env.truncated() {
+                break;
+            }
         }
-    }
-    if let Some(e) = env.take_error() {
-        return Err(e);
     }
     Ok(out)
 }
@@ -537,16 +557,26 @@ pub fn build_codebook(
         config.explore_steps,
         &mut rng,
     )?;
+    quantise(&per_agent, &vec![4; per_agent.len()], config, &mut rng)
+}
+
+/// Every agent's codebook of its samples (`dims[i]` values each), agent 0 first.
+fn quantise(
+    per_agent: &[Vec<f64>],
+    dims: &[usize],
+    config: &VqqlConfig,
+    rng: &mut Pcg64Mcg,
+) -> Result<(FeatureSpace, LloydReport), SimError> {
     let mut books = Vec::with_capacity(per_agent.len());
     let mut reports = Vec::with_capacity(per_agent.len());
-    for samples in &per_agent {
+    for (samples, &dim) in per_agent.iter().zip(dims) {
         let (book, report) = lloyd_with(
             samples,
-            4,
+            dim,
             config.cells,
             config.lloyd_iterations,
             config.lloyd_tolerance,
-            &mut rng,
+            rng,
         )?;
         books.push(book);
         reports.push(report);
@@ -554,6 +584,25 @@ pub fn build_codebook(
     let features = FeatureSpace::codebook(books)?;
     let report = LloydReport::new(reports, &features);
     Ok((features, report))
+}
+
+/// [`build_codebook`] on any environment: explores it with [`explore_env`] (episodes of
+/// [`explore_steps`](VqqlConfig::explore_steps)) and quantises each agent's observations.
+pub fn build_codebook_on<E: Environment>(
+    env: &mut E,
+    config: &VqqlConfig,
+) -> Result<(FeatureSpace, LloydReport), SimError> {
+    config.validate()?;
+    let mut rng = Pcg64Mcg::seed_from_u64(config.seed);
+    let per_agent = explore_env(env, config.samples, config.explore_steps, &mut rng)?;
+    quantise(
+        &per_agent,
+        &(0..env.n_agents())
+            .map(|i| env.obs_dim(i))
+            .collect::<Vec<_>>(),
+        config,
+        &mut rng,
+    )
 }
 
 /// VQQL on the point-mass task: [`build_codebook`], then tabular Q-learning over the cells

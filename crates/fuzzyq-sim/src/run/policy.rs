@@ -11,6 +11,7 @@
 //!
 //! A policy acts on a plant through a [`Controller`] ([`Policy::controller`]).
 
+use std::borrow::Cow;
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
@@ -18,6 +19,7 @@ use fuzzyq_core::error::check_len;
 use fuzzyq_core::q::PolicyKind;
 use fuzzyq_core::solver::{BackupPath, Grid, Operator, SolveError, TabulatedModel};
 use fuzzyq_core::{Backup, EvalError, Model, Real, q};
+use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, require};
 use crate::io::config::TrainConfig;
@@ -582,15 +584,41 @@ enum Observe {
     OwnState,
     /// Its sonars and the goal's distance and angle (the robots, [`observation`]).
     Sensors,
+    /// The listed variables of a task's state of `state_dim` values (a system declared in
+    /// Python), agent by agent.
+    Variables {
+        state_dim: usize,
+        of_agent: Vec<Vec<usize>>,
+    },
 }
 
-/// A Q-function learned from samples in the additive layout, with the task it acts in.
+/// A Q-function learned from samples in the additive layout, with the task it acts in: a
+/// built-in model, or a task given by each agent's actions and the state variables it
+/// observes ([`for_task`](Self::for_task)).
 #[derive(Clone, Debug)]
 pub struct AdditivePolicy {
-    model: EnvModel,
+    model: Option<EnvModel>,
+    /// Each agent's actions.
+    actions: Vec<ActionTable>,
     q: AdditiveQ,
     gamma: f64,
     observe: Observe,
+}
+
+/// An [`AdditivePolicy`] of a task ([`AdditivePolicy::for_task`]) as data: what pickles it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TaskPolicyData {
+    /// The learned Q-function.
+    pub q: AdditiveQ,
+    /// Per agent: its actions' components (action-major) and components per action.
+    pub actions: Vec<(Vec<f64>, usize)>,
+    /// Length of the task's state.
+    pub state_dim: usize,
+    /// Per agent: the state variables it observes.
+    pub variables: Vec<Vec<usize>>,
+    /// The learning discount.
+    pub gamma: f64,
 }
 
 impl AdditivePolicy {
@@ -607,7 +635,66 @@ impl AdditivePolicy {
         Self::with(EnvModel::Khepera(model), q, gamma, Observe::Sensors)
     }
 
+    /// A Q-function learned on a task of `data.state_dim` state variables, agent `i`
+    /// observing `data.variables[i]` and acting with `data.actions[i]`. Errors name what does
+    /// not fit the Q-function.
+    pub fn for_task(data: TaskPolicyData) -> Result<Self, SimError> {
+        let TaskPolicyData {
+            q,
+            actions,
+            state_dim,
+            variables,
+            gamma,
+        } = data;
+        let n = q.n_agents();
+        require!(
+            actions.len() == n && variables.len() == n,
+            "policy",
+            format!(
+                "{n} agents in the Q-function, {} action sets and {} observations",
+                actions.len(),
+                variables.len()
+            ),
+        );
+        let mut tables = Vec::with_capacity(n);
+        for (i, (values, dim)) in actions.into_iter().enumerate() {
+            let table = ActionTable::new(values, dim);
+            require!(
+                dim > 0 && table.values().len() == dim * q.actions()[i],
+                &format!("actions[{i}]"),
+                format!("expected {} actions of {dim} values", q.actions()[i]),
+            );
+            let observed = &variables[i];
+            require!(
+                q.features().obs_dim(i) == Some(observed.len())
+                    && observed.iter().all(|&d| d < state_dim),
+                &format!("variables[{i}]"),
+                format!(
+                    "expected {:?} variables below {state_dim}, got {observed:?}",
+                    q.features().obs_dim(i)
+                ),
+            );
+            tables.push(table);
+        }
+        let observe = Observe::Variables {
+            state_dim,
+            of_agent: variables,
+        };
+        Self::checked(None, tables, q, gamma, observe)
+    }
+
     fn with(model: EnvModel, q: AdditiveQ, gamma: f64, observe: Observe) -> Result<Self, SimError> {
+        let tables = vec![F64Model::actions(&model).clone(); F64Model::n_agents(&model)];
+        Self::checked(Some(model), tables, q, gamma, observe)
+    }
+
+    fn checked(
+        model: Option<EnvModel>,
+        actions: Vec<ActionTable>,
+        q: AdditiveQ,
+        gamma: f64,
+        observe: Observe,
+    ) -> Result<Self, SimError> {
         if !(0.0..=1.0).contains(&gamma) {
             return Err(
                 ConfigError::invalid("gamma", format!("must be in [0, 1], got {gamma}")).into(),
@@ -615,6 +702,7 @@ impl AdditivePolicy {
         }
         Ok(Self {
             model,
+            actions,
             q,
             gamma,
             observe,
@@ -634,16 +722,39 @@ impl AdditivePolicy {
         Self::robots(model, file.q, file.fql.gamma)
     }
 
+    /// A task's policy as data (`None` for a built-in model's, which its policy file holds).
+    #[must_use]
+    pub fn task_data(&self) -> Option<TaskPolicyData> {
+        let Observe::Variables {
+            state_dim,
+            of_agent,
+        } = &self.observe
+        else {
+            return None;
+        };
+        Some(TaskPolicyData {
+            q: self.q.clone(),
+            actions: self
+                .actions
+                .iter()
+                .map(|t| (t.values().to_vec(), t.dim()))
+                .collect(),
+            state_dim: *state_dim,
+            variables: of_agent.clone(),
+            gamma: self.gamma,
+        })
+    }
+
     /// The learned Q-function.
     #[must_use]
     pub fn q(&self) -> &AdditiveQ {
         &self.q
     }
 
-    /// The task's model.
+    /// The task's model (`None` for a task given by its actions, [`for_task`](Self::for_task)).
     #[must_use]
-    pub fn model(&self) -> &EnvModel {
-        &self.model
+    pub fn model(&self) -> Option<&EnvModel> {
+        self.model.as_ref()
     }
 
     /// The learning discount.
@@ -652,36 +763,98 @@ impl AdditivePolicy {
         self.gamma
     }
 
+    /// Each agent's actions.
+    #[must_use]
+    pub fn actions(&self) -> &[ActionTable] {
+        &self.actions
+    }
+
+    /// The joint actions: every agent's actions, agent 0 most significant.
+    pub fn joint(&self) -> Result<fuzzyq_core::JointActions<'_, f64>, EvalError> {
+        let mut sets = [fuzzyq_core::ActionSet::default(); fuzzyq_core::MAX_AGENTS];
+        let n = self.actions.len();
+        if n == 0 || n > fuzzyq_core::MAX_AGENTS {
+            return Err(EvalError::Agents { found: n });
+        }
+        for (s, t) in sets.iter_mut().zip(&self.actions) {
+            *s = t.set::<f64>();
+        }
+        fuzzyq_core::JointActions::try_new(&sets[..n])
+    }
+
+    /// Length of the joint action vector.
+    #[must_use]
+    pub fn action_dim(&self) -> usize {
+        self.actions.iter().map(ActionTable::dim).sum()
+    }
+
+    /// Length of what the policy acts on: the task's state, or the agents' observations
+    /// concatenated (a point mass's own state, a robot's sensors).
+    #[must_use]
+    pub fn input_dim(&self) -> usize {
+        match &self.observe {
+            Observe::Variables { state_dim, .. } => *state_dim,
+            _ => (0..self.q.n_agents())
+                .map(|i| self.q.features().obs_dim(i).unwrap_or(0))
+                .sum(),
+        }
+    }
+
+    /// Every agent's observation in an input `x` of [`input_dim`](Self::input_dim) values:
+    /// its variables of the task's state, or its consecutive slice.
+    pub fn split<'a>(&self, x: &'a [f64]) -> Result<Vec<Cow<'a, [f64]>>, SimError> {
+        check_len("state", self.input_dim(), x.len())?;
+        if let Observe::Variables { of_agent, .. } = &self.observe {
+            return Ok(of_agent
+                .iter()
+                .map(|vars| Cow::Owned(vars.iter().map(|&d| x[d]).collect()))
+                .collect());
+        }
+        let mut start = 0;
+        Ok((0..self.q.n_agents())
+            .map(|i| {
+                let d = self.q.features().obs_dim(i).unwrap_or(0);
+                start += d;
+                Cow::Borrowed(&x[start - d..start])
+            })
+            .collect())
+    }
+
+    /// Writes agent action indices `indices` as the joint action vector `u`.
+    pub fn write_actions(&self, indices: &[usize], u: &mut [f64]) {
+        let mut at = 0;
+        for (t, &a) in self.actions.iter().zip(indices) {
+            u[at..at + t.dim()].copy_from_slice(t.action(a));
+            at += t.dim();
+        }
+    }
+
     /// Calls `f` with every agent's observation at `obs`: its own slice of the state (the point
-    /// masses), or its sensors computed into `buf` (the robots).
+    /// masses), its sensors computed into `buf` (the robots), or its variables of the state.
     fn each_observation(
         &self,
         obs: &Observation<'_>,
         buf: &mut Vec<f64>,
         mut f: impl FnMut(usize, &[f64]) -> Result<(), SimError>,
     ) -> Result<(), SimError> {
-        let n = self.q.n_agents();
-        let dim = obs.state.len() / n.max(1);
-        if self.observe == Observe::OwnState {
-            check_len("state", n * dim, obs.state.len())?;
-        }
-        for i in 0..n {
-            match self.observe {
-                Observe::OwnState => f(i, &obs.state[dim * i..dim * (i + 1)])?,
-                Observe::Sensors => {
-                    let pose = obs.state.get(3 * i..3 * i + 3);
-                    let (Some(p), Some(sonar)) = (pose, obs.sonar.get(i)) else {
-                        return Err(ConfigError::invalid(
-                            "plant",
-                            "a robot policy needs the robots' poses and sonars",
-                        )
-                        .into());
-                    };
-                    buf.resize(sonar.len() + 2, 0.0);
-                    observation([p[0], p[1], p[2]], sonar, buf);
-                    f(i, buf)?;
-                }
+        if self.observe != Observe::Sensors {
+            for (i, o) in self.split(obs.state)?.iter().enumerate() {
+                f(i, o)?;
             }
+            return Ok(());
+        }
+        for i in 0..self.q.n_agents() {
+            let pose = obs.state.get(3 * i..3 * i + 3);
+            let (Some(p), Some(sonar)) = (pose, obs.sonar.get(i)) else {
+                return Err(ConfigError::invalid(
+                    "plant",
+                    "a robot policy needs the robots' poses and sonars",
+                )
+                .into());
+            };
+            buf.resize(sonar.len() + 2, 0.0);
+            observation([p[0], p[1], p[2]], sonar, buf);
+            f(i, buf)?;
         }
         Ok(())
     }
@@ -713,16 +886,6 @@ impl AdditivePolicy {
         })?;
         Ok(total)
     }
-
-    /// The action vector of agent action `a` (the model's per-agent actions).
-    #[must_use]
-    pub fn action(&self, a: usize) -> &[f64] {
-        F64Model::actions(&self.model).action(a)
-    }
-
-    fn actions(&self) -> &ActionTable {
-        F64Model::actions(&self.model)
-    }
 }
 
 /// Decides with an [`AdditivePolicy`]: every agent the argmax of its own term.
@@ -737,11 +900,7 @@ impl Controller for AdditiveController<'_> {
     fn act(&mut self, obs: &Observation<'_>, u: &mut [f64]) -> Result<(), SimError> {
         self.policy
             .act_indices_with(obs, &mut self.indices, &mut self.obs)?;
-        let table = self.policy.actions();
-        let d = table.dim();
-        for (i, &a) in self.indices.iter().enumerate() {
-            u[d * i..d * (i + 1)].copy_from_slice(table.action(a));
-        }
+        self.policy.write_actions(&self.indices, u);
         Ok(())
     }
 
@@ -788,7 +947,7 @@ impl Policy {
     pub fn model(&self) -> Option<&EnvModel> {
         match self {
             Self::Fqi(p) => p.model(),
-            Self::Additive(p) => Some(p.model()),
+            Self::Additive(p) => p.model(),
         }
     }
 
@@ -824,5 +983,83 @@ impl Policy {
                 })
             }
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::learn::fql::FeatureSpace;
+
+    /// Two agents of a 4-variable task: agent 0 observes variables 0 and 1 and has 2 actions
+    /// of one value, agent 1 observes variable 3 and has 3 actions of two values.
+    fn task_data() -> TaskPolicyData {
+        let features = FeatureSpace::new(vec![
+            vec![vec![0.0, 1.0], vec![0.0, 1.0]],
+            vec![vec![0.0, 0.5, 1.0]],
+        ])
+        .unwrap();
+        let mut q = AdditiveQ::new(features, vec![2, 3]).unwrap();
+        // Agent 0 prefers action 1 everywhere, agent 1 action 2 near variable 3 = 1.
+        q.phi[0] = vec![0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0];
+        q.phi[1] = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 2.0];
+        TaskPolicyData {
+            q,
+            actions: vec![
+                (vec![-1.0, 1.0], 1),
+                (vec![0.0, 0.0, 1.0, 0.0, 0.0, 1.0], 2),
+            ],
+            state_dim: 4,
+            variables: vec![vec![0, 1], vec![3]],
+            gamma: 0.9,
+        }
+    }
+
+    #[test]
+    fn a_task_policy_observes_its_variables_and_writes_each_agents_actions() {
+        let policy = AdditivePolicy::for_task(task_data()).unwrap();
+        assert!(policy.model().is_none());
+        assert_eq!((policy.input_dim(), policy.action_dim()), (4, 3));
+        let x = [0.2, 0.7, 123.0, 1.0];
+        let obs = policy.split(&x).unwrap();
+        assert_eq!(obs[0].as_ref(), &[0.2, 0.7]);
+        assert_eq!(obs[1].as_ref(), &[1.0]);
+        let mut indices = [0; 2];
+        policy
+            .act_indices(
+                &Observation {
+                    state: &x,
+                    sonar: &[],
+                },
+                &mut indices,
+            )
+            .unwrap();
+        assert_eq!(indices, [1, 2]);
+        let mut u = [0.0; 3];
+        policy.write_actions(&indices, &mut u);
+        assert_eq!(u, [1.0, 0.0, 1.0]);
+        assert_eq!(policy.joint().unwrap().compose(&indices).unwrap(), 5);
+        assert!(policy.split(&x[..3]).is_err());
+        // It round-trips as data.
+        let again = AdditivePolicy::for_task(policy.task_data().unwrap()).unwrap();
+        assert_eq!(again.task_data(), policy.task_data());
+    }
+
+    #[test]
+    fn a_task_policy_that_does_not_fit_its_q_function_is_refused() {
+        let mut data = task_data();
+        data.variables[1] = vec![4];
+        let e = AdditivePolicy::for_task(data).unwrap_err().to_string();
+        assert!(e.contains("variables[1]"), "{e}");
+        let mut data = task_data();
+        data.actions[0] = (vec![-1.0, 0.0, 1.0], 1);
+        let e = AdditivePolicy::for_task(data).unwrap_err().to_string();
+        assert!(e.contains("actions[0]"), "{e}");
+        let mut data = task_data();
+        data.variables.pop();
+        assert!(AdditivePolicy::for_task(data).is_err());
+        let mut data = task_data();
+        data.gamma = 1.5;
+        assert!(AdditivePolicy::for_task(data).is_err());
     }
 }

@@ -592,6 +592,9 @@ fn evaluate_with<E: Environment, L: Lookup>(
                 success = tr.reward > 0.0;
                 break;
             }
+            if env.truncated() {
+                break;
+            }
         }
         success |= env.success();
         total += ret;
@@ -891,6 +894,9 @@ fn learning_episode<E: Environment, L: Lookup>(
         std::mem::swap(&mut bufs.active, &mut bufs.next_active);
         if tr.terminal {
             terminal = true;
+            break;
+        }
+        if env.truncated() {
             break;
         }
         for i in 0..n {

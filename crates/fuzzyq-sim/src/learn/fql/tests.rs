@@ -694,3 +694,91 @@ fn codebook_update_is_tabular_q_learning() {
     let eval = evaluate(&mut Lines::new(1), &out.q, 20, 40, eval_seed(config.seed)).unwrap();
     assert_eq!(eval.success_rate, 1.0);
 }
+
+/// [`Lines`] cut by the environment after `limit` steps (a time limit of its own).
+struct Cut {
+    lines: Lines,
+    limit: usize,
+    steps: usize,
+}
+
+impl Environment for Cut {
+    fn n_agents(&self) -> usize {
+        self.lines.n_agents()
+    }
+    fn n_actions(&self, a: usize) -> usize {
+        self.lines.n_actions(a)
+    }
+    fn obs_dim(&self, a: usize) -> usize {
+        self.lines.obs_dim(a)
+    }
+    fn reset(&mut self, rng: &mut Pcg64Mcg) {
+        self.steps = 0;
+        self.lines.reset(rng);
+    }
+    fn observe(&self, agent: usize, out: &mut [f64]) {
+        self.lines.observe(agent, out);
+    }
+    fn step(&mut self, actions: &[usize], rng: &mut Pcg64Mcg) -> Transition {
+        self.steps += 1;
+        self.lines.step(actions, rng)
+    }
+    fn truncated(&self) -> bool {
+        self.steps >= self.limit
+    }
+}
+
+#[test]
+fn an_environment_that_cuts_its_episodes_ends_them_there() {
+    let features = FeatureSpace::new(vec![vec![uniform_cores(11)]]).unwrap();
+    let config = FqlConfig {
+        episodes: 40,
+        ..line_config()
+    };
+    let mut env = Cut {
+        lines: Lines::new(1),
+        limit: 5,
+        steps: 0,
+    };
+    let outcome = learn(&mut env, &features, &config, continue_all).unwrap();
+    assert!(outcome.curve.iter().all(|r| r.steps <= 5));
+    assert!(outcome.curve.iter().any(|r| r.steps == 5 && !r.terminal));
+    assert_eq!(
+        outcome.steps_total,
+        outcome.curve.iter().map(|r| r.steps).sum::<usize>()
+    );
+    // Uncut, the same runs last up to the learner's own limit.
+    let uncut = learn(&mut Lines::new(1), &features, &config, continue_all).unwrap();
+    assert!(uncut.curve.iter().any(|r| r.steps > 5));
+}
+
+#[test]
+fn vqql_quantises_any_environment() {
+    let mut env = Cut {
+        lines: Lines::new(2),
+        limit: 10,
+        steps: 0,
+    };
+    let config = crate::learn::vqql::VqqlConfig {
+        cells: 6,
+        samples: 400,
+        explore_steps: 50,
+        ..Default::default()
+    };
+    let (features, report) = crate::learn::vqql::build_codebook_on(&mut env, &config).unwrap();
+    assert!(features.is_codebook());
+    assert_eq!(
+        (features.n_cores(0), features.n_cores(1)),
+        (Some(6), Some(6))
+    );
+    assert_eq!(report.agents.len(), 2);
+    let again = crate::learn::vqql::build_codebook_on(&mut env, &config).unwrap();
+    assert_eq!(again.0, features);
+    // Exactly `samples` observations per agent, one value each.
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let samples = crate::learn::vqql::explore_env(&mut env, 33, 50, &mut rng).unwrap();
+    assert_eq!(samples.len(), 2);
+    assert_eq!(samples[0].len(), 33);
+    let outcome = learn(&mut env, &features, &line_config(), continue_all).unwrap();
+    assert!(outcome.q.phi.iter().flatten().all(|v| v.is_finite()));
+}
