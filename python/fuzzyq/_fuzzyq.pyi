@@ -1719,6 +1719,7 @@ def learn_from_samples(
     episodes: int | None = None,
     episode_steps: int | None = None,
     gamma: float | None = None,
+    reward_bound: float | None = None,
     literal: bool = False,
     cells: int | None = None,
     seed: int = 0,
@@ -1761,6 +1762,10 @@ def learn_from_samples(
             robots, 1000 for a system of your own).
         episode_steps: a system of your own's steps per episode at most (default 200).
         gamma: a system of your own's discount (default 0.96, the paper's).
+        reward_bound: the largest magnitude of a step's reward of your own system, if you
+            know it: every parameter is then kept within ``reward_bound / (1 - gamma)`` (the
+            projected update, which the built-in tasks always apply with their goal reward
+            and collision penalty). None: no projection.
         literal: the update as printed in the paper (eqs 24-26) instead of the corrected
             one (kept to measure what the printed form learns).
         cells: VQQL's cells per agent (default: as many as the fuzzy partition has cores: the
@@ -1786,8 +1791,8 @@ def learn_from_samples(
     Raises:
         ConfigError: a classic benchmark, another learner, ``"vqql"`` for the robots, `cells`
             with ``"fql"``, ``episodes=0``; a system of your own without `task` or `grid`, or
-            a grid of another dimension; `task`, `grid`, `episode_steps`, `gamma` or `starts`
-            for a built-in task.
+            a grid of another dimension, a negative `reward_bound`; `task`, `grid`,
+            `episode_steps`, `gamma`, `reward_bound` or `starts` for a built-in task.
         InputTypeError: an argument of the wrong type, or a source that is no system.
         KeyboardInterrupt: Ctrl-C (the run stops after its current episode).
     """

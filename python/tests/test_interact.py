@@ -266,6 +266,19 @@ def test_learning_your_own_system_refuses_what_it_lacks() -> None:
         fuzzyq.learn_from_samples(env, task=task, grid=grid, cells=4)
     with pytest.raises(fuzzyq.ConfigError, match="gamma"):
         fuzzyq.learn_from_samples(env, task=task, grid=grid, gamma=1.5)
+    with pytest.raises(fuzzyq.ConfigError, match="reward_bound"):
+        fuzzyq.learn_from_samples(env, task=task, grid=grid, reward_bound=-1.0)
+
+
+def test_a_reward_bound_keeps_the_parameters_within_the_discounted_returns() -> None:
+    task, grid = two_carts.task(), two_carts.grid()
+    kw: dict[str, Any] = {"task": task, "grid": grid, "episodes": 30, "gamma": 0.9}
+    free, _ = fuzzyq.learn_from_samples(two_carts.TwoCartsEnv(), **kw)
+    bounded, _ = fuzzyq.learn_from_samples(two_carts.TwoCartsEnv(), reward_bound=0.05, **kw)
+    states = np.random.default_rng(2).uniform(-1, 1, (200, 4))
+    # Each cart's term stays within 0.05 / (1 - 0.9) = 0.5: their sum within 1.
+    assert np.abs(bounded.q_values(states)).max() <= 1.0 + 1e-12  # 0.05 / 0.1 rounds up
+    assert np.abs(free.q_values(states)).max() > 1.0
 
 
 def test_an_exception_in_the_environment_is_raised() -> None:

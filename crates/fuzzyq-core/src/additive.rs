@@ -333,6 +333,23 @@ impl<T: Real> Increment<T> {
         finite
     }
 
+    /// [`apply`](Self::apply) projected onto the box `[-bound, bound]`: each changed
+    /// parameter is clamped into it (the projected update; an infinite `bound` is `apply`).
+    pub fn apply_within(
+        &self,
+        phi: &mut [T],
+        n_actions: usize,
+        cores: &ActiveCores<T>,
+        action: usize,
+        bound: T,
+        mut log: impl FnMut(usize, T),
+    ) {
+        self.for_each(cores, n_actions, action, |k, c| {
+            log(k, phi[k]);
+            phi[k] = (phi[k] + c).clamp_to(T::ZERO - bound, bound);
+        });
+    }
+
     /// Adds the increment to one agent's parameters; `log(index, old_value)` sees each
     /// parameter before it changes.
     pub fn apply(
@@ -496,6 +513,31 @@ mod tests {
         let s = 0.1 * delta;
         assert_eq!(phi0, [0.0, 2.0 + 0.5 * s, 0.0, 4.0 + 0.5 * s, 1.0, 0.0]);
         assert_eq!(phi1, [1.0 + s, 0.0, 0.0, 0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn the_projected_update_clamps_each_changed_parameter() {
+        let (c, _) = grid();
+        let g = ProductPartition::try_new(&[&c[..]]).unwrap();
+        let cores = g.active(&[0.25]).unwrap();
+        let inc = Increment {
+            rule: Update::Corrected,
+            error: 10.0,
+            step: 10.0,
+        };
+        let mut phi = [0.0, 2.0, 0.0, 4.0, 1.0, -9.0];
+        let mut logged = [f64::NAN; 6];
+        inc.apply_within(&mut phi, 2, &cores, 1, 5.0, |k, old| logged[k] = old);
+        // Cores 0 and 1 hold half each: +5 on action 1, clamped to 5; the rest untouched.
+        assert_eq!(phi, [0.0, 5.0, 0.0, 5.0, 1.0, -9.0]);
+        assert_eq!(logged[1], 2.0);
+        assert_eq!(logged[3], 4.0);
+        // An infinite bound is the plain update.
+        let mut free = [0.0, 2.0, 0.0, 4.0, 1.0, -9.0];
+        let mut plain = free;
+        inc.apply_within(&mut free, 2, &cores, 1, f64::INFINITY, |_, _| {});
+        inc.apply(&mut plain, 2, &cores, 1, |_, _| {});
+        assert_eq!(free, plain);
     }
 
     #[test]

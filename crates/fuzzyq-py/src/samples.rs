@@ -136,7 +136,7 @@ fn report<'py>(
 /// fuzzified on a `Grid`. Returns the greedy, decentralised `Policy` and the run's report
 /// (see the stub).
 #[pyfunction]
-#[pyo3(signature = (source, learner = "fql", *, task = None, grid = None, episodes = None, episode_steps = None, gamma = None, literal = false, cells = None, seed = 0, starts = None, progress = false))]
+#[pyo3(signature = (source, learner = "fql", *, task = None, grid = None, episodes = None, episode_steps = None, gamma = None, reward_bound = None, literal = false, cells = None, seed = 0, starts = None, progress = false))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn learn_from_samples<'py>(
     py: Python<'py>,
@@ -147,6 +147,7 @@ pub(crate) fn learn_from_samples<'py>(
     #[pyo3(from_py_with = arg)] episodes: Option<usize>,
     #[pyo3(from_py_with = arg)] episode_steps: Option<usize>,
     #[pyo3(from_py_with = arg)] gamma: Option<f64>,
+    #[pyo3(from_py_with = arg)] reward_bound: Option<f64>,
     #[pyo3(from_py_with = arg)] literal: bool,
     #[pyo3(from_py_with = arg)] cells: Option<usize>,
     #[pyo3(from_py_with = arg)] seed: u64,
@@ -180,6 +181,7 @@ pub(crate) fn learn_from_samples<'py>(
                 ("grid", given(grid)),
                 ("episode_steps", episode_steps.is_some()),
                 ("gamma", gamma.is_some()),
+                ("reward_bound", reward_bound.is_some()),
                 ("starts", given(starts)),
             ];
             if let Some((name, _)) = own.iter().find(|(_, set)| *set) {
@@ -228,6 +230,7 @@ pub(crate) fn learn_from_samples<'py>(
             grid: grid.get(),
             gamma: gamma.unwrap_or(fuzzyq_sim::paper::GAMMA),
             max_steps: episode_steps,
+            reward_bound,
         };
         learn_own(py, source, learner, &own, &options, starts, progress)
     })
@@ -312,6 +315,7 @@ struct PyEpisodes<'py, 'f> {
     x: Vec<f64>,
     truncated: bool,
     success: bool,
+    reward_bound: Option<f64>,
     failure: &'f RefCell<Option<PyErr>>,
 }
 
@@ -404,6 +408,9 @@ impl Environment for PyEpisodes<'_, '_> {
     fn truncated(&self) -> bool {
         self.truncated
     }
+    fn reward_bound(&self) -> Option<f64> {
+        self.reward_bound
+    }
 }
 
 /// The state variables each agent of `task` observes: its own block's, when the declared
@@ -449,6 +456,8 @@ struct OwnSystem<'a, 'py> {
     grid: &'a Grid,
     gamma: f64,
     max_steps: Option<usize>,
+    /// The largest magnitude of a step's reward, if the user knows it (the projection).
+    reward_bound: Option<f64>,
 }
 
 /// Learns a system of your own (`source`, through `fuzzyq._interact._episodes`) with fuzzy
@@ -519,6 +528,7 @@ fn learn_own<'py>(
         variables: variables.clone(),
         truncated: false,
         success: false,
+        reward_bound: own.reward_bound,
         failure: &failure,
     };
     let per_agent: Vec<Vec<Vec<f64>>> = variables

@@ -67,19 +67,34 @@ pub(crate) struct Step<'s> {
     pub(crate) terminal: bool,
 }
 
+/// How a sample update changes the parameters: the rule, the discount, the step size and the
+/// box `[-bound, bound]` the parameters are projected onto.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Rates {
+    pub(crate) rule: Update,
+    pub(crate) gamma: f64,
+    pub(crate) alpha: f64,
+    pub(crate) bound: f64,
+}
+
 /// Applies one sample update in place with the core's [`additive`] update: returns the TD
 /// error `delta` (corrected) or the bracket `r + beta - Gamma` (literal), or `None`, leaving
-/// `phi` untouched, when the update is not finite. `log(agent, index, old_value)` is called
-/// before each parameter is overwritten.
+/// `phi` untouched, when the update is not finite. Each changed parameter is then projected
+/// onto `[-bound, bound]` (an infinite `bound` projects nothing). `log(agent, index,
+/// old_value)` is called before each parameter is overwritten.
 pub(crate) fn td_update(
-    rule: Update,
+    rates: Rates,
     phi: &mut [Vec<f64>],
     m: &[usize],
     step: &Step<'_>,
-    gamma: f64,
-    alpha: f64,
     mut log: impl FnMut(usize, usize, f64),
 ) -> Option<f64> {
+    let Rates {
+        rule,
+        gamma,
+        alpha,
+        bound,
+    } = rates;
     let mut td = Td::default();
     for (i, &u) in step.actions.iter().enumerate() {
         td.add_agent(step.q[i][u], &step.q_next[i], u, &step.next[i]);
@@ -94,7 +109,9 @@ pub(crate) fn td_update(
     }
     for (i, phi_i) in phi.iter_mut().enumerate() {
         let cores = inc.cores(&step.cur[i], &step.next[i]);
-        inc.apply(phi_i, m[i], cores, step.actions[i], |k, old| log(i, k, old));
+        inc.apply_within(phi_i, m[i], cores, step.actions[i], bound, |k, old| {
+            log(i, k, old);
+        });
     }
     Some(inc.error)
 }

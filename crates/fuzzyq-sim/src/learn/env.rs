@@ -34,6 +34,13 @@ pub trait Environment {
     fn truncated(&self) -> bool {
         false
     }
+    /// The largest magnitude of a step's reward, when the environment knows it: the learners
+    /// from samples then keep every parameter within `reward_bound / (1 - gamma)`, the
+    /// largest discounted return (the projected update; see [`crate::learn::fql`]). The
+    /// default knows none and projects nothing.
+    fn reward_bound(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// The outcome of one [`Environment::step`].

@@ -70,6 +70,18 @@
 //! other part of [`learn`] (exploration, schedules, evaluations, the convergence window, the
 //! curve) is shared; the fuzzy path is compiled separately and unchanged.
 //!
+//! # The projected update
+//! The additive value is a value decomposition trained off-policy with bootstrapping, and
+//! such linear TD updates can diverge (they did on the point masses learning near the goal:
+//! parameters of 2e60 with the corrected update, 2e225 with the literal one). When the
+//! environment bounds its rewards, `|r| <= R` ([`Environment::reward_bound`]: the point
+//! masses' goal reward, the robots' goal reward or collision penalty), every changed parameter
+//! is clamped into `[-R / (1 - gamma), R / (1 - gamma)]`, the range of every discounted
+//! return: a projection onto a box that holds every agent's share of the true values, so the
+//! parameters stay bounded whatever the step size (Bertsekas and Tsitsiklis 1996, projected
+//! stochastic approximation). Runs whose parameters stay inside are unchanged, bit for bit;
+//! an environment that knows no bound is not projected.
+//!
 //! # Exploration and step sizes
 //! Epsilon-greedy per agent: each agent independently takes a uniformly random action with
 //! probability `epsilon_k` and its greedy action otherwise. `epsilon_k` decays linearly from
@@ -148,7 +160,7 @@ pub use fuzzyq_core::additive::Update;
 
 use crate::error::{ConfigError, SimError, discount, require};
 pub use crate::learn::additive::{AdditiveQ, Sample};
-use crate::learn::additive::{Step, td_update};
+use crate::learn::additive::{Rates, Step, td_update};
 pub use crate::learn::env::{Environment, Transition};
 pub use crate::learn::features::FeatureSpace;
 use crate::learn::features::{FeatureKind, Lookup};
@@ -376,6 +388,20 @@ pub struct Evaluation {
     /// Fraction of episodes that succeeded: ended with a terminal transition of positive
     /// reward, or with [`Environment::success`] true.
     pub success_rate: f64,
+}
+
+/// The box `[-b, b]` every parameter is projected onto: `b = reward_bound / (1 - gamma)`, the
+/// largest discounted return, when the environment bounds its rewards; infinite (no
+/// projection) otherwise.
+fn param_bound(reward_bound: Option<f64>, gamma: f64) -> Result<f64, ConfigError> {
+    match reward_bound {
+        None => Ok(f64::INFINITY),
+        Some(r) if r >= 0.0 && r.is_finite() => Ok(r / (1.0 - gamma)),
+        Some(r) => Err(ConfigError::invalid(
+            "reward_bound",
+            format!("the environment's reward bound must be a finite number >= 0, got {r}"),
+        )),
+    }
 }
 
 /// The log of overwritten parameter values over the last `window` episodes, from which the
@@ -687,6 +713,7 @@ fn learn_with<E: Environment, L: Lookup>(
     let mut steps_total = 0usize;
     let mut moved = false;
     let mut stop = StopReason::EpisodeLimit;
+    let bound = param_bound(env.reward_bound(), config.gamma)?;
     if let Some(state) = progress.resume() {
         state.check(&q.phi, config)?;
         state.restore(&mut resume::Restored {
@@ -712,7 +739,7 @@ fn learn_with<E: Environment, L: Lookup>(
             &mut bufs,
             &mut rng,
             &mut log,
-            (episode, epsilon, alpha),
+            (episode, epsilon, alpha, bound),
         )?;
         moved |= e.moved;
         let (steps, ret, discounted, terminal, diverged) =
@@ -814,7 +841,7 @@ struct EpisodeRun {
 /// One episode of fuzzy Q-learning from a reset of `env`: epsilon-greedy actions per agent,
 /// a temporal-difference update of `phi` after every step (each change logged), until a
 /// terminal state, `config.max_steps` or a diverging update. `at` is the episode's number,
-/// epsilon and alpha.
+/// epsilon, alpha and the parameters' bound.
 #[allow(clippy::too_many_arguments)] // the learner's state, passed apart so each borrow is its own
 fn learning_episode<E: Environment, L: Lookup>(
     env: &mut E,
@@ -825,7 +852,7 @@ fn learning_episode<E: Environment, L: Lookup>(
     bufs: &mut Buffers,
     rng: &mut Pcg64Mcg,
     log: &mut WindowLog,
-    (episode, epsilon, alpha): (usize, f64, f64),
+    (episode, epsilon, alpha, bound): (usize, f64, f64, f64),
 ) -> Result<EpisodeRun, SimError> {
     let n = m.len();
     let mut moved = false;
@@ -871,17 +898,15 @@ fn learning_episode<E: Environment, L: Lookup>(
             reward: tr.reward,
             terminal: tr.terminal,
         };
-        let result = td_update(
-            config.update,
-            phi,
-            m,
-            &step,
-            config.gamma,
+        let rates = Rates {
+            rule: config.update,
+            gamma: config.gamma,
             alpha,
-            |a, k, old| {
-                log.record(a, k, old);
-            },
-        );
+            bound,
+        };
+        let result = td_update(rates, phi, m, &step, |a, k, old| {
+            log.record(a, k, old);
+        });
         let Some(delta) = result else {
             diverged = true;
             break;

@@ -401,6 +401,15 @@ impl Environment for KheperaEnv {
     fn success(&self) -> bool {
         self.in_region && !self.last_contact
     }
+
+    /// The goal reward or the collision penalty, whichever is larger; none with the
+    /// diagnostic [`Shaping`] on.
+    fn reward_bound(&self) -> Option<f64> {
+        let c = self.model.config();
+        self.shaping
+            .is_none()
+            .then(|| c.goal_reward.abs().max(c.collision_penalty.abs()))
+    }
 }
 
 /// The default learning settings of [`train_fql`] on the Khepera task:

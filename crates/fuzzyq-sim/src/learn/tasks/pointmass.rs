@@ -265,6 +265,11 @@ impl Environment for PointMassEnv {
     fn success(&self) -> bool {
         self.model.in_goal_f64(&self.x)
     }
+
+    /// The goal reward: the only reward a step pays.
+    fn reward_bound(&self) -> Option<f64> {
+        Some(self.model.config().goal_reward.abs())
+    }
 }
 
 /// The default learning settings on the point-mass task (fuzzy Q-learning and VQQL alike):
@@ -336,6 +341,88 @@ mod tests {
 
     fn continue_all(_: &EpisodeRecord) -> ControlFlow<()> {
         ControlFlow::Continue(())
+    }
+
+    /// [`PointMassEnv`] without its reward bound: the learners' updates unprojected.
+    struct Unbounded(PointMassEnv);
+
+    impl Environment for Unbounded {
+        fn n_agents(&self) -> usize {
+            self.0.n_agents()
+        }
+        fn n_actions(&self, agent: usize) -> usize {
+            self.0.n_actions(agent)
+        }
+        fn obs_dim(&self, agent: usize) -> usize {
+            self.0.obs_dim(agent)
+        }
+        fn reset(&mut self, rng: &mut Pcg64Mcg) {
+            self.0.reset(rng);
+        }
+        fn observe(&self, agent: usize, out: &mut [f64]) {
+            self.0.observe(agent, out);
+        }
+        fn step(&mut self, actions: &[usize], rng: &mut Pcg64Mcg) -> Transition {
+            self.0.step(actions, rng)
+        }
+    }
+
+    /// The largest parameter magnitude of fuzzy Q-learning (corrected or literal) or VQQL
+    /// on the paper's point masses learning near the goal (`fuzzyq compare --learn-position
+    /// 0.1`), where the unprojected updates diverge; `bounded`: with the projection.
+    fn largest_parameter(learner: &str, seed: u64, bounded: bool) -> f64 {
+        let model = PointMass::paper();
+        let starts = Starts::Uniform {
+            position: 0.1,
+            velocity: 0.0,
+        };
+        let fql = FqlConfig {
+            episodes: 300,
+            seed,
+            eval_every: 0,
+            update: if learner == "fql-literal" {
+                fql::Update::Literal
+            } else {
+                fql::Update::Corrected
+            },
+            ..default_fql_config()
+        };
+        let features = if learner == "vqql" {
+            let v = VqqlConfig {
+                cells: 128,
+                samples: 4000,
+                seed,
+                ..VqqlConfig::default()
+            };
+            vqql::build_codebook(&model, &starts, &v).unwrap().0
+        } else {
+            feature_space(&model, &POSITION_CORES, &VELOCITY_CORES).unwrap()
+        };
+        let mut env = PointMassEnv::new(&model, starts).unwrap();
+        let outcome = if bounded {
+            fql::learn(&mut env, &features, &fql, continue_all)
+        } else {
+            fql::learn(&mut Unbounded(env), &features, &fql, continue_all)
+        };
+        let q = outcome.unwrap().q;
+        q.phi.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()))
+    }
+
+    #[test]
+    fn the_projected_update_keeps_every_learners_parameters_bounded() {
+        // The goal reward 5 over 1 - gamma = 0.04: no parameter beyond 125, in any seed.
+        let bound = 5.0 / (1.0 - crate::paper::GAMMA);
+        let mut unbounded: f64 = 0.0;
+        for learner in ["fql", "fql-literal", "vqql"] {
+            for seed in 0..5 {
+                let largest = largest_parameter(learner, seed, true);
+                assert!(largest <= bound, "{learner} seed {seed}: {largest}");
+                assert!(largest > 0.0, "{learner} seed {seed} met no reward");
+            }
+            unbounded = unbounded.max(largest_parameter(learner, 0, false));
+        }
+        // Without the projection the same runs leave every bound behind.
+        assert!(unbounded > 1e6, "{unbounded}");
     }
 
     /// Rolls the greedy policy out from [`TINY_X0`]: it must reach the goal ball and stay.
