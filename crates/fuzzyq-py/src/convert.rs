@@ -462,3 +462,12 @@ pub(crate) fn transitions_dict<'py>(
     d.set_item("rewards", PyArray1::from_slice(py, r))?;
     Ok(d)
 }
+
+/// Pairs `(a, b)` as a new `(n, 2)` array.
+pub(crate) fn pairs_array<'py>(py: Python<'py>, pairs: &[(f64, f64)]) -> Bound<'py, PyArray2<f64>> {
+    let flat: Vec<f64> = pairs.iter().flat_map(|&(a, b)| [a, b]).collect();
+    PyArray2::from_owned_array(
+        py,
+        Array2::from_shape_vec((pairs.len(), 2), flat).expect("pairs"),
+    )
+}

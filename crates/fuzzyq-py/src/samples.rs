@@ -28,44 +28,31 @@ use crate::errors::{Kind, config_error, error, guard, sim_error};
 use crate::khepera::Khepera;
 use crate::model::{Grid, PointMass};
 use crate::policy::Policy;
+use crate::solve::progress_bar;
 use crate::task::Task;
 
-/// The training configuration `fuzzyq train --env ENV` reads for a built-in multi-agent model.
-fn config_of(py: Python<'_>, model: &Bound<'_, PyAny>) -> PyResult<TrainConfig> {
-    if let Ok(pm) = model.cast::<PointMass>() {
+/// The training configuration `fuzzyq train --env ENV` reads for a built-in model the
+/// learners from samples learn (the point masses, the robots); `None` for any other source.
+fn builtin_config(py: Python<'_>, source: &Bound<'_, PyAny>) -> PyResult<Option<TrainConfig>> {
+    if let Ok(pm) = source.cast::<PointMass>() {
         let mut c =
             TrainConfig::default_for(EnvKind::Pointmass).map_err(|e| config_error(py, &e))?;
         c.env = fuzzyq_sim::io::config::EnvConfig::Pointmass(pm.get().model.config().clone());
-        return Ok(c);
+        return Ok(Some(c));
     }
-    if let Ok(k) = model.cast::<Khepera>() {
-        return k.get().train_config(py);
+    match source.cast::<Khepera>() {
+        Ok(k) => Ok(Some(k.get().train_config(py)?)),
+        Err(_) => Ok(None),
     }
-    Err(error(
-        py,
-        Kind::Config,
-        format!(
-            "source: fuzzy Q-learning and VQQL learn the point masses (fuzzyq.PointMass) and the \
-             robots (fuzzyq.Khepera), got {}",
-            describe(model)
-        ),
-    ))
 }
 
-/// The tqdm bar of `progress=True` over `episodes`.
-fn bar(py: Python<'_>, episodes: usize, what: &str) -> PyResult<Py<PyAny>> {
-    let tqdm = py.import("tqdm").map_err(|_| {
-        error(
-            py,
-            Kind::Config,
-            "progress: progress=True shows a tqdm bar, but tqdm is not installed (pip install tqdm)",
-        )
-    })?;
-    let kwargs = PyDict::new(py);
-    kwargs.set_item("total", episodes)?;
-    kwargs.set_item("unit", "episode")?;
-    kwargs.set_item("desc", what)?;
-    Ok(tqdm.getattr("tqdm")?.call((), Some(&kwargs))?.unbind())
+/// Between two episodes: Ctrl-C (an exception a signal handler raised) and the bar's step.
+fn between_episodes(py: Python<'_>, bar: Option<&Py<PyAny>>) -> PyResult<()> {
+    py.check_signals()?;
+    if let Some(b) = bar {
+        b.bind(py).call_method1("update", (1,))?;
+    }
+    Ok(())
 }
 
 /// The learning curve as numpy columns named as `fuzzyq train --curve` names them.
@@ -174,8 +161,7 @@ pub(crate) fn learn_from_samples<'py>(
             seed,
         };
         let given = |v: Option<&Bound<'_, PyAny>>| v.is_some_and(|v| !v.is_none());
-        let builtin = source.cast::<PointMass>().is_ok() || source.cast::<Khepera>().is_ok();
-        if builtin {
+        if let Some(config) = builtin_config(py, source)? {
             let own = [
                 ("task", given(task)),
                 ("grid", given(grid)),
@@ -194,7 +180,7 @@ pub(crate) fn learn_from_samples<'py>(
                     ),
                 ));
             }
-            return learn_builtin(py, source, learner, &options, progress);
+            return learn_builtin(py, &config, learner, &options, progress);
         }
         if source.cast::<crate::classic::ClassicModel>().is_ok() {
             return Err(error(
@@ -259,36 +245,29 @@ fn required<'a, 'py, T: pyo3::PyClass>(
 /// [`learn_from_samples`] of a built-in task: the command line's run.
 fn learn_builtin<'py>(
     py: Python<'py>,
-    model: &Bound<'py, PyAny>,
+    config: &TrainConfig,
     learner: Learner,
     options: &SampleOptions,
     progress: bool,
 ) -> PyResult<(Py<Policy>, Bound<'py, PyDict>)> {
-    let config = config_of(py, model)?;
     let learning =
-        SampleLearning::with_options(&config, learner, options).map_err(|e| sim_error(py, &e))?;
+        SampleLearning::with_options(config, learner, options).map_err(|e| sim_error(py, &e))?;
     let bar = progress
-        .then(|| bar(py, learning.fql.episodes, learner_name(learner)))
+        .then(|| progress_bar(py, learning.fql.episodes, "episode", learner_name(learner)))
         .transpose()?;
     let failure: Mutex<Option<PyErr>> = Mutex::new(None);
     let observer = |_: &EpisodeRecord| {
-        Python::attach(|py| {
-            let seen = py.check_signals().and_then(|()| match &bar {
-                Some(b) => b.bind(py).call_method1("update", (1,)).map(|_| ()),
-                None => Ok(()),
-            });
-            match seen {
-                Ok(()) => ControlFlow::Continue(()),
-                Err(e) => {
-                    failure.lock().expect("not poisoned").get_or_insert(e);
-                    ControlFlow::Break(())
-                }
+        Python::attach(|py| match between_episodes(py, bar.as_ref()) {
+            Ok(()) => ControlFlow::Continue(()),
+            Err(e) => {
+                failure.lock().expect("not poisoned").get_or_insert(e);
+                ControlFlow::Break(())
             }
         })
     };
     let started = Instant::now();
     let learned = crate::pool::detach(py, || {
-        train::learn_from_samples(&config, &learning, observer)
+        train::learn_from_samples(config, &learning, observer)
     });
     let seconds = started.elapsed().as_secs_f64();
     if let Some(b) = &bar {
@@ -540,20 +519,14 @@ fn learn_own<'py>(
         return Err(e);
     }
     let bar = progress
-        .then(|| bar(py, config.episodes, learner_name(learner)))
+        .then(|| progress_bar(py, config.episodes, "episode", learner_name(learner)))
         .transpose()?;
-    let observer = |_: &EpisodeRecord| {
-        let seen = py.check_signals().and_then(|()| match &bar {
-            Some(b) => b.bind(py).call_method1("update", (1,)).map(|_| ()),
-            None => Ok(()),
-        });
-        match seen {
-            Ok(()) if failure.borrow().is_none() => ControlFlow::Continue(()),
-            Ok(()) => ControlFlow::Break(()),
-            Err(e) => {
-                failure.borrow_mut().get_or_insert(e);
-                ControlFlow::Break(())
-            }
+    let observer = |_: &EpisodeRecord| match between_episodes(py, bar.as_ref()) {
+        Ok(()) if failure.borrow().is_none() => ControlFlow::Continue(()),
+        Ok(()) => ControlFlow::Break(()),
+        Err(e) => {
+            failure.borrow_mut().get_or_insert(e);
+            ControlFlow::Break(())
         }
     };
     let started = Instant::now();

@@ -440,18 +440,7 @@ impl Solution {
     #[getter]
     fn deltas<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         guard(py, || {
-            Ok({
-                let flat: Vec<f64> = self
-                    .summary
-                    .deltas
-                    .iter()
-                    .flat_map(|&(a, b)| [a, b])
-                    .collect();
-                PyArray2::from_owned_array(
-                    py,
-                    Array2::from_shape_vec((self.summary.deltas.len(), 2), flat).expect("pairs"),
-                )
-            })
+            Ok(crate::convert::pairs_array(py, &self.summary.deltas))
         })
     }
 

@@ -96,6 +96,28 @@ impl Settings<'_> {
 /// What a solve's observer reports back: a raised exception, or the sweep at which the
 /// callback asked to stop (returning `False`) and the run's state one sweep before, from which
 /// the partial solution is finished.
+/// The tqdm bar of `progress=True`: `total` steps of `unit`, labelled `desc`.
+pub(crate) fn progress_bar(
+    py: Python<'_>,
+    total: usize,
+    unit: &str,
+    desc: &str,
+) -> PyResult<Py<PyAny>> {
+    let tqdm = py.import("tqdm").map_err(|_| {
+        error(
+            py,
+            Kind::Config,
+            "progress: progress=True shows a tqdm bar, but tqdm is not installed (pip install \
+             tqdm)",
+        )
+    })?;
+    let kwargs = PyDict::new(py);
+    kwargs.set_item("total", total)?;
+    kwargs.set_item("unit", unit)?;
+    kwargs.set_item("desc", desc)?;
+    Ok(tqdm.getattr("tqdm")?.call((), Some(&kwargs))?.unbind())
+}
+
 struct Watch<'a, S> {
     callback: Option<&'a Py<PyAny>>,
     /// The tqdm bar of `progress=True`.
@@ -121,23 +143,9 @@ impl<'a, S> Watch<'a, S> {
         progress: bool,
         max_sweeps: usize,
     ) -> PyResult<Self> {
-        let bar = if progress {
-            let tqdm = py.import("tqdm").map_err(|_| {
-                error(
-                    py,
-                    Kind::Config,
-                    "progress: progress=True shows a tqdm bar, but tqdm is not installed (pip \
-                     install tqdm)",
-                )
-            })?;
-            let kwargs = PyDict::new(py);
-            kwargs.set_item("total", max_sweeps)?;
-            kwargs.set_item("unit", "sweep")?;
-            kwargs.set_item("desc", "fuzzy Q-iteration")?;
-            Some(tqdm.getattr("tqdm")?.call((), Some(&kwargs))?.unbind())
-        } else {
-            None
-        };
+        let bar = progress
+            .then(|| progress_bar(py, max_sweeps, "sweep", "fuzzy Q-iteration"))
+            .transpose()?;
         Ok(Self {
             callback,
             bar,

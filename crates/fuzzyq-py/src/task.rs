@@ -249,16 +249,7 @@ impl Task {
     /// The range of each state variable, shape `(state_dim, 2)`.
     #[getter]
     fn state_bounds<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let flat: Vec<f64> = self
-            .shape
-            .bounds
-            .iter()
-            .flat_map(|&(l, h)| [l, h])
-            .collect();
-        PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((self.shape.bounds.len(), 2), flat).expect("pairs"),
-        )
+        crate::convert::pairs_array(py, &self.shape.bounds)
     }
 
     /// The periodic state variables.
