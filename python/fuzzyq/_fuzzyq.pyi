@@ -240,6 +240,13 @@ class PointMass:
         velocity_noise: standard deviation (m/s) of the plant's zero-mean Gaussian process
             noise on every velocity per step (used by `collect` and rollouts); the model that
             is solved stays noise-free.
+        reward: ``"paper"`` (the goal reward alone) or ``"shaped"``: plus the
+            potential-based term ``gamma * Phi(f(x, u)) - Phi(x)`` with
+            ``Phi(x) = -sum_i ||x_i||`` (each agent's distance to its goal state), which keeps
+            the optimal policy (Ng, Harada and Russell 1999); the reward then depends on the
+            action.
+        shaping_discount: the ``gamma`` of the shaping term, in ``(0, 1]``; use the discount
+            you solve or learn with (the identity needs it).
 
     Raises:
         ConfigError: a parameter out of range, or repeated force levels.
@@ -262,6 +269,8 @@ class PointMass:
         friction: float = 1.0,
         friction_patches: Sequence[tuple[tuple[float, float], float, float]] | None = None,
         velocity_noise: float = 0.0,
+        reward: Literal["paper", "shaped"] = "paper",
+        shaping_discount: float = 0.96,
     ) -> PointMass:
         """Creates the task (see the class docstring for the arguments)."""
 
@@ -363,17 +372,21 @@ class PointMass:
             InputError: wrong shapes, different batch sizes, or non-finite values.
         """
 
-    def reward(self, x: npt.ArrayLike) -> float:
-        """The reward at state `x` (it does not depend on the action).
+    def reward(self, x: npt.ArrayLike, u: npt.ArrayLike | None = None) -> float:
+        """The reward of joint force vector `u` at state `x`.
 
         Args:
             x: a state, shape ``(state_dim,)``.
+            u: a joint force vector, shape ``(2 * agents,)``; may be left out under the
+                paper's reward, which does not depend on it.
 
         Returns:
-            `goal_reward` if `x` is in the reward region, else 0.
+            `goal_reward` if `x` is in the reward region, else 0; under ``reward="shaped"``
+            plus ``gamma * Phi(f(x, u)) - Phi(x)``.
 
         Raises:
-            InputError: `x` has the wrong shape or non-finite values.
+            InputError: `x` or `u` has the wrong shape or non-finite values, or `u` is
+                missing under the shaped reward.
         """
 
     def in_goal(self, x: npt.ArrayLike) -> bool:

@@ -73,8 +73,17 @@ _Floats = npt.NDArray[np.float64]
 _COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#ff7f0e")
 _PURPLE = "#9467bd"
 _GOOD = "#2ca02c"
-_LEARNERS = ("fqi", "crisp", "crisp-uniform", "fql", "fql-literal", "vqql", "learned-model")
-_LEARNER_COLOURS = (*_COLOURS, _PURPLE, "#8c564b")
+_LEARNERS = (
+    "fqi",
+    "crisp",
+    "crisp-uniform",
+    "fql",
+    "fql-literal",
+    "vqql",
+    "learned-model",
+    "fqi-samples",
+)
+_LEARNER_COLOURS = (*_COLOURS, _PURPLE, "#8c564b", "#17becf", "#e377c2")
 _ENVS = ("pointmass", "khepera", "dcmotor", "pendulum", "carhill", "arm")
 _AGENTS = ("pointmass", "khepera")  # per-agent layouts; their variables carry the agent number
 

@@ -181,6 +181,22 @@ def test_solve_a_model_learned_from_transitions(
         fuzzyq.PointMass(velocity_noise=-1.0)
 
 
+def test_the_shaped_reward_adds_the_potential_difference() -> None:
+    paper = fuzzyq.PointMass(agents=1)
+    shaped = fuzzyq.PointMass(agents=1, reward="shaped", shaping_discount=0.9)
+    x, u = np.array([-4.0, 5.0, 0.0, 0.0]), np.array([2.0, -2.0])
+    nxt = shaped.step(x, u)
+    expected = 0.9 * -np.linalg.norm(nxt) + np.linalg.norm(x)
+    assert shaped.reward(x, u) == pytest.approx(expected, abs=1e-12)
+    assert paper.reward(x, u) == paper.reward(x) == 0.0
+    with pytest.raises(fuzzyq.InputError, match="u is missing"):
+        shaped.reward(x)
+    with pytest.raises(fuzzyq.ConfigError, match="reward"):
+        fuzzyq.PointMass(reward="dense")  # type: ignore[arg-type]
+    with pytest.raises(fuzzyq.ConfigError, match="shaping_discount"):
+        fuzzyq.PointMass(reward="shaped", shaping_discount=0.0)
+
+
 def test_policies(one_agent: tuple[fuzzyq.PointMass, fuzzyq.Grid, fuzzyq.Solution]) -> None:
     model, grid, s = one_agent
     greedy, interp = s.policy("greedy"), s.policy("interpolated")

@@ -4,7 +4,9 @@ use std::sync::Arc;
 
 use fuzzyq_core::model::joint_actions;
 use fuzzyq_core::{ActionSet, JointActions, Model};
-use fuzzyq_sim::model::pointmass::{FrictionConfig, FrictionPatch, Integrator, PointMassConfig};
+use fuzzyq_sim::model::pointmass::{
+    FrictionConfig, FrictionPatch, Integrator, PointMassConfig, RewardShape,
+};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -300,6 +302,8 @@ impl PointMass {
         friction = 1.0,
         friction_patches = None,
         velocity_noise = 0.0,
+        reward = "paper",
+        shaping_discount = 0.96,
     ))]
     #[allow(clippy::too_many_arguments)] // the model's parameters, as keyword arguments
     fn new(
@@ -317,8 +321,11 @@ impl PointMass {
         #[pyo3(from_py_with = arg)] friction: f64,
         #[pyo3(from_py_with = arg)] friction_patches: Option<Vec<Patch>>,
         #[pyo3(from_py_with = arg)] velocity_noise: f64,
+        #[pyo3(from_py_with = arg)] reward: &str,
+        #[pyo3(from_py_with = arg)] shaping_discount: f64,
     ) -> PyResult<Self> {
         guard(py, || {
+            let reward = RewardShape::parse(reward, "reward").map_err(|e| config_error(py, &e))?;
             let integrator = match integrator {
                 "exact" => Integrator::Exact,
                 "rk4" => Integrator::Rk4,
@@ -364,6 +371,8 @@ impl PointMass {
                     rk4_substeps,
                     friction,
                     velocity_noise,
+                    reward,
+                    shaping_discount,
                 },
             )
         })
@@ -504,15 +513,30 @@ impl PointMass {
         })
     }
 
-    /// The reward at state `x` (it does not depend on the action).
-    fn reward(&self, py: Python<'_>, x: &Bound<'_, PyAny>) -> PyResult<f64> {
+    /// The reward of joint force vector `u` at state `x`; `u` may be left out under the
+    /// paper's reward, which does not depend on it.
+    #[pyo3(signature = (x, u = None))]
+    fn reward(
+        &self,
+        py: Python<'_>,
+        x: &Bound<'_, PyAny>,
+        u: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<f64> {
         guard(py, || {
             let x = finite_vector(x, "x", Some(self.state_dim()))?;
-            Ok(if self.model.in_goal_f64(&x) {
-                self.model.config().goal_reward
-            } else {
-                0.0
-            })
+            let dim = 2 * self.model.config().agents;
+            let u = match u {
+                Some(u) => finite_vector(u, "u", Some(dim))?,
+                None if self.model.config().reward == RewardShape::Paper => vec![0.0; dim],
+                None => {
+                    return Err(error(
+                        py,
+                        Kind::Input,
+                        "u is missing: the shaped reward depends on the action",
+                    ));
+                }
+            };
+            Ok(fuzzyq_core::Model::<f64>::reward(&*self.model, &x, &u))
         })
     }
 

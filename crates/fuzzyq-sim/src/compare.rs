@@ -25,10 +25,30 @@
 //! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
 //! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
 //! | [`Learner::LearnedModel`] | joint fuzzy Q-iteration on a fuzzy model learned from transitions collected on the plant ([`crate::train::train_learned`]) | `N * M`; only `V` and the learned tables are stored |
+//! | [`Learner::FqiSamples`] | fuzzy Q-iteration from samples: batch fitted Q-iteration with the fuzzy averager, per agent, on the same transitions, never building a model ([`crate::learn::fitted`]) | `sum_i N_i * M_i` |
 //!
 //! [`sample_efficiency`] asks the other question of Table 1, at equal samples: each learner
 //! from samples (the learned model, fuzzy Q-learning, VQQL) gets the same numbers of
 //! transitions of interaction ([`with_budget`]) and is measured over the same random starts.
+//!
+//! # Rewards, seeds and the codebook sweep
+//! - The reward is the task's ([`PointMassConfig::reward`](crate::PointMassConfig::reward)):
+//!   the paper's, or the same with a potential-based shaping term
+//!   ([`CompareConfig::set_reward`]). The learners from samples learn from it. The
+//!   learners that plan with the model plan with the paper's reward under either: shaping by
+//!   the potential as their grid represents it (interpolated from its values at the cores)
+//!   leaves their solution the paper's minus `Phi` at each core, so their greedy policy is the
+//!   same (Ng, Harada and Russell 1999, on the grid's own Markov chain), while shaping by the
+//!   exact potential makes the reward depend on the joint action at each of the grid's
+//!   `N * M` pairs in every full backup (measured: 239 s per full backup on the paper's grid,
+//!   2 cores, against about 0.2 s).
+//! - With [`CompareConfig::seeds`] above 1 every learner from samples runs once per seed
+//!   (`seed`, `seed + 1`, ...): the table gives the means over seeds with 95% percentile
+//!   bootstrap intervals ([`Estimate`]), and the paths of every seed.
+//! - With [`CompareConfig::vqql_sweep`] VQQL runs once per codebook size (and seed); the
+//!   sweep is reported whole ([`SweepPoint`]) and the table's VQQL column is the best size:
+//!   the highest mean success over the random starts, then the lowest mean final error over
+//!   them (never the Table 1 start itself, which the table reports).
 //!
 //! Everything is seeded: the same configuration gives the same table (bar the seconds).
 
@@ -37,21 +57,25 @@ use std::time::Instant;
 use fuzzyq_core::Membership;
 use fuzzyq_core::additive::Update;
 use fuzzyq_core::q::PolicyKind;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, SimError, require};
 use crate::io::config::{EnvConfig, TrainConfig};
 use crate::io::policy_file::{PolicyArtifact, Values};
+use crate::learn::fitted::{self, FittedConfig};
 use crate::learn::fql::FqlConfig;
+use crate::learn::samples::Exploration;
 use crate::learn::tasks::pointmass as pointmass_task;
 use crate::learn::vqql::VqqlConfig;
-use crate::model::check_state;
 use crate::model::classic::octave::linspace;
-use crate::model::pointmass::{self, PointMass, Starts};
+use crate::model::pointmass::{self, PointMass, RewardShape, Starts};
+use crate::model::{EnvModel, F64Model, check_state};
 use crate::paper;
 use crate::run::evaluate::{self, Outcome, PlantChoice, RolloutSpec};
 use crate::run::metrics::{PointMassReport, RolloutMetrics, Trajectory, mean_final_error_cm};
-use crate::run::policy::{FqiPolicy, Policy};
+use crate::run::policy::{AdditivePolicy, FqiPolicy, Policy};
 use crate::train::{self, ModelLearning, SampleLearning};
 
 fuzzyq_core::named_option! {
@@ -72,6 +96,9 @@ fuzzyq_core::named_option! {
         Vqql = "vqql" => "VQQL (CMOMMT): k-means cells + tabular Q-learning",
         /// Joint fuzzy Q-iteration on a fuzzy model learned from transitions.
         LearnedModel = "learned-model" => "joint fuzzy Q-iteration on a model learned from transitions",
+        /// Fuzzy Q-iteration from samples: fitted Q-iteration with the fuzzy averager, per
+        /// agent, on the learned model's transitions, with no model.
+        FqiSamples = "fqi-samples" => "fuzzy Q-iteration from samples (fitted, per agent, no model)",
     }
 }
 
@@ -126,6 +153,12 @@ pub struct CompareConfig {
     /// The learned-model learner's interaction with the plant and fit (its seed is the
     /// fuzzy Q-learning seed's).
     pub model_learning: ModelLearning,
+    /// Runs of every learner from samples, seeded `fql.seed`, `fql.seed + 1`, ... (the
+    /// learned model's collection and VQQL's exploration likewise); 1 to 100.
+    pub seeds: usize,
+    /// VQQL codebook sizes (cells per agent) to sweep, the best one making the VQQL column;
+    /// empty: [`VqqlConfig::cells`] alone.
+    pub vqql_sweep: Vec<usize>,
 }
 
 impl Default for CompareConfig {
@@ -137,9 +170,10 @@ impl Default for CompareConfig {
 
 impl CompareConfig {
     /// The comparison on `task`: the Table 1 start, 100 random starts (seed 7) within 5 m of
-    /// the goal, 100 steps (40 s) per rollout, every learner with its defaults, and VQQL with
-    /// as many cells per agent as the task's grid has own-state cores (`n_pos^2 * n_vel^2`),
-    /// so that its table has exactly as many parameters as the additive fuzzy layout.
+    /// the goal, 100 steps (40 s) per rollout, every learner with its defaults, one seed, and
+    /// VQQL swept over [`default_sweep`] of the task's own-state cores (`n_pos^2 * n_vel^2`),
+    /// its single size ([`VqqlConfig::cells`]) being that count, so that its table has
+    /// exactly as many parameters as the additive fuzzy layout.
     #[must_use]
     pub fn new(task: TrainConfig) -> Self {
         let own_cores =
@@ -160,7 +194,47 @@ impl CompareConfig {
             fql_starts: pointmass_task::default_starts(),
             vqql,
             model_learning: ModelLearning::new(20_000, pointmass_task::default_fql_config().seed),
+            seeds: 1,
+            vqql_sweep: default_sweep(own_cores),
         }
+    }
+
+    /// The task's reward ([`RewardShape`]).
+    #[must_use]
+    pub fn reward(&self) -> RewardShape {
+        match &self.task.env {
+            EnvConfig::Pointmass(p) => p.reward,
+            _ => RewardShape::Paper,
+        }
+    }
+
+    /// Sets the task's reward, the shaping discounted with the task's `gamma`.
+    pub fn set_reward(&mut self, reward: RewardShape) {
+        let gamma = self.task.solver.gamma;
+        if let EnvConfig::Pointmass(p) = &mut self.task.env {
+            p.reward = reward;
+            p.shaping_discount = gamma;
+        }
+    }
+
+    /// The task the learners that plan with the model solve: the paper's reward (see the
+    /// [module docs](self#rewards-seeds-and-the-codebook-sweep)).
+    fn planning_task(&self) -> TrainConfig {
+        let mut task = self.task.clone();
+        if let EnvConfig::Pointmass(p) = &mut task.env {
+            p.reward = RewardShape::Paper;
+            p.shaping_discount = paper::GAMMA;
+        }
+        task
+    }
+
+    /// This configuration with seed `seed` for every learner from samples.
+    fn with_seed(&self, seed: u64) -> Self {
+        let mut c = self.clone();
+        c.fql.seed = seed;
+        c.vqql.seed = seed;
+        c.model_learning.collection.seed = seed;
+        c
     }
 
     /// Checks the configuration; errors name the field.
@@ -195,12 +269,27 @@ impl CompareConfig {
         );
         self.fql.validate()?;
         self.fql_starts.validate(&model)?;
-        if self.learners.contains(&Learner::LearnedModel) {
+        if self.learners.contains(&Learner::LearnedModel)
+            || self.learners.contains(&Learner::FqiSamples)
+        {
             self.model_learning.collection.validate()?;
         }
         if self.learners.contains(&Learner::Vqql) {
             self.vqql.validate()?;
+            for &cells in &self.vqql_sweep {
+                VqqlConfig {
+                    cells,
+                    ..self.vqql.clone()
+                }
+                .validate()
+                .map_err(|e| ConfigError::invalid("vqql_sweep", e.to_string()))?;
+            }
         }
+        require!(
+            (1..=100).contains(&self.seeds),
+            "seeds",
+            format!("must be between 1 and 100, got {}", self.seeds),
+        );
         Ok(())
     }
 
@@ -217,6 +306,18 @@ impl CompareConfig {
             .into()),
         }
     }
+}
+
+/// The VQQL codebook sizes swept by default: the powers of two from 16 below `cores` (the
+/// fuzzy grid's own-state cores per agent), then `cores` itself (as many cells as cores).
+#[must_use]
+pub fn default_sweep(cores: usize) -> Vec<usize> {
+    let mut sizes: Vec<usize> = (4..usize::BITS)
+        .map(|b| 1usize << b)
+        .take_while(|&k| k < cores)
+        .collect();
+    sizes.push(cores);
+    sizes
 }
 
 /// The largest position magnitude of the model's state space.
@@ -260,7 +361,113 @@ pub struct LearnerReport {
     pub mean_final_error_cm: f64,
     /// Learner-specific notes (k-means iterations and distortion for VQQL, ...).
     pub notes: Vec<String>,
+    /// The largest parameter magnitude of a learner from samples (over its seeds).
+    pub largest_parameter: Option<f64>,
+    /// Over several seeds ([`CompareConfig::seeds`] > 1, learners from samples): the means
+    /// with their intervals. The fields above then hold the means (the rollout `from_x0` is
+    /// the first seed's).
+    pub over_seeds: Option<OverSeeds>,
 }
+
+/// A mean over seeds with its 95% percentile bootstrap interval ([`bootstrap`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Estimate {
+    /// The mean.
+    pub mean: f64,
+    /// The interval's lower end.
+    pub lo: f64,
+    /// The interval's upper end.
+    pub hi: f64,
+}
+
+/// A learner's measurements over its seeds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OverSeeds {
+    /// The seeds, in run order.
+    pub seeds: Vec<u64>,
+    /// Final error from `x0` (cm, mean of the agents), per seed.
+    pub final_error_cm: Vec<f64>,
+    /// Time to the reward region from `x0` (s), per seed (`None`: never).
+    pub time_to_goal_s: Vec<Option<f64>>,
+    /// Success over the random starts, per seed.
+    pub success_rate: Vec<f64>,
+    /// Mean final error over the random starts (cm), per seed.
+    pub mean_final_error_cm: Vec<f64>,
+    /// [`final_error_cm`](Self::final_error_cm) over the seeds.
+    pub final_error: Estimate,
+    /// Time to goal over the seeds that reach the goal from `x0` (`None` if none does).
+    pub time_to_goal: Option<Estimate>,
+    /// [`success_rate`](Self::success_rate) over the seeds.
+    pub success: Estimate,
+    /// [`mean_final_error_cm`](Self::mean_final_error_cm) over the seeds.
+    pub mean_final_error: Estimate,
+}
+
+/// One codebook size of the VQQL sweep ([`CompareConfig::vqql_sweep`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SweepPoint {
+    /// Cells per agent.
+    pub cells: usize,
+    /// Parameters of the Q-table (all agents).
+    pub parameters: u64,
+    /// The measurements over the seeds (one seed: intervals of width 0).
+    pub over_seeds: OverSeeds,
+    /// The best size (the table's VQQL column).
+    pub best: bool,
+}
+
+/// The mean of `values` and the 95% percentile bootstrap interval of the mean: 10,000
+/// resamples with replacement drawn from `Pcg64Mcg` seeded with `seed`, the 2.5% and 97.5%
+/// order statistics of their means. `None` for no values.
+#[must_use]
+pub fn bootstrap(values: &[f64], seed: u64) -> Option<Estimate> {
+    const RESAMPLES: usize = 10_000;
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let mean = values.iter().sum::<f64>() / n as f64;
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let mut means: Vec<f64> = (0..RESAMPLES)
+        .map(|_| (0..n).map(|_| values[rng.random_range(0..n)]).sum::<f64>() / n as f64)
+        .collect();
+    means.sort_by(f64::total_cmp);
+    let at = |q: f64| means[((q * RESAMPLES as f64) as usize).min(RESAMPLES - 1)];
+    Some(Estimate {
+        mean,
+        lo: at(0.025),
+        hi: at(0.975),
+    })
+}
+
+impl OverSeeds {
+    /// The measurements of `runs` (one report per seed) with their bootstrap intervals.
+    fn of(seeds: Vec<u64>, runs: &[LearnerReport]) -> Self {
+        let col = |f: &dyn Fn(&LearnerReport) -> f64| runs.iter().map(f).collect::<Vec<_>>();
+        let (final_error_cm, success_rate, mean_final_error_cm) = (
+            col(&|r| r.final_error_cm),
+            col(&|r| r.success_rate),
+            col(&|r| r.mean_final_error_cm),
+        );
+        let time_to_goal_s: Vec<Option<f64>> = runs.iter().map(|r| r.time_to_goal_s).collect();
+        let reached: Vec<f64> = time_to_goal_s.iter().flatten().copied().collect();
+        let est = |v: &[f64]| bootstrap(v, BOOTSTRAP_SEED).expect("at least one seed");
+        Self {
+            final_error: est(&final_error_cm),
+            time_to_goal: bootstrap(&reached, BOOTSTRAP_SEED),
+            success: est(&success_rate),
+            mean_final_error: est(&mean_final_error_cm),
+            seeds,
+            final_error_cm,
+            time_to_goal_s,
+            success_rate,
+            mean_final_error_cm,
+        }
+    }
+}
+
+/// The seed of every bootstrap of the table (intervals are part of the seeded output).
+const BOOTSTRAP_SEED: u64 = 0x7ab1e1;
 
 /// The outcome of [`compare`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -279,8 +486,15 @@ pub struct Comparison {
     pub start_position: f64,
     /// One report per learner, in the configured order.
     pub reports: Vec<LearnerReport>,
-    /// The rollout from `x0` of each learner, in the same order.
+    /// The rollout from `x0` of each learner, in the same order (the first seed's).
     pub trajectories: Vec<Trajectory>,
+    /// The rollouts from `x0` of each learner's further seeds, in the same order (empty for
+    /// the learners that run once).
+    pub seed_trajectories: Vec<Vec<Trajectory>>,
+    /// The task's reward.
+    pub reward: RewardShape,
+    /// The VQQL codebook sweep (empty without one).
+    pub vqql_sweep: Vec<SweepPoint>,
 }
 
 /// What [`compare`] is doing, for progress output.
@@ -292,6 +506,16 @@ pub enum Event {
     Trained(Learner, usize, f64),
     /// A learner's policy is rolled out from the random starts.
     Evaluating(Learner),
+    /// A learner from samples starts its run with `seed` (with `cells` per agent for VQQL),
+    /// when it runs more than once.
+    Run {
+        /// The learner.
+        learner: Learner,
+        /// The run's seed.
+        seed: u64,
+        /// VQQL's codebook size.
+        cells: Option<usize>,
+    },
 }
 
 /// Trains every configured learner and measures its greedy policy (see the
@@ -310,48 +534,181 @@ pub fn compare(
         plant: PlantChoice::Model,
         seed: 0,
     };
-    let mut reports = Vec::with_capacity(config.learners.len());
-    let mut trajectories = Vec::with_capacity(config.learners.len());
-    for &learner in &config.learners {
-        progress(Event::Training(learner));
-        let t0 = Instant::now();
-        let (policy, mut report) = train_one(config, learner)?;
-        report.train_seconds = t0.elapsed().as_secs_f64();
-        progress(Event::Trained(
-            learner,
-            report.iterations,
-            report.train_seconds,
-        ));
-        let Outcome::PointMass {
-            trajectory,
-            metrics: from_x0,
-            ..
-        } = evaluate::run(&policy, &config.x0, &spec)?
-        else {
-            unreachable!("a point-mass policy runs on the point masses")
-        };
-        progress(Event::Evaluating(learner));
-        let runs = evaluate::point_mass_starts(&policy, &starts, config.steps, PolicyKind::Greedy)?;
-        let over = PointMassReport::from_runs(&runs);
-        report.final_error_cm = mean_final_error_cm(&from_x0);
-        report.time_to_goal_s = from_x0.reach_time_s;
-        report.from_x0 = from_x0;
-        report.success_rate = over.success_rate;
-        report.mean_time_to_goal_s = over.mean_time_to_goal_s;
-        report.mean_final_error_cm = over.mean_final_error_cm;
-        reports.push(report);
-        trajectories.push(trajectory);
-    }
-    Ok(Comparison {
+    let mut out = Comparison {
         x0: config.x0.clone(),
         steps: config.steps,
         dt: model.config().sample_time,
         starts: config.starts,
         seed: config.seed,
         start_position: config.start_position,
-        reports,
-        trajectories,
-    })
+        reports: Vec::with_capacity(config.learners.len()),
+        trajectories: Vec::with_capacity(config.learners.len()),
+        seed_trajectories: Vec::with_capacity(config.learners.len()),
+        reward: config.reward(),
+        vqql_sweep: Vec::new(),
+    };
+    let mut progress: &mut dyn FnMut(Event) = &mut progress;
+    for &learner in &config.learners {
+        let (report, mut paths) = if learner.is_model_based() && learner != Learner::LearnedModel {
+            let (report, path) = measure(config, learner, &starts, &spec, &mut progress)?;
+            (report, vec![path])
+        } else if learner == Learner::Vqql && !config.vqql_sweep.is_empty() {
+            let (points, report, paths) = vqql_sweep(config, &starts, &spec, &mut progress)?;
+            out.vqql_sweep = points;
+            (report, paths)
+        } else {
+            let (report, paths, _) = over_seeds(config, learner, &starts, &spec, &mut progress)?;
+            (report, paths)
+        };
+        out.trajectories.push(paths.remove(0));
+        out.seed_trajectories.push(paths);
+        out.reports.push(report);
+    }
+    Ok(out)
+}
+
+/// Trains `learner` once on `config` and measures its greedy policy from `x0` and `starts`.
+fn measure(
+    config: &CompareConfig,
+    learner: Learner,
+    starts: &[Vec<f64>],
+    spec: &RolloutSpec,
+    progress: &mut dyn FnMut(Event),
+) -> Result<(LearnerReport, Trajectory), SimError> {
+    progress(Event::Training(learner));
+    let t0 = Instant::now();
+    let (policy, mut report) = train_one(config, learner)?;
+    report.train_seconds = t0.elapsed().as_secs_f64();
+    progress(Event::Trained(
+        learner,
+        report.iterations,
+        report.train_seconds,
+    ));
+    let Outcome::PointMass {
+        trajectory,
+        metrics: from_x0,
+        ..
+    } = evaluate::run(&policy, &config.x0, spec)?
+    else {
+        unreachable!("a point-mass policy runs on the point masses")
+    };
+    progress(Event::Evaluating(learner));
+    let runs = evaluate::point_mass_starts(&policy, starts, config.steps, PolicyKind::Greedy)?;
+    let over = PointMassReport::from_runs(&runs);
+    report.final_error_cm = mean_final_error_cm(&from_x0);
+    report.time_to_goal_s = from_x0.reach_time_s;
+    report.from_x0 = from_x0;
+    report.success_rate = over.success_rate;
+    report.mean_time_to_goal_s = over.mean_time_to_goal_s;
+    report.mean_final_error_cm = over.mean_final_error_cm;
+    Ok((report, trajectory))
+}
+
+/// Runs the learner from samples `learner` once per seed ([`CompareConfig::seeds`]): the
+/// report (the means over seeds when there are several), every seed's path from `x0`, and
+/// the measurements over the seeds.
+fn over_seeds(
+    config: &CompareConfig,
+    learner: Learner,
+    starts: &[Vec<f64>],
+    spec: &RolloutSpec,
+    progress: &mut dyn FnMut(Event),
+) -> Result<(LearnerReport, Vec<Trajectory>, OverSeeds), SimError> {
+    let announce = config.seeds > 1 || (learner == Learner::Vqql && !config.vqql_sweep.is_empty());
+    let (mut runs, mut paths, mut seeds) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 0..config.seeds {
+        let seed = config.fql.seed.wrapping_add(k as u64);
+        if announce {
+            progress(Event::Run {
+                learner,
+                seed,
+                cells: (learner == Learner::Vqql).then_some(config.vqql.cells),
+            });
+        }
+        let c = if config.seeds > 1 {
+            &config.with_seed(seed)
+        } else {
+            config
+        };
+        let (report, path) = measure(c, learner, starts, spec, progress)?;
+        runs.push(report);
+        paths.push(path);
+        seeds.push(seed);
+    }
+    let over = OverSeeds::of(seeds, &runs);
+    let mut report = runs[0].clone();
+    if runs.len() > 1 {
+        let times: Vec<f64> = runs.iter().filter_map(|r| r.mean_time_to_goal_s).collect();
+        report.final_error_cm = over.final_error.mean;
+        report.time_to_goal_s = over.time_to_goal.map(|e| e.mean);
+        report.success_rate = over.success.mean;
+        report.mean_final_error_cm = over.mean_final_error.mean;
+        report.mean_time_to_goal_s =
+            (!times.is_empty()).then(|| times.iter().sum::<f64>() / times.len() as f64);
+        report.train_seconds = runs.iter().map(|r| r.train_seconds).sum();
+        report.converged = runs.iter().all(|r| r.converged);
+        report.largest_parameter = runs
+            .iter()
+            .filter_map(|r| r.largest_parameter)
+            .reduce(f64::max);
+        report.notes.insert(
+            0,
+            format!(
+                "{} seeds ({}-{}); notes of the first seed:",
+                runs.len(),
+                over.seeds[0],
+                over.seeds[runs.len() - 1]
+            ),
+        );
+        report.over_seeds = Some(over.clone());
+    }
+    Ok((report, paths, over))
+}
+
+/// VQQL over every codebook size of the sweep: the sweep, and the best size's report and
+/// paths (see the [module docs](self#rewards-seeds-and-the-codebook-sweep)).
+fn vqql_sweep(
+    config: &CompareConfig,
+    starts: &[Vec<f64>],
+    spec: &RolloutSpec,
+    progress: &mut dyn FnMut(Event),
+) -> Result<(Vec<SweepPoint>, LearnerReport, Vec<Trajectory>), SimError> {
+    let mut points = Vec::new();
+    let mut best: Option<(usize, LearnerReport, Vec<Trajectory>)> = None;
+    for &cells in &config.vqql_sweep {
+        let mut c = config.clone();
+        c.vqql.cells = cells;
+        let (report, paths, over) = over_seeds(&c, Learner::Vqql, starts, spec, progress)?;
+        let better = best.as_ref().is_none_or(|(i, _, _)| {
+            let b: &SweepPoint = &points[*i];
+            let (s, e) = (over.success.mean, over.mean_final_error.mean);
+            let (bs, be) = (
+                b.over_seeds.success.mean,
+                b.over_seeds.mean_final_error.mean,
+            );
+            s > bs || (s == bs && e < be)
+        });
+        if better {
+            best = Some((points.len(), report.clone(), paths));
+        }
+        points.push(SweepPoint {
+            cells,
+            parameters: report.parameters,
+            over_seeds: over,
+            best: false,
+        });
+    }
+    let (i, mut report, paths) = best.expect("validate: the sweep is not empty");
+    points[i].best = true;
+    report.notes.insert(
+        0,
+        format!(
+            "the best of the codebook sweep ({} sizes): {} cells per agent",
+            points.len(),
+            points[i].cells
+        ),
+    );
+    Ok((points, report, paths))
 }
 
 /// One point of a sample-efficiency curve ([`sample_efficiency`]).
@@ -388,7 +745,9 @@ pub fn with_budget(config: &CompareConfig, learner: Learner, transitions: usize)
     };
     match learner {
         Learner::Fqi | Learner::Crisp | Learner::CrispUniform => {}
-        Learner::LearnedModel => c.model_learning.collection.samples = transitions,
+        Learner::LearnedModel | Learner::FqiSamples => {
+            c.model_learning.collection.samples = transitions;
+        }
         Learner::Fql | Learner::FqlLiteral => learn_for(transitions),
         Learner::Vqql => {
             learn_for(transitions / 2);
@@ -528,6 +887,8 @@ fn blank(learner: Learner) -> LearnerReport {
         mean_time_to_goal_s: None,
         mean_final_error_cm: f64::NAN,
         notes: Vec::new(),
+        largest_parameter: None,
+        over_seeds: None,
     }
 }
 
@@ -538,7 +899,7 @@ fn train_one(
     let mut report = blank(learner);
     match learner {
         Learner::Fqi | Learner::Crisp | Learner::CrispUniform => {
-            let mut task = config.task.clone();
+            let mut task = config.planning_task();
             task.grid.membership = if learner == Learner::Fqi {
                 Membership::Triangular
             } else {
@@ -568,7 +929,7 @@ fn train_one(
             Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
         }
         Learner::LearnedModel => {
-            let mut task = config.task.clone();
+            let mut task = config.planning_task();
             task.grid.membership = Membership::Triangular;
             let run = train::train_learned(&task, &config.model_learning, |_| {
                 std::ops::ControlFlow::Continue(())
@@ -597,6 +958,7 @@ fn train_one(
             ));
             Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
         }
+        Learner::FqiSamples => fitted_from_samples(config, report),
         Learner::Fql | Learner::FqlLiteral | Learner::Vqql => {
             let mut fql = config.fql.clone();
             fql.gamma = config.task.solver.gamma;
@@ -634,24 +996,89 @@ fn train_one(
             report.converged = outcome.converged_at.is_some();
             report.parameters = outcome.q.params().iter().map(|p| p.len() as u64).sum();
             report.stored_values += report.parameters;
-            let rewarded = outcome.curve.iter().filter(|r| r.ret > 0.0).count();
             let largest = outcome
                 .q
                 .params()
                 .iter()
                 .flatten()
                 .fold(0.0_f64, |m, p| m.max(p.abs()));
-            report.notes.push(format!(
-                "{rewarded} of {} learning episodes met the reward; largest |parameter| {largest:.3e}",
-                outcome.curve.len()
-            ));
+            report.largest_parameter = Some(largest);
+            // Under the paper's reward a positive return means the goal was met; a shaped
+            // return says nothing of it.
+            if config.reward() == RewardShape::Paper {
+                let rewarded = outcome.curve.iter().filter(|r| r.ret > 0.0).count();
+                report.notes.push(format!(
+                    "{rewarded} of {} learning episodes met the reward",
+                    outcome.curve.len()
+                ));
+            }
+            report
+                .notes
+                .push(format!("largest |parameter| {largest:.3e}"));
             Ok((Policy::from_file(learned.file)?, report))
         }
     }
 }
 
+/// [`Learner::FqiSamples`]: the learned model's transitions (its collection settings and
+/// seed, the task's reward), fitted per agent on the task's own-state cores.
+fn fitted_from_samples(
+    config: &CompareConfig,
+    mut report: LearnerReport,
+) -> Result<(Policy, LearnerReport), SimError> {
+    let model = config.model()?;
+    let c = &config.model_learning.collection;
+    let data = train::collect_from_plant(
+        &EnvModel::PointMass(model.clone()),
+        c,
+        &mut Exploration::Random,
+    )?;
+    let g = &config.task.grid;
+    let features = pointmass_task::feature_space(&model, &g.position_cores, &g.velocity_cores)?;
+    let s = &config.task.solver;
+    let out = fitted::fitted_q(
+        &data,
+        &features,
+        F64Model::actions(&model),
+        &FittedConfig {
+            gamma: s.gamma,
+            xi: s.xi,
+            max_iterations: s.max_sweeps,
+        },
+    )?;
+    report.iterations = out.iterations;
+    report.iteration_unit = "iterations".into();
+    report.converged = out.converged;
+    report.parameters = out.q.params().iter().map(|p| p.len() as u64).sum();
+    report.stored_values = report.parameters;
+    let largest = out
+        .q
+        .params()
+        .iter()
+        .flatten()
+        .fold(0.0_f64, |m, p| m.max(p.abs()));
+    report.largest_parameter = Some(largest);
+    report.notes.push(format!(
+        "fitted on {} transitions (random actions, episodes of {} steps, seed {}), the \
+         learned model's; largest |parameter| {largest:.3e}",
+        c.samples, c.episode_steps, c.seed
+    ));
+    let policy = AdditivePolicy::point_masses(model, out.q, s.gamma)?;
+    Ok((Policy::Additive(policy), report))
+}
+
 fn fmt_opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "never".into(), |v| format!("{v:.digits$}"))
+}
+
+/// `mean [lo, hi]`, each times `scale`, with `digits` decimals.
+fn fmt_estimate(e: &Estimate, digits: usize, scale: f64) -> String {
+    format!(
+        "{:.digits$} [{:.digits$}, {:.digits$}]",
+        e.mean * scale,
+        e.lo * scale,
+        e.hi * scale
+    )
 }
 
 fn fmt_count(n: u64) -> String {
@@ -677,23 +1104,48 @@ impl Comparison {
         };
         let none = || [String::from("-"), String::from("-")];
         let col = |f: &dyn Fn(&LearnerReport) -> String| self.reports.iter().map(f).collect();
+        // A mean with its interval where the learner ran over seeds.
+        let est = |r: &LearnerReport, plain: String, pick: &dyn Fn(&OverSeeds) -> String| {
+            r.over_seeds.as_ref().map_or(plain, pick)
+        };
         rows.push((
             "final error from x0 (cm)".into(),
-            col(&|r| format!("{:.1}", r.final_error_cm)),
+            col(&|r| {
+                est(r, format!("{:.1}", r.final_error_cm), &|o| {
+                    fmt_estimate(&o.final_error, 1, 1.0)
+                })
+            }),
             paper(0),
         ));
         rows.push((
             "time to goal from x0 (s)".into(),
-            col(&|r| fmt_opt(r.time_to_goal_s, 1)),
+            col(&|r| {
+                est(r, fmt_opt(r.time_to_goal_s, 1), &|o| {
+                    let reached = o.time_to_goal_s.iter().flatten().count();
+                    o.time_to_goal.map_or_else(
+                        || "never".into(),
+                        |e| {
+                            format!(
+                                "{} ({reached} of {} seeds)",
+                                fmt_estimate(&e, 1, 1.0),
+                                o.seeds.len()
+                            )
+                        },
+                    )
+                })
+            }),
             paper(1),
         ));
         rows.push((
             "iterations".into(),
             col(&|r| {
+                let unit = match r.iterations {
+                    1 => r.iteration_unit.trim_end_matches('s'),
+                    _ => &r.iteration_unit,
+                };
                 format!(
-                    "{} {}{}",
+                    "{} {unit}{}",
                     r.iterations,
-                    r.iteration_unit,
                     if r.converged { "" } else { " (not converged)" }
                 )
             }),
@@ -710,8 +1162,20 @@ impl Comparison {
             none(),
         ));
         rows.push((
+            "largest parameter".into(),
+            col(&|r| {
+                r.largest_parameter
+                    .map_or("-".into(), |p| format!("{p:.3e}"))
+            }),
+            none(),
+        ));
+        rows.push((
             format!("success over {} starts", self.starts),
-            col(&|r| format!("{:.0}%", 100.0 * r.success_rate)),
+            col(&|r| {
+                est(r, format!("{:.0}%", 100.0 * r.success_rate), &|o| {
+                    format!("{}%", fmt_estimate(&o.success, 0, 100.0))
+                })
+            }),
             none(),
         ));
         rows.push((
@@ -721,7 +1185,11 @@ impl Comparison {
         ));
         rows.push((
             "mean final error (cm)".into(),
-            col(&|r| format!("{:.1}", r.mean_final_error_cm)),
+            col(&|r| {
+                est(r, format!("{:.1}", r.mean_final_error_cm), &|o| {
+                    fmt_estimate(&o.mean_final_error, 1, 1.0)
+                })
+            }),
             none(),
         ));
         let mut out = String::from("| |");
@@ -739,14 +1207,58 @@ impl Comparison {
             out.push_str(&format!(" {} | {} |\n", paper[0], paper[1]));
         }
         out.push_str(&format!(
-            "\nx0 = {:?}; {} steps of {} s; {} random starts at rest within {} m (seed {}); \
-             goal: the reward region ||x||_2 < 0.1 over the whole state.\n",
-            self.x0, self.steps, self.dt, self.starts, self.start_position, self.seed
+            "\nReward: {}. x0 = {:?}; {} steps of {} s; {} random starts at rest within {} m \
+             (seed {}); goal: the reward region ||x||_2 < 0.1 over the whole state. Over \
+             several seeds: mean [95% bootstrap interval].\n",
+            self.reward_description(),
+            self.x0,
+            self.steps,
+            self.dt,
+            self.starts,
+            self.start_position,
+            self.seed
         ));
         for r in &self.reports {
             for n in &r.notes {
                 out.push_str(&format!("- {}: {n}\n", r.learner.name()));
             }
+        }
+        if !self.vqql_sweep.is_empty() {
+            out.push_str(&self.sweep_markdown());
+        }
+        out
+    }
+
+    fn reward_description(&self) -> &'static str {
+        match self.reward {
+            RewardShape::Paper => "the paper's (goal reward only)",
+            RewardShape::Shaped => {
+                "shaped, the paper's plus gamma Phi(x') - Phi(x) with Phi(x) = -sum_i ||x_i|| \
+                 (the learners from samples; the learners that plan with the model plan with \
+                 the paper's reward, the same greedy policy)"
+            }
+        }
+    }
+
+    /// The VQQL codebook sweep as a Markdown table.
+    fn sweep_markdown(&self) -> String {
+        let mut out = String::from(
+            "\nVQQL codebook sweep (mean [95% bootstrap interval] over seeds; * the best: the \
+             highest success over the random starts, then the lowest mean final error):\n\n\
+             | cells per agent | parameters | final error from x0 (cm) | success over starts \
+             | mean final error (cm) |\n|---|---|---|---|---|\n",
+        );
+        for p in &self.vqql_sweep {
+            let o = &p.over_seeds;
+            out.push_str(&format!(
+                "| {}{} | {} | {} | {}% | {} |\n",
+                p.cells,
+                if p.best { " *" } else { "" },
+                fmt_count(p.parameters),
+                fmt_estimate(&o.final_error, 1, 1.0),
+                fmt_estimate(&o.success, 0, 100.0),
+                fmt_estimate(&o.mean_final_error, 1, 1.0),
+            ));
         }
         out
     }
@@ -757,12 +1269,17 @@ impl Comparison {
         let mut out = String::from(
             "learner,final_error_cm,time_to_goal_s,iterations,iteration_unit,converged,\
              train_seconds,parameters,stored_values,success_rate,mean_time_to_goal_s,\
-             mean_final_error_cm\n",
+             mean_final_error_cm,largest_parameter,seeds,final_error_lo,final_error_hi,\
+             success_lo,success_hi,mean_final_error_lo,mean_final_error_hi\n",
         );
         let opt = |v: Option<f64>| v.map_or_else(String::new, |v| v.to_string());
         for r in &self.reports {
+            let o = r.over_seeds.as_ref();
+            let ci = |f: &dyn Fn(&OverSeeds) -> Estimate| {
+                o.map_or_else(|| ",".to_string(), |o| format!("{},{}", f(o).lo, f(o).hi))
+            };
             out.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 r.learner.name(),
                 r.final_error_cm,
                 opt(r.time_to_goal_s),
@@ -775,6 +1292,11 @@ impl Comparison {
                 r.success_rate,
                 opt(r.mean_time_to_goal_s),
                 r.mean_final_error_cm,
+                opt(r.largest_parameter),
+                o.map_or(1, |o| o.seeds.len()),
+                ci(&|o| o.final_error),
+                ci(&|o| o.success),
+                ci(&|o| o.mean_final_error),
             ));
         }
         out
@@ -806,6 +1328,7 @@ mod tests {
         c.steps = 60;
         c.fql.episodes = 40;
         c.vqql.samples = 2000;
+        c.vqql_sweep.clear();
         c
     }
 
@@ -1007,6 +1530,108 @@ mod tests {
             a.to_csv().lines().count(),
             1 + <Learner as fuzzyq_core::NamedOption>::ALL.len()
         );
+    }
+
+    #[test]
+    fn the_bootstrap_interval_holds_the_mean_and_is_seeded() {
+        assert_eq!(bootstrap(&[], 1), None);
+        let one = bootstrap(&[3.5], 1).unwrap();
+        assert_eq!((one.mean, one.lo, one.hi), (3.5, 3.5, 3.5));
+        let v = [1.0, 4.0, 2.0, 8.0, 5.0];
+        let e = bootstrap(&v, 9).unwrap();
+        assert_eq!(e.mean, 4.0);
+        assert!(e.lo < e.mean && e.mean < e.hi, "{e:?}");
+        assert!(e.lo >= 1.0 && e.hi <= 8.0, "{e:?}");
+        assert_eq!(bootstrap(&v, 9), Some(e));
+        // A constant sample has no spread.
+        let c = bootstrap(&[2.0; 5], 9).unwrap();
+        assert_eq!((c.lo, c.hi), (2.0, 2.0));
+    }
+
+    #[test]
+    fn seeds_and_the_codebook_sweep_are_reported_whole() {
+        let mut c = tiny();
+        c.learners = vec![Learner::Fql, Learner::Vqql];
+        c.seeds = 3;
+        c.vqql_sweep = vec![8, 32];
+        c.set_reward(RewardShape::Shaped);
+        let mut runs = Vec::new();
+        let a = compare(&c, |e| {
+            if let Event::Run {
+                learner,
+                seed,
+                cells,
+            } = e
+            {
+                runs.push((learner, seed, cells));
+            }
+        })
+        .unwrap();
+        let base = c.fql.seed;
+        assert_eq!(runs.len(), 3 + 2 * 3);
+        assert_eq!(runs[0], (Learner::Fql, base, None));
+        assert_eq!(runs[3], (Learner::Vqql, base, Some(8)));
+        assert_eq!(runs[8], (Learner::Vqql, base + 2, Some(32)));
+        assert_eq!(a.reward, RewardShape::Shaped);
+        // Every learner from samples: three seeds, the means over them, every path.
+        for (k, r) in a.reports.iter().enumerate() {
+            let o = r.over_seeds.as_ref().unwrap();
+            assert_eq!(o.seeds, [base, base + 1, base + 2]);
+            let mean = o.final_error_cm.iter().sum::<f64>() / 3.0;
+            assert!((r.final_error_cm - mean).abs() < 1e-9);
+            assert!(o.final_error.lo <= mean && mean <= o.final_error.hi);
+            assert_eq!(a.seed_trajectories[k].len(), 2);
+            assert!(r.largest_parameter.unwrap() > 0.0);
+        }
+        // The sweep: both sizes, one best, and the VQQL column is the best size's.
+        assert_eq!(a.vqql_sweep.len(), 2);
+        let best: Vec<&SweepPoint> = a.vqql_sweep.iter().filter(|p| p.best).collect();
+        assert_eq!(best.len(), 1);
+        let other = a.vqql_sweep.iter().find(|p| !p.best).unwrap();
+        let key = |p: &SweepPoint| {
+            (
+                p.over_seeds.success.mean,
+                -p.over_seeds.mean_final_error.mean,
+            )
+        };
+        assert!(key(best[0]) >= key(other));
+        assert_eq!(a.reports[1].parameters, best[0].parameters);
+        assert_eq!(a.reports[1].over_seeds.as_ref(), Some(&best[0].over_seeds));
+        // A different seed is a different run (the seeds are really used).
+        let o = a.reports[0].over_seeds.as_ref().unwrap();
+        assert!(
+            o.final_error_cm.windows(2).any(|w| w[0] != w[1])
+                || o.mean_final_error_cm.windows(2).any(|w| w[0] != w[1])
+        );
+        let md = a.to_markdown();
+        assert!(
+            md.contains("VQQL codebook sweep") && md.contains("Reward: shaped"),
+            "{md}"
+        );
+        assert_eq!(a.to_csv().lines().nth(1).unwrap().split(',').count(), 20);
+        // Seeded: the same configuration, the same table.
+        let strip = |mut c: Comparison| {
+            for r in &mut c.reports {
+                r.train_seconds = 0.0;
+            }
+            c
+        };
+        assert_eq!(strip(a), strip(compare(&c, |_| {}).unwrap()));
+        c.seeds = 0;
+        assert!(
+            compare(&c, |_| {})
+                .unwrap_err()
+                .to_string()
+                .contains("seeds")
+        );
+    }
+
+    #[test]
+    fn the_default_sweep_doubles_up_to_the_cores() {
+        assert_eq!(default_sweep(2025), [16, 32, 64, 128, 256, 512, 1024, 2025]);
+        assert_eq!(default_sweep(16), [16]);
+        assert_eq!(default_sweep(5), [5]);
+        assert_eq!(CompareConfig::default().vqql_sweep.last(), Some(&2025));
     }
 
     #[test]

@@ -38,6 +38,15 @@ pub fn rollout_additive(
     }
 }
 
+/// The paper's point mass, one agent.
+pub fn one_point_mass() -> PointMass {
+    PointMass::new(PointMassConfig {
+        agents: 1,
+        ..PointMassConfig::default()
+    })
+    .unwrap()
+}
+
 /// One agent, forces `{-2, 0, 2}` per axis (9 actions), a goal ball of radius 1 in its
 /// 4-D state.
 pub fn tiny_model() -> PointMass {

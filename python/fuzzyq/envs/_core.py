@@ -187,8 +187,8 @@ class PointMassSim:
             raise gym_error.ResetNeeded(
                 f"the episode was truncated after max_steps={self.max_steps} steps; call reset()"
             )
-        reward = float(self.model.reward(state))
         force = self.model.joint_action(joint_index)
+        reward = float(self.model.reward(state, force))
         self.state = np.asarray(self.model.step(state, force), dtype=np.float64)
         self.steps += 1
         return reward

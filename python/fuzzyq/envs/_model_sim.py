@@ -165,8 +165,8 @@ class PointMassAdapter(ModelAdapter):
         return state.reshape(-1)
 
     def step_vector(self, x: State, u: npt.NDArray[np.float64]) -> tuple[State, float, bool]:
-        """The next state, the paper's reward rho(x) of `x`, and False (never terminal)."""
-        reward = float(self.model.reward(x))
+        """The next state, the model's reward rho(x, u) at `x`, and False (never terminal)."""
+        reward = float(self.model.reward(x, u))
         next_state = self.model.step(x, u)
         return np.asarray(next_state, dtype=np.float64), reward, False
 

@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args;
 use fuzzyq_sim::compare::{self, CompareConfig, Comparison, Event, Learner};
-use fuzzyq_sim::model::pointmass::Starts;
+use fuzzyq_sim::model::pointmass::{RewardShape, Starts};
 use fuzzyq_sim::model::{EnvKind, F64Model};
 
 use crate::cmd::load_config;
@@ -46,21 +46,38 @@ pub(crate) struct CompareArgs {
     episodes: Option<usize>,
     /// Also a sample-efficiency curve: success over the random starts against these numbers
     /// of transitions (comma-separated), for every named learner that learns from samples
-    /// (learned-model, fql, fql-literal, vqql), each given that many transitions of
+    /// (learned-model, fql, fql-literal, vqql, fqi-samples), each given that many transitions of
     /// interaction; writes efficiency.csv, efficiency.json and efficiency.png.
     #[arg(long, value_name = "N,...", value_delimiter = ',')]
     curve: Option<Vec<usize>>,
-    /// learned-model: transitions collected on the plant [default: 20000].
+    /// learned-model, fqi-samples: transitions collected on the plant [default: 20000].
     #[arg(long, value_name = "N")]
     samples: Option<usize>,
     /// fql, fql-literal, vqql: learning episodes start at rest with each agent uniformly
     /// within this distance of the goal per axis (m) [default: the whole field, 6].
     #[arg(long, value_name = "M")]
     learn_position: Option<f64>,
-    /// VQQL: k-means cells per agent [default: the number of own-state fuzzy cores, so that
-    /// VQQL has as many parameters as the additive fuzzy layout].
-    #[arg(long, value_name = "K")]
+    /// VQQL: k-means cells per agent, this size alone (no sweep).
+    #[arg(long, value_name = "K", conflicts_with = "vqql_sweep")]
     cells: Option<usize>,
+    /// VQQL: the codebook sizes to sweep (cells per agent, comma-separated); the table's VQQL
+    /// column is the best, the whole sweep is reported [default: the powers of two from 16
+    /// below the number of own-state fuzzy cores, then that number, at which VQQL has as
+    /// many parameters as the additive fuzzy layout].
+    #[arg(long, value_name = "K,...", value_delimiter = ',')]
+    vqql_sweep: Option<Vec<usize>>,
+    /// The reward: the paper's, or shaped by the potential minus each agent's distance to
+    /// the goal (potential-based: the optimal policy is the paper's). The learners from
+    /// samples learn from it; the learners that plan with the model plan with the paper's,
+    /// which gives them the same greedy policy.
+    /// [default: the config's, else the paper's]
+    #[arg(long, value_name = "REWARD", value_parser = ["paper", "shaped"])]
+    reward: Option<String>,
+    /// Runs of every learner from samples (fql, fql-literal, vqql, learned-model,
+    /// fqi-samples), seeded
+    /// --seed, --seed + 1, ...; the table gives means with 95% bootstrap intervals.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    seeds: usize,
     /// Output directory (created if missing): table1.md, table1.csv, table1.json,
     /// paths.png and one rollout figure per learner.
     #[arg(long, value_name = "DIR", default_value = "compare")]
@@ -105,7 +122,18 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
     }
     if let Some(k) = args.cells {
         c.vqql.cells = k;
+        c.vqql_sweep.clear();
     }
+    if let Some(sweep) = &args.vqql_sweep {
+        if sweep.is_empty() || sweep.contains(&0) {
+            anyhow::bail!("--vqql-sweep: name codebook sizes of at least 1 cell");
+        }
+        c.vqql_sweep.clone_from(sweep);
+    }
+    if let Some(reward) = &args.reward {
+        c.set_reward(RewardShape::parse(reward, "--reward")?);
+    }
+    c.seeds = args.seeds;
     c.fql.seed = args.seed;
     c.vqql.seed = args.seed;
     c.model_learning.collection.seed = args.seed;
@@ -178,10 +206,10 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
         match e {
             Event::Training(l) => eprintln!("{}: training ({})", l.name(), l.description()),
             Event::Trained(l, n, s) => {
-                let unit = if l.is_model_based() {
-                    "sweeps"
-                } else {
-                    "episodes"
+                let unit = match l {
+                    Learner::FqiSamples => "iterations",
+                    l if l.is_model_based() => "sweeps",
+                    _ => "episodes",
                 };
                 eprintln!("{}: {n} {unit} in {s:.1} s", l.name());
             }
@@ -189,6 +217,15 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
                 "{}: rolling out from x0 and {} random starts",
                 l.name(),
                 config.starts
+            ),
+            Event::Run {
+                learner,
+                seed,
+                cells,
+            } => eprintln!(
+                "{}: seed {seed}{}",
+                learner.name(),
+                cells.map_or(String::new(), |k| format!(", {k} cells per agent"))
             ),
         }
     })?;

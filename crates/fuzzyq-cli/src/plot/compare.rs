@@ -3,21 +3,56 @@
 use std::path::Path;
 
 use anyhow::bail;
-use fuzzyq_sim::compare::Comparison;
+use fuzzyq_core::NamedOption;
+use fuzzyq_sim::compare::{Comparison, Learner};
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::{chart, draw_origin, err, key, legend_at, range, titled, write_figure};
 
-/// One colour per learner of the comparison.
-pub(super) const LEARNER_COLORS: [RGBColor; 6] = [
+/// One colour per learner of the comparison (as many as there are learners).
+pub(super) const LEARNER_COLORS: [RGBColor; 8] = [
     RGBColor(0x1f, 0x77, 0xb4),
     RGBColor(0xd6, 0x27, 0x28),
     RGBColor(0x2c, 0xa0, 0x2c),
     RGBColor(0xff, 0x7f, 0x0e),
     RGBColor(0x94, 0x67, 0xbd),
     RGBColor(0x8c, 0x56, 0x4b),
+    RGBColor(0x17, 0xbe, 0xcf),
+    RGBColor(0xe3, 0x77, 0xc2),
 ];
+
+/// How learner `k`'s path is stroked: solid, dashed or dotted, in turn, so that paths that
+/// coincide stay distinguishable where they part.
+#[derive(Clone, Copy)]
+enum Stroke {
+    Solid,
+    Dashed,
+    Dotted,
+}
+
+impl Stroke {
+    fn of(k: usize) -> Self {
+        [Self::Solid, Self::Dashed, Self::Dotted][k % 3]
+    }
+}
+
+/// Draws `path` with `stroke` in `style` on `chart`; returns the series for its legend entry.
+fn draw_path<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    path: &[(f64, f64)],
+    stroke: Stroke,
+    style: ShapeStyle,
+) -> anyhow::Result<()> {
+    let points = path.iter().copied();
+    let series = match stroke {
+        Stroke::Solid => chart.draw_series(LineSeries::new(points, style)),
+        Stroke::Dashed => chart.draw_series(DashedLineSeries::new(points, 10, 6, style)),
+        Stroke::Dotted => chart.draw_series(DashedLineSeries::new(points, 3, 4, style)),
+    };
+    series.map(|_| ()).map_err(err)
+}
 
 /// The paths of every learner from the comparison's start, one panel per agent.
 pub(crate) fn compare_figure(path: &Path, c: &Comparison) -> anyhow::Result<()> {
@@ -66,20 +101,57 @@ fn draw_compare<DB: DrawingBackend>(
         )?;
         draw_origin(&mut chart, 8)?;
         for (k, (r, t)) in c.reports.iter().zip(&c.trajectories).enumerate() {
-            let color = LEARNER_COLORS[k % LEARNER_COLORS.len()];
-            let path: Vec<(f64, f64)> = t.states.iter().map(|x| (x[4 * i], x[4 * i + 1])).collect();
-            chart
-                .draw_series(LineSeries::new(path.iter().copied(), color.stroke_width(2)))
-                .map_err(err)?
-                .label(r.learner.name())
-                .legend(key(color));
+            // A learner's colour and line style are its own, whichever learners run.
+            let own = Learner::ALL
+                .iter()
+                .position(|&l| l == r.learner)
+                .unwrap_or(k);
+            let color = LEARNER_COLORS[own % LEARNER_COLORS.len()];
+            let xy = |t: &fuzzyq_sim::run::metrics::Trajectory| -> Vec<(f64, f64)> {
+                t.states.iter().map(|x| (x[4 * i], x[4 * i + 1])).collect()
+            };
+            // The spread over seeds: the further seeds' paths, thin and light.
+            for other in c.seed_trajectories.get(k).into_iter().flatten() {
+                let path = xy(other);
+                draw_path(
+                    &mut chart,
+                    &path,
+                    Stroke::of(own),
+                    color.mix(0.35).stroke_width(1),
+                )?;
+                chart
+                    .draw_series(std::iter::once(Circle::new(
+                        *path.last().expect("a non-empty path"),
+                        3,
+                        color.mix(0.35).filled(),
+                    )))
+                    .map_err(err)?;
+            }
+            let path = xy(t);
+            // Earlier learners drawn wider, so that a path another one covers shows as its
+            // border (the learned model's path is fuzzy Q-iteration's here).
+            let width = 2 + (c.reports.len() - 1 - k) as u32 / 2;
+            draw_path(
+                &mut chart,
+                &path,
+                Stroke::of(own),
+                color.stroke_width(width),
+            )?;
+            let seeds = c.seed_trajectories.get(k).map_or(0, Vec::len);
+            let label = if seeds > 0 {
+                format!("{} ({} seeds)", r.learner.name(), seeds + 1)
+            } else {
+                r.learner.name().to_string()
+            };
             chart
                 .draw_series(std::iter::once(Circle::new(
                     *path.last().expect("a non-empty path"),
                     4,
                     color.filled(),
                 )))
-                .map_err(err)?;
+                .map_err(err)?
+                .label(label)
+                .legend(key(color));
         }
         chart
             .draw_series(std::iter::once(TriangleMarker::new(

@@ -530,20 +530,21 @@ fn compare_writes_the_table_and_figures() {
         "fql-literal",
         "vqql",
         "learned-model",
+        "fqi-samples",
     ];
     for l in learners {
         assert!(out.join(format!("rollout-{l}.png")).is_file(), "{l}");
     }
     let csv = std::fs::read_to_string(out.join("table1.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + learners.len());
-    // The sample-efficiency curve: 2 budgets for each of the 4 learners from samples.
+    // The sample-efficiency curve: 2 budgets for each of the 5 learners from samples.
     let curve = std::fs::read_to_string(out.join("efficiency.csv")).unwrap();
-    assert_eq!(curve.lines().count(), 1 + 2 * 4, "{curve}");
+    assert_eq!(curve.lines().count(), 1 + 2 * 5, "{curve}");
     assert!(curve.contains("learned-model,3000,"), "{curve}");
     assert!(out.join("efficiency.png").is_file());
     assert_eq!(
         json(&out.join("efficiency.json")).as_array().unwrap().len(),
-        8
+        10
     );
     let j = json(&out.join("table1.json"));
     let reports = j["reports"].as_array().unwrap();
@@ -568,6 +569,10 @@ fn compare_writes_the_table_and_figures() {
     assert_eq!(learned["parameters"], 2025 * 25);
     assert_eq!(learned["iteration_unit"], "sweeps");
     assert_eq!(learned["time_to_goal_s"], fqi["time_to_goal_s"]);
+    // Fuzzy Q-iteration from samples: the one agent's own-state cores x 25 actions.
+    let fitted = &reports[7];
+    assert_eq!(fitted["parameters"], 2025 * 25);
+    assert_eq!(fitted["iteration_unit"], "iterations");
     assert_eq!(learned["success_rate"], fqi["success_rate"]);
     assert_eq!(j["trajectories"].as_array().unwrap().len(), learners.len());
 
@@ -613,9 +618,73 @@ fn compare_writes_the_table_and_figures() {
                 "compare --config one.toml --x0=-4,5,0,0 --out file",
                 "not a directory",
             ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --seeds 0",
+                "seeds",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --reward dense",
+                "--reward",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --vqql-sweep 16,0",
+                "--vqql-sweep",
+            ),
+            (
+                "compare --config one.toml --out fresh --x0=-4,5,0,0 --cells 8 --vqql-sweep 16",
+                "--cells",
+            ),
         ],
     );
     assert!(!d.join("fresh").exists());
+}
+
+#[test]
+fn compare_runs_the_learners_from_samples_over_seeds_under_the_shaped_reward() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    one_agent_config(d);
+    let o = fuzzyq(
+        &[
+            "compare",
+            "--config",
+            "one.toml",
+            "--x0=-4,5,0,0",
+            "--starts",
+            "4",
+            "--steps",
+            "40",
+            "--episodes",
+            "20",
+            "--learners",
+            "fqi,fql,vqql",
+            "--reward",
+            "shaped",
+            "--seeds",
+            "2",
+            "--vqql-sweep",
+            "8,16",
+            "--out",
+            "cmp",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("vqql: seed 8, 16 cells per agent"), "{err}");
+    let j = json(&d.join("cmp/table1.json"));
+    assert_eq!(j["reward"], "shaped");
+    let reports = j["reports"].as_array().unwrap();
+    assert!(reports[0]["over_seeds"].is_null(), "fqi plans once");
+    for r in &reports[1..] {
+        assert_eq!(r["over_seeds"]["seeds"], serde_json::json!([7, 8]), "{r}");
+    }
+    assert_eq!(j["seed_trajectories"][1].as_array().unwrap().len(), 1);
+    let sweep = j["vqql_sweep"].as_array().unwrap();
+    assert_eq!(sweep.len(), 2);
+    let table = std::fs::read_to_string(d.join("cmp/table1.md")).unwrap();
+    assert!(table.contains("| cells per agent |"), "{table}");
+    assert!(d.join("cmp/paths.png").is_file());
 }
 
 #[test]

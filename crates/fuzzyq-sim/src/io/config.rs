@@ -19,7 +19,7 @@ use crate::model::classic::dcmotor::{DcMotor, DcMotorConfig};
 use crate::model::classic::pendulum::{Pendulum, PendulumConfig};
 use crate::model::classic::{self, Benchmark, Classic};
 use crate::model::khepera::{self, KheperaConfig, KheperaModel};
-use crate::model::pointmass::{PointMass, PointMassConfig};
+use crate::model::pointmass::{PointMass, PointMassConfig, RewardShape};
 use crate::model::{EnvKind, EnvModel};
 use crate::paper;
 
@@ -40,6 +40,8 @@ goal_reward = 5.0                           # reward inside the region (eq 40)
 integrator = "exact"                        # "exact" (constant friction) or "rk4"
 rk4_substeps = 10                           # substeps per sample time for "rk4"
 velocity_noise = 0.0                        # m/s: std dev of Gaussian process noise on every velocity per step (the plant's; 0 = the paper's)
+reward = "paper"                            # "paper", or "shaped": plus gamma Phi(x') - Phi(x), Phi = -sum of the agents' distances to the goal (same optimal policy)
+shaping_discount = 0.96                     # the shaping's gamma: must equal solver.gamma
 
 [env.friction]
 kind = "constant"                           # or "patches" with base = ..., patches = [{ center = [x, y], radius = r, eta = e }]
@@ -692,8 +694,17 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.env.validate()?;
         match &self.env {
-            EnvConfig::Pointmass(_) => {
+            EnvConfig::Pointmass(p) => {
                 check_cores("grid.velocity_cores", &self.grid.velocity_cores)?;
+                require!(
+                    p.reward == RewardShape::Paper || p.shaping_discount == self.solver.gamma,
+                    "env.shaping_discount",
+                    format!(
+                        "is {} but solver.gamma is {}: the shaped reward keeps the optimal \
+                         policy only with the learner's discount (set both alike)",
+                        p.shaping_discount, self.solver.gamma
+                    ),
+                );
                 require!(
                     self.grid.heading_divisions.is_none(),
                     "grid.heading_divisions",
@@ -902,6 +913,19 @@ mod tests {
         ))
         .unwrap_err();
         assert!(e.to_string().starts_with("grid.velocity_cores"), "{e}");
+        // The shaped reward keeps the optimal policy only with the learner's discount.
+        let shaped = DEFAULT_POINTMASS_TOML
+            .replace("reward = \"paper\"", "reward = \"shaped\"")
+            .replace("gamma = 0.96", "gamma = 0.9");
+        let e = TrainConfig::from_toml(&shaped).unwrap_err();
+        assert!(e.to_string().starts_with("env.shaping_discount"), "{e}");
+        let both = shaped.replace("shaping_discount = 0.96", "shaping_discount = 0.9");
+        assert!(TrainConfig::from_toml(&both).is_ok());
+        let e = TrainConfig::from_toml(
+            &DEFAULT_POINTMASS_TOML.replace("reward = \"paper\"", "reward = \"dense\""),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("env.reward"), "{e}");
     }
 
     /// Errors inside `[env...]` sections name the field and its line, not the section's
@@ -937,15 +961,15 @@ mod tests {
         // [env.friction] is itself an internally tagged enum.
         let e = pm("eta = 1.0", "eta = \"x\"");
         assert!(
-            e.contains("env.friction.eta") && e.ends_with("(line 20)"),
+            e.contains("env.friction.eta") && e.ends_with("(line 22)"),
             "{e}"
         );
         let e = pm("eta = 1.0", "etaa = 1.0");
-        assert!(e.contains("etaa") && e.ends_with("(line 20)"), "{e}");
+        assert!(e.contains("etaa") && e.ends_with("(line 22)"), "{e}");
         // Outside [env], as before.
         let e = pm("xi = 0.05", "xi = \"small\"");
         assert!(
-            e.starts_with("solver.xi: invalid type") && e.ends_with("(line 30)"),
+            e.starts_with("solver.xi: invalid type") && e.ends_with("(line 32)"),
             "{e}"
         );
         // Validation errors name the line too.

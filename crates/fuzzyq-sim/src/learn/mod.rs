@@ -6,6 +6,8 @@
 //! - [`codebook`]: VQQL's vector quantisers (exact k-d tree lookups);
 //! - [`additive`]: the additive Q-function and its sample update (the core's arithmetic);
 //! - [`fql`]: the learning loop (exploration, schedules, evaluations, convergence, curves);
+//! - [`fitted`]: fuzzy Q-iteration from samples (batch fitted Q-iteration with the fuzzy
+//!   averager, per agent);
 //! - [`vqql`]: the Generalized Lloyd algorithm and VQQL on the point masses;
 //! - [`tasks`]: the point masses and the robots as learning environments;
 //! - [`samples`]: transitions `(x, u, x', r)` and their collection from a plant;
@@ -18,6 +20,7 @@ pub mod codebook;
 pub mod env;
 pub mod features;
 pub mod fit;
+pub mod fitted;
 pub mod fql;
 pub mod reward;
 pub mod samples;

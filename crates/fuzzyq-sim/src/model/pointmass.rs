@@ -8,6 +8,20 @@
 //! 25 actions per agent and `25^n` joint actions. The shared reward is `R` when the whole state
 //! is within `goal_radius` of the origin (eq 40, evaluated at the current state), else 0.
 //!
+//! # The shaped reward
+//! With `reward = "shaped"` ([`RewardShape::Shaped`]) every transition also pays the
+//! potential-based shaping term of Ng, Harada and Russell (1999),
+//! `F(x, u) = gamma * Phi(f(x, u)) - Phi(x)`, with the potential
+//! `Phi(x) = -sum_i ||x_i||_2`: minus each agent's distance to its goal state, measured over
+//! its own `(s_x, s_y, v_x, v_y)` as the reward region is. The shaped reward is
+//! `rho(x) + F(x, u)`. Along any path the terms telescope: the discounted return from `x_0`
+//! changes by `-Phi(x_0)` whatever the actions, so every policy's ranking, and the optimal
+//! policy, stay those of the paper's reward, while each step now says whether it brought the
+//! agents closer. `gamma` is [`PointMassConfig::shaping_discount`], which must be the
+//! learner's discount for the identity to hold (the training configuration checks it). The
+//! successor is the model's noise-free `f(x, u)`; on a noisy plant the term is that of the
+//! mean dynamics. The reward then depends on the action.
+//!
 //! # Integration
 //! - `exact` (constant friction only): the closed-form zero-order-hold solution. With
 //!   `a = eta / m` and `w = u / eta`: `v' = w + (v - w) e^{-aT}`,
@@ -76,6 +90,53 @@ pub enum Integrator {
     Rk4,
 }
 
+/// The point-mass task's reward: the paper's, or the same with a potential-based shaping
+/// term (see the [module docs](self#the-shaped-reward)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RewardShape {
+    /// `R` inside the reward region, else 0 (eq 40).
+    #[default]
+    Paper,
+    /// The paper's reward plus `gamma * Phi(f(x, u)) - Phi(x)`, `Phi(x) = -sum_i ||x_i||_2`.
+    Shaped,
+}
+
+impl RewardShape {
+    /// The name in a config file (`"paper"`, `"shaped"`).
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::Shaped => "shaped",
+        }
+    }
+
+    /// Parses a [`name`](Self::name); the error names `field`.
+    pub fn parse(name: &str, field: &str) -> Result<Self, ConfigError> {
+        match name {
+            "paper" => Ok(Self::Paper),
+            "shaped" => Ok(Self::Shaped),
+            _ => Err(ConfigError::invalid(
+                field,
+                format!("{name:?} is not a reward: use \"paper\" or \"shaped\""),
+            )),
+        }
+    }
+
+    fn is_paper(&self) -> bool {
+        *self == Self::Paper
+    }
+}
+
+fn is_paper_gamma(g: &f64) -> bool {
+    *g == paper::GAMMA
+}
+
+fn paper_gamma() -> f64 {
+    paper::GAMMA
+}
+
 /// The point-mass task's parameters (the `[env]` table of a config file).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -109,6 +170,14 @@ pub struct PointMassConfig {
     /// collection add it, seeded; the rapier plant does not.
     #[serde(default)]
     pub velocity_noise: f64,
+    /// The reward: `"paper"` (default) or `"shaped"` (see the
+    /// [module docs](self#the-shaped-reward)).
+    #[serde(default, skip_serializing_if = "RewardShape::is_paper")]
+    pub reward: RewardShape,
+    /// The discount `gamma` of the shaping term, in `(0, 1]`; it must equal the learner's
+    /// discount. Default: the paper's 0.96.
+    #[serde(default = "paper_gamma", skip_serializing_if = "is_paper_gamma")]
+    pub shaping_discount: f64,
 }
 
 impl Default for PointMassConfig {
@@ -127,6 +196,8 @@ impl Default for PointMassConfig {
             rk4_substeps: 10,
             friction: FrictionConfig::Constant { eta: 1.0 },
             velocity_noise: 0.0,
+            reward: RewardShape::Paper,
+            shaping_discount: paper::GAMMA,
         }
     }
 }
@@ -151,6 +222,11 @@ impl PointMassConfig {
         positive("env.velocity_limit", self.velocity_limit)?;
         non_negative("env.goal_radius", self.goal_radius)?;
         non_negative("env.velocity_noise", self.velocity_noise)?;
+        require!(
+            self.shaping_discount > 0.0 && self.shaping_discount <= 1.0,
+            "env.shaping_discount",
+            format!("must be in (0, 1], got {}", self.shaping_discount),
+        );
         require!(
             self.goal_reward.is_finite(),
             "env.goal_reward",
@@ -347,6 +423,37 @@ impl PointMass {
         x.iter().map(|v| v * v).sum::<f64>().sqrt() < self.config.goal_radius
     }
 
+    /// The shaping potential `Phi(x) = -sum_i ||x_i||_2` (each agent's own state).
+    #[must_use]
+    pub fn potential(x: &[f64]) -> f64 {
+        -x.chunks(4)
+            .map(|a| a.iter().map(|v| v * v).sum::<f64>().sqrt())
+            .sum::<f64>()
+    }
+
+    /// The shaping term `gamma * Phi(next) - Phi(x)` of a transition from `x` to `next`.
+    #[must_use]
+    pub fn shaping(&self, x: &[f64], next: &[f64]) -> f64 {
+        self.config.shaping_discount * Self::potential(next) - Self::potential(x)
+    }
+
+    /// The largest `|r|` of a step: the goal reward, plus under the shaped reward the largest
+    /// shaping term (`|Phi|` is at most the agents' distance from the origin to a corner of
+    /// the state box, and `gamma <= 1`).
+    #[must_use]
+    pub fn reward_bound(&self) -> f64 {
+        let c = &self.config;
+        let goal = c.goal_reward.abs();
+        match c.reward {
+            RewardShape::Paper => goal,
+            RewardShape::Shaped => {
+                let corner =
+                    (2.0 * c.position_limit.powi(2) + 2.0 * c.velocity_limit.powi(2)).sqrt();
+                goal + c.agents as f64 * corner
+            }
+        }
+    }
+
     /// Agent `i`'s position `(s_x, s_y)` in state `x`.
     #[must_use]
     pub fn position(x: &[f64], agent: usize) -> [f64; 2] {
@@ -516,16 +623,27 @@ impl Dynamics for PointMass {
         self.step_f64(x, u, next);
     }
 
-    fn reward(&self, x: &[f64], _u: &[f64], _precision: Precision) -> f64 {
-        if self.in_goal_f64(x) {
+    fn reward(&self, x: &[f64], u: &[f64], precision: Precision) -> f64 {
+        let goal = if self.in_goal_f64(x) {
             self.config.goal_reward
         } else {
             0.0
+        };
+        match self.config.reward {
+            RewardShape::Paper => goal,
+            RewardShape::Shaped => {
+                // The successor as the solver sees it (rounded to its precision).
+                let mut next = [0.0; 4 * MAX_POINT_MASS_AGENTS];
+                let next = &mut next[..x.len()];
+                self.step_f64(x, u, next);
+                next.iter_mut().for_each(|v| *v = precision.round(*v));
+                goal + self.shaping(x, next)
+            }
         }
     }
 
     fn reward_depends_on_action(&self) -> bool {
-        false
+        self.config.reward == RewardShape::Shaped
     }
 
     fn is_goal(&self, x: &[f64]) -> bool {
@@ -647,6 +765,76 @@ mod tests {
                 patches: vec![]
             })
             .contains("rk4")
+        );
+    }
+
+    #[test]
+    fn the_shaped_reward_telescopes_along_any_path() {
+        // Sum_k gamma^k (rho(x_k) + F(x_k, u_k)) = sum_k gamma^k rho(x_k) + gamma^K Phi(x_K)
+        // - Phi(x_0): the shaping adds the same for every action sequence (Ng et al. 1999).
+        let paper = PointMass::paper();
+        let shaped = PointMass::new(PointMassConfig {
+            reward: RewardShape::Shaped,
+            ..PointMassConfig::default()
+        })
+        .unwrap();
+        assert!(Model::<f64>::reward_depends_on_action(&shaped));
+        assert!(!Model::<f64>::reward_depends_on_action(&paper));
+        let gamma = paper::GAMMA;
+        let mut rng = Pcg64Mcg::seed_from_u64(3);
+        for start in [[0.05, 0.0, 0.0, 0.0, -0.02, 0.03, 0.0, 0.0], TABLE1_START] {
+            let (mut x, mut next) = (start.to_vec(), vec![0.0; 8]);
+            let (mut plain, mut with, mut discount) = (0.0, 0.0, 1.0);
+            for _ in 0..60 {
+                let u: Vec<f64> = (0..4)
+                    .map(|_| paper::FORCE_LEVELS[rng.random_range(0..5)])
+                    .collect();
+                plain += discount * Model::<f64>::reward(&paper, &x, &u);
+                with += discount * Model::<f64>::reward(&shaped, &x, &u);
+                paper.step_f64(&x, &u, &mut next);
+                std::mem::swap(&mut x, &mut next);
+                discount *= gamma;
+            }
+            let expected =
+                plain + discount * PointMass::potential(&x) - PointMass::potential(&start);
+            assert!((with - expected).abs() < 1e-9, "{with} against {expected}");
+        }
+        // Each step's reward stays within the bound the learners project onto.
+        let bound = shaped.reward_bound();
+        assert!((bound - (5.0 + 2.0 * 90f64.sqrt())).abs() < 1e-12);
+        assert_eq!(paper.reward_bound(), 5.0);
+    }
+
+    const TABLE1_START: [f64; 8] = [-4.0, 5.0, 0.0, 0.0, 5.0, -3.0, 0.0, 0.0];
+
+    #[test]
+    fn the_paper_reward_serialises_as_before_and_the_shaping_discount_is_checked() {
+        let text = toml::to_string(&PointMassConfig::default()).unwrap();
+        assert!(
+            !text.contains("\nreward") && !text.contains("shaping"),
+            "{text}"
+        );
+        let shaped = PointMassConfig {
+            reward: RewardShape::Shaped,
+            shaping_discount: 0.9,
+            ..PointMassConfig::default()
+        };
+        let text = toml::to_string(&shaped).unwrap();
+        assert!(text.contains("reward = \"shaped\""), "{text}");
+        assert_eq!(toml::from_str::<PointMassConfig>(&text).unwrap(), shaped);
+        for bad in [0.0, 1.5, f64::NAN] {
+            let e = PointMass::new(PointMassConfig {
+                shaping_discount: bad,
+                ..shaped.clone()
+            })
+            .unwrap_err();
+            assert!(e.to_string().contains("env.shaping_discount"), "{e}");
+        }
+        assert!(
+            RewardShape::parse("dense", "--reward")
+                .unwrap_err()
+                .to_string()
+                .contains("--reward")
         );
     }
 }

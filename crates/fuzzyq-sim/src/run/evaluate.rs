@@ -344,13 +344,7 @@ mod tests {
     use crate::run::policy::{AdditivePolicy, FqiPolicy};
     use crate::test_support::rollout_additive;
 
-    fn one_agent() -> PointMass {
-        PointMass::new(PointMassConfig {
-            agents: 1,
-            ..PointMassConfig::default()
-        })
-        .unwrap()
-    }
+    use crate::test_support::one_point_mass as one_agent;
 
     fn spec(steps: usize) -> RolloutSpec {
         RolloutSpec {

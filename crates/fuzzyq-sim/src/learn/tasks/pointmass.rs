@@ -266,9 +266,9 @@ impl Environment for PointMassEnv {
         self.model.in_goal_f64(&self.x)
     }
 
-    /// The goal reward: the only reward a step pays.
+    /// The goal reward, plus the largest shaping term under the shaped reward.
     fn reward_bound(&self) -> Option<f64> {
-        Some(self.model.config().goal_reward.abs())
+        Some(self.model.reward_bound())
     }
 }
 
@@ -371,9 +371,19 @@ mod tests {
     /// on the paper's point masses learning near the goal (`fuzzyq compare --learn-position
     /// 0.1`), where the unprojected updates diverge; `bounded`: with the projection.
     fn largest_parameter(learner: &str, seed: u64, bounded: bool) -> f64 {
-        let model = PointMass::paper();
+        largest_under(PointMass::paper(), 0.1, learner, seed, bounded)
+    }
+
+    /// [`largest_parameter`] on `model`, the learning episodes starting within `position`.
+    fn largest_under(
+        model: PointMass,
+        position: f64,
+        learner: &str,
+        seed: u64,
+        bounded: bool,
+    ) -> f64 {
         let starts = Starts::Uniform {
-            position: 0.1,
+            position,
             velocity: 0.0,
         };
         let fql = FqlConfig {
@@ -423,6 +433,30 @@ mod tests {
         }
         // Without the projection the same runs leave every bound behind.
         assert!(unbounded > 1e6, "{unbounded}");
+    }
+
+    #[test]
+    fn under_the_shaped_reward_every_learners_parameters_stay_bounded() {
+        use crate::model::pointmass::{PointMassConfig, RewardShape};
+        let model = PointMass::new(PointMassConfig {
+            reward: RewardShape::Shaped,
+            ..PointMassConfig::default()
+        })
+        .unwrap();
+        // The shaped step reward is at most 5 + 2 sqrt(90) = 23.97; over 1 - gamma: 599.
+        let bound = model.reward_bound() / (1.0 - crate::paper::GAMMA);
+        assert!(bound < 1e3);
+        for learner in ["fql", "fql-literal", "vqql"] {
+            for seed in 0..5 {
+                for position in [0.1, 6.0] {
+                    let largest = largest_under(model.clone(), position, learner, seed, true);
+                    assert!(
+                        largest > 0.0 && largest <= bound,
+                        "{learner} seed {seed} within {position} m: {largest}"
+                    );
+                }
+            }
+        }
     }
 
     /// Rolls the greedy policy out from [`TINY_X0`]: it must reach the goal ball and stay.
