@@ -82,8 +82,9 @@ _LEARNERS = (
     "vqql",
     "learned-model",
     "fqi-samples",
+    "vqql-batch",
 )
-_LEARNER_COLOURS = (*_COLOURS, _PURPLE, "#8c564b", "#17becf", "#e377c2")
+_LEARNER_COLOURS = (*_COLOURS, _PURPLE, "#8c564b", "#17becf", "#e377c2", "#7f7f7f")
 _ENVS = ("pointmass", "khepera", "dcmotor", "pendulum", "carhill", "arm")
 _AGENTS = ("pointmass", "khepera")  # per-agent layouts; their variables carry the agent number
 

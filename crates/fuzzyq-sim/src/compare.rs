@@ -25,7 +25,8 @@
 //! | [`Learner::FqlLiteral`] | the same with the update as printed (eqs 24-26) | `sum_i N_i * M_i` |
 //! | [`Learner::Vqql`] | VQQL, the CMOMMT learner: k-means cells per agent + tabular Q-learning ([`crate::learn::vqql`]) | `sum_i K_i * M_i` |
 //! | [`Learner::LearnedModel`] | joint fuzzy Q-iteration on a fuzzy model learned from transitions collected on the plant ([`crate::train::train_learned`]) | `N * M`; only `V` and the learned tables are stored |
-//! | [`Learner::FqiSamples`] | fuzzy Q-iteration from samples: batch fitted Q-iteration with the fuzzy averager, per agent, on the same transitions, never building a model ([`crate::learn::fitted`]) | `sum_i N_i * M_i` |
+//! | [`Learner::FqiSamples`] | fuzzy Q-iteration from samples: batch fitted Q-iteration with the fuzzy averager, per agent, on [`CompareConfig::batch`]'s transitions, never building a model ([`crate::learn::fitted`]) | `sum_i N_i * M_i` |
+//! | [`Learner::VqqlBatch`] | its crisp counterpart: VQQL's k-means cells, fitted Q-iteration over them on the same transitions | `sum_i K_i * M_i` |
 //!
 //! [`sample_efficiency`] asks the other question of Table 1, at equal samples: each learner
 //! from samples (the learned model, fuzzy Q-learning, VQQL) gets the same numbers of
@@ -66,9 +67,9 @@ use crate::io::config::{EnvConfig, TrainConfig};
 use crate::io::policy_file::{PolicyArtifact, Values};
 use crate::learn::fitted::{self, FittedConfig};
 use crate::learn::fql::FqlConfig;
-use crate::learn::samples::Exploration;
+use crate::learn::samples::{Collection, Exploration};
 use crate::learn::tasks::pointmass as pointmass_task;
-use crate::learn::vqql::VqqlConfig;
+use crate::learn::vqql::{self, VqqlConfig};
 use crate::model::classic::octave::linspace;
 use crate::model::pointmass::{self, PointMass, RewardShape, Starts};
 use crate::model::{EnvModel, F64Model, check_state};
@@ -97,8 +98,11 @@ fuzzyq_core::named_option! {
         /// Joint fuzzy Q-iteration on a fuzzy model learned from transitions.
         LearnedModel = "learned-model" => "joint fuzzy Q-iteration on a model learned from transitions",
         /// Fuzzy Q-iteration from samples: fitted Q-iteration with the fuzzy averager, per
-        /// agent, on the learned model's transitions, with no model.
+        /// agent, on a batch of transitions, with no model.
         FqiSamples = "fqi-samples" => "fuzzy Q-iteration from samples (fitted, per agent, no model)",
+        /// VQQL from a batch: VQQL's k-means cells, and fitted Q-iteration over them (a crisp
+        /// averager) on the same transitions as `fqi-samples`.
+        VqqlBatch = "vqql-batch" => "VQQL cells + fitted Q-iteration on the same transitions (crisp, batch)",
     }
 }
 
@@ -113,6 +117,13 @@ impl Learner {
     pub fn parse(name: &str) -> Result<Self, ConfigError> {
         name.parse()
             .map_err(|e| ConfigError::invalid("learners", format!("{name:?}: {e}")))
+    }
+
+    /// Whether the learner is one of VQQL's (k-means cells, swept by
+    /// [`CompareConfig::vqql_sweep`]).
+    #[must_use]
+    pub fn is_vqql(self) -> bool {
+        matches!(self, Self::Vqql | Self::VqqlBatch)
     }
 
     /// Whether the learner is model-based (iterates over a grid with the model).
@@ -153,6 +164,10 @@ pub struct CompareConfig {
     /// The learned-model learner's interaction with the plant and fit (its seed is the
     /// fuzzy Q-learning seed's).
     pub model_learning: ModelLearning,
+    /// The batch learners' ([`Learner::FqiSamples`], [`Learner::VqqlBatch`]) transitions:
+    /// random actions on the plant, as the learned model collects them (by default 100,000
+    /// in episodes of the learned model's length, its seed).
+    pub batch: Collection,
     /// Runs of every learner from samples, seeded `fql.seed`, `fql.seed + 1`, ... (the
     /// learned model's collection and VQQL's exploration likewise); 1 to 100.
     pub seeds: usize,
@@ -194,6 +209,10 @@ impl CompareConfig {
             fql_starts: pointmass_task::default_starts(),
             vqql,
             model_learning: ModelLearning::new(20_000, pointmass_task::default_fql_config().seed),
+            batch: Collection {
+                samples: 100_000,
+                ..ModelLearning::new(1, pointmass_task::default_fql_config().seed).collection
+            },
             seeds: 1,
             vqql_sweep: default_sweep(own_cores),
         }
@@ -234,6 +253,7 @@ impl CompareConfig {
         c.fql.seed = seed;
         c.vqql.seed = seed;
         c.model_learning.collection.seed = seed;
+        c.batch.seed = seed;
         c
     }
 
@@ -269,12 +289,17 @@ impl CompareConfig {
         );
         self.fql.validate()?;
         self.fql_starts.validate(&model)?;
-        if self.learners.contains(&Learner::LearnedModel)
-            || self.learners.contains(&Learner::FqiSamples)
-        {
+        if self.learners.contains(&Learner::LearnedModel) {
             self.model_learning.collection.validate()?;
         }
-        if self.learners.contains(&Learner::Vqql) {
+        if self.learners.contains(&Learner::FqiSamples)
+            || self.learners.contains(&Learner::VqqlBatch)
+        {
+            self.batch
+                .validate()
+                .map_err(|e| ConfigError::invalid("batch", e.to_string()))?;
+        }
+        if self.learners.iter().any(|l| l.is_vqql()) {
             self.vqql.validate()?;
             for &cells in &self.vqql_sweep {
                 VqqlConfig {
@@ -406,6 +431,8 @@ pub struct OverSeeds {
 /// One codebook size of the VQQL sweep ([`CompareConfig::vqql_sweep`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SweepPoint {
+    /// The VQQL learner swept ([`Learner::Vqql`] or [`Learner::VqqlBatch`]).
+    pub learner: Learner,
     /// Cells per agent.
     pub cells: usize,
     /// Parameters of the Q-table (all agents).
@@ -552,9 +579,10 @@ pub fn compare(
         let (report, mut paths) = if learner.is_model_based() && learner != Learner::LearnedModel {
             let (report, path) = measure(config, learner, &starts, &spec, &mut progress)?;
             (report, vec![path])
-        } else if learner == Learner::Vqql && !config.vqql_sweep.is_empty() {
-            let (points, report, paths) = vqql_sweep(config, &starts, &spec, &mut progress)?;
-            out.vqql_sweep = points;
+        } else if learner.is_vqql() && !config.vqql_sweep.is_empty() {
+            let (points, report, paths) =
+                vqql_sweep(config, learner, &starts, &spec, &mut progress)?;
+            out.vqql_sweep.extend(points);
             (report, paths)
         } else {
             let (report, paths, _) = over_seeds(config, learner, &starts, &spec, &mut progress)?;
@@ -614,7 +642,7 @@ fn over_seeds(
     spec: &RolloutSpec,
     progress: &mut dyn FnMut(Event),
 ) -> Result<(LearnerReport, Vec<Trajectory>, OverSeeds), SimError> {
-    let announce = config.seeds > 1 || (learner == Learner::Vqql && !config.vqql_sweep.is_empty());
+    let announce = config.seeds > 1 || (learner.is_vqql() && !config.vqql_sweep.is_empty());
     let (mut runs, mut paths, mut seeds) = (Vec::new(), Vec::new(), Vec::new());
     for k in 0..config.seeds {
         let seed = config.fql.seed.wrapping_add(k as u64);
@@ -622,7 +650,7 @@ fn over_seeds(
             progress(Event::Run {
                 learner,
                 seed,
-                cells: (learner == Learner::Vqql).then_some(config.vqql.cells),
+                cells: learner.is_vqql().then_some(config.vqql.cells),
             });
         }
         let c = if config.seeds > 1 {
@@ -669,6 +697,7 @@ fn over_seeds(
 /// paths (see the [module docs](self#rewards-seeds-and-the-codebook-sweep)).
 fn vqql_sweep(
     config: &CompareConfig,
+    learner: Learner,
     starts: &[Vec<f64>],
     spec: &RolloutSpec,
     progress: &mut dyn FnMut(Event),
@@ -678,7 +707,7 @@ fn vqql_sweep(
     for &cells in &config.vqql_sweep {
         let mut c = config.clone();
         c.vqql.cells = cells;
-        let (report, paths, over) = over_seeds(&c, Learner::Vqql, starts, spec, progress)?;
+        let (report, paths, over) = over_seeds(&c, learner, starts, spec, progress)?;
         let better = best.as_ref().is_none_or(|(i, _, _)| {
             let b: &SweepPoint = &points[*i];
             let (s, e) = (over.success.mean, over.mean_final_error.mean);
@@ -692,6 +721,7 @@ fn vqql_sweep(
             best = Some((points.len(), report.clone(), paths));
         }
         points.push(SweepPoint {
+            learner,
             cells,
             parameters: report.parameters,
             over_seeds: over,
@@ -745,8 +775,11 @@ pub fn with_budget(config: &CompareConfig, learner: Learner, transitions: usize)
     };
     match learner {
         Learner::Fqi | Learner::Crisp | Learner::CrispUniform => {}
-        Learner::LearnedModel | Learner::FqiSamples => {
-            c.model_learning.collection.samples = transitions;
+        Learner::LearnedModel => c.model_learning.collection.samples = transitions,
+        Learner::FqiSamples => c.batch.samples = transitions,
+        Learner::VqqlBatch => {
+            c.batch.samples = transitions;
+            c.vqql.cells = c.vqql.cells.min(c.vqql.samples);
         }
         Learner::Fql | Learner::FqlLiteral => learn_for(transitions),
         Learner::Vqql => {
@@ -958,7 +991,7 @@ fn train_one(
             ));
             Ok((Policy::Fqi(FqiPolicy::from_artifact(artifact)?), report))
         }
-        Learner::FqiSamples => fitted_from_samples(config, report),
+        Learner::FqiSamples | Learner::VqqlBatch => fitted_from_samples(config, learner, report),
         Learner::Fql | Learner::FqlLiteral | Learner::Vqql => {
             let mut fql = config.fql.clone();
             fql.gamma = config.task.solver.gamma;
@@ -1020,21 +1053,33 @@ fn train_one(
     }
 }
 
-/// [`Learner::FqiSamples`]: the learned model's transitions (its collection settings and
-/// seed, the task's reward), fitted per agent on the task's own-state cores.
+/// [`Learner::FqiSamples`] and [`Learner::VqqlBatch`]: fitted Q-iteration on the
+/// [`CompareConfig::batch`] transitions (the task's reward), over the task's own-state cores
+/// or over VQQL's codebook (built as [`Learner::Vqql`] builds it).
 fn fitted_from_samples(
     config: &CompareConfig,
+    learner: Learner,
     mut report: LearnerReport,
 ) -> Result<(Policy, LearnerReport), SimError> {
     let model = config.model()?;
-    let c = &config.model_learning.collection;
+    let c = &config.batch;
     let data = train::collect_from_plant(
         &EnvModel::PointMass(model.clone()),
         c,
         &mut Exploration::Random,
     )?;
-    let g = &config.task.grid;
-    let features = pointmass_task::feature_space(&model, &g.position_cores, &g.velocity_cores)?;
+    let features = if learner == Learner::VqqlBatch {
+        let (features, lloyd) = vqql::build_codebook(&model, &config.fql_starts, &config.vqql)?;
+        report.notes.push(format!(
+            "k-means: {} cells per agent, {} Lloyd iterations, distortion {:.4}",
+            config.vqql.cells, lloyd.iterations, lloyd.distortion
+        ));
+        report.stored_values += lloyd.codebook_values as u64;
+        features
+    } else {
+        let g = &config.task.grid;
+        pointmass_task::feature_space(&model, &g.position_cores, &g.velocity_cores)?
+    };
     let s = &config.task.solver;
     let out = fitted::fitted_q(
         &data,
@@ -1050,7 +1095,7 @@ fn fitted_from_samples(
     report.iteration_unit = "iterations".into();
     report.converged = out.converged;
     report.parameters = out.q.params().iter().map(|p| p.len() as u64).sum();
-    report.stored_values = report.parameters;
+    report.stored_values += report.parameters;
     let largest = out
         .q
         .params()
@@ -1059,8 +1104,8 @@ fn fitted_from_samples(
         .fold(0.0_f64, |m, p| m.max(p.abs()));
     report.largest_parameter = Some(largest);
     report.notes.push(format!(
-        "fitted on {} transitions (random actions, episodes of {} steps, seed {}), the \
-         learned model's; largest |parameter| {largest:.3e}",
+        "fitted on {} transitions (random actions, episodes of {} steps, seed {}); largest \
+         |parameter| {largest:.3e}",
         c.samples, c.episode_steps, c.seed
     ));
     let policy = AdditivePolicy::point_masses(model, out.q, s.gamma)?;
@@ -1245,13 +1290,14 @@ impl Comparison {
         let mut out = String::from(
             "\nVQQL codebook sweep (mean [95% bootstrap interval] over seeds; * the best: the \
              highest success over the random starts, then the lowest mean final error):\n\n\
-             | cells per agent | parameters | final error from x0 (cm) | success over starts \
-             | mean final error (cm) |\n|---|---|---|---|---|\n",
+             | learner | cells per agent | parameters | final error from x0 (cm) | success over \
+             starts | mean final error (cm) |\n|---|---|---|---|---|---|\n",
         );
         for p in &self.vqql_sweep {
             let o = &p.over_seeds;
             out.push_str(&format!(
-                "| {}{} | {} | {} | {}% | {} |\n",
+                "| {} | {}{} | {} | {} | {}% | {} |\n",
+                p.learner.name(),
                 p.cells,
                 if p.best { " *" } else { "" },
                 fmt_count(p.parameters),
@@ -1329,6 +1375,7 @@ mod tests {
         c.fql.episodes = 40;
         c.vqql.samples = 2000;
         c.vqql_sweep.clear();
+        c.batch.samples = 2000;
         c
     }
 
@@ -1368,6 +1415,9 @@ mod tests {
         let v = with_budget(&c, Learner::Vqql, 3000);
         assert_eq!(v.vqql.samples + v.fql.episodes * v.fql.max_steps, 3000);
         assert_eq!(with_budget(&c, Learner::Vqql, 100).vqql.cells, 25);
+        let b = with_budget(&c, Learner::VqqlBatch, 700);
+        assert_eq!(b.batch.samples, 700);
+        assert_eq!(with_budget(&c, Learner::FqiSamples, 700), b);
         assert_eq!(with_budget(&c, Learner::Fqi, 100), c);
     }
 
@@ -1519,6 +1569,13 @@ mod tests {
         assert_eq!(a.reports[3].iteration_unit, "episodes");
         assert_eq!(a.reports[3].iterations, 40);
         assert_eq!(a.reports[5].parameters, 441 * 25);
+        // The batch learners: fuzzy cores and VQQL's cells, fitted on the same transitions.
+        for (k, cells) in [(7, 7 * 7 * 3 * 3), (8, 441)] {
+            let r = &a.reports[k];
+            assert_eq!(r.iteration_unit, "iterations", "{}", r.learner.name());
+            assert_eq!(r.parameters, cells * 25);
+            assert!(r.converged && r.largest_parameter.unwrap() <= 5.0 / (1.0 - 0.96));
+        }
         // The table has one column per learner and the paper's two.
         let md = a.to_markdown();
         let header = md.lines().next().unwrap();

@@ -46,22 +46,27 @@ pub(crate) struct CompareArgs {
     episodes: Option<usize>,
     /// Also a sample-efficiency curve: success over the random starts against these numbers
     /// of transitions (comma-separated), for every named learner that learns from samples
-    /// (learned-model, fql, fql-literal, vqql, fqi-samples), each given that many transitions of
+    /// (learned-model, fql, fql-literal, vqql, fqi-samples, vqql-batch), each given that many
+    /// transitions of
     /// interaction; writes efficiency.csv, efficiency.json and efficiency.png.
     #[arg(long, value_name = "N,...", value_delimiter = ',')]
     curve: Option<Vec<usize>>,
-    /// learned-model, fqi-samples: transitions collected on the plant [default: 20000].
+    /// learned-model: transitions collected on the plant [default: 20000].
     #[arg(long, value_name = "N")]
     samples: Option<usize>,
+    /// fqi-samples, vqql-batch: transitions of their batch, collected on the plant with
+    /// random actions [default: 100000].
+    #[arg(long, value_name = "N")]
+    batch_samples: Option<usize>,
     /// fql, fql-literal, vqql: learning episodes start at rest with each agent uniformly
     /// within this distance of the goal per axis (m) [default: the whole field, 6].
     #[arg(long, value_name = "M")]
     learn_position: Option<f64>,
-    /// VQQL: k-means cells per agent, this size alone (no sweep).
+    /// vqql, vqql-batch: k-means cells per agent, this size alone (no sweep).
     #[arg(long, value_name = "K", conflicts_with = "vqql_sweep")]
     cells: Option<usize>,
-    /// VQQL: the codebook sizes to sweep (cells per agent, comma-separated); the table's VQQL
-    /// column is the best, the whole sweep is reported [default: the powers of two from 16
+    /// vqql, vqql-batch: the codebook sizes to sweep (cells per agent, comma-separated); each
+    /// one's column is its best size, the whole sweep is reported [default: the powers of two from 16
     /// below the number of own-state fuzzy cores, then that number, at which VQQL has as
     /// many parameters as the additive fuzzy layout].
     #[arg(long, value_name = "K,...", value_delimiter = ',')]
@@ -74,7 +79,7 @@ pub(crate) struct CompareArgs {
     #[arg(long, value_name = "REWARD", value_parser = ["paper", "shaped"])]
     reward: Option<String>,
     /// Runs of every learner from samples (fql, fql-literal, vqql, learned-model,
-    /// fqi-samples), seeded
+    /// fqi-samples, vqql-batch), seeded
     /// --seed, --seed + 1, ...; the table gives means with 95% bootstrap intervals.
     #[arg(long, value_name = "N", default_value_t = 1)]
     seeds: usize,
@@ -140,6 +145,10 @@ fn build(args: &CompareArgs) -> anyhow::Result<CompareConfig> {
     if let Some(n) = args.samples {
         c.model_learning.collection.samples = n;
     }
+    if let Some(n) = args.batch_samples {
+        c.batch.samples = n;
+    }
+    c.batch.seed = args.seed;
     c.validate()?;
     let task = c.task.build_model()?;
     let mut estimate = output::rollout_estimate(
@@ -207,7 +216,7 @@ pub(crate) fn run(args: CompareArgs) -> anyhow::Result<()> {
             Event::Training(l) => eprintln!("{}: training ({})", l.name(), l.description()),
             Event::Trained(l, n, s) => {
                 let unit = match l {
-                    Learner::FqiSamples => "iterations",
+                    Learner::FqiSamples | Learner::VqqlBatch => "iterations",
                     l if l.is_model_based() => "sweeps",
                     _ => "episodes",
                 };

@@ -12,7 +12,7 @@ use plotters::prelude::*;
 use super::{chart, draw_origin, err, key, legend_at, range, titled, write_figure};
 
 /// One colour per learner of the comparison (as many as there are learners).
-pub(super) const LEARNER_COLORS: [RGBColor; 8] = [
+pub(super) const LEARNER_COLORS: [RGBColor; 9] = [
     RGBColor(0x1f, 0x77, 0xb4),
     RGBColor(0xd6, 0x27, 0x28),
     RGBColor(0x2c, 0xa0, 0x2c),
@@ -21,6 +21,7 @@ pub(super) const LEARNER_COLORS: [RGBColor; 8] = [
     RGBColor(0x8c, 0x56, 0x4b),
     RGBColor(0x17, 0xbe, 0xcf),
     RGBColor(0xe3, 0x77, 0xc2),
+    RGBColor(0x7f, 0x7f, 0x7f),
 ];
 
 /// How learner `k`'s path is stroked: solid, dashed or dotted, in turn, so that paths that

@@ -505,6 +505,8 @@ fn compare_writes_the_table_and_figures() {
             "64",
             "--samples",
             "2000",
+            "--batch-samples",
+            "2000",
             "--curve",
             "300,3000",
             "--out",
@@ -531,20 +533,21 @@ fn compare_writes_the_table_and_figures() {
         "vqql",
         "learned-model",
         "fqi-samples",
+        "vqql-batch",
     ];
     for l in learners {
         assert!(out.join(format!("rollout-{l}.png")).is_file(), "{l}");
     }
     let csv = std::fs::read_to_string(out.join("table1.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + learners.len());
-    // The sample-efficiency curve: 2 budgets for each of the 5 learners from samples.
+    // The sample-efficiency curve: 2 budgets for each of the 6 learners from samples.
     let curve = std::fs::read_to_string(out.join("efficiency.csv")).unwrap();
-    assert_eq!(curve.lines().count(), 1 + 2 * 5, "{curve}");
+    assert_eq!(curve.lines().count(), 1 + 2 * 6, "{curve}");
     assert!(curve.contains("learned-model,3000,"), "{curve}");
     assert!(out.join("efficiency.png").is_file());
     assert_eq!(
         json(&out.join("efficiency.json")).as_array().unwrap().len(),
-        10
+        12
     );
     let j = json(&out.join("table1.json"));
     let reports = j["reports"].as_array().unwrap();
@@ -573,6 +576,9 @@ fn compare_writes_the_table_and_figures() {
     let fitted = &reports[7];
     assert_eq!(fitted["parameters"], 2025 * 25);
     assert_eq!(fitted["iteration_unit"], "iterations");
+    // Its crisp counterpart: VQQL's 64 cells x 25 actions, fitted on the same transitions.
+    assert_eq!(reports[8]["parameters"], 64 * 25);
+    assert_eq!(reports[8]["iteration_unit"], "iterations");
     assert_eq!(learned["success_rate"], fqi["success_rate"]);
     assert_eq!(j["trajectories"].as_array().unwrap().len(), learners.len());
 
