@@ -273,6 +273,7 @@ struct SampleSummary {
     policy: String,
     episodes: usize,
     steps_total: usize,
+    /// Episodes with a positive return: under the paper's reward, those that met it.
     rewarded_episodes: usize,
     converged_at: Option<usize>,
     final_eval_success_rate: Option<f64>,
@@ -1023,7 +1024,7 @@ fn sample_outputs(
     }
     if !args.quiet {
         eprintln!(
-            "learned in {seconds:.1} s: {} episodes, {} steps ({rewarded} met the reward), \
+            "learned in {seconds:.1} s: {} episodes, {} steps ({rewarded} with a positive return), \
              converged {}, last greedy evaluation success {}; wrote {}",
             outcome.curve.len(),
             outcome.steps_total,
