@@ -11,7 +11,9 @@
 # NVIDIA's Vulkan driver file is looked up where NVIDIA's container images put it.
 # Logs and JSON go to $OUT (or ./gpu-check-out). GPU_CHECK_ENVS and GPU_CHECK_BENCH_ENV choose
 # smaller problems for a trial of the script itself (on lavapipe, say: `GPU_CHECK_ENVS=dcmotor
-# GPU_CHECK_BENCH_ENV=dcmotor GPU_CHECK_BATCHES=256 scripts/gpu-check.sh`).
+# GPU_CHECK_TRAIN_ARGS="--precision f32" GPU_CHECK_BENCH_ENV=dcmotor GPU_CHECK_BATCHES=256
+# scripts/gpu-check.sh`; there the exports differ, as lavapipe does not fuse `fma`). Each
+# train row is followed by where its seconds went, from its `--json` summary.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-gpu-check-out}
@@ -22,6 +24,23 @@ ROWS=()
 row() { ROWS+=("$(printf '| %s | %s | %s |' "$1" "$2" "$3")"); }
 now() { date +%s.%N; }
 secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
+# Where a run's time went, from its `train --json` summary: the device, the set-up, the coarse
+# start, the sweeps (of which evaluation), the other passes (exact changes, greedy passes),
+# the result read back, the policy written, and the command's total.
+phases() {
+  python3 - "$1" <<'PY' 2>/dev/null || echo "no summary"
+import json, sys
+d = json.load(open(sys.argv[1]))
+g = lambda k: d.get(k) or 0.0
+coarse = (d.get("coarse_start") or {}).get("seconds", 0.0)
+other = g("seconds") - g("setup_seconds") - coarse - g("sweep_seconds") - g("result_seconds")
+parts = [("device", d.get("device_seconds")), ("setup", g("setup_seconds")), ("coarse", coarse),
+         ("sweeps", g("sweep_seconds")), ("of them evaluation", g("evaluation_seconds")),
+         ("other passes", other), ("result", g("result_seconds")), ("write", g("write_seconds"))]
+print(", ".join(f"{k} {v:.3f}" for k, v in parts if v is not None)
+      + f" = command {g('command_seconds'):.3f} s")
+PY
+}
 
 # The Vulkan loader, and NVIDIA's driver file.
 if ! ldconfig -p 2>/dev/null | grep -q 'libvulkan.so.1'; then
@@ -90,6 +109,9 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
   sweeps=$(grep -E 'sweeps|converged' "$OUT/train-$env-gpu.log" | tail -1 | cut -c1-120)
   row "train --env $env" "$([ "$rc_gpu" = 0 ] && [ "$same" = identical ] && echo PASS || echo "FAIL (gpu rc=$rc_gpu, exports $same)")" \
     "gpu ${wall_gpu} s wall, cpu ${wall_cpu} s wall; exported V + greedy $same; ${sweeps}"
+  for dev in gpu cpu; do
+    row "  its seconds on the $dev" "" "$(phases "$OUT/$env-$dev.json")"
+  done
 done
 
 echo

@@ -55,6 +55,7 @@ fn small_train_save_load_rollout() {
         a.summary.evaluation_seconds = 0.0;
         a.summary.seconds = 0.0;
         a.summary.sweep_seconds = 0.0;
+        (a.summary.setup_seconds, a.summary.result_seconds) = (None, None);
     }
     assert_eq!(PolicyFile::load(&path).unwrap(), file);
 

@@ -394,6 +394,9 @@ fn solve<T: Real, M: fuzzyq_core::Model<T> + Sync>(
         sweep_seconds: q.seconds,
         evaluation_seconds: 0.0,
         seconds: start.elapsed().as_secs_f64(),
+        // Busoniu's operator reports its sweeps only.
+        setup_seconds: None,
+        result_seconds: None,
         coarse: None,
     })
 }

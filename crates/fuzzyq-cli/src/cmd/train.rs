@@ -4,7 +4,7 @@ use std::io::IsTerminal;
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use clap::Args;
 use fuzzyq_core::additive::Update;
@@ -183,6 +183,16 @@ struct Summary<'a> {
     multiply_adds_per_sweep: Option<f64>,
     sweep_seconds: f64,
     evaluation_seconds: f64,
+    /// The part of `seconds` before the first sweep, the coarse start aside: the operator
+    /// (block tables, rewards) and the backend's buffers (on a GPU: kernels, tables, `V`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    setup_seconds: Option<f64>,
+    /// The part of `seconds` bringing `V` and the greedy actions into grid order at the end
+    /// (on a GPU: reading them back).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    result_seconds: Option<f64>,
+    #[serde(flatten)]
+    timings: Timings,
     gflops_fma: Option<f64>,
     precision: Precision,
     sweep: SweepMode,
@@ -198,6 +208,20 @@ struct Summary<'a> {
     /// `--learner learned-model`: the data and the fit.
     #[serde(skip_serializing_if = "Option::is_none")]
     learned_model: Option<LearnedSummary<'a>>,
+}
+
+/// Where a run's time went outside the solver (`--json`).
+#[derive(Clone, Copy, Serialize)]
+struct Timings {
+    /// `--device gpu`: seconds opening the GPU (the adapter, its start-up probes and the
+    /// kernels every problem shares), before `seconds`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    device_seconds: Option<f64>,
+    /// Seconds encoding the policy file and writing it (staged; put in place at the end).
+    write_seconds: f64,
+    /// Seconds from the start of the command to its policy file written: the configuration,
+    /// the device, `seconds` and `write_seconds` (not the process's start).
+    command_seconds: f64,
 }
 
 /// A run's sweeps for the closing line: `52 sweeps (10 full backups + 42 evaluation sweeps,
@@ -387,6 +411,7 @@ fn stop_if(stop: &AtomicBool) -> ControlFlow<()> {
 }
 
 pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
     let config = build_config(&args)?;
     if matches!(args.learner, Learner::Fqi | Learner::LearnedModel) {
         output::check_memory(args.max_memory, &fuzzyq_sim::memory::train(&config))?;
@@ -427,6 +452,14 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     start_pool(args.threads)?;
     let threads = rayon::current_num_threads();
+    // Opened here, once for the run (the solver shares it), and timed.
+    let device_seconds = (config.solver.device == Device::Gpu)
+        .then(|| {
+            let t0 = Instant::now();
+            fuzzyq_gpu::Gpu::shared().map(|_| t0.elapsed().as_secs_f64())
+        })
+        .transpose()
+        .map_err(SimError::from)?;
     if !args.quiet {
         announce(&args, &config, threads, learning.as_ref(), logged.as_ref())?;
         if let (Some(state), Some(path)) = (&resume, &args.resume) {
@@ -436,9 +469,6 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
                 state.sweeps()
             );
         }
-    } else if config.solver.device == Device::Gpu {
-        // Opened here, once for the run (the solver shares it).
-        fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
     }
     let task = Task {
         config: &config,
@@ -446,8 +476,14 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
         logged: logged.as_ref(),
     };
     let (artifact, learned_run) = solve(&args, &task, resume, &mut checkpoints)?;
+    let written = Instant::now();
     let file = PolicyFile::Fqi(artifact);
     output::write_file(&args.out, &file.to_bytes()?)?;
+    let timings = Timings {
+        device_seconds,
+        write_seconds: written.elapsed().as_secs_f64(),
+        command_seconds: started.elapsed().as_secs_f64(),
+    };
     let PolicyFile::Fqi(artifact) = file else {
         unreachable!("just built")
     };
@@ -473,7 +509,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
         write_json(
             path,
-            &summary(&args, &task, s, threads, learned_run.as_ref()),
+            &summary(&args, &task, s, (threads, timings), learned_run.as_ref()),
         )?;
     }
     Ok(())
@@ -748,7 +784,7 @@ fn summary<'a>(
     args: &'a TrainArgs,
     task: &Task<'_>,
     s: &'a TrainSummary,
-    threads: usize,
+    (threads, timings): (usize, Timings),
     learned_run: Option<&'a train::LearnedModelRun>,
 ) -> Summary<'a> {
     let config = task.config;
@@ -776,6 +812,9 @@ fn summary<'a>(
         multiply_adds_per_sweep: s.multiply_adds_per_sweep,
         sweep_seconds: s.sweep_seconds,
         evaluation_seconds: s.evaluation_seconds,
+        setup_seconds: s.setup_seconds,
+        result_seconds: s.result_seconds,
+        timings,
         // Billions of multiply-adds per second over the full backups.
         gflops_fma: s.multiply_adds_per_sweep.map(|m| {
             m * (s.sweeps - s.evaluation.len()) as f64

@@ -163,6 +163,20 @@ fn train_and_rollout_end_to_end() {
         c["coarse_start"]["sweeps"], c["coarse_start"]["cores"]
     );
     assert!(stderr(&o).contains(&scheme), "{scheme:?} in {}", stderr(&o));
+    // Where the time went: the solver's parts within `seconds`, the writing after it, and the
+    // command around both (no GPU: no device time).
+    let secs = |k: &str| c[k].as_f64().unwrap_or_else(|| panic!("{k} in {c}"));
+    let parts = secs("setup_seconds")
+        + c["coarse_start"]["seconds"].as_f64().unwrap()
+        + secs("sweep_seconds")
+        + secs("result_seconds");
+    assert!(parts > 0.0 && parts <= secs("seconds"), "{c}");
+    assert!(secs("write_seconds") > 0.0, "{c}");
+    assert!(
+        secs("seconds") + secs("write_seconds") <= secs("command_seconds"),
+        "{c}"
+    );
+    assert!(c.get("device_seconds").is_none(), "{c}");
     std::fs::remove_file(d.join("c.fzq")).unwrap();
     std::fs::remove_file(d.join("c.json")).unwrap();
     // Extrapolation (the default) needs far fewer sweeps than the paper's plain iteration,
@@ -1355,4 +1369,11 @@ fn train_on_the_gpu_and_its_refusals() {
     let j = json(&d.join("g.json"));
     assert_eq!(j["kernel"], "wgpu");
     assert_eq!(j["converged"], true);
+    // Opening the GPU is timed apart from the solve (and in quiet runs too).
+    let device = j["device_seconds"].as_f64().expect("device_seconds");
+    let command = j["command_seconds"].as_f64().unwrap();
+    assert!(
+        device > 0.0 && device + j["seconds"].as_f64().unwrap() <= command,
+        "{j}"
+    );
 }

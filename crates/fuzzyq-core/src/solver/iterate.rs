@@ -217,11 +217,15 @@ where
     if let Some(state) = &resume {
         check_resume(run, config, state)?;
     }
+    // Everything so far but the coarse start: the operator and the backend.
+    let setup_seconds =
+        (start.elapsed().as_secs_f64() - coarse.as_ref().map_or(0.0, |c| c.seconds)).max(0.0);
     let mut d = Driver {
         run,
         config,
         sweeps,
         start,
+        setup_seconds,
         show_state,
         coarse,
     };
@@ -287,6 +291,8 @@ struct Driver<'r, 'a, T: Real, M: ?Sized, S> {
     config: &'r SolverConfig,
     sweeps: &'r mut S,
     start: Instant,
+    /// Seconds from `start` to the first sweep, without the coarse start.
+    setup_seconds: f64,
     show_state: bool,
     /// The run's coarse start, if it had one.
     coarse: Option<CoarseStart>,
@@ -320,9 +326,13 @@ where
     ) -> Result<Solution<T>, S::Error> {
         let op = &self.run.op;
         let (offset, sweep_seconds, evaluation_seconds) = seconds;
+        let t0 = Instant::now();
+        let values = op.to_grid(&self.sweeps.values(v)?);
+        let greedy = op.to_grid(&self.sweeps.policy()?);
+        let result_seconds = t0.elapsed().as_secs_f64();
         Ok(Solution {
-            v: op.to_grid(&self.sweeps.values(v)?),
-            greedy: op.to_grid(&self.sweeps.policy()?),
+            v: values,
+            greedy,
             sweeps: records,
             scheme: self.run.scheme,
             stop,
@@ -335,6 +345,8 @@ where
             sweep_seconds,
             evaluation_seconds,
             seconds: offset + self.start.elapsed().as_secs_f64(),
+            setup_seconds: Some(self.setup_seconds),
+            result_seconds: Some(result_seconds),
             coarse: self.coarse,
         })
     }

@@ -721,6 +721,14 @@ pub struct Solution<T> {
     pub evaluation_seconds: f64,
     /// Wall-clock seconds of the whole solve (a coarse start's included).
     pub seconds: f64,
+    /// The part of `seconds` before the first sweep, without the coarse start: the operator
+    /// (block tables, rewards) and the backend's buffers (on a GPU: its kernels, tables and
+    /// `V`). `None` where a solver does not measure it.
+    pub setup_seconds: Option<f64>,
+    /// The part of `seconds` spent at the end bringing `V` and the greedy actions into
+    /// [`Self::v`] and [`Self::greedy`] (on a GPU: reading them back). `None` where a solver
+    /// does not measure it.
+    pub result_seconds: Option<f64>,
     /// The coarse start, if the run had one ([`SolverConfig::coarse_start`]).
     pub coarse: Option<CoarseStart>,
 }

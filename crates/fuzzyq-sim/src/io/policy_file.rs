@@ -132,6 +132,15 @@ pub struct TrainSummary {
     /// stays small).
     #[serde(skip)]
     pub coarse: Option<Box<fuzzyq_core::solver::CoarseStart>>,
+    /// Seconds before the first sweep, the coarse start aside: the operator and the
+    /// backend's buffers ([`Solution::setup_seconds`](fuzzyq_core::solver::Solution); not
+    /// stored in the file).
+    #[serde(skip)]
+    pub setup_seconds: Option<f64>,
+    /// Seconds bringing `V` and the greedy actions into grid order at the end
+    /// ([`Solution::result_seconds`](fuzzyq_core::solver::Solution); not stored in the file).
+    #[serde(skip)]
+    pub result_seconds: Option<f64>,
 }
 
 impl TrainSummary {
@@ -172,6 +181,8 @@ impl TrainSummary {
                 .collect(),
             evaluation_seconds: s.evaluation_seconds,
             coarse: s.coarse.map(Box::new),
+            setup_seconds: s.setup_seconds,
+            result_seconds: s.result_seconds,
         }
     }
 }
@@ -483,6 +494,9 @@ impl KheperaPolicyFile {
 }
 
 /// The content of a policy file of any learner.
+// One value per file read or written: the size of its largest variant costs nothing that a box
+// would save.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq)]
 pub enum PolicyFile {
     /// Fuzzy Q-iteration (`fuzzyq train`, the default learner).
@@ -818,6 +832,8 @@ mod tests {
                 evaluation: Vec::new(),
                 evaluation_seconds: 0.0,
                 coarse: None,
+                setup_seconds: None,
+                result_seconds: None,
             },
         }
     }
@@ -950,7 +966,9 @@ mod tests {
             ControlFlow::Continue(())
         })
         .unwrap();
-        let a = run.artifact;
+        let mut a = run.artifact;
+        // What a file does not keep.
+        (a.summary.setup_seconds, a.summary.result_seconds) = (None, None);
         let tables = a.learned.as_deref().unwrap();
         assert_eq!(tables.membership, fuzzyq_core::Membership::Triangular);
         let payload = postcard::to_stdvec(&Payload::LearnedFqi(
@@ -986,6 +1004,7 @@ mod tests {
         assert_eq!(tables.membership, fuzzyq_core::Membership::Crisp);
         let mut crisp = crisp;
         (crisp.summary.seconds, crisp.summary.sweep_seconds) = (0.0, 0.0);
+        (crisp.summary.setup_seconds, crisp.summary.result_seconds) = (None, None);
         let file = PolicyFile::Fqi(crisp);
         assert_eq!(decode(&file.to_bytes().unwrap()).unwrap(), file);
         // The tables must match the configured grid's membership functions.
