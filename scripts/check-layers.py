@@ -39,7 +39,7 @@ LAYERS = {
         {"compare"},
     ],
     "fuzzyq-gpu": [
-        {"error", "reference"},
+        {"error", "reference", "memory"},
         {"context"},
         {"buffers"},
         {"kernels"},

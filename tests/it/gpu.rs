@@ -255,6 +255,17 @@ fn passes_match<M: Model<f32> + Sync>(g: &Gpu, op: &Operator<'_, f32, M>) {
         hs.rewards(Buf(1)).unwrap();
         same(&gs, &hs, "rewards");
     }
+    // Every buffer is allocated now (the exact delta's too), and the memory estimated before
+    // allocating is what they take, to the byte: a limit of exactly that opens the run, one
+    // byte less refuses it.
+    let bytes = gs.device_bytes();
+    drop(gs);
+    GpuSweeps::new(&g.clone().with_memory_limit(bytes), op).expect("fits to the byte");
+    let e = GpuSweeps::new(&g.clone().with_memory_limit(bytes - 1), op).unwrap_err();
+    assert!(
+        matches!(e, GpuError::OutOfMemory { need, .. } if need == bytes),
+        "{e}"
+    );
 }
 
 /// The operator a run of `config` prepares.
@@ -357,6 +368,19 @@ fn refusals_are_one_line_errors() {
     let e = fuzzyq_gpu::solve_from(&tiny, &model, &grid, &config, None, false, noop).unwrap_err();
     assert!(matches!(e, GpuError::TooLarge { .. }), "{e}");
     assert!(e.to_string().contains("V needs"), "{e}");
+    errors.push(e);
+    // Less device memory than the run's buffers take: refused before allocating, in GB.
+    if g.summary().backend == "vulkan" {
+        assert!(
+            g.summary().memory.is_some_and(|m| m > 0),
+            "{:?}",
+            g.summary()
+        );
+    }
+    let small = g.clone().with_memory_limit(100_000);
+    let e = fuzzyq_gpu::solve_from(&small, &model, &grid, &config, None, false, noop).unwrap_err();
+    assert!(matches!(e, GpuError::OutOfMemory { .. }), "{e}");
+    assert!(e.to_string().contains("GB of GPU memory ("), "{e}");
     errors.push(e);
     for e in errors {
         assert!(!e.to_string().contains('\n'), "one line: {e}");

@@ -24,6 +24,11 @@ pub struct AdapterSummary {
     pub max_buffer: u64,
     /// The adapter's largest storage-buffer binding, in bytes.
     pub max_binding: u64,
+    /// The adapter's memory for a run's buffers, in bytes, as the driver reported it when
+    /// the GPU was opened: on Vulkan, its budget for the largest device-local heap
+    /// (`VK_EXT_memory_budget`: what this process may still allocate) or else that heap's
+    /// size; `None` where the API does not say (Metal, DX12).
+    pub memory: Option<u64>,
     /// The adapter's subgroup size, where it has subgroup operations, one size, and a
     /// workgroup of that many threads is one subgroup whose shuffles reduce as the last stage
     /// needs (checked at start-up); the last stage then reduces a core's lanes with them.

@@ -45,6 +45,21 @@ pub enum GpuError {
         /// Which limit (a buffer, a binding).
         kind: &'static str,
     },
+    /// The run's buffers would take more device memory than the adapter has (estimated
+    /// before allocating).
+    #[error(
+        "the run needs {:.2} GB of GPU memory ({what}), more than the {:.2} GB the adapter has \
+         free; run it on a smaller grid or with --device cpu",
+        *.need as f64 / 1e9, *.available as f64 / 1e9
+    )]
+    OutOfMemory {
+        /// What takes the memory, in words.
+        what: String,
+        /// Bytes the run's buffers take.
+        need: u64,
+        /// Bytes the adapter has for them.
+        available: u64,
+    },
     /// The device ran out of memory or lost itself.
     #[error("the GPU failed: {}", one_line(.0))]
     Failed(String),

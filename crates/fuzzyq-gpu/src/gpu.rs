@@ -13,6 +13,8 @@ pub struct Gpu {
     pub(crate) kernels: Arc<crate::kernels::Kernels>,
     /// The largest storage binding a run uses (the adapter's, or less).
     pub(crate) max_binding: u64,
+    /// The device memory a run's buffers may take (the adapter's, or less), if known.
+    pub(crate) memory: Option<u64>,
     /// Bytes of a batch's largest stage buffer.
     pub(crate) batch_bytes: u64,
     /// Whether the last stage may reduce a core's lanes by subgroup operations.
@@ -61,6 +63,7 @@ impl Gpu {
             f64: features.contains(wgpu::Features::SHADER_F64),
             max_buffer: limits.max_buffer_size,
             max_binding: limits.max_storage_buffer_binding_size,
+            memory: crate::memory::available(&adapter),
             subgroup_size: (features.contains(wgpu::Features::SUBGROUP)
                 && info.subgroup_min_size == info.subgroup_max_size
                 && (4..=64).contains(&info.subgroup_min_size))
@@ -80,6 +83,7 @@ impl Gpu {
         };
         Ok(Self {
             max_binding: ctx.summary.max_binding,
+            memory: ctx.summary.memory,
             batch_bytes: default_batch_bytes(),
             subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
             kernels: Arc::new(kernels),
@@ -111,6 +115,16 @@ impl Gpu {
     #[must_use]
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.max_binding = bytes.min(self.inner.summary.max_binding);
+        self
+    }
+
+    /// This GPU with runs limited to `bytes` of device memory (the adapter's, as
+    /// [`AdapterSummary::memory`] reports it, is the default): a run whose buffers would take
+    /// more is refused before anything is allocated ([`GpuError::OutOfMemory`]). For a card
+    /// shared with other work, or trying a smaller card's memory.
+    #[must_use]
+    pub fn with_memory_limit(mut self, bytes: u64) -> Self {
+        self.memory = Some(self.inner.summary.memory.map_or(bytes, |m| m.min(bytes)));
         self
     }
 

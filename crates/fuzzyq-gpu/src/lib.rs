@@ -36,13 +36,17 @@
 //! # Limits
 //! `f32` only; the block path only (a model that declares no blocks is refused, as are models
 //! with terminal states and asynchronous sweeps); `V` and each batch's stage output must fit
-//! one storage binding of the adapter (checked before allocating, [`GpuError::TooLarge`]).
+//! one storage binding of the adapter, and all of a run's buffers (`V` three times, the policy,
+//! two work buffers, the tables, rewards and stage buffers) its memory: both are checked
+//! before anything is allocated ([`GpuError::TooLarge`], [`GpuError::OutOfMemory`]; the
+//! memory where the API reports it, Vulkan, through wgpu-hal as wgpu has no API for it).
 
 mod buffers;
 mod context;
 mod error;
 mod gpu;
 mod kernels;
+mod memory;
 mod probe;
 pub mod reference;
 mod sweeps;

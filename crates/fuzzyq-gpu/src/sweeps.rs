@@ -208,27 +208,41 @@ impl BlockArrays {
     }
 }
 
+/// Bytes of the rewards on the device: per core (`rho(x_d)`), or per core and joint action.
+fn reward_bytes(plan: &fuzzyq_core::solver::BlockPlan<'_, f32>, n: usize) -> u64 {
+    4 * match (plan.rewards, plan.reward_table) {
+        (Some(r), _) => r.len(),
+        (None, Some(t)) => t.len(),
+        (None, None) => n * plan.n_joint,
+    } as u64
+}
+
 /// The rewards on the device: per core (`rho(x_d)`), or per core and joint action (the
-/// model's table, or the rewards `op` computes, tabulated once); `check` refuses a table over
-/// the adapter's binding limit.
+/// model's table, or the rewards `op` computes, tabulated once).
 fn reward_buffer<M: Model<f32> + Sync + ?Sized>(
     gpu: &Gpu,
     plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
     op: &Operator<'_, f32, M>,
-    check: impl Fn(&'static str, u64) -> Result<(), GpuError>,
-) -> Result<wgpu::Buffer, GpuError> {
-    Ok(match (plan.rewards, plan.reward_table) {
+) -> wgpu::Buffer {
+    match (plan.rewards, plan.reward_table) {
         (Some(r), _) => with_data(&gpu.inner, "rewards", r),
-        (None, Some(t)) => {
-            check("the reward table", 4 * t.len() as u64)?;
-            with_data(&gpu.inner, "reward table", t)
-        }
-        (None, None) => {
-            // A reward of the action that the model computes: tabulated once.
-            check("the reward table", 4 * (op.n_cores() * plan.n_joint) as u64)?;
-            with_data(&gpu.inner, "reward table", &op.reward_rows())
-        }
-    })
+        (None, Some(t)) => with_data(&gpu.inner, "reward table", t),
+        // A reward of the action that the model computes: tabulated once.
+        (None, None) => with_data(&gpu.inner, "reward table", &op.reward_rows()),
+    }
+}
+
+/// The size of a buffer made for `bytes` bytes ([`buffers::zeroed`], [`with_data`]).
+fn allocated(bytes: u64) -> u64 {
+    bytes.max(4).next_multiple_of(4)
+}
+
+/// The device memory of a run's buffers, in bytes: `V`'s three buffers, the policy and the
+/// exact delta's two work buffers (one value per core each), and the rest (`other`: tables,
+/// rewards, stage buffers, partial results), each as allocated.
+fn footprint(n: usize, other: &[u64]) -> (u64, u64) {
+    let per_core = 6 * allocated(4 * n as u64);
+    (per_core, other.iter().map(|&b| allocated(b)).sum())
 }
 
 /// The problem's kernels, compiled with its sizes as constants: the stage kernel of every
@@ -383,11 +397,52 @@ impl GpuSweeps {
         let budget = gpu.batch_bytes.min(max_binding);
         shape.batch = (budget / per_slab).clamp(1, shape.n0);
 
+        let rewards_bytes = reward_bytes(&plan, n);
+        if plan.rewards.is_none() {
+            check("the reward table", rewards_bytes)?;
+        }
+        let map = plan.joint_to_product.unwrap_or(&[]);
+        let partials = n.div_ceil(PER_WG as usize) as u64;
+        let (gx, gy) = kernels::groups(partials);
+        let partial_len = u64::from(gx) * u64::from(gy);
+        let k = gpu.kernels.clone();
+        let n_batches = shape.n0.div_ceil(shape.batch) as usize;
+        let params_cap = (n_batches * (nb + 1)).max(4);
+        // Every buffer but the per-core ones.
+        let mut other = vec![
+            rewards_bytes,
+            4 * plan.goal.len() as u64,
+            4 * map.len() as u64,
+            4 * ptr.len() as u64,
+            4 * col.len() as u64,
+            4 * weight.len() as u64,
+        ];
+        other.extend((0..shape.written_stages()).map(|b| 4 * shape.batch * shape.stage_len(b)));
+        if !shape.fused || !shape.fused_abs {
+            other.push(4 * shape.batch * shape.slab * shape.n_product);
+        }
+        if k.diff.is_some() {
+            other.push(16 * partial_len);
+        }
+        other.extend([4 * partial_len, params_cap as u64 * PARAM_STRIDE, 4, 4]);
+        let (per_core, rest) = footprint(n, &other);
+        if let Some(available) = gpu.memory.filter(|&m| per_core + rest > m) {
+            return Err(GpuError::OutOfMemory {
+                what: format!(
+                    "{n} cores: V three times, the policy and two work buffers, {:.2} GB; \
+                     the tables, rewards and stage buffers, {:.2} GB",
+                    per_core as f64 / 1e9,
+                    rest as f64 / 1e9
+                ),
+                need: per_core + rest,
+                available,
+            });
+        }
+
         let device = &gpu.inner.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let rewards = reward_buffer(gpu, &plan, op, check)?;
+        let rewards = reward_buffer(gpu, &plan, op);
         let goal: Vec<u32> = plan.goal.iter().map(|&g| u32::from(g)).collect();
-        let map = plan.joint_to_product.unwrap_or(&[]);
         let table = [
             with_data(&gpu.inner, "row_ptr", &ptr),
             with_data(&gpu.inner, "col", &col),
@@ -404,18 +459,12 @@ impl GpuSweeps {
                 4 * shape.batch * shape.slab * shape.n_product,
             )
         });
-        let partials = n.div_ceil(PER_WG as usize) as u64;
-        let (gx, gy) = kernels::groups(partials);
-        let partial_len = u64::from(gx) * u64::from(gy);
-        let k = gpu.kernels.clone();
         let sg = gpu.inner.summary.subgroup_size.filter(|_| gpu.subgroups);
         let (stage_c, last1) = compile(gpu, &k, &shape, sg)?;
         let diff_out = k
             .diff
             .is_some()
             .then(|| zeroed(&gpu.inner, "diff partials", 16 * partial_len));
-        let n_batches = shape.n0.div_ceil(shape.batch) as usize;
-        let params_cap = (n_batches * (nb + 1)).max(4);
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("params"),
             size: params_cap as u64 * PARAM_STRIDE,
@@ -477,6 +526,32 @@ impl GpuSweeps {
     #[must_use]
     pub fn batch(&self) -> u64 {
         self.shape.batch
+    }
+
+    /// Bytes of device memory this run's buffers take now (the exact delta's two work
+    /// buffers once it has run): at most what [`Self::new`] estimated and checked against
+    /// [`AdapterSummary::memory`](crate::AdapterSummary::memory).
+    #[must_use]
+    pub fn device_bytes(&self) -> u64 {
+        let mut all: Vec<&wgpu::Buffer> = vec![
+            &self.rewards,
+            &self.goal,
+            &self.map,
+            &self.policy,
+            &self.partial,
+            &self.params,
+            &self.dummy_r,
+            &self.dummy_w,
+        ];
+        all.extend(&self.table);
+        all.extend(&self.v);
+        all.extend(&self.stages);
+        all.extend(
+            [&self.rows, &self.scratch, &self.dv, &self.diff_out]
+                .into_iter()
+                .flatten(),
+        );
+        all.iter().map(|b| b.size()).sum()
     }
 
     /// Profiling on: every dispatch runs in a submission of its own, waited for, and its time

@@ -238,7 +238,9 @@ pub(crate) fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
         SimError::PolicyFile(f) => policy_file_error(py, f),
         // A run the GPU path does not take, or one too large for the adapter: the settings'.
         SimError::Gpu(
-            fuzzyq_gpu::GpuError::Unsupported(_) | fuzzyq_gpu::GpuError::TooLarge { .. },
+            fuzzyq_gpu::GpuError::Unsupported(_)
+            | fuzzyq_gpu::GpuError::TooLarge { .. }
+            | fuzzyq_gpu::GpuError::OutOfMemory { .. },
         ) => error(py, Kind::Config, e.to_string()),
         _ => error(py, Kind::Solver, e.to_string()),
     }

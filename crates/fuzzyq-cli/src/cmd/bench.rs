@@ -344,6 +344,10 @@ struct GpuReport {
     backend: String,
     driver: String,
     fused_fma: bool,
+    /// The adapter's memory for a run's buffers, where the API reports it.
+    memory_bytes: Option<u64>,
+    /// What the timed run's buffers took on the device.
+    run_bytes: u64,
     peak_gfma_per_second: f64,
     env: &'static str,
     cores: usize,
@@ -368,12 +372,13 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     let gpu = fuzzyq_gpu::Gpu::shared()?;
     let a = gpu.summary().clone();
     println!(
-        "gpu        {} ({}, {}); fma {}; f64 in shaders: {}",
+        "gpu        {} ({}, {}); fma {}; f64 in shaders: {}; {}",
         a.name,
         a.backend,
         a.driver,
         if a.fused_fma { "fused" } else { "not fused" },
-        if a.f64 { "yes" } else { "no" }
+        if a.f64 { "yes" } else { "no" },
+        gpu_memory(a.memory)
     );
     let peak = gpu.fma_peak(args.peak_seconds)?;
     println!(
@@ -444,12 +449,14 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         }
     }
     println!(
-        "problem    {}: {cores} cores x {joint} joint actions{}; {} slab(s) per batch; set-up {:.3} s",
+        "problem    {}: {cores} cores x {joint} joint actions{}; {} slab(s) per batch; {:.3} GB \
+         on the GPU; set-up {:.3} s",
         config.env.name(),
         fma.map_or(String::new(), |f| format!(
             ", {f:.3e} multiply-adds per full backup"
         )),
         sweeps.batch(),
+        sweeps.device_bytes() as f64 / 1e9,
         setup
     );
     let (lo, hi) = min_max(&times);
@@ -468,6 +475,8 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             backend: a.backend,
             driver: a.driver,
             fused_fma: a.fused_fma,
+            memory_bytes: a.memory,
+            run_bytes: sweeps.device_bytes(),
             peak_gfma_per_second: peak,
             env: config.env.name(),
             cores,
@@ -485,6 +494,14 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         write_json(path, &report)?;
     }
     Ok(())
+}
+
+/// The adapter's memory in words: `"141.05 GB free"`, or that the API does not say.
+pub(crate) fn gpu_memory(bytes: Option<u64>) -> String {
+    bytes.map_or_else(
+        || "free memory unknown (the API does not report it)".to_string(),
+        |b| format!("{:.2} GB free", b as f64 / 1e9),
+    )
 }
 
 fn median(xs: &[f64]) -> f64 {

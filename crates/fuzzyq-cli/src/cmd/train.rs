@@ -627,10 +627,11 @@ fn announce(
         let gpu = fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
         let a = gpu.summary();
         eprintln!(
-            "GPU: {} ({}, {}; fma {})",
+            "GPU: {} ({}, {}; {}; fma {})",
             a.name,
             a.backend,
             a.driver,
+            super::bench::gpu_memory(a.memory),
             if a.fused_fma {
                 "fused: the CPU's bits"
             } else {
