@@ -74,7 +74,7 @@ for mb in $GPU_CHECK_BATCHES; do
   FUZZYQ_GPU_PROFILE=$([ "$mb" = "${GPU_CHECK_BATCHES%% *}" ] && echo 1) FUZZYQ_GPU_BATCH_MB=$mb timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --device gpu --backups 6 --peak-seconds 0.5 \
     --json "$OUT/bench-gpu-$mb.json" >"$OUT/bench-gpu-$mb.log" 2>&1
   rc=$?
-  line=$(grep -E '^(backup|evaluate)' "$OUT/bench-gpu-$mb.log" | sed 's/  */ /g' | paste -sd ';' -)
+  line=$(grep -E '^(backup|evaluate|read back|problem)' "$OUT/bench-gpu-$mb.log" | sed 's/  */ /g' | paste -sd ';' -)
   peak=$(grep -E '^FMA peak' "$OUT/bench-gpu-$mb.log" | sed 's/^FMA peak *//')
   row "GPU full backup, batch ${mb} MiB" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "${line:-see log}; peak ${peak}"
   prof=$(grep -E '^profile' "$OUT/bench-gpu-$mb.log" | sed 's/^profile *//' | paste -sd ';' -)
@@ -85,7 +85,7 @@ if [ -z "${GPU_CHECK_BENCH_ENV:-}" ]; then
   FUZZYQ_GPU_PROFILE=1 timeout 120 "$BIN" bench --env khepera --device gpu --backups 4 --peak-seconds 0.2 \
     --json "$OUT/bench-gpu-khepera.json" >"$OUT/bench-gpu-khepera.log" 2>&1
   rc=$?
-  row "GPU full backup, khepera" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^(backup|evaluate|profile)' "$OUT/bench-gpu-khepera.log" | sed 's/  */ /g' | paste -sd ';' -)"
+  row "GPU full backup, khepera" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^(backup|evaluate|read back|profile)' "$OUT/bench-gpu-khepera.log" | sed 's/  */ /g' | paste -sd ';' -)"
 fi
 timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --backups 4 --peak-seconds 0.5 --json "$OUT/bench-cpu.json" >"$OUT/bench-cpu.log" 2>&1
 rc=$?

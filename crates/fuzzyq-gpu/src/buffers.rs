@@ -40,8 +40,15 @@ pub(crate) fn wait(gpu: &Context) -> Result<(), GpuError> {
         .map_err(|e| GpuError::Failed(e.to_string()))
 }
 
-/// The first `bytes` bytes of `buffer`, read back to the host.
-pub(crate) fn read(gpu: &Context, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+/// The first `len` values of `buffer`, read back to the host: copied on the device into a
+/// staging buffer the host maps, then once from the mapping into the result (a run's `V` is
+/// 150 MB on the robots' grid, so no copy beyond that one).
+pub(crate) fn read_as<T: bytemuck::Pod>(
+    gpu: &Context,
+    buffer: &wgpu::Buffer,
+    len: usize,
+) -> Result<Vec<T>, GpuError> {
+    let bytes = (len * size_of::<T>()) as u64;
     let device = &gpu.device;
     let size = bytes.max(4).next_multiple_of(4);
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
@@ -64,18 +71,9 @@ pub(crate) fn read(gpu: &Context, buffer: &wgpu::Buffer, bytes: u64) -> Result<V
     let view = staging
         .get_mapped_range(..)
         .map_err(|e| GpuError::Failed(e.to_string()))?;
-    let out = view[..bytes as usize].to_vec();
+    let mut out = vec![T::zeroed(); len];
+    bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&view[..bytes as usize]);
     drop(view);
     staging.unmap();
     Ok(out)
-}
-
-/// `bytes` read back as values of `T`.
-pub(crate) fn read_as<T: bytemuck::Pod>(
-    gpu: &Context,
-    buffer: &wgpu::Buffer,
-    len: usize,
-) -> Result<Vec<T>, GpuError> {
-    let bytes = read(gpu, buffer, (len * size_of::<T>()) as u64)?;
-    Ok(bytemuck::pod_collect_to_vec(&bytes))
 }

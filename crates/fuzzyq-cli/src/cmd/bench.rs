@@ -357,6 +357,8 @@ struct GpuReport {
     setup_seconds: f64,
     subgroups: bool,
     evaluation_seconds: Vec<f64>,
+    /// Seconds reading `V` and the greedy actions back to the host (a run's last step).
+    readback_seconds: f64,
     backup_seconds: Vec<f64>,
     median_backup_seconds: f64,
     gfma_per_second: Option<f64>,
@@ -437,6 +439,14 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             }
         );
     }
+    // What a run does at its end: V and the greedy actions back to the host.
+    let t = Instant::now();
+    let back = (sweeps.values(v)?.len(), sweeps.policy()?.len());
+    let readback_seconds = t.elapsed().as_secs_f64();
+    println!(
+        "read back  {readback_seconds:.4} s for V and the greedy actions ({} values, {} actions)",
+        back.0, back.1
+    );
     if std::env::var("FUZZYQ_GPU_PROFILE").is_ok_and(|v| !v.is_empty() && v != "0") {
         // One more backup with every dispatch timed on its own.
         sweeps.set_profiling(true);
@@ -486,6 +496,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             setup_seconds: setup,
             subgroups: sweeps.uses_subgroups(),
             evaluation_seconds: evaluation,
+            readback_seconds,
             backup_seconds: times,
             median_backup_seconds: median_seconds,
             gfma_per_second: rate,
