@@ -48,6 +48,7 @@ struct Params {
 @group(0) @binding(5) var<storage, read_write> dst: array<f32>;
 @group(0) @binding(6) var<storage, read_write> aux: array<u32>;
 @group(0) @binding(7) var<storage, read> rewards: array<f32>;
+// Goal cores, one bit each: core `c` is bit `c % 32` of word `c / 32`.
 @group(0) @binding(8) var<storage, read> goal: array<u32>;
 @group(0) @binding(9) var<storage, read> joint_map: array<u32>;
 @group(0) @binding(10) var<storage, read> src2: array<f32>;
@@ -79,10 +80,15 @@ fn core_of(first: bool, q: u32, n: u32) -> vec2<u32> {
     return vec2<u32>(q % n, (q / n) * n);
 }
 
+// Whether `core` is a goal core (of a run with goal cores: an absorbing goal).
+fn goal_at(core: u32) -> bool {
+    return prm.has_goal != 0u && ((goal[core >> 5u] >> (core & 31u)) & 1u) != 0u;
+}
+
 // `V` of core `core` from the maximum `m` of its expected values (state-only reward).
 fn finish(core: u32, m: f32) -> f32 {
     let r = rewards[core];
-    if prm.has_goal != 0u && goal[core] != 0u {
+    if goal_at(core) {
         return r;
     }
     return r + unfused(prm.gamma, m);
@@ -115,7 +121,7 @@ fn reduce_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup
     let width = prm.len;
     let row = local * width;
     let m = prm.n_joint;
-    let is_goal = prm.has_goal != 0u && goal[core] != 0u;
+    let is_goal = goal_at(core);
     if prm.mode == 3u {
         var best = 0.0;
         if !is_goal {

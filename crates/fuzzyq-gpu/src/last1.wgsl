@@ -55,7 +55,7 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         return;
     }
     let core = prm.c0_lo * prm.slab + local;
-    let is_goal = prm.has_goal != 0u && goal[core] != 0u;
+    let is_goal = goal_at(core);
     switch prm.mode {
         case 0u: {
             dst[core] = finish(core, bv);

@@ -232,6 +232,18 @@ fn reward_buffer<M: Model<f32> + Sync + ?Sized>(
     }
 }
 
+/// The goal cores as bits, 32 to a word (`block.wgsl`'s `goal_at`): core `c` is bit `c % 32`
+/// of word `c / 32` (none for a run without goal cores).
+fn goal_bits(goal: &[bool]) -> Vec<u32> {
+    goal.chunks(32)
+        .map(|c| {
+            c.iter()
+                .enumerate()
+                .fold(0u32, |w, (i, &g)| w | (u32::from(g) << i))
+        })
+        .collect()
+}
+
 /// The size of a buffer made for `bytes` bytes ([`buffers::zeroed`], [`with_data`]).
 fn allocated(bytes: u64) -> u64 {
     bytes.max(4).next_multiple_of(4)
@@ -402,6 +414,7 @@ impl GpuSweeps {
             check("the reward table", rewards_bytes)?;
         }
         let map = plan.joint_to_product.unwrap_or(&[]);
+        let goal = goal_bits(plan.goal);
         let partials = n.div_ceil(PER_WG as usize) as u64;
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
@@ -411,7 +424,7 @@ impl GpuSweeps {
         // Every buffer but the per-core ones.
         let mut other = vec![
             rewards_bytes,
-            4 * plan.goal.len() as u64,
+            4 * goal.len() as u64,
             4 * map.len() as u64,
             4 * ptr.len() as u64,
             4 * col.len() as u64,
@@ -442,7 +455,7 @@ impl GpuSweeps {
         let device = &gpu.inner.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let rewards = reward_buffer(gpu, &plan, op);
-        let goal: Vec<u32> = plan.goal.iter().map(|&g| u32::from(g)).collect();
+
         let table = [
             with_data(&gpu.inner, "row_ptr", &ptr),
             with_data(&gpu.inner, "col", &col),
