@@ -76,6 +76,48 @@ struct Shape {
 }
 
 impl Shape {
+    /// The shape of `plan`'s block path over `n` cores, its blocks' sizes and row bases from
+    /// [`BlockArrays`]; one slab per batch.
+    fn of(
+        plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
+        n: usize,
+        blocks: Vec<[u32; 4]>,
+        row_base: Vec<u32>,
+    ) -> Self {
+        let last = plan.tables.last().expect("at least one block");
+        let identity = plan.joint_to_product.is_none();
+        let reward_table = plan.rewards.is_none();
+        Self {
+            n,
+            blocks,
+            row_base,
+            n_joint: plan.n_joint as u32,
+            n_product: (last.p_len * last.n_actions) as u64,
+            slab: plan.tables[0].r_len as u64,
+            n0: plan.tables[0].n_cores as u64,
+            batch: 1,
+            fused: identity && !reward_table,
+            fused_abs: identity,
+            gamma: plan.gamma,
+            has_goal: !plan.goal.is_empty(),
+            reward_table,
+            can_evaluate: plan.can_evaluate,
+        }
+    }
+
+    /// Bytes of the largest buffer a batch of one slab needs: a stage's output, or the full
+    /// rows.
+    fn per_slab_bytes(&self) -> u64 {
+        let mut per_slab = (0..self.written_stages())
+            .map(|b| self.stage_len(b))
+            .max()
+            .unwrap_or(0);
+        if !self.fused || !self.fused_abs {
+            per_slab = per_slab.max(self.slab * self.n_product);
+        }
+        4 * per_slab.max(1)
+    }
+
     fn n_blocks(&self) -> usize {
         self.blocks.len()
     }
@@ -249,12 +291,31 @@ fn allocated(bytes: u64) -> u64 {
     bytes.max(4).next_multiple_of(4)
 }
 
-/// The device memory of a run's buffers, in bytes: `V`'s three buffers, the policy and the
-/// exact delta's two work buffers (one value per core each), and the rest (`other`: tables,
-/// rewards, stage buffers, partial results), each as allocated.
-fn footprint(n: usize, other: &[u64]) -> (u64, u64) {
+/// Refuses a run whose buffers would take more device memory than `gpu` has
+/// ([`Gpu::with_memory_limit`]), before any is allocated: the per-core ones (`V` three times,
+/// the policy, the exact delta's two work buffers), the stage buffers of `shape`'s batches
+/// and `other` (tables, rewards, partial results), each as allocated.
+fn check_memory(gpu: &Gpu, shape: &Shape, mut other: Vec<u64>) -> Result<(), GpuError> {
+    let n = shape.n;
+    other.extend((0..shape.written_stages()).map(|b| 4 * shape.batch * shape.stage_len(b)));
+    if !shape.fused || !shape.fused_abs {
+        other.push(4 * shape.batch * shape.slab * shape.n_product);
+    }
     let per_core = 6 * allocated(4 * n as u64);
-    (per_core, other.iter().map(|&b| allocated(b)).sum())
+    let rest: u64 = other.iter().map(|&b| allocated(b)).sum();
+    match gpu.memory.filter(|&m| per_core + rest > m) {
+        None => Ok(()),
+        Some(available) => Err(GpuError::OutOfMemory {
+            what: format!(
+                "{n} cores: V three times, the policy and two work buffers, {:.2} GB; the \
+                 tables, rewards and stage buffers, {:.2} GB",
+                per_core as f64 / 1e9,
+                rest as f64 / 1e9
+            ),
+            need: per_core + rest,
+            available,
+        }),
+    }
 }
 
 /// The problem's kernels, compiled with its sizes as constants: the stage kernel of every
@@ -376,38 +437,11 @@ impl GpuSweeps {
             col,
             weight,
         } = BlockArrays::of(&plan)?;
-        let last = plan.tables.last().expect("at least one block");
-        let identity = plan.joint_to_product.is_none();
-        let reward_table = plan.rewards.is_none();
-        let mut shape = Shape {
-            n,
-            blocks,
-            row_base,
-            n_joint: plan.n_joint as u32,
-            n_product: (last.p_len * last.n_actions) as u64,
-            slab: plan.tables[0].r_len as u64,
-            n0: plan.tables[0].n_cores as u64,
-            batch: 1,
-            fused: identity && !reward_table,
-            fused_abs: identity,
-            gamma: plan.gamma,
-            has_goal: !plan.goal.is_empty(),
-            reward_table,
-            can_evaluate: plan.can_evaluate,
-        };
+        let mut shape = Shape::of(&plan, n, blocks, row_base);
         let nb = shape.n_blocks();
-        // The largest buffer a batch of one slab needs: a stage's output, or the full rows.
-        let mut per_slab = (0..shape.written_stages())
-            .map(|b| shape.stage_len(b))
-            .max()
-            .unwrap_or(0);
-        if !shape.fused || !shape.fused_abs {
-            per_slab = per_slab.max(shape.slab * shape.n_product);
-        }
-        let per_slab = 4 * per_slab.max(1);
+        let per_slab = shape.per_slab_bytes();
         check("one slab's stage output", per_slab)?;
-        let budget = gpu.batch_bytes.min(max_binding);
-        shape.batch = (budget / per_slab).clamp(1, shape.n0);
+        shape.batch = (gpu.batch_bytes.min(max_binding) / per_slab).clamp(1, shape.n0);
 
         let rewards_bytes = reward_bytes(&plan, n);
         if plan.rewards.is_none() {
@@ -421,7 +455,7 @@ impl GpuSweeps {
         let k = gpu.kernels.clone();
         let n_batches = shape.n0.div_ceil(shape.batch) as usize;
         let params_cap = (n_batches * (nb + 1)).max(4);
-        // Every buffer but the per-core ones.
+        // Every buffer but the per-core ones and the stages'.
         let mut other = vec![
             rewards_bytes,
             4 * goal.len() as u64,
@@ -429,28 +463,15 @@ impl GpuSweeps {
             4 * ptr.len() as u64,
             4 * col.len() as u64,
             4 * weight.len() as u64,
+            4 * partial_len,
+            params_cap as u64 * PARAM_STRIDE,
+            4,
+            4,
         ];
-        other.extend((0..shape.written_stages()).map(|b| 4 * shape.batch * shape.stage_len(b)));
-        if !shape.fused || !shape.fused_abs {
-            other.push(4 * shape.batch * shape.slab * shape.n_product);
-        }
         if k.diff.is_some() {
             other.push(16 * partial_len);
         }
-        other.extend([4 * partial_len, params_cap as u64 * PARAM_STRIDE, 4, 4]);
-        let (per_core, rest) = footprint(n, &other);
-        if let Some(available) = gpu.memory.filter(|&m| per_core + rest > m) {
-            return Err(GpuError::OutOfMemory {
-                what: format!(
-                    "{n} cores: V three times, the policy and two work buffers, {:.2} GB; \
-                     the tables, rewards and stage buffers, {:.2} GB",
-                    per_core as f64 / 1e9,
-                    rest as f64 / 1e9
-                ),
-                need: per_core + rest,
-                available,
-            });
-        }
+        check_memory(gpu, &shape, other)?;
 
         let device = &gpu.inner.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
