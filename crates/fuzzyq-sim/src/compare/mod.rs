@@ -65,6 +65,7 @@ use serde::{Deserialize, Serialize};
 use crate::error::{ConfigError, SimError, require};
 use crate::io::config::{EnvConfig, TrainConfig};
 use crate::io::policy_file::{PolicyArtifact, Values};
+use crate::learn::additive::AdditiveQ;
 use crate::learn::fitted::{self, FittedConfig};
 use crate::learn::fql::FqlConfig;
 use crate::learn::samples::{Collection, Exploration};
@@ -392,6 +393,31 @@ pub struct LearnerReport {
     /// with their intervals. The fields above then hold the means (the rollout `from_x0` is
     /// the first seed's).
     pub over_seeds: Option<OverSeeds>,
+}
+
+impl LearnerReport {
+    /// Records a learner's per-agent Q-function: its parameters (kept in memory too) and the
+    /// largest magnitude among them, which it returns.
+    fn record_parameters(&mut self, q: &AdditiveQ) -> f64 {
+        self.parameters = q.params().iter().map(|p| p.len() as u64).sum();
+        self.stored_values += self.parameters;
+        let largest = q
+            .params()
+            .iter()
+            .flatten()
+            .fold(0.0_f64, |m, p| m.max(p.abs()));
+        self.largest_parameter = Some(largest);
+        largest
+    }
+
+    /// Records VQQL's codebook of `cells` cells per agent: a note and its stored values.
+    fn record_codebook(&mut self, cells: usize, lloyd: &vqql::LloydReport) {
+        self.notes.push(format!(
+            "k-means: {cells} cells per agent, {} Lloyd iterations, distortion {:.4}",
+            lloyd.iterations, lloyd.distortion
+        ));
+        self.stored_values += lloyd.codebook_values as u64;
+    }
 }
 
 /// A mean over seeds with its 95% percentile bootstrap interval ([`bootstrap`]).
@@ -1018,24 +1044,12 @@ fn train_one(
             )?;
             let outcome = &learned.outcome;
             if let Some(lloyd) = &learned.lloyd {
-                report.notes.push(format!(
-                    "k-means: {} cells per agent, {} Lloyd iterations, distortion {:.4}",
-                    config.vqql.cells, lloyd.iterations, lloyd.distortion
-                ));
-                report.stored_values += lloyd.codebook_values as u64;
+                report.record_codebook(config.vqql.cells, lloyd);
             }
             report.iterations = outcome.curve.len();
             report.iteration_unit = "episodes".into();
             report.converged = outcome.converged_at.is_some();
-            report.parameters = outcome.q.params().iter().map(|p| p.len() as u64).sum();
-            report.stored_values += report.parameters;
-            let largest = outcome
-                .q
-                .params()
-                .iter()
-                .flatten()
-                .fold(0.0_f64, |m, p| m.max(p.abs()));
-            report.largest_parameter = Some(largest);
+            let largest = report.record_parameters(&outcome.q);
             // Under the paper's reward a positive return means the goal was met; a shaped
             // return says nothing of it.
             if config.reward() == RewardShape::Paper {
@@ -1070,11 +1084,7 @@ fn fitted_from_samples(
     )?;
     let features = if learner == Learner::VqqlBatch {
         let (features, lloyd) = vqql::build_codebook(&model, &config.fql_starts, &config.vqql)?;
-        report.notes.push(format!(
-            "k-means: {} cells per agent, {} Lloyd iterations, distortion {:.4}",
-            config.vqql.cells, lloyd.iterations, lloyd.distortion
-        ));
-        report.stored_values += lloyd.codebook_values as u64;
+        report.record_codebook(config.vqql.cells, &lloyd);
         features
     } else {
         let g = &config.task.grid;
@@ -1094,15 +1104,7 @@ fn fitted_from_samples(
     report.iterations = out.iterations;
     report.iteration_unit = "iterations".into();
     report.converged = out.converged;
-    report.parameters = out.q.params().iter().map(|p| p.len() as u64).sum();
-    report.stored_values += report.parameters;
-    let largest = out
-        .q
-        .params()
-        .iter()
-        .flatten()
-        .fold(0.0_f64, |m, p| m.max(p.abs()));
-    report.largest_parameter = Some(largest);
+    let largest = report.record_parameters(&out.q);
     report.notes.push(format!(
         "fitted on {} transitions (random actions, episodes of {} steps, seed {}); largest \
          |parameter| {largest:.3e}",
