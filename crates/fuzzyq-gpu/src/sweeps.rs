@@ -105,6 +105,12 @@ impl Shape {
         }
     }
 
+    /// Whether some pass writes full rows for `reduce_rows` (a renumbered joint action or a
+    /// reward of the action).
+    fn writes_rows(&self) -> bool {
+        !self.fused || !self.fused_abs
+    }
+
     /// Bytes of the largest buffer a batch of one slab needs: a stage's output, or the full
     /// rows.
     fn per_slab_bytes(&self) -> u64 {
@@ -112,10 +118,21 @@ impl Shape {
             .map(|b| self.stage_len(b))
             .max()
             .unwrap_or(0);
-        if !self.fused || !self.fused_abs {
+        if self.writes_rows() {
             per_slab = per_slab.max(self.slab * self.n_product);
         }
         4 * per_slab.max(1)
+    }
+
+    /// Bytes of the buffer of stage `b`'s output for one batch.
+    fn stage_bytes(&self, b: usize) -> u64 {
+        4 * self.batch * self.stage_len(b)
+    }
+
+    /// Bytes of the full rows of one batch, where a pass writes them.
+    fn rows_bytes(&self) -> Option<u64> {
+        self.writes_rows()
+            .then(|| 4 * self.batch * self.slab * self.n_product)
     }
 
     fn n_blocks(&self) -> usize {
@@ -297,10 +314,8 @@ fn allocated(bytes: u64) -> u64 {
 /// and `other` (tables, rewards, partial results), each as allocated.
 fn check_memory(gpu: &Gpu, shape: &Shape, mut other: Vec<u64>) -> Result<(), GpuError> {
     let n = shape.n;
-    other.extend((0..shape.written_stages()).map(|b| 4 * shape.batch * shape.stage_len(b)));
-    if !shape.fused || !shape.fused_abs {
-        other.push(4 * shape.batch * shape.slab * shape.n_product);
-    }
+    other.extend((0..shape.written_stages()).map(|b| shape.stage_bytes(b)));
+    other.extend(shape.rows_bytes());
     let per_core = 6 * allocated(4 * n as u64);
     let rest: u64 = other.iter().map(|&b| allocated(b)).sum();
     match gpu.memory.filter(|&m| per_core + rest > m) {
@@ -338,11 +353,7 @@ fn compile(
     let nb = shape.n_blocks();
     // Every stage the passes run as a stage: those before the last, and the last where it
     // writes full rows.
-    let compiled = if shape.fused && shape.fused_abs {
-        nb - 1
-    } else {
-        nb
-    };
+    let compiled = if shape.writes_rows() { nb } else { nb - 1 };
     let stage_c = (0..compiled)
         .map(|b| {
             let [n_b, a_b, r_b, p_b] = shape.blocks[b];
@@ -484,15 +495,9 @@ impl GpuSweeps {
         ];
         let vbytes = 4 * n as u64;
         let stages = (0..shape.written_stages())
-            .map(|b| zeroed(&gpu.inner, "stage", 4 * shape.batch * shape.stage_len(b)))
+            .map(|b| zeroed(&gpu.inner, "stage", shape.stage_bytes(b)))
             .collect();
-        let rows = (!shape.fused || !shape.fused_abs).then(|| {
-            zeroed(
-                &gpu.inner,
-                "rows",
-                4 * shape.batch * shape.slab * shape.n_product,
-            )
-        });
+        let rows = shape.rows_bytes().map(|b| zeroed(&gpu.inner, "rows", b));
         let sg = gpu.inner.summary.subgroup_size.filter(|_| gpu.subgroups);
         let (stage_c, last1) = compile(gpu, &k, &shape, sg)?;
         let diff_out = k
