@@ -39,7 +39,7 @@ LAYERS = {
         {"compare"},
     ],
     "fuzzyq-gpu": [
-        {"error", "reference", "memory"},
+        {"error", "reference", "memory", "batches"},
         {"context"},
         {"buffers"},
         {"kernels"},

@@ -9,19 +9,26 @@
 # and the Vulkan loader: where `ldconfig -p` lists no libvulkan.so.1, the Debian package in
 # .gl/ (`apt-get download libvulkan1` on a machine with the network) is unpacked into /.
 # NVIDIA's Vulkan driver file is looked up where NVIDIA's container images put it.
-# Logs and JSON go to $OUT (or ./gpu-check-out). GPU_CHECK_ENVS and GPU_CHECK_BENCH_ENV choose
+# Logs and JSON go to $OUT (or ./gpu-check-out), and each table row to $OUT/rows.md as it is
+# made (so a run cut short still reports). GPU_CHECK_ENVS and GPU_CHECK_BENCH_ENV choose
 # smaller problems for a trial of the script itself (on lavapipe, say: `GPU_CHECK_ENVS=dcmotor
 # GPU_CHECK_TRAIN_ARGS="--precision f32" GPU_CHECK_BENCH_ENV=dcmotor GPU_CHECK_BATCHES=256
 # scripts/gpu-check.sh`; there the exports differ, as lavapipe does not fuse `fma`). Each
-# train row is followed by where its seconds went, from its `--json` summary.
+# train row is followed by where its seconds went, from its `--json` summary. Last, three
+# point masses (GPU_CHECK_THREE, a configuration; empty skips them): trained on the GPU and
+# rolled out from 20 random starts, then one full backup with 5 force levels per axis.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-gpu-check-out}
 mkdir -p "$OUT"
+: >"$OUT/rows.md"
 BIN=${FUZZYQ_BIN:-$( [ -x .gpucheck/fuzzyq ] && echo .gpucheck/fuzzyq || echo target/release/fuzzyq )}
 TESTS=${FUZZYQ_TESTS:-.gpucheck/integration}
 ROWS=()
-row() { ROWS+=("$(printf '| %s | %s | %s |' "$1" "$2" "$3")"); }
+row() {
+  ROWS+=("$(printf '| %s | %s | %s |' "$1" "$2" "$3")")
+  printf '%s\n' "${ROWS[-1]}" >>"$OUT/rows.md"
+}
 now() { date +%s.%N; }
 secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
 # Where a run's time went, from its `train --json` summary: the device, the set-up, the coarse
@@ -113,6 +120,32 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
     row "  its seconds on the $dev" "" "$(phases "$OUT/$env-$dev.json")"
   done
 done
+
+# 4. Three point masses: six blocks, so batches below fixed cores of the first blocks.
+THREE=${GPU_CHECK_THREE-examples/three-point-masses.toml}
+if [ -n "$THREE" ]; then
+  t0=$(now)
+  timeout 240 "$BIN" train --config "$THREE" --device gpu --out "$OUT/three.fzq" \
+    --json "$OUT/three.json" >"$OUT/train-three.log" 2>&1
+  rc=$?
+  wall=$(secs "$t0" "$(now)")
+  sweeps=$(grep -E 'converged|sweeps' "$OUT/train-three.log" | tail -1 | cut -c1-140)
+  reach="no policy"
+  if [ $rc = 0 ]; then
+    timeout 60 "$BIN" rollout --policy "$OUT/three.fzq" --starts 20 >"$OUT/rollout-three.log" 2>&1
+    reach=$(tail -1 "$OUT/rollout-three.log" | cut -c1-160)
+  fi
+  row "train $THREE (three point masses)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "gpu ${wall} s wall; ${sweeps}; ${reach}"
+  row "  its seconds on the gpu" "" "$(phases "$OUT/three.json")"
+  # The same grid with the paper's 5 force levels per axis: one full backup.
+  sed 's/^force_levels = .*/force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]/' "$THREE" >"$OUT/three-5.toml"
+  timeout 150 "$BIN" bench --config "$OUT/three-5.toml" --device gpu --backups 1 --peak-seconds 0.2 \
+    --json "$OUT/bench-three-5.json" >"$OUT/bench-three-5.log" 2>&1
+  rc=$?
+  row "GPU full backup, three point masses, 5 forces per axis" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "$(grep -E '^(backup|problem)' "$OUT/bench-three-5.log" | sed 's/  */ /g' | paste -sd ';' -)"
+fi
 
 echo
 echo "| check | result | figures |"

@@ -293,6 +293,14 @@ fn operator_passes(c: &TrainConfig) {
 #[test]
 fn every_pass_matches_the_reference_on_point_masses() {
     operator_passes(&pointmass_small());
+    // 15,625 joint actions: the fused last stage takes a core's 3,125 product columns in
+    // chunks per lane.
+    let mut five = three_point_masses(false);
+    let EnvConfig::Pointmass(p) = &mut five.env else {
+        unreachable!("a point-mass config")
+    };
+    p.force_levels = vec![-2.0, -0.2, 0.0, 0.2, 2.0];
+    operator_passes(&five);
     let mut goal = pointmass_small();
     goal.solver.absorbing_goal = true;
     operator_passes(&goal);
@@ -304,18 +312,65 @@ fn every_pass_matches_the_reference_on_khepera_and_dcmotor() {
     operator_passes(&config_of(EnvKind::Dcmotor));
 }
 
+/// Three point masses (six blocks) on 2 positions x 2 velocities per axis (4,096 cores) and
+/// forces -2, 0 and 2 N (729 joint actions); `shaped`: the reward of the action (full rows
+/// and a reward table).
+fn three_point_masses(shaped: bool) -> TrainConfig {
+    let mut c = config_of(EnvKind::Pointmass);
+    c.grid.position_cores = vec![-6.0, 6.0];
+    c.grid.velocity_cores = vec![-3.0, 3.0];
+    let EnvConfig::Pointmass(p) = &mut c.env else {
+        unreachable!("a point-mass config")
+    };
+    p.agents = 3;
+    p.force_levels = vec![-2.0, 0.0, 2.0];
+    if shaped {
+        p.reward = fuzzyq_sim::model::pointmass::RewardShape::Shaped;
+    }
+    c
+}
+
+/// The batch levels of `op`'s passes under stage budgets from 1 byte to the default, each
+/// budget's passes checked against the reference.
+fn batch_levels<M: Model<f32> + Sync>(g: &Gpu, op: &Operator<'_, f32, M>) -> Vec<usize> {
+    let mut levels = Vec::new();
+    for budget in [1u64, 1 << 10, 1 << 14, 1 << 18, 1 << 22, 1 << 26] {
+        let small = g.clone().with_batch_bytes(budget);
+        let b = GpuSweeps::new(&small, op).unwrap().batches();
+        if !levels.contains(&b.level) {
+            eprintln!("budget {budget} B: {b}");
+            passes_match(&small, op);
+            levels.push(b.level);
+        }
+    }
+    levels
+}
+
 #[test]
-fn small_batches_give_the_same_bits() {
+fn every_batching_gives_the_same_bits() {
     let Some(g) = gpu() else { return };
-    // One slab per batch: the stage buffers hold one slab and a pass runs many batches.
-    let c = pointmass_small();
-    let model = c.build_model().unwrap();
-    let grid = c.grid::<f32>().unwrap();
-    let config = c.solver.solver_config();
-    let small = g.clone().with_batch_bytes(1);
-    let a = fuzzyq_gpu::solve_from(&small, &model, &grid, &config, None, false, noop).unwrap();
-    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
-    assert_same(&a, &b, "one slab per batch against the default");
+    // Small budgets cut a pass into batches of one slab, then of cores of later blocks below
+    // fixed cores of earlier ones; every pass keeps the reference's bits, as a whole run
+    // keeps the default batches'.
+    for (c, deepest) in [
+        (pointmass_small(), 2),
+        (three_point_masses(false), 3),
+        (three_point_masses(true), 4),
+    ] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let op = operator(&model, &grid, &config);
+        let levels = batch_levels(g, &op);
+        assert!(
+            levels.contains(&0) && levels.contains(&deepest),
+            "{levels:?}"
+        );
+        let small = g.clone().with_batch_bytes(1);
+        let a = fuzzyq_gpu::solve_from(&small, &model, &grid, &config, None, false, noop).unwrap();
+        let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+        assert_same(&a, &b, "the smallest batches against the default");
+    }
 }
 
 #[test]

@@ -168,3 +168,24 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn every_example_configuration_is_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let c = TrainConfig::from_toml(&text).unwrap_or_else(|e| panic!("{path:?}: {e}"));
+            c.validate().unwrap_or_else(|e| panic!("{path:?}: {e}"));
+            seen += 1;
+        }
+    }
+    assert!(seen >= 3, "{seen} configurations in {dir:?}");
+    // The sizes scripts/gpu-check.sh and the file's header state.
+    let text = std::fs::read_to_string(dir.join("three-point-masses.toml")).unwrap();
+    let three = TrainConfig::from_toml(&text).unwrap();
+    assert_eq!(three.n_cores(), 21usize.pow(6));
+    assert_eq!(three.n_joint_actions(), 729);
+}

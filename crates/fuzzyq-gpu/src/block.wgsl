@@ -11,10 +11,10 @@ struct Params {
     b: u32,
     // Threads (or items) of this dispatch.
     count: u32,
-    // The first slab of this batch (a core of the first contracted block).
-    c0_lo: u32,
-    // Padding: the fields before `blocks` fill whole 16-byte rows.
-    pad0: u32,
+    // A stage's first item (a prefix of block cores, `batches.rs`; for the last stage a
+    // core), and the first item of the stage before it that `src` holds.
+    lo: u32,
+    src_lo: u32,
     // The reduction: 0: maximum of the expected values; 1: and the argument; 2: the argument
     // only; 3: maximum of the absolute values (written per core, for `max_pass`).
     mode: u32,
@@ -28,8 +28,8 @@ struct Params {
     zero: u32,
     gamma: f32,
     shift: f32,
-    // Cores of one slab (`R_0`) and blocks.
-    slab: u32,
+    // Padding, and blocks.
+    pad1: u32,
     n_blocks: u32,
     // Elements of the buffers a generic pass covers.
     len: u32,
@@ -71,13 +71,12 @@ fn blk(b: u32) -> vec4<u32> {
     return prm.blocks[b];
 }
 
-// Item `q` of a batch at a stage of `n` block cores: its block core and the first item of its
-// prefix (`(c, base)`); the first stage's cores start at the batch's first slab.
-fn core_of(first: bool, q: u32, n: u32) -> vec2<u32> {
-    if first {
-        return vec2<u32>(prm.c0_lo + q, 0u);
-    }
-    return vec2<u32>(q % n, (q / n) * n);
+// Item `q` of a dispatch at a stage of `n` block cores: its block core, and where its parent's
+// output starts in `src` in items of this stage's input (`(c, base)`). The first stage's
+// parent is the root, whose output is `V`.
+fn core_of(q: u32, n: u32) -> vec2<u32> {
+    let g = prm.lo + q;
+    return vec2<u32>(g % n, (g / n - prm.src_lo) * n);
 }
 
 // Whether `core` is a goal core (of a run with goal cores: an absorbing goal).
@@ -117,7 +116,7 @@ fn reduce_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup
     if local >= prm.count {
         return;
     }
-    let core = prm.c0_lo * prm.slab + local;
+    let core = prm.lo + local;
     let width = prm.len;
     let row = local * width;
     let m = prm.n_joint;

@@ -109,7 +109,7 @@ impl Gpu {
     }
 
     /// This GPU with runs limited to storage bindings of at most `bytes` (the adapter's limit
-    /// is the default): a run whose `V` or one slab's stage output exceeds it is refused
+    /// is the default): a run whose `V` or smallest batch's stage output exceeds it is refused
     /// before anything is allocated ([`GpuError::TooLarge`]). For trying a smaller card's
     /// limits.
     #[must_use]
@@ -137,9 +137,11 @@ impl Gpu {
         self
     }
 
-    /// This GPU with batches of slabs whose largest stage output takes at most `bytes` (at
-    /// least one slab each; default 256 MiB, or `FUZZYQ_GPU_BATCH_MB`). Any batch size gives
-    /// the same bits; larger batches mean fewer, larger dispatches.
+    /// This GPU with batches whose largest stage output takes at most `bytes` where one
+    /// item's can (default 256 MiB, or `FUZZYQ_GPU_BATCH_MB`): runs of slabs where a slab
+    /// fits, else of cores of a later block below fixed cores of the earlier ones
+    /// ([`Batches`](crate::Batches)). Any batches give the same bits; larger batches mean
+    /// fewer, larger dispatches.
     #[must_use]
     pub fn with_batch_bytes(mut self, bytes: u64) -> Self {
         self.batch_bytes = bytes;

@@ -1,7 +1,9 @@
 // The last stage fused with the reduction, compiled with the problem's constants
 // (`sweeps.rs`): LAST (the block), NL cores, AL actions, PL product actions before it; TPC
 // lanes per core, each taking J of the core's PL columns (p = lane + TPC j), so that a row
-// entry's weight and column feed J multiply-adds; CPW cores per workgroup of WGS threads.
+// entry's weight and column feed several multiply-adds: JC at a time, in NCH chunks (JC J's
+// up to 8, so that the accumulators stay in registers where PL is large, as with 15,625 joint
+// actions); CPW cores per workgroup of WGS threads.
 // With SG the workgroup is one subgroup and a core's lanes reduce by `subgroupShuffleXor`
 // (no workgroup memory, no barrier); without, in workgroup memory. The same sums in the same
 // order as `last_fused`, and the same maximum at the lowest index: the same bits.
@@ -19,33 +21,38 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     var bv = bitcast<f32>(0xff800000u ^ prm.zero);
     var bi = 0xffffffffu;
     if valid {
-        let cb = core_of(LAST == 0u, local, NL);
+        let cb = core_of(local, NL);
         let c = cb.x;
         let base = cb.y;
         let abs_mode = prm.mode == 3u;
         for (var a = 0u; a < AL; a++) {
             let row = prm.rows[LAST].x + c * AL + a;
+            let e0 = row_ptr[row];
             let e1 = row_ptr[row + 1u];
-            var acc: array<f32, J>;
-            for (var j = 0u; j < J; j++) {
-                acc[j] = 0.0;
-            }
-            for (var e = row_ptr[row]; e < e1; e++) {
-                let w = weight[e];
-                let k = (base + col[e]) * PL;
-                for (var j = 0u; j < J; j++) {
-                    acc[j] = fma(w, src[k + min(lane + TPC * j, PL - 1u)], acc[j]);
+            for (var ch = 0u; ch < NCH; ch++) {
+                let p0 = lane + TPC * JC * ch;
+                var acc: array<f32, JC>;
+                for (var j = 0u; j < JC; j++) {
+                    acc[j] = 0.0;
                 }
-            }
-            for (var j = 0u; j < J; j++) {
-                let p = lane + TPC * j;
-                var x = acc[j];
-                if abs_mode {
-                    x = abs(x);
+                for (var e = e0; e < e1; e++) {
+                    let w = weight[e];
+                    let k = (base + col[e]) * PL;
+                    for (var j = 0u; j < JC; j++) {
+                        acc[j] = fma(w, src[k + min(p0 + TPC * j, PL - 1u)], acc[j]);
+                    }
                 }
-                if p < PL && x > bv {
-                    bv = x;
-                    bi = a * PL + p;
+                for (var j = 0u; j < JC; j++) {
+                    let p = p0 + TPC * j;
+                    var x = acc[j];
+                    if abs_mode {
+                        x = abs(x);
+                    }
+                    // The lowest index among equals whatever the order the chunks visit.
+                    if p < PL && beats(x, a * PL + p, bv, bi) {
+                        bv = x;
+                        bi = a * PL + p;
+                    }
                 }
             }
         }
@@ -54,7 +61,7 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if !valid || lane != 0u {
         return;
     }
-    let core = prm.c0_lo * prm.slab + local;
+    let core = prm.lo + local;
     let is_goal = goal_at(core);
     switch prm.mode {
         case 0u: {

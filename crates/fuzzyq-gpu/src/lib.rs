@@ -11,8 +11,10 @@
 //! exact delta); `V` and the greedy actions come back at the end and when an observer asks
 //! for the run's state (a checkpoint).
 //!
-//! A full backup runs the block contraction a batch of slabs at a time: each stage before the
-//! last writes its whole output for the batch, one thread per element (`stagec.wgsl`, compiled
+//! A full backup runs the block contraction a batch at a time ([`Batches`]: a run of slabs, or
+//! where one slab's stage outputs would not fit, a run of cores of a later block below fixed
+//! cores of the earlier ones, whose shared stages are kept from batch to batch): each stage
+//! before the last writes its output for the batch, one thread per element (`stagec.wgsl`, compiled
 //! with the problem's sizes as constants); the last stage is fused with the maximum over
 //! actions (`last1.wgsl`: up to 32 lanes per core, each taking several of the core's columns
 //! so that a row entry's weight feeds several multiply-adds, then the lanes reduce to the
@@ -41,6 +43,7 @@
 //! before anything is allocated ([`GpuError::TooLarge`], [`GpuError::OutOfMemory`]; the
 //! memory where the API reports it, Vulkan, through wgpu-hal as wgpu has no API for it).
 
+mod batches;
 mod buffers;
 mod context;
 mod error;
@@ -56,6 +59,7 @@ use core::ops::ControlFlow;
 use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
 
+pub use batches::Batches;
 pub use context::AdapterSummary;
 pub use error::GpuError;
 pub use gpu::Gpu;

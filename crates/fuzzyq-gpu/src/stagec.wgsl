@@ -15,7 +15,7 @@ fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id)
     t = t / SA;
     let r = t % SR;
     let q = t / SR;
-    let cb = core_of(SB == 0u, q, SN);
+    let cb = core_of(q, SN);
     let c = cb.x;
     let base = cb.y;
     let row = prm.rows[SB].x + c * SA + a;

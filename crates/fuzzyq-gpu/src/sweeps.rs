@@ -6,6 +6,7 @@ use std::collections::HashMap;
 use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Buf, DiffStats, Operator, Sweeps};
 
+use crate::batches::{Batches, Step, Tree};
 use crate::buffers::{self, with_data, zeroed};
 use crate::error::GpuError;
 use crate::gpu::Gpu;
@@ -58,11 +59,9 @@ struct Shape {
     n_joint: u32,
     /// Product actions (`P` of the last block times its actions).
     n_product: u64,
-    /// Cores per slab (`R_0`) and slabs (block 0's cores).
-    slab: u64,
-    n0: u64,
-    /// Slabs per batch.
-    batch: u64,
+    /// The blocks' sizes for batching, and the batches a pass runs in.
+    tree: Tree,
+    batches: Batches,
     /// Whether the last stage reduces in place (the identity action map and a state-only
     /// reward); else it writes full rows that `reduce_rows` reduces.
     fused: bool,
@@ -77,7 +76,7 @@ struct Shape {
 
 impl Shape {
     /// The shape of `plan`'s block path over `n` cores, its blocks' sizes and row bases from
-    /// [`BlockArrays`]; one slab per batch.
+    /// [`BlockArrays`]; batches of one slab until [`Self::batch_within`].
     fn of(
         plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
         n: usize,
@@ -87,17 +86,20 @@ impl Shape {
         let last = plan.tables.last().expect("at least one block");
         let identity = plan.joint_to_product.is_none();
         let reward_table = plan.rewards.is_none();
+        let n_product = (last.p_len * last.n_actions) as u64;
+        let (fused, fused_abs) = (identity && !reward_table, identity);
+        let rows = (!fused || !fused_abs).then_some(n_product);
+        let tree = Tree::new(&blocks, rows);
         Self {
             n,
+            batches: tree.batches(0, 1),
+            tree,
             blocks,
             row_base,
             n_joint: plan.n_joint as u32,
-            n_product: (last.p_len * last.n_actions) as u64,
-            slab: plan.tables[0].r_len as u64,
-            n0: plan.tables[0].n_cores as u64,
-            batch: 1,
-            fused: identity && !reward_table,
-            fused_abs: identity,
+            n_product,
+            fused,
+            fused_abs,
             gamma: plan.gamma,
             has_goal: !plan.goal.is_empty(),
             reward_table,
@@ -111,28 +113,31 @@ impl Shape {
         !self.fused || !self.fused_abs
     }
 
-    /// Bytes of the largest buffer a batch of one slab needs: a stage's output, or the full
-    /// rows.
-    fn per_slab_bytes(&self) -> u64 {
-        let mut per_slab = (0..self.written_stages())
-            .map(|b| self.stage_len(b))
-            .max()
-            .unwrap_or(0);
-        if self.writes_rows() {
-            per_slab = per_slab.max(self.slab * self.n_product);
+    /// Batches whose largest buffer takes at most `budget` bytes where one item's can
+    /// ([`Tree::choose`]); refused where the smallest batch's buffer exceeds one storage
+    /// binding of `max_binding` bytes.
+    fn batch_within(&mut self, budget: u64, max_binding: u64) -> Result<(), GpuError> {
+        self.batches = self.tree.choose(budget.min(max_binding));
+        let largest = self.tree.largest_of(&self.batches);
+        if largest > max_binding {
+            return Err(GpuError::TooLarge {
+                what: "the smallest batch's stage output",
+                need: largest,
+                limit: max_binding,
+                kind: "storage binding",
+            });
         }
-        4 * per_slab.max(1)
+        Ok(())
     }
 
     /// Bytes of the buffer of stage `b`'s output for one batch.
     fn stage_bytes(&self, b: usize) -> u64 {
-        4 * self.batch * self.stage_len(b)
+        self.tree.stage_bytes(b, &self.batches)
     }
 
     /// Bytes of the full rows of one batch, where a pass writes them.
     fn rows_bytes(&self) -> Option<u64> {
-        self.writes_rows()
-            .then(|| 4 * self.batch * self.slab * self.n_product)
+        self.tree.rows_bytes(&self.batches)
     }
 
     fn n_blocks(&self) -> usize {
@@ -142,12 +147,6 @@ impl Shape {
     /// The stages whose outputs go to memory (those before the last).
     fn written_stages(&self) -> usize {
         self.n_blocks() - 1
-    }
-
-    /// Elements of stage `b`'s output for one slab.
-    fn stage_len(&self, b: usize) -> u64 {
-        let [_, a, _, p] = self.blocks[b];
-        self.slab * u64::from(a) * u64::from(p)
     }
 
     /// The base parameters of every dispatch.
@@ -164,7 +163,6 @@ impl Shape {
             reward_table: u32::from(self.reward_table),
             has_goal: u32::from(self.has_goal),
             gamma: self.gamma,
-            slab: self.slab as u32,
             n_blocks: self.blocks.len() as u32,
             len: self.n as u32,
             blocks,
@@ -218,10 +216,13 @@ impl core::fmt::Debug for GpuSweeps {
         f.debug_struct("GpuSweeps")
             .field("gpu", &self.gpu)
             .field("cores", &self.shape.n)
-            .field("batch", &self.shape.batch)
+            .field("batches", &self.shape.batches)
             .finish()
     }
 }
+
+/// Columns a lane of the fused last stage accumulates at once (`JC` in `last1.wgsl`).
+const LAST_CHUNK: u32 = 8;
 
 /// Partial results of `max_pass` / `diff_range`: values per workgroup.
 const PER_WG: u64 = 4096;
@@ -374,13 +375,16 @@ fn compile(
         // lanes a power of two up to 32 (or the subgroup), each taking J columns.
         let wgs = sg.unwrap_or(WG);
         let tpc = pl.next_power_of_two().min(wgs).min(32);
+        let j = pl.div_ceil(tpc);
+        let jc = j.min(LAST_CHUNK);
         let consts = [
             ("LAST", (nb - 1) as u32),
             ("NL", nl),
             ("AL", al),
             ("PL", pl),
             ("TPC", tpc),
-            ("J", pl.div_ceil(tpc)),
+            ("JC", jc),
+            ("NCH", j.div_ceil(jc)),
             ("CPW", wgs / tpc),
             ("WGS", wgs),
         ];
@@ -449,10 +453,7 @@ impl GpuSweeps {
             weight,
         } = BlockArrays::of(&plan)?;
         let mut shape = Shape::of(&plan, n, blocks, row_base);
-        let nb = shape.n_blocks();
-        let per_slab = shape.per_slab_bytes();
-        check("one slab's stage output", per_slab)?;
-        shape.batch = (gpu.batch_bytes.min(max_binding) / per_slab).clamp(1, shape.n0);
+        shape.batch_within(gpu.batch_bytes, max_binding)?;
 
         let rewards_bytes = reward_bytes(&plan, n);
         if plan.rewards.is_none() {
@@ -464,8 +465,9 @@ impl GpuSweeps {
         let (gx, gy) = kernels::groups(partials);
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = gpu.kernels.clone();
-        let n_batches = shape.n0.div_ceil(shape.batch) as usize;
-        let params_cap = (n_batches * (nb + 1)).max(4);
+        // Dispatches per submission: a pass's, up to 1,024.
+        let per_pass = shape.batches.count * (shape.n_blocks() as u64 + 1);
+        let params_cap = per_pass.clamp(4, 1024) as usize;
         // Every buffer but the per-core ones and the stages'.
         let mut other = vec![
             rewards_bytes,
@@ -561,10 +563,10 @@ impl GpuSweeps {
         self.subgroups
     }
 
-    /// Slabs per batch (the stage buffers hold one batch).
+    /// The batches a full pass runs in (the stage buffers hold one batch).
     #[must_use]
-    pub fn batch(&self) -> u64 {
-        self.shape.batch
+    pub fn batches(&self) -> Batches {
+        self.shape.batches
     }
 
     /// Bytes of device memory this run's buffers take now (the exact delta's two work
@@ -700,83 +702,73 @@ impl GpuSweeps {
     }
 
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
-    /// `v` and writing `out` (values) and the policy buffer (actions).
+    /// `v` and writing `out` (values) and the policy buffer (actions), batch by batch
+    /// ([`Tree::steps`]).
     fn full_pass(&mut self, input: Slot, out: Slot, mode: Mode) -> Vec<Dispatch> {
         let s = &self.shape;
-        let nb = s.n_blocks();
+        let last = s.n_blocks() - 1;
         let fused = if mode == Mode::Abs {
             s.fused_abs
         } else {
             s.fused
         };
+        let dst = if mode == Mode::Abs {
+            Slot::Scratch
+        } else {
+            out
+        };
+        let cpw = self.last1.as_ref().map(|l| l.1);
         let base = self.base();
         let mut ds = Vec::new();
-        let mut c0 = 0u64;
-        while c0 < s.n0 {
-            let nc0 = s.batch.min(s.n0 - c0);
-            // The stages before the last (or the last two).
-            for b in 0..s.written_stages() {
-                let count = nc0 * s.stage_len(b);
-                let src = if b == 0 { input } else { Slot::Stage(b - 1) };
+        for step in s.tree.steps(&s.batches) {
+            let Step {
+                stage: b,
+                lo,
+                items,
+                src_lo,
+            } = step;
+            let src = if b == 0 { input } else { Slot::Stage(b - 1) };
+            let p = Params {
+                b: b as u32,
+                lo: lo as u32,
+                src_lo: src_lo as u32,
+                ..base
+            };
+            if b < last {
+                let count = items * s.tree.item_len(b);
                 let p = Params {
-                    b: b as u32,
                     count: count as u32,
-                    c0_lo: c0 as u32,
-                    ..base
+                    ..p
                 };
                 let slots = [src, Slot::Stage(b), Slot::DummyWrite, Slot::DummyRead];
                 ds.push((Entry::StageConst, p, slots, kernels::grid(count)));
-            }
-            let last = nb - 1;
-            let src = if last == 0 {
-                input
-            } else {
-                Slot::Stage(last - 1)
-            };
-            let cores = nc0 * s.slab;
-            if fused {
-                let cpw = self.last1.as_ref().expect("compiled where fused").1;
+            } else if fused {
+                let cpw = cpw.expect("compiled where fused");
                 let p = Params {
-                    b: last as u32,
-                    count: cores as u32,
-                    c0_lo: c0 as u32,
+                    count: items as u32,
                     mode: mode as u32,
-                    ..base
-                };
-                let dst = if mode == Mode::Abs {
-                    Slot::Scratch
-                } else {
-                    out
+                    ..p
                 };
                 let slots = [src, dst, Slot::Policy, Slot::DummyRead];
-                let wgs = cores.div_ceil(u64::from(cpw));
+                let wgs = items.div_ceil(u64::from(cpw));
                 ds.push((Entry::LastOne, p, slots, kernels::groups(wgs)));
             } else {
-                let count = cores * s.n_product;
-                let p = Params {
-                    b: last as u32,
+                let count = items * s.n_product;
+                let rows = Params {
                     count: count as u32,
-                    c0_lo: c0 as u32,
-                    ..base
+                    ..p
                 };
                 let slots = [src, Slot::Rows, Slot::DummyWrite, Slot::DummyRead];
-                ds.push((Entry::StageConst, p, slots, kernels::grid(count)));
+                ds.push((Entry::StageConst, rows, slots, kernels::grid(count)));
                 let p = Params {
-                    count: cores as u32,
-                    c0_lo: c0 as u32,
+                    count: items as u32,
                     mode: mode as u32,
                     len: s.n_product as u32,
-                    ..base
-                };
-                let dst = if mode == Mode::Abs {
-                    Slot::Scratch
-                } else {
-                    out
+                    ..p
                 };
                 let slots = [Slot::Rows, dst, Slot::Policy, Slot::DummyRead];
-                ds.push((Entry::ReduceRows, p, slots, kernels::grid(cores)));
+                ds.push((Entry::ReduceRows, p, slots, kernels::grid(items)));
             }
-            c0 += nc0;
         }
         ds
     }

@@ -353,7 +353,11 @@ struct GpuReport {
     cores: usize,
     joint_actions: usize,
     multiply_adds_per_backup: Option<f64>,
-    slabs_per_batch: u64,
+    /// How a full pass is batched: each batch fixes the cores of the first `batch_level`
+    /// contracted blocks and runs `items_per_batch` cores of the next (level 0: slabs).
+    batch_level: usize,
+    items_per_batch: u64,
+    batches_per_pass: u64,
     setup_seconds: f64,
     subgroups: bool,
     evaluation_seconds: Vec<f64>,
@@ -457,13 +461,13 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         }
     }
     println!(
-        "problem    {}: {cores} cores x {joint} joint actions{}; {} slab(s) per batch; {:.3} GB \
-         on the GPU; set-up {:.3} s",
+        "problem    {}: {cores} cores x {joint} joint actions{}; {}; {:.3} GB on the GPU; set-up \
+         {:.3} s",
         config.env.name(),
         fma.map_or(String::new(), |f| format!(
             ", {f:.3e} multiply-adds per full backup"
         )),
-        sweeps.batch(),
+        sweeps.batches(),
         sweeps.device_bytes() as f64 / 1e9,
         setup
     );
@@ -490,7 +494,9 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             cores,
             joint_actions: joint,
             multiply_adds_per_backup: fma,
-            slabs_per_batch: sweeps.batch(),
+            batch_level: sweeps.batches().level,
+            items_per_batch: sweeps.batches().items,
+            batches_per_pass: sweeps.batches().count,
             setup_seconds: setup,
             subgroups: sweeps.uses_subgroups(),
             evaluation_seconds: evaluation,

@@ -1377,3 +1377,53 @@ fn train_on_the_gpu_and_its_refusals() {
         "{j}"
     );
 }
+
+/// `bench --device gpu` on three point masses with a 1 MiB stage budget: the passes run in
+/// batches below fixed cores of the first blocks, and the report says so.
+#[test]
+fn bench_on_the_gpu_batches_three_point_masses() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let example =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/three-point-masses.toml");
+    let text = std::fs::read_to_string(example).unwrap();
+    let (grid, _) = text.split_once("\nposition_cores").unwrap();
+    let (_, rest) = text.split_once("\nvelocity_cores").unwrap();
+    let (_, rest) = rest.split_once('\n').unwrap();
+    // 3 positions x 2 velocities per axis: 6^6 = 46,656 cores.
+    let small =
+        format!("{grid}\nposition_cores = [-6.0, 0.0, 6.0]\nvelocity_cores = [-1.0, 1.0]\n{rest}");
+    std::fs::write(d.join("three.toml"), small).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_fuzzyq"))
+        .args([
+            "bench",
+            "--config",
+            "three.toml",
+            "--device",
+            "gpu",
+            "--backups",
+            "1",
+            "--peak-seconds",
+            "0.05",
+            "--json",
+            "b.json",
+        ])
+        .env("FUZZYQ_GPU_BATCH_MB", "1")
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    if err.contains("no GPU adapter") && std::env::var_os("FUZZYQ_REQUIRE_GPU").is_none() {
+        eprintln!("skipped: {err}");
+        return;
+    }
+    assert!(o.status.success(), "{err}");
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("below fixed cores of block"), "{out}");
+    let j = json(&d.join("b.json"));
+    assert_eq!(j["cores"], 6u64.pow(6));
+    assert_eq!(j["joint_actions"], 729);
+    assert!(j["batch_level"].as_u64().unwrap() >= 1, "{j}");
+    assert!(j["batches_per_pass"].as_u64().unwrap() > 1, "{j}");
+    assert!(j["run_bytes"].as_u64().unwrap() > 4 * 6u64.pow(6), "{j}");
+}
