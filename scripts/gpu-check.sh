@@ -24,11 +24,7 @@ mkdir -p "$OUT"
 : >"$OUT/rows.md"
 BIN=${FUZZYQ_BIN:-$( [ -x .gpucheck/fuzzyq ] && echo .gpucheck/fuzzyq || echo target/release/fuzzyq )}
 TESTS=${FUZZYQ_TESTS:-.gpucheck/integration}
-ROWS=()
-row() {
-  ROWS+=("$(printf '| %s | %s | %s |' "$1" "$2" "$3")")
-  printf '%s\n' "${ROWS[-1]}" >>"$OUT/rows.md"
-}
+row() { printf '| %s | %s | %s |\n' "$1" "$2" "$3" >>"$OUT/rows.md"; }
 now() { date +%s.%N; }
 secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
 # Where a run's time went, from its `train --json` summary: the device, the set-up, the coarse
@@ -150,5 +146,5 @@ fi
 echo
 echo "| check | result | figures |"
 echo "|---|---|---|"
-printf '%s\n' "${ROWS[@]}" | tee "$OUT/table.md"
+tee "$OUT/table.md" <"$OUT/rows.md"
 [ -s "$OUT/adapter.txt" ] && cat "$OUT/adapter.txt"

@@ -267,7 +267,6 @@ mod tests {
             if s.stage == last {
                 batches += 1;
             }
-            assert!(s.stage < b.level || s.stage == 0 || s.src_lo == held[s.stage - 1].0);
             for g in s.lo..s.lo + s.items {
                 done[s.stage][g as usize] += 1;
                 if s.stage > 0 {

@@ -110,7 +110,7 @@ impl Shape {
     /// Whether some pass writes full rows for `reduce_rows` (a renumbered joint action or a
     /// reward of the action).
     fn writes_rows(&self) -> bool {
-        !self.fused || !self.fused_abs
+        self.rows_bytes().is_some()
     }
 
     /// Batches whose largest buffer takes at most `budget` bytes where one item's can
