@@ -40,6 +40,7 @@ LAYERS = {
     ],
     "fuzzyq-gpu": [
         {"error", "reference", "memory", "batches"},
+        {"parts"},
         {"context"},
         {"buffers"},
         {"kernels"},

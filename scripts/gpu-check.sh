@@ -14,9 +14,12 @@
 # smaller problems for a trial of the script itself (on lavapipe, say: `GPU_CHECK_ENVS=dcmotor
 # GPU_CHECK_TRAIN_ARGS="--precision f32" GPU_CHECK_BENCH_ENV=dcmotor GPU_CHECK_BATCHES=256
 # scripts/gpu-check.sh`; there the exports differ, as lavapipe does not fuse `fma`). Each
-# train row is followed by where its seconds went, from its `--json` summary. Last, three
-# point masses (GPU_CHECK_THREE, a configuration; empty skips them): trained on the GPU and
-# rolled out from 20 random starts, then one full backup with 5 force levels per axis.
+# train row is followed by where its seconds went, from its `--json` summary. Then three point
+# masses on the paper's cores (45^6 = 8.3e9 cores, 15,625 joint actions; `V` in 9 parts on the
+# card, about 108 GB of the host's memory): two full backups timed. Last, three point masses
+# on a smaller grid (GPU_CHECK_THREE, a configuration; empty skips them): trained on the GPU
+# and rolled out from 20 random starts, then one full backup with 5 force levels per axis.
+# GPU_CHECK_SECTIONS picks sections (default "1 2 3 paper 4").
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-gpu-check-out}
@@ -24,6 +27,7 @@ mkdir -p "$OUT"
 : >"$OUT/rows.md"
 BIN=${FUZZYQ_BIN:-$( [ -x .gpucheck/fuzzyq ] && echo .gpucheck/fuzzyq || echo target/release/fuzzyq )}
 TESTS=${FUZZYQ_TESTS:-.gpucheck/integration}
+want() { [[ " ${GPU_CHECK_SECTIONS:-1 2 3 paper 4} " == *" $1 "* ]]; }
 row() { printf '| %s | %s | %s |\n' "$1" "$2" "$3" >>"$OUT/rows.md"; }
 now() { date +%s.%N; }
 secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
@@ -61,7 +65,9 @@ row "host" "${gpu:-no nvidia-smi}" "$cpu, $nproc_ CPUs"
 
 # 1. The GPU tests (bit for bit against the host reference, and against the CPU solver where
 #    the adapter fuses).
-if [ -x "$TESTS" ]; then
+if ! want 1; then
+  :
+elif [ -x "$TESTS" ]; then
   FUZZYQ_REQUIRE_GPU=1 timeout 240 "$TESTS" gpu:: --test-threads 4 >"$OUT/tests.log" 2>&1
   rc=$?
   res=$(grep -E '^test result' "$OUT/tests.log" | tail -1)
@@ -73,6 +79,7 @@ fi
 
 # 2. Full backups of the paper's grid on the GPU (several batch sizes) and on the CPU.
 GPU_CHECK_BATCHES=${GPU_CHECK_BATCHES:-256 64 1024}
+want 2 || GPU_CHECK_BATCHES=
 for mb in $GPU_CHECK_BATCHES; do
   FUZZYQ_GPU_PROFILE=$([ "$mb" = "${GPU_CHECK_BATCHES%% *}" ] && echo 1) FUZZYQ_GPU_BATCH_MB=$mb timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --device gpu --backups 6 --peak-seconds 0.5 \
     --json "$OUT/bench-gpu-$mb.json" >"$OUT/bench-gpu-$mb.log" 2>&1
@@ -84,18 +91,21 @@ for mb in $GPU_CHECK_BATCHES; do
   [ -n "$prof" ] && row "  its dispatches, one at a time" "" "$prof"
 done
 # The robots' grid on the GPU, profiled.
-if [ -z "${GPU_CHECK_BENCH_ENV:-}" ]; then
+if want 2 && [ -z "${GPU_CHECK_BENCH_ENV:-}" ]; then
   FUZZYQ_GPU_PROFILE=1 timeout 120 "$BIN" bench --env khepera --device gpu --backups 4 --peak-seconds 0.2 \
     --json "$OUT/bench-gpu-khepera.json" >"$OUT/bench-gpu-khepera.log" 2>&1
   rc=$?
   row "GPU full backup, khepera" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^(backup|evaluate|read back|profile)' "$OUT/bench-gpu-khepera.log" | sed 's/  */ /g' | paste -sd ';' -)"
 fi
-timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --backups 4 --peak-seconds 0.5 --json "$OUT/bench-cpu.json" >"$OUT/bench-cpu.log" 2>&1
-rc=$?
-row "CPU full backup ($nproc_ threads)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^backup' "$OUT/bench-cpu.log" | sed 's/^backup *//')"
+if want 2; then
+  timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --backups 4 --peak-seconds 0.5 --json "$OUT/bench-cpu.json" >"$OUT/bench-cpu.log" 2>&1
+  rc=$?
+  row "CPU full backup ($nproc_ threads)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^backup' "$OUT/bench-cpu.log" | sed 's/^backup *//')"
+fi
 
 # 3. The default runs on both devices: wall time and the same values and greedy actions
 #    (the exported policies, which hold V and the greedy actions, compared byte for byte).
+want 3 || GPU_CHECK_ENVS=" "
 for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
   for dev in gpu cpu; do
     t0=$(now)
@@ -115,11 +125,33 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
   for dev in gpu cpu; do
     row "  its seconds on the $dev" "" "$(phases "$OUT/$env-$dev.json")"
   done
+  # V cut into parts of 1 MiB (about two slabs each: 23 parts on the paper's grid) where one
+  # would do: the same bytes.
+  if [ "$env" = pointmass ]; then
+    FUZZYQ_GPU_PART_KB=1024 timeout 180 "$BIN" train --env "$env" --device gpu ${GPU_CHECK_TRAIN_ARGS:-} \
+      --out "$OUT/$env-parts.fzq" >"$OUT/train-$env-parts.log" 2>&1
+    rc=$?
+    [ $rc = 0 ] && "$BIN" export --policy "$OUT/$env-parts.fzq" --out "$OUT/$env-parts.bin" >/dev/null 2>&1
+    same="differ"
+    if [ -s "$OUT/$env-parts.bin" ] && cmp -s "$OUT/$env-parts.bin" "$OUT/$env-cpu.bin"; then same="identical"; fi
+    row "train --env $env, V in parts of 1 MiB" "$([ $rc = 0 ] && [ "$same" = identical ] && echo PASS || echo "FAIL (rc=$rc, exports $same)")" \
+      "exported V + greedy against the cpu's: $same"
+  fi
 done
+
+# The paper's three point masses: 45^6 cores, 15,625 joint actions, V in 9 parts on the card.
+if want paper; then
+  "$BIN" config --env pointmass | sed 's/^agents = 2 /agents = 3 /' >"$OUT/paper-three.toml"
+  timeout 300 "$BIN" bench --config "$OUT/paper-three.toml" --device gpu --backups 1 --evaluations 0 \
+    --peak-seconds 0.2 --json "$OUT/bench-paper-three.json" >"$OUT/bench-paper-three.log" 2>&1
+  rc=$?
+  row "GPU full backup, three point masses on the paper's cores" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "$(grep -E '^(backup|problem|read back)|error' "$OUT/bench-paper-three.log" | sed 's/  */ /g' | paste -sd ';' -)"
+fi
 
 # 4. Three point masses: six blocks, so batches below fixed cores of the first blocks.
 THREE=${GPU_CHECK_THREE-examples/three-point-masses.toml}
-if [ -n "$THREE" ]; then
+if want 4 && [ -n "$THREE" ]; then
   t0=$(now)
   timeout 240 "$BIN" train --config "$THREE" --device gpu --out "$OUT/three.fzq" \
     --json "$OUT/three.json" >"$OUT/train-three.log" 2>&1

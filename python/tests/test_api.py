@@ -117,9 +117,11 @@ def test_point_mass_errors() -> None:
         m.joint_action(25)
     with pytest.raises(fuzzyq.InputTypeError):
         m.step(None, None)  # type: ignore[arg-type]
-    # The paper's grid of three agents has 45^6 = 8.3e9 cores: a typed error, not a panic.
+    # The paper's grid of three agents has 45^6 = 8.3e9 cores (a grid: no memory yet); 20
+    # cores on each of 16 variables, more than a grid can index: a typed error, not a panic.
+    assert fuzzyq.PointMass(agents=3).paper_grid().n_cores == 45**6
     with pytest.raises(fuzzyq.ConfigError, match="cores"):
-        fuzzyq.PointMass(agents=3).paper_grid()
+        fuzzyq.Grid([np.linspace(-1.0, 1.0, 20)] * 16)
     with pytest.raises(fuzzyq.ConfigError, match="single precision"):
         fuzzyq.PointMass(force_levels=[-1e39, 0.0, 1e39])
 

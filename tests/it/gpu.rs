@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 
 use fuzzyq_core::Model;
 use fuzzyq_core::solver::{
-    self, Buf, Device, Grid, Operator, Precision, Solution, SolverConfig, Sweeps,
+    self, Buf, Device, Grid, Operator, Precision, Scheme, Solution, SolverConfig, Sweeps,
 };
 use fuzzyq_gpu::reference::{HostSweeps, Rounding};
 use fuzzyq_gpu::{Gpu, GpuError, GpuSweeps};
@@ -89,7 +89,7 @@ fn gpu_and_reference<M: Model<f32> + Sync>(
         config,
         None,
         false,
-        &mut |op| HostSweeps::new(op, r),
+        &mut |op, _| HostSweeps::new(op, r),
         noop,
     )
     .expect("reference");
@@ -181,7 +181,7 @@ fn the_fused_reference_is_the_cpu_solver() {
             &config,
             None,
             false,
-            &mut |op| HostSweeps::new(op, Rounding::Fused),
+            &mut |op, _| HostSweeps::new(op, Rounding::Fused),
             noop,
         )
         .unwrap();
@@ -370,6 +370,84 @@ fn every_batching_gives_the_same_bits() {
 }
 
 #[test]
+fn v_in_parts_gives_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    eprintln!("{:?}", g.summary());
+    // `V` cut into parts (one slab each at the smallest, as a `V` over one storage binding
+    // is): the first stage and policy evaluation read across parts, the other passes run a
+    // part at a time, the goal bits and the reward table are cut with them. Every pass keeps
+    // the reference's bits, as a whole run keeps one part's.
+    let mut goal = pointmass_small();
+    goal.solver.absorbing_goal = true;
+    for c in [
+        pointmass_small(),
+        goal,
+        khepera_small(),
+        three_point_masses(false),
+        three_point_masses(true),
+    ] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let op = operator(&model, &grid, &config);
+        let v_bytes = 4 * op.n_cores() as u64;
+        let mut counts = Vec::new();
+        for bytes in [1, v_bytes / 3, v_bytes / 2] {
+            let cut = g.clone().with_part_bytes(bytes);
+            let parts = GpuSweeps::new(&cut, &op).unwrap().parts();
+            if counts.contains(&parts) {
+                continue;
+            }
+            counts.push(parts);
+            eprintln!("{} cores in {parts} parts", op.n_cores());
+            passes_match(&cut, &op);
+        }
+        assert!(counts.iter().all(|&p| p > 1), "{counts:?}");
+        assert_eq!(GpuSweeps::new(g, &op).unwrap().parts(), 1);
+        let cut = g.clone().with_part_bytes(1);
+        let a = fuzzyq_gpu::solve_from(&cut, &model, &grid, &config, None, false, noop).unwrap();
+        let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+        assert_same(&a, &b, "V in parts against one part");
+    }
+}
+
+#[test]
+fn modified_policy_iteration_holds_v_twice() {
+    let Some(g) = gpu() else { return };
+    // The buffers modified policy iteration's driver uses: V twice and the policy, checked
+    // against the memory to the byte before allocating (three point masses on the paper's
+    // cores fit one H200 this way). A buffer beyond them is made when a pass first asks.
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let op = operator(&model, &grid, &config);
+    let n = op.n_cores();
+    let mpi = Scheme::ModifiedPolicy;
+    let mut gs = GpuSweeps::for_scheme(g, &op, mpi).unwrap();
+    gs.load(Buf(0), &values(n, 7, -3.0, 5.0)).unwrap();
+    gs.backup_greedy(Buf(0), Buf(1)).unwrap();
+    gs.evaluate(Buf(1), Buf(0)).unwrap();
+    gs.diff_stats(Buf(1), Buf(0), 0.0).unwrap();
+    gs.shift(Buf(0), 0.5).unwrap();
+    gs.rewards(Buf(1)).unwrap();
+    gs.greedy(Buf(0)).unwrap();
+    let bytes = gs.device_bytes();
+    GpuSweeps::for_scheme(&g.clone().with_memory_limit(bytes), &op, mpi).expect("fits");
+    let e = GpuSweeps::for_scheme(&g.clone().with_memory_limit(bytes - 1), &op, mpi).unwrap_err();
+    assert!(
+        matches!(e, GpuError::OutOfMemory { need, .. } if need == bytes),
+        "{e}"
+    );
+    assert!(e.to_string().contains("V twice and the policy"), "{e}");
+    // Value iteration's third V and the exact delta's two work buffers, made on first use.
+    assert_eq!(gs.values(Buf(2)).unwrap().into_owned(), vec![0.0; n]);
+    gs.backup(Buf(0), Buf(2)).unwrap();
+    gs.exact_delta(Buf(2), Buf(0)).unwrap();
+    assert_eq!(gs.device_bytes(), bytes + 3 * 4 * n as u64);
+}
+
+#[test]
 fn lanes_reduced_in_memory_or_by_subgroups_give_the_same_bits() {
     let Some(g) = gpu() else { return };
     for c in [pointmass_small(), khepera_small()] {
@@ -471,7 +549,7 @@ fn training_on_the_gpu_writes_the_reference_policy() {
         &config,
         None,
         false,
-        &mut |op| HostSweeps::new(op, r),
+        &mut |op, _| HostSweeps::new(op, r),
         noop,
     )
     .unwrap();

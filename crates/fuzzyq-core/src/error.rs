@@ -60,7 +60,9 @@ pub enum PartitionError {
         /// How many were given.
         found: usize,
     },
-    /// The number of joint cores overflows `u32` (the index type of per-core tables).
+    /// The number of joint cores overflows `usize`. (Only the generic backup path and
+    /// Q-iteration, whose tables index cores in 32 bits, stop at 2^32 cores:
+    /// [`SolveError::TooLarge`](crate::solver::SolveError::TooLarge).)
     TooManyCores,
 }
 
@@ -74,7 +76,9 @@ impl fmt::Display for PartitionError {
                 "a fuzzy grid has at most {} state variables, found {found}",
                 crate::limits::MAX_DIMS
             ),
-            Self::TooManyCores => f.write_str("the number of joint cores does not fit in 32 bits"),
+            Self::TooManyCores => {
+                f.write_str("the number of joint cores overflows this machine's indices (usize)")
+            }
         }
     }
 }

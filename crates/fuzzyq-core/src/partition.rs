@@ -289,19 +289,18 @@ impl<'a, T: Real> ProductPartition<'a, T> {
         let mut dims = [Partition::EMPTY; MAX_DIMS];
         dims[..parts.len()].copy_from_slice(parts);
         let mut strides = [0usize; MAX_DIMS];
-        let mut n: u64 = 1;
+        let mut n: usize = 1;
         for e in (0..parts.len()).rev() {
-            strides[e] = n as usize;
+            strides[e] = n;
             n = n
-                .checked_mul(parts[e].n_cores() as u64)
-                .filter(|&n| n <= u64::from(u32::MAX))
+                .checked_mul(parts[e].n_cores())
                 .ok_or(PartitionError::TooManyCores)?;
         }
         Ok(Self {
             dims,
             strides,
             n_dims: parts.len(),
-            n_cores: n as usize,
+            n_cores: n,
         })
     }
 

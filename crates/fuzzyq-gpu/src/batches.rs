@@ -337,24 +337,47 @@ mod tests {
         );
     }
 
+    /// Three point masses: six blocks of `n` cores and `a` actions (contraction order).
+    fn three_masses(n: u32, a: u32) -> Tree {
+        let blocks: Vec<[u32; 4]> = (0..6).map(|b| [n, a, n.pow(5 - b), a.pow(b)]).collect();
+        Tree::new(&blocks, None)
+    }
+
+    #[test]
+    fn the_papers_three_masses_index_within_u32_and_batch_within_parts() {
+        // 45^6 = 8.3e9 cores: every index a dispatch passes the shaders (an item counted from
+        // its source's first child, a count of elements) fits u32, and the last stage's
+        // batches (cores) lie within one part of V.
+        let t = three_masses(45, 5);
+        let b = t.choose(256 << 20);
+        let max = u64::from(u32::MAX);
+        let parts = crate::parts::Parts::new(45, 45u64.pow(5), max, max, 100).unwrap();
+        let mut last = 0;
+        for s in t.steps(&b) {
+            assert!(s.lo - s.src_lo * t.n[s.stage] <= max, "{s:?}");
+            assert!(s.items * t.item_len[s.stage] <= max, "{s:?}");
+            if s.stage == t.last() {
+                assert_eq!(parts.of_core(s.lo), parts.of_core(s.lo + s.items - 1));
+                assert_eq!(s.lo, last, "the cores in order");
+                last = s.lo + s.items;
+            }
+        }
+        assert_eq!(last, 45u64.pow(6));
+        assert!(last > max);
+    }
+
     #[test]
     fn three_point_masses_on_the_papers_cores_batch_below_two_blocks() {
         // Six blocks of 45 cores and 5 actions: one slab's first stage (45^5 x 5 values,
         // 3.69 GB) is the smallest largest buffer; below two fixed blocks, three cores of the
         // third fit beside it.
-        let blocks: Vec<[u32; 4]> = (0..6)
-            .map(|b| [45, 5, 45u32.pow(5 - b), 5u32.pow(b)])
-            .collect();
-        let t = Tree::new(&blocks, None);
+        let t = three_masses(45, 5);
         let b = t.choose(256 << 20);
         assert_eq!((b.level, b.items, b.count), (2, 3, 45 * 45 * 15));
         assert_eq!(t.largest_of(&b), 4 * 45u64.pow(5) * 5);
         // examples/three-point-masses.toml: 21 cores and 3 actions per block; one slab's last
         // written stage would take 3.97 GB, one core of block 1's 189 MB.
-        let blocks: Vec<[u32; 4]> = (0..6)
-            .map(|b| [21, 3, 21u32.pow(5 - b), 3u32.pow(b)])
-            .collect();
-        let t = Tree::new(&blocks, None);
+        let t = three_masses(21, 3);
         assert_eq!(t.largest(0, 1), 4 * 21u64.pow(4) * 21 * 243);
         let b = t.choose(256 << 20);
         assert_eq!((b.level, b.items, b.count), (1, 1, 441));

@@ -12,9 +12,10 @@ struct Params {
     // Threads (or items) of this dispatch.
     count: u32,
     // A stage's first item (a prefix of block cores, `batches.rs`; for the last stage a
-    // core), and the first item of the stage before it that `src` holds.
+    // core), counted from the first child of the first item of the stage before it that `src`
+    // holds; and where the dispatch's first core is in its part of `V` (`parts.rs`).
     lo: u32,
-    src_lo: u32,
+    out_lo: u32,
     // The reduction: 0: maximum of the expected values; 1: and the argument; 2: the argument
     // only; 3: maximum of the absolute values (written per core, for `max_pass`).
     mode: u32,
@@ -28,12 +29,13 @@ struct Params {
     zero: u32,
     gamma: f32,
     shift: f32,
-    // Padding, and blocks.
-    pad1: u32,
+    // Where the part's goal bits start (words), and blocks.
+    goal_lo: u32,
     n_blocks: u32,
-    // Elements of the buffers a generic pass covers.
+    // Elements of the buffers a generic pass covers (a part's cores).
     len: u32,
-    pad: u32,
+    // The part's first slab (`evaluate.wgsl`).
+    part_c0: u32,
     // Per block (contraction order): (cores, actions, R, P).
     blocks: array<vec4<u32>, MAX_BLOCKS>,
     // Per block: (first row start in `ptr`, 0, 0, 0).
@@ -76,12 +78,16 @@ fn blk(b: u32) -> vec4<u32> {
 // parent is the root, whose output is `V`.
 fn core_of(q: u32, n: u32) -> vec2<u32> {
     let g = prm.lo + q;
-    return vec2<u32>(g % n, (g / n - prm.src_lo) * n);
+    return vec2<u32>(g % n, (g / n) * n);
 }
 
-// Whether `core` is a goal core (of a run with goal cores: an absorbing goal).
+// Whether core `core` of the dispatch's part is a goal core (of a run with goal cores: an
+// absorbing goal).
 fn goal_at(core: u32) -> bool {
-    return prm.has_goal != 0u && ((goal[core >> 5u] >> (core & 31u)) & 1u) != 0u;
+    if prm.has_goal == 0u {
+        return false;
+    }
+    return ((goal[prm.goal_lo + (core >> 5u)] >> (core & 31u)) & 1u) != 0u;
 }
 
 // `V` of core `core` from the maximum `m` of its expected values (state-only reward).
@@ -116,7 +122,7 @@ fn reduce_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup
     if local >= prm.count {
         return;
     }
-    let core = prm.lo + local;
+    let core = prm.out_lo + local;
     let width = prm.len;
     let row = local * width;
     let m = prm.n_joint;
@@ -170,79 +176,6 @@ fn reduce_rows(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup
     if prm.mode != 0u {
         aux[core] = arg;
     }
-}
-
-// One policy-evaluation sweep, one thread per core: the expected value of the core's action
-// in `aux`, the sums nested as the stages nest them (block 0 innermost), then `finish`.
-@compute @workgroup_size(64)
-fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
-            @builtin(num_workgroups) nwg: vec3<u32>) {
-    let core = linear(gid, wid, nwg);
-    if core >= prm.len {
-        return;
-    }
-    let nb = prm.n_blocks;
-    let pol = aux[core];
-    var start: array<u32, MAX_BLOCKS>;
-    var end: array<u32, MAX_BLOCKS>;
-    var e: array<u32, MAX_BLOCKS>;
-    var acc: array<f32, MAX_BLOCKS>;
-    // The core's block cores, c_{B-1} fastest.
-    var rest = core;
-    for (var i = 0u; i < nb; i++) {
-        let b = nb - 1u - i;
-        let bl = blk(b);
-        let c = rest % bl.x;
-        rest = rest / bl.x;
-        let a = (pol / bl.w) % bl.y;
-        let row = prm.rows[b].x + c * bl.y + a;
-        start[b] = row_ptr[row];
-        end[b] = row_ptr[row + 1u];
-        e[b] = start[b];
-        acc[b] = 0.0;
-    }
-    var result = 0.0;
-    var empty = false;
-    for (var b = 1u; b < nb; b++) {
-        empty = empty || start[b] == end[b];
-    }
-    loop {
-        if empty {
-            break;
-        }
-        var off = 0u;
-        for (var b = 1u; b < nb; b++) {
-            off += col[e[b]] * blk(b).z;
-        }
-        let r0 = blk(0u).z;
-        var s = 0.0;
-        for (var i = start[0]; i < end[0]; i++) {
-            s = fma(weight[i], src[col[i] * r0 + off], s);
-        }
-        var val = s;
-        var b = 1u;
-        var done = false;
-        loop {
-            if b >= nb {
-                done = true;
-                break;
-            }
-            acc[b] = fma(weight[e[b]], val, acc[b]);
-            e[b] += 1u;
-            if e[b] < end[b] {
-                break;
-            }
-            val = acc[b];
-            acc[b] = 0.0;
-            e[b] = start[b];
-            b += 1u;
-        }
-        if done {
-            result = val;
-            break;
-        }
-    }
-    dst[core] = finish(core, result);
 }
 
 // `dst = rho + gamma 0` per core: the backup of `V = 0` (state-only rewards).

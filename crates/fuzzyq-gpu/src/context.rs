@@ -24,6 +24,9 @@ pub struct AdapterSummary {
     pub max_buffer: u64,
     /// The adapter's largest storage-buffer binding, in bytes.
     pub max_binding: u64,
+    /// Storage buffers one kernel may bind (ten, plus one per part of a `V` larger than a
+    /// binding).
+    pub max_storage_buffers: u32,
     /// The adapter's memory for a run's buffers, in bytes, as the driver reported it when
     /// the GPU was opened: on Vulkan, its budget for the largest device-local heap
     /// (`VK_EXT_memory_budget`: what this process may still allocate) or else that heap's

@@ -45,6 +45,18 @@ pub enum GpuError {
         /// Which limit (a buffer, a binding).
         kind: &'static str,
     },
+    /// `V` needs more parts (of one storage binding each) than a kernel may bind.
+    #[error(
+        "V in {parts} parts of one storage binding each needs more than the {limit} parts \
+         a kernel of this adapter may bind"
+    )]
+    TooManyParts {
+        /// The parts of `V`.
+        parts: usize,
+        /// The most parts a kernel may bind (the adapter's storage buffers per kernel, less
+        /// the ten every kernel binds).
+        limit: u64,
+    },
     /// The run's buffers would take more device memory than the adapter has (estimated
     /// before allocating).
     #[error(
@@ -66,6 +78,19 @@ pub enum GpuError {
     /// The solver's own error (a model, grid or configuration it refuses, or an interrupted run).
     #[error(transparent)]
     Solve(#[from] SolveError),
+}
+
+impl GpuError {
+    /// [`GpuError::TooLarge`] for `what`, which needs `need` bytes of one storage binding of at
+    /// most `limit`.
+    pub(crate) fn over_binding(what: &'static str, need: u64, limit: u64) -> Self {
+        Self::TooLarge {
+            what,
+            need,
+            limit,
+            kind: "storage binding",
+        }
+    }
 }
 
 /// wgpu's multi-line messages on one line: their non-empty lines, trimmed, joined by "; ".

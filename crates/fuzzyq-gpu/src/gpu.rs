@@ -17,6 +17,8 @@ pub struct Gpu {
     pub(crate) memory: Option<u64>,
     /// Bytes of a batch's largest stage buffer.
     pub(crate) batch_bytes: u64,
+    /// Bytes of a part of `V` (at most one storage binding).
+    pub(crate) part_bytes: u64,
     /// Whether the last stage may reduce a core's lanes by subgroup operations.
     pub(crate) subgroups: bool,
 }
@@ -63,6 +65,7 @@ impl Gpu {
             f64: features.contains(wgpu::Features::SHADER_F64),
             max_buffer: limits.max_buffer_size,
             max_binding: limits.max_storage_buffer_binding_size,
+            max_storage_buffers: limits.max_storage_buffers_per_shader_stage,
             memory: crate::memory::available(&adapter),
             subgroup_size: (features.contains(wgpu::Features::SUBGROUP)
                 && info.subgroup_min_size == info.subgroup_max_size
@@ -85,6 +88,7 @@ impl Gpu {
             max_binding: ctx.summary.max_binding,
             memory: ctx.summary.memory,
             batch_bytes: default_batch_bytes(),
+            part_bytes: env_kib("FUZZYQ_GPU_PART_KB").unwrap_or(u64::MAX),
             subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
@@ -109,9 +113,10 @@ impl Gpu {
     }
 
     /// This GPU with runs limited to storage bindings of at most `bytes` (the adapter's limit
-    /// is the default): a run whose `V` or smallest batch's stage output exceeds it is refused
-    /// before anything is allocated ([`GpuError::TooLarge`]). For trying a smaller card's
-    /// limits.
+    /// is the default): `V` is cut into parts of at most that size, and a run whose slab of
+    /// `V` (or whose `V`, with one block) or smallest batch's stage output exceeds it is
+    /// refused before anything is allocated ([`GpuError::TooLarge`]). For trying a smaller
+    /// card's limits.
     #[must_use]
     pub fn with_binding_limit(mut self, bytes: u64) -> Self {
         self.max_binding = bytes.min(self.inner.summary.max_binding);
@@ -137,6 +142,20 @@ impl Gpu {
         self
     }
 
+    /// This GPU with `V` and the other per-core buffers cut into parts of about `bytes`
+    /// (whole slabs of `V`, at least one, and at most one storage binding, the default, or
+    /// `FUZZYQ_GPU_PART_KB` kibibytes; larger
+    /// where a kernel could not bind that many parts: [`AdapterSummary::max_storage_buffers`]
+    /// less ten). The
+    /// first stage of a full backup and policy evaluation read `V` through all its parts;
+    /// the other passes run a part at a time. Any parts give the same bits; a `V` larger
+    /// than one binding (three point masses on the paper's cores: 33 GB, 9 parts) needs them.
+    #[must_use]
+    pub fn with_part_bytes(mut self, bytes: u64) -> Self {
+        self.part_bytes = bytes;
+        self
+    }
+
     /// This GPU with batches whose largest stage output takes at most `bytes` where one
     /// item's can (default 256 MiB, or `FUZZYQ_GPU_BATCH_MB`): runs of slabs where a slab
     /// fits, else of cores of a later block below fixed cores of the earlier ones
@@ -151,11 +170,17 @@ impl Gpu {
 
 /// 256 MiB, or `FUZZYQ_GPU_BATCH_MB` mebibytes.
 fn default_batch_bytes() -> u64 {
-    std::env::var("FUZZYQ_GPU_BATCH_MB")
+    env_kib("FUZZYQ_GPU_BATCH_MB").map_or(256 << 20, |k| k << 10)
+}
+
+/// The positive whole number in environment variable `name`, times 1,024 (`None` where it is
+/// unset or not one).
+fn env_kib(name: &str) -> Option<u64> {
+    std::env::var(name)
         .ok()
         .and_then(|s| s.parse::<u64>().ok())
         .filter(|&m| m > 0)
-        .map_or(256 << 20, |m| m << 20)
+        .and_then(|m| m.checked_mul(1 << 10))
 }
 
 /// Chains of `peak.wgsl` per thread.

@@ -21,7 +21,7 @@ pub(crate) struct Params {
     pub b: u32,
     pub count: u32,
     pub lo: u32,
-    pub src_lo: u32,
+    pub out_lo: u32,
     pub mode: u32,
     pub n_joint: u32,
     pub has_map: u32,
@@ -30,10 +30,10 @@ pub(crate) struct Params {
     pub zero: u32,
     pub gamma: f32,
     pub shift: f32,
-    pub pad1: u32,
+    pub goal_lo: u32,
     pub n_blocks: u32,
     pub len: u32,
-    pub pad: u32,
+    pub part_c0: u32,
     pub blocks: [[u32; 4]; MAX_BLOCKS],
     pub rows: [[u32; 4]; MAX_BLOCKS],
 }
@@ -52,7 +52,6 @@ pub(crate) struct DiffParams {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Entry {
     ReduceRows,
-    Evaluate,
     Rewards,
     Shift,
     Sub,
@@ -62,12 +61,13 @@ pub(crate) enum Entry {
     StageConst,
     /// `last1.wgsl`, compiled per problem (not in [`Entry::ALL`]).
     LastOne,
+    /// `evaluate.wgsl`, compiled per problem with the parts of `V` (not in [`Entry::ALL`]).
+    Evaluate,
 }
 
 impl Entry {
-    const ALL: [Entry; 7] = [
+    const ALL: [Entry; 6] = [
         Entry::ReduceRows,
-        Entry::Evaluate,
         Entry::Rewards,
         Entry::Shift,
         Entry::Sub,
@@ -124,15 +124,48 @@ fn uniform(binding: u32, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+/// The layout of group 1 of the kernels that read `V` at other cores: its `parts`
+/// read-only parts (`vp0..`, [`crate::parts::Parts::reader`]).
+pub(crate) fn parts_layout(gpu: &Context, parts: usize) -> wgpu::BindGroupLayout {
+    let entries: Vec<_> = (0..parts as u32).map(|k| storage(k, true)).collect();
+    gpu.device
+        .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("parts of V"),
+            entries: &entries,
+        })
+}
+
+/// A bind group of [`parts_layout`] binding `parts`.
+pub(crate) fn parts_group(
+    gpu: &Context,
+    layout: &wgpu::BindGroupLayout,
+    parts: &[wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<_> = parts
+        .iter()
+        .enumerate()
+        .map(|(k, b)| wgpu::BindGroupEntry {
+            binding: k as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("parts of V"),
+        layout,
+        entries: &entries,
+    })
+}
+
 fn pipeline(
     device: &wgpu::Device,
-    layout: &wgpu::BindGroupLayout,
+    layouts: &[&wgpu::BindGroupLayout],
     module: &wgpu::ShaderModule,
     entry: &str,
 ) -> wgpu::ComputePipeline {
+    let layouts: Vec<_> = layouts.iter().map(|&l| Some(l)).collect();
     let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(entry),
-        bind_group_layouts: &[Some(layout)],
+        bind_group_layouts: &layouts,
         immediate_size: 0,
     });
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -175,7 +208,7 @@ impl Kernels {
         });
         let pipelines = Entry::ALL
             .iter()
-            .map(|e| pipeline(device, &layout, &module, e.name()))
+            .map(|e| pipeline(device, &[&layout], &module, e.name()))
             .collect();
         let diff = gpu.summary.f64.then(|| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -191,7 +224,7 @@ impl Kernels {
                     storage(3, false),
                 ],
             });
-            let p = pipeline(device, &layout, &module, "diff_range");
+            let p = pipeline(device, &[&layout], &module, "diff_range");
             (layout, p)
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -217,7 +250,8 @@ impl Kernels {
 
 /// A kernel of `template` compiled with the problem's constants `consts` (prepended, with
 /// `block.wgsl`'s declarations), its text's `replace` pairs substituted; `subgroups` when it
-/// uses subgroup operations.
+/// uses subgroup operations; `parts`: group 1's layout and declarations (`v_at`), for a kernel
+/// that reads `V` through them.
 pub(crate) fn specialized(
     gpu: &Context,
     k: &Kernels,
@@ -225,6 +259,7 @@ pub(crate) fn specialized(
     consts: &[(&str, u32)],
     replace: &[(&str, &str)],
     subgroups: bool,
+    parts: Option<(&wgpu::BindGroupLayout, &str)>,
 ) -> Result<wgpu::ComputePipeline, GpuError> {
     // Naga takes subgroup operations without `enable subgroups;` (which it does not parse
     // yet) where the device has the feature; the flag only names the kernel's needs.
@@ -234,6 +269,9 @@ pub(crate) fn specialized(
         source.push_str(&format!("const {name}: u32 = {v}u;\n"));
     }
     source.push_str(include_str!("block.wgsl"));
+    if let Some((_, reader)) = parts {
+        source.push_str(reader);
+    }
     let mut body = template.to_owned();
     for (from, to) in replace {
         body = body.replace(from, to);
@@ -245,7 +283,9 @@ pub(crate) fn specialized(
         label: Some(entry),
         source: wgpu::ShaderSource::Wgsl(source.into()),
     });
-    let p = pipeline(device, &k.layout, &module, entry);
+    let layouts: Vec<&wgpu::BindGroupLayout> =
+        [&k.layout].into_iter().chain(parts.map(|p| p.0)).collect();
+    let p = pipeline(device, &layouts, &module, entry);
     if let Some(e) = pollster::block_on(scope.pop()) {
         return Err(GpuError::Failed(format!(
             "the kernel {entry} did not compile: {e}"

@@ -61,7 +61,7 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if !valid || lane != 0u {
         return;
     }
-    let core = prm.lo + local;
+    let core = prm.out_lo + local;
     let is_goal = goal_at(core);
     switch prm.mode {
         case 0u: {

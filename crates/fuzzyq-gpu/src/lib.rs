@@ -6,7 +6,7 @@
 //! modified policy iteration's evaluation budget, the coarse start) stays in
 //! `fuzzyq-core`'s driver, which asks a [`Sweeps`](fuzzyq_core::solver::Sweeps) backend for
 //! every pass over `V`. [`GpuSweeps`] is that backend on a GPU: the block tables
-//! ([`BlockPlan`](fuzzyq_core::solver::BlockPlan)), `V`'s three buffers and the policy live on
+//! ([`BlockPlan`](fuzzyq_core::solver::BlockPlan)), `V`'s buffers and the policy live on
 //! the device, and only scalars come back between passes (the range of a sweep's change, the
 //! exact delta); `V` and the greedy actions come back at the end and when an observer asks
 //! for the run's state (a checkpoint).
@@ -35,13 +35,27 @@
 //! the tests check on every CI run. The change statistics use `f64` in shaders where the
 //! adapter has it, and otherwise read `V` back.
 //!
+//! # Parts of `V`
+//! `V` and the other per-core buffers (the policy, the rewards, the exact delta's work
+//! buffers) are cut into parts of whole slabs, each within one storage binding (4 GiB on most
+//! adapters; three point masses on the paper's cores, `V` 33 GB, take 9). Every index a shader
+//! computes is within a part or a stage buffer, so it fits `u32` however many cores the grid
+//! has. The first stage of a full backup and policy evaluation read `V` at other cores: they
+//! bind every part (group 1) and pick one from the first block's core (`v_at`); the other
+//! passes run a part at a time, and a batch of the last stage never straddles two parts. Any
+//! parts give the same bits ([`Gpu::with_part_bytes`]).
+//!
 //! # Limits
 //! `f32` only; the block path only (a model that declares no blocks is refused, as are models
-//! with terminal states and asynchronous sweeps); `V` and each batch's stage output must fit
-//! one storage binding of the adapter, and all of a run's buffers (`V` three times, the policy,
-//! two work buffers, the tables, rewards and stage buffers) its memory: both are checked
-//! before anything is allocated ([`GpuError::TooLarge`], [`GpuError::OutOfMemory`]; the
-//! memory where the API reports it, Vulkan, through wgpu-hal as wgpu has no API for it).
+//! with terminal states and asynchronous sweeps); one slab of `V` and each batch's stage
+//! output must fit one storage binding, and `V`'s parts a kernel's storage bindings
+//! ([`AdapterSummary::max_storage_buffers`] less ten). All of a run's buffers must fit the
+//! adapter's memory: `V` as often as the run's scheme uses it
+//! ([`Scheme::value_buffers`](fuzzyq_core::solver::Scheme::value_buffers): twice for modified
+//! policy iteration, three times for value iteration, with two work buffers for its exact
+//! stopping rule), the policy, the tables, rewards and stage buffers. Both are checked before
+//! anything is allocated ([`GpuError::TooLarge`], [`GpuError::OutOfMemory`]; the memory where
+//! the API reports it, Vulkan, through wgpu-hal as wgpu has no API for it).
 
 mod batches;
 mod buffers;
@@ -50,6 +64,7 @@ mod error;
 mod gpu;
 mod kernels;
 mod memory;
+mod parts;
 mod probe;
 pub mod reference;
 mod sweeps;
@@ -92,7 +107,7 @@ where
         config,
         resume,
         show_state,
-        &mut |op| GpuSweeps::new(gpu, op),
+        &mut |op, scheme| GpuSweeps::for_scheme(gpu, op, scheme),
         observer,
     )
 }

@@ -24,7 +24,7 @@ pub(crate) fn subgroups_work(gpu: &Context, k: &Kernels, wgs: u32) -> Result<boo
     let consts = [("WGS", wgs), ("TPC", tpc)];
     let t = (include_str!("sgprobe.wgsl"), "sg_probe");
     let replace = [("REDUCE", crate::kernels::REDUCE_SUBGROUP)];
-    let Ok(pipeline) = crate::kernels::specialized(gpu, k, t, &consts, &replace, true) else {
+    let Ok(pipeline) = crate::kernels::specialized(gpu, k, t, &consts, &replace, true, None) else {
         return Ok(false);
     };
     let groups = 64u32;

@@ -1,6 +1,7 @@
 // Stage SB of a full backup with the problem's constants (`sweeps.rs`: SB, SN cores, SA
-// actions, SR, SP), so that every index is arithmetic on constants: `stage` of `block.wgsl`,
-// the same sums in the same order.
+// actions, SR, SP), so that every index is arithmetic on constants. The first stage of a
+// contraction of several blocks reads `V` through `v_at` (its parts, `parts.rs`): SRC_AT is
+// `v_at(col[e], r)` there and `src[...]` (the stage before) elsewhere.
 
 @compute @workgroup_size(64)
 fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
@@ -22,7 +23,7 @@ fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id)
     let e1 = row_ptr[row + 1u];
     var acc = 0.0;
     for (var e = row_ptr[row]; e < e1; e++) {
-        acc = fma(weight[e], src[((base + col[e]) * SR + r) * SP + p], acc);
+        acc = fma(weight[e], SRC_AT, acc);
     }
     dst[o] = acc;
 }

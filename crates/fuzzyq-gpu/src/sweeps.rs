@@ -4,7 +4,7 @@ use std::borrow::Cow;
 use std::collections::HashMap;
 
 use fuzzyq_core::Model;
-use fuzzyq_core::solver::{Buf, DiffStats, Operator, Sweeps};
+use fuzzyq_core::solver::{Buf, DiffStats, Operator, Scheme, Sweeps};
 
 use crate::batches::{Batches, Step, Tree};
 use crate::buffers::{self, with_data, zeroed};
@@ -14,6 +14,7 @@ use crate::kernels::{
     self, DiffParams, Entry, Kernels, MAX_BLOCKS, PARAM_STRIDE, Params, WG, bind_group,
     params_bytes,
 };
+use crate::parts::Parts;
 
 /// The last stage's reduction (`mode` in `block.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -28,22 +29,45 @@ enum Mode {
     Abs = 3,
 }
 
-/// One dispatch: the kernel, its parameters, its bindings `[src, dst, aux, src2]` and its
-/// workgroups `(x, y)`.
-type Dispatch = (Entry, Params, [Slot; 4], (u32, u32));
+/// A buffer of one value per core, cut into [`Parts`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum PerCore {
+    V(u8),
+    /// The absolute maxima of the exact delta.
+    Scratch,
+    /// The change the exact delta contracts.
+    Dv,
+    Policy,
+    /// The rewards per core (or the reward table, in one part).
+    Rewards,
+}
 
 /// Which device buffer a binding takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 enum Slot {
-    V(u8),
+    /// Part `k` of a per-core buffer.
+    Part(PerCore, u32),
     Stage(usize),
     Rows,
-    Scratch,
-    Dv,
-    Policy,
     Partial,
     DummyRead,
     DummyWrite,
+}
+
+/// Group 0's bindings of a dispatch: `[src, dst, aux, src2, rewards]`.
+type Slots = [Slot; 5];
+
+/// One dispatch.
+#[derive(Clone, Copy, Debug)]
+struct Dispatch {
+    entry: Entry,
+    params: Params,
+    slots: Slots,
+    /// The per-core buffer whose parts group 1 binds (`v_at`: the first stage and policy
+    /// evaluation read `V` at other cores).
+    reads: Option<PerCore>,
+    /// Workgroups `(x, y)`.
+    groups: (u32, u32),
 }
 
 /// The shape of the block path, from [`fuzzyq_core::solver::BlockPlan`].
@@ -62,6 +86,8 @@ struct Shape {
     /// The blocks' sizes for batching, and the batches a pass runs in.
     tree: Tree,
     batches: Batches,
+    /// The parts of the per-core buffers.
+    parts: Parts,
     /// Whether the last stage reduces in place (the identity action map and a state-only
     /// reward); else it writes full rows that `reduce_rows` reduces.
     fused: bool,
@@ -82,6 +108,7 @@ impl Shape {
         n: usize,
         blocks: Vec<[u32; 4]>,
         row_base: Vec<u32>,
+        parts: Parts,
     ) -> Self {
         let last = plan.tables.last().expect("at least one block");
         let identity = plan.joint_to_product.is_none();
@@ -94,6 +121,7 @@ impl Shape {
             n,
             batches: tree.batches(0, 1),
             tree,
+            parts,
             blocks,
             row_base,
             n_joint: plan.n_joint as u32,
@@ -114,18 +142,26 @@ impl Shape {
     }
 
     /// Batches whose largest buffer takes at most `budget` bytes where one item's can
-    /// ([`Tree::choose`]); refused where the smallest batch's buffer exceeds one storage
-    /// binding of `max_binding` bytes.
+    /// ([`Tree::choose`]), runs of slabs never straddling two parts; refused where the
+    /// smallest batch's buffer exceeds one storage binding of `max_binding` bytes.
     fn batch_within(&mut self, budget: u64, max_binding: u64) -> Result<(), GpuError> {
         self.batches = self.tree.choose(budget.min(max_binding));
+        if self.batches.level == 0 && self.parts.count() > 1 {
+            // Parts start at multiples of `per` slabs: batches of a divisor of it.
+            let per = self.parts.per;
+            let items = (1..=self.batches.items.min(per))
+                .rev()
+                .find(|&i| per.is_multiple_of(i))
+                .expect("1 divides");
+            self.batches = self.tree.batches(0, items);
+        }
         let largest = self.tree.largest_of(&self.batches);
         if largest > max_binding {
-            return Err(GpuError::TooLarge {
-                what: "the smallest batch's stage output",
-                need: largest,
-                limit: max_binding,
-                kind: "storage binding",
-            });
+            return Err(GpuError::over_binding(
+                "the smallest batch's stage output",
+                largest,
+                max_binding,
+            ));
         }
         Ok(())
     }
@@ -164,7 +200,6 @@ impl Shape {
             has_goal: u32::from(self.has_goal),
             gamma: self.gamma,
             n_blocks: self.blocks.len() as u32,
-            len: self.n as u32,
             blocks,
             rows,
             ..Params::default()
@@ -186,26 +221,35 @@ pub struct GpuSweeps {
     /// The fused last stage compiled for this problem (`last1.wgsl`), where it applies, with
     /// its cores per workgroup.
     last1: Option<(wgpu::ComputePipeline, u32)>,
+    /// Policy evaluation compiled with the parts of `V` (`evaluate.wgsl`), where the run
+    /// can evaluate.
+    evaluate: Option<wgpu::ComputePipeline>,
     /// Whether `last1` reduces by subgroup operations.
     subgroups: bool,
     shape: Shape,
     table: [wgpu::Buffer; 3],
-    rewards: wgpu::Buffer,
+    /// The rewards per core, a buffer per part (or the reward table, one buffer).
+    rewards: Vec<wgpu::Buffer>,
     goal: wgpu::Buffer,
     map: wgpu::Buffer,
-    v: [wgpu::Buffer; 3],
-    policy: wgpu::Buffer,
+    /// `V`'s three buffers, the policy, and the exact delta's two work buffers (made when it
+    /// first runs), each a buffer per part.
+    v: [Vec<wgpu::Buffer>; 3],
+    policy: Vec<wgpu::Buffer>,
+    scratch: Vec<wgpu::Buffer>,
+    dv: Vec<wgpu::Buffer>,
     stages: Vec<wgpu::Buffer>,
     rows: Option<wgpu::Buffer>,
-    scratch: Option<wgpu::Buffer>,
-    dv: Option<wgpu::Buffer>,
     partial: wgpu::Buffer,
     diff_out: Option<wgpu::Buffer>,
     params: wgpu::Buffer,
     params_cap: usize,
     dummy_r: wgpu::Buffer,
     dummy_w: wgpu::Buffer,
-    binds: HashMap<[Slot; 4], wgpu::BindGroup>,
+    binds: HashMap<Slots, wgpu::BindGroup>,
+    /// Group 1's layout, and its bind group per per-core buffer read through `v_at`.
+    parts_layout: wgpu::BindGroupLayout,
+    reads: HashMap<PerCore, wgpu::BindGroup>,
     /// Seconds and dispatches per kernel (and stage), when profiling
     /// ([`GpuSweeps::set_profiling`]).
     profile: Option<std::collections::BTreeMap<String, (f64, usize)>>,
@@ -217,6 +261,7 @@ impl core::fmt::Debug for GpuSweeps {
             .field("gpu", &self.gpu)
             .field("cores", &self.shape.n)
             .field("batches", &self.shape.batches)
+            .field("parts", &self.shape.parts.count())
             .finish()
     }
 }
@@ -226,6 +271,12 @@ const LAST_CHUNK: u32 = 8;
 
 /// Partial results of `max_pass` / `diff_range`: values per workgroup.
 const PER_WG: u64 = 4096;
+
+/// A count or index of a dispatch as the shaders take it: within one storage binding (a part
+/// of `V`, a stage buffer), so within `u32` whatever the grid's core count.
+fn index(x: u64) -> u32 {
+    u32::try_from(x).expect("an index within one binding fits u32")
+}
 
 /// The arrays of every block's transition table, one after the other (row pointers shifted
 /// to the concatenation), and each block's sizes.
@@ -249,7 +300,7 @@ impl BlockArrays {
             weight: Vec::new(),
         };
         let small = |x: usize| {
-            u32::try_from(x).map_err(|_| GpuError::Unsupported("runs grids of at most 2^32 cores"))
+            u32::try_from(x).map_err(|_| GpuError::Unsupported("runs blocks of at most 2^32 cores"))
         };
         for t in &plan.tables {
             a.blocks.push([
@@ -277,31 +328,43 @@ fn reward_bytes(plan: &fuzzyq_core::solver::BlockPlan<'_, f32>, n: usize) -> u64
     } as u64
 }
 
-/// The rewards on the device: per core (`rho(x_d)`), or per core and joint action (the
-/// model's table, or the rewards `op` computes, tabulated once).
-fn reward_buffer<M: Model<f32> + Sync + ?Sized>(
+/// The rewards on the device, a buffer per part: per core (`rho(x_d)`), or per core and
+/// joint action (the model's table, or the rewards `op` computes, tabulated once).
+fn reward_buffers<M: Model<f32> + Sync + ?Sized>(
     gpu: &Gpu,
     plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
     op: &Operator<'_, f32, M>,
-) -> wgpu::Buffer {
+    parts: &Parts,
+) -> Vec<wgpu::Buffer> {
+    let made = |label: &str, data: &[f32], width: usize| -> Vec<wgpu::Buffer> {
+        parts
+            .split(data, width)
+            .map(|d| with_data(&gpu.inner, label, d))
+            .collect()
+    };
     match (plan.rewards, plan.reward_table) {
-        (Some(r), _) => with_data(&gpu.inner, "rewards", r),
-        (None, Some(t)) => with_data(&gpu.inner, "reward table", t),
+        (Some(r), _) => made("rewards", r, 1),
+        (None, Some(t)) => made("reward table", t, plan.n_joint),
         // A reward of the action that the model computes: tabulated once.
-        (None, None) => with_data(&gpu.inner, "reward table", &op.reward_rows()),
+        (None, None) => made("reward table", &op.reward_rows(), plan.n_joint),
     }
 }
 
-/// The goal cores as bits, 32 to a word (`block.wgsl`'s `goal_at`): core `c` is bit `c % 32`
-/// of word `c / 32` (none for a run without goal cores).
-fn goal_bits(goal: &[bool]) -> Vec<u32> {
-    goal.chunks(32)
-        .map(|c| {
-            c.iter()
-                .enumerate()
-                .fold(0u32, |w, (i, &g)| w | (u32::from(g) << i))
-        })
-        .collect()
+/// The goal cores as bits, 32 to a word (`block.wgsl`'s `goal_at`): part `k`'s core `c` is
+/// bit `c % 32` of word `k W + c / 32`, `W` words per part (none for a run without goal
+/// cores).
+fn goal_bits(goal: &[bool], parts: &Parts) -> Vec<u32> {
+    if goal.is_empty() {
+        return Vec::new();
+    }
+    let w = parts.goal_words() as usize;
+    let mut bits = vec![0u32; w * parts.count()];
+    for (k, part) in parts.split(goal, 1).enumerate() {
+        for (c, _) in part.iter().enumerate().filter(|(_, g)| **g) {
+            bits[k * w + c / 32] |= 1 << (c % 32);
+        }
+    }
+    bits
 }
 
 /// The size of a buffer made for `bytes` bytes ([`buffers::zeroed`], [`with_data`]).
@@ -309,22 +372,46 @@ fn allocated(bytes: u64) -> u64 {
     bytes.max(4).next_multiple_of(4)
 }
 
+/// The per-core buffers a run of `scheme` holds, and what they are in words: the value
+/// buffers its driver uses ([`Scheme::value_buffers`]), the policy, and the exact delta's two
+/// work buffers where it asks for that.
+fn per_core_buffers(scheme: Scheme) -> (u64, &'static str) {
+    if scheme.uses_exact_delta() {
+        let what = "V three times, the policy and two work buffers";
+        (u64::from(scheme.value_buffers()) + 3, what)
+    } else {
+        (
+            u64::from(scheme.value_buffers()) + 1,
+            "V twice and the policy",
+        )
+    }
+}
+
 /// Refuses a run whose buffers would take more device memory than `gpu` has
-/// ([`Gpu::with_memory_limit`]), before any is allocated: the per-core ones (`V` three times,
-/// the policy, the exact delta's two work buffers), the stage buffers of `shape`'s batches
-/// and `other` (tables, rewards, partial results), each as allocated.
-fn check_memory(gpu: &Gpu, shape: &Shape, mut other: Vec<u64>) -> Result<(), GpuError> {
+/// ([`Gpu::with_memory_limit`]), before any is allocated: the per-core ones `scheme` uses
+/// ([`per_core_buffers`], each part as allocated), the stage buffers of `shape`'s batches and
+/// `other` (tables, rewards, partial results), each as allocated.
+fn check_memory(
+    gpu: &Gpu,
+    shape: &Shape,
+    scheme: Scheme,
+    mut other: Vec<u64>,
+) -> Result<(), GpuError> {
     let n = shape.n;
     other.extend((0..shape.written_stages()).map(|b| shape.stage_bytes(b)));
     other.extend(shape.rows_bytes());
-    let per_core = 6 * allocated(4 * n as u64);
+    let parts = &shape.parts;
+    let (count, what) = per_core_buffers(scheme);
+    let per_core = count
+        * (0..parts.count())
+            .map(|k| allocated(4 * parts.len(k)))
+            .sum::<u64>();
     let rest: u64 = other.iter().map(|&b| allocated(b)).sum();
     match gpu.memory.filter(|&m| per_core + rest > m) {
         None => Ok(()),
         Some(available) => Err(GpuError::OutOfMemory {
             what: format!(
-                "{n} cores: V three times, the policy and two work buffers, {:.2} GB; the \
-                 tables, rewards and stage buffers, {:.2} GB",
+                "{n} cores: {what}, {:.2} GB; the tables, rewards and stage buffers, {:.2} GB",
                 per_core as f64 / 1e9,
                 rest as f64 / 1e9
             ),
@@ -334,23 +421,26 @@ fn check_memory(gpu: &Gpu, shape: &Shape, mut other: Vec<u64>) -> Result<(), Gpu
     }
 }
 
+/// The kernels compiled for one problem ([`compile`]).
+struct Compiled {
+    stage_c: Vec<wgpu::ComputePipeline>,
+    last1: Option<(wgpu::ComputePipeline, u32)>,
+    evaluate: Option<wgpu::ComputePipeline>,
+}
+
 /// The problem's kernels, compiled with its sizes as constants: the stage kernel of every
-/// stage the passes run as a stage, and the fused last stage (with the cores per workgroup)
-/// where the joint actions are the product's and the reward does not depend on the action.
-/// `sg`: the subgroup size the last stage reduces with, if any.
-#[allow(clippy::type_complexity)] // the pipelines, as GpuSweeps keeps them
+/// stage the passes run as a stage (the first, where several blocks contract, reading `V`'s
+/// parts through group 1, `parts`), the fused last stage (with the cores per workgroup) where
+/// the joint actions are the product's and the reward does not depend on the action, and
+/// policy evaluation where the run can evaluate. `sg`: the subgroup size the last stage
+/// reduces with, if any.
 fn compile(
     gpu: &Gpu,
     k: &Kernels,
     shape: &Shape,
     sg: Option<u32>,
-) -> Result<
-    (
-        Vec<wgpu::ComputePipeline>,
-        Option<(wgpu::ComputePipeline, u32)>,
-    ),
-    GpuError,
-> {
+    parts: (&wgpu::BindGroupLayout, &str),
+) -> Result<Compiled, GpuError> {
     let nb = shape.n_blocks();
     // Every stage the passes run as a stage: those before the last, and the last where it
     // writes full rows.
@@ -366,7 +456,13 @@ fn compile(
                 ("SP", p_b),
             ];
             let t = (include_str!("stagec.wgsl"), "stage_c");
-            kernels::specialized(&gpu.inner, k, t, &consts, &[], false)
+            if b == 0 && nb > 1 {
+                let at = [("SRC_AT", "v_at(col[e], r)")];
+                kernels::specialized(&gpu.inner, k, t, &consts, &at, false, Some(parts))
+            } else {
+                let at = [("SRC_AT", "src[((base + col[e]) * SR + r) * SP + p]")];
+                kernels::specialized(&gpu.inner, k, t, &consts, &at, false, None)
+            }
         })
         .collect::<Result<Vec<_>, _>>()?;
     let last1 = if shape.fused_abs {
@@ -402,23 +498,57 @@ fn compile(
             ]
         };
         let t = (include_str!("last1.wgsl"), "last1");
-        let p = kernels::specialized(&gpu.inner, k, t, &consts, replace, sg.is_some())?;
+        let p = kernels::specialized(&gpu.inner, k, t, &consts, replace, sg.is_some(), None)?;
         Some((p, wgs / tpc))
     } else {
         None
     };
-    Ok((stage_c, last1))
+    let evaluate = if shape.can_evaluate {
+        let t = (include_str!("evaluate.wgsl"), "evaluate");
+        Some(kernels::specialized(
+            &gpu.inner,
+            k,
+            t,
+            &[],
+            &[],
+            false,
+            Some(parts),
+        )?)
+    } else {
+        None
+    };
+    Ok(Compiled {
+        stage_c,
+        last1,
+        evaluate,
+    })
 }
 
 impl GpuSweeps {
     /// Uploads `op`'s block tables and allocates the run's buffers on `gpu`.
     ///
     /// Refused ([`GpuError::Unsupported`]): the generic path (no blocks), terminal states,
-    /// more than 8 blocks. [`GpuError::TooLarge`] where a buffer exceeds the adapter's limits
-    /// (checked before allocating).
+    /// more than 8 blocks, a reward of the action where `V` takes more than one part.
+    /// [`GpuError::TooLarge`] where a buffer exceeds the adapter's limits, and
+    /// [`GpuError::OutOfMemory`] where the run's buffers exceed its memory (both checked
+    /// before allocating). `V` and the other per-core buffers are cut into parts of at most
+    /// one storage binding ([`Gpu::with_part_bytes`]).
     pub fn new<M: Model<f32> + Sync + ?Sized>(
         gpu: &Gpu,
         op: &Operator<'_, f32, M>,
+    ) -> Result<Self, GpuError> {
+        Self::for_scheme(gpu, op, Scheme::Value)
+    }
+
+    /// [`Self::new`] for a run of `scheme`: the device memory is checked for, and made for,
+    /// the buffers that scheme's driver uses ([`Scheme::value_buffers`], the exact delta's
+    /// work buffers where [`Scheme::uses_exact_delta`]): modified policy iteration holds `V`
+    /// twice and the policy, so that three point masses on the paper's cores fit one H200. A
+    /// buffer a pass asks for beyond them is made when first used.
+    pub fn for_scheme<M: Model<f32> + Sync + ?Sized>(
+        gpu: &Gpu,
+        op: &Operator<'_, f32, M>,
+        scheme: Scheme,
     ) -> Result<Self, GpuError> {
         let plan = op.block_plan().ok_or(GpuError::Unsupported(
             "runs the block backup only, and this model declares no independent blocks",
@@ -435,34 +565,61 @@ impl GpuSweeps {
         let max_binding = gpu.max_binding;
         let check = |what: &'static str, bytes: u64| -> Result<(), GpuError> {
             if bytes > max_binding {
-                return Err(GpuError::TooLarge {
-                    what,
-                    need: bytes,
-                    limit: max_binding,
-                    kind: "storage binding",
-                });
+                return Err(GpuError::over_binding(what, bytes, max_binding));
             }
             Ok(())
         };
-        check("V", 4 * n as u64)?;
-        let BlockArrays {
-            blocks,
-            row_base,
-            ptr,
-            col,
-            weight,
-        } = BlockArrays::of(&plan)?;
-        let mut shape = Shape::of(&plan, n, blocks, row_base);
-        shape.batch_within(gpu.batch_bytes, max_binding)?;
-
-        let rewards_bytes = reward_bytes(&plan, n);
-        if plan.rewards.is_none() {
-            check("the reward table", rewards_bytes)?;
+        let arrays = BlockArrays::of(&plan)?;
+        let [n0, _, r0, _] = arrays.blocks[0];
+        // One block: `V` is the block's cores, read whole by the last stage.
+        let one_block = arrays.blocks.len() == 1;
+        if one_block {
+            check("V", 4 * n as u64)?;
         }
+        // Group 1 binds the parts beside group 0's ten storage buffers.
+        let max_parts = u64::from(gpu.summary().max_storage_buffers).saturating_sub(10);
+        let wish = if one_block {
+            max_binding
+        } else {
+            gpu.part_bytes
+        };
+        let parts = Parts::new(u64::from(n0), u64::from(r0), max_binding, wish, max_parts)?;
+        if plan.rewards.is_none() {
+            // The reward table, cut as `V` is.
+            let largest = (0..parts.count()).map(|k| parts.len(k)).max().unwrap_or(0);
+            let what = if parts.count() == 1 {
+                "the reward table"
+            } else {
+                "a part of the reward table"
+            };
+            check(what, 4 * largest * plan.n_joint as u64)?;
+        }
+        let mut shape = Shape::of(
+            &plan,
+            n,
+            arrays.blocks.clone(),
+            arrays.row_base.clone(),
+            parts,
+        );
+        shape.batch_within(gpu.batch_bytes, max_binding)?;
+        let rewards_bytes = reward_bytes(&plan, n);
+        Self::allocate(gpu, op, &plan, (shape, scheme), &arrays, rewards_bytes)
+    }
+
+    /// The run's buffers and kernels for `shape`, checked against the adapter's memory first.
+    fn allocate<M: Model<f32> + Sync + ?Sized>(
+        gpu: &Gpu,
+        op: &Operator<'_, f32, M>,
+        plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
+        (shape, scheme): (Shape, Scheme),
+        arrays: &BlockArrays,
+        rewards_bytes: u64,
+    ) -> Result<Self, GpuError> {
+        let parts = shape.parts;
         let map = plan.joint_to_product.unwrap_or(&[]);
-        let goal = goal_bits(plan.goal);
-        let partials = n.div_ceil(PER_WG as usize) as u64;
-        let (gx, gy) = kernels::groups(partials);
+        let goal = goal_bits(plan.goal, &parts);
+        let largest_part = (0..parts.count()).map(|k| parts.len(k)).max().unwrap_or(1);
+        let (gx, gy) = kernels::groups(largest_part.div_ceil(PER_WG));
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = gpu.kernels.clone();
         // Dispatches per submission: a pass's, up to 1,024.
@@ -473,9 +630,9 @@ impl GpuSweeps {
             rewards_bytes,
             4 * goal.len() as u64,
             4 * map.len() as u64,
-            4 * ptr.len() as u64,
-            4 * col.len() as u64,
-            4 * weight.len() as u64,
+            4 * arrays.ptr.len() as u64,
+            4 * arrays.col.len() as u64,
+            4 * arrays.weight.len() as u64,
             4 * partial_len,
             params_cap as u64 * PARAM_STRIDE,
             4,
@@ -484,62 +641,68 @@ impl GpuSweeps {
         if k.diff.is_some() {
             other.push(16 * partial_len);
         }
-        check_memory(gpu, &shape, other)?;
+        check_memory(gpu, &shape, scheme, other)?;
 
-        let device = &gpu.inner.device;
+        let ctx = &gpu.inner;
+        let device = &ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let rewards = reward_buffer(gpu, &plan, op);
-
-        let table = [
-            with_data(&gpu.inner, "row_ptr", &ptr),
-            with_data(&gpu.inner, "col", &col),
-            with_data(&gpu.inner, "weight", &weight),
-        ];
-        let vbytes = 4 * n as u64;
-        let stages = (0..shape.written_stages())
-            .map(|b| zeroed(&gpu.inner, "stage", shape.stage_bytes(b)))
-            .collect();
-        let rows = shape.rows_bytes().map(|b| zeroed(&gpu.inner, "rows", b));
-        let sg = gpu.inner.summary.subgroup_size.filter(|_| gpu.subgroups);
-        let (stage_c, last1) = compile(gpu, &k, &shape, sg)?;
-        let diff_out = k
-            .diff
-            .is_some()
-            .then(|| zeroed(&gpu.inner, "diff partials", 16 * partial_len));
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("params"),
-            size: params_cap as u64 * PARAM_STRIDE,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let per_core = |label: &str| -> Vec<wgpu::Buffer> {
+            (0..parts.count())
+                .map(|k| zeroed(ctx, label, 4 * parts.len(k)))
+                .collect()
+        };
+        let parts_layout = kernels::parts_layout(ctx, parts.count());
+        let sg = ctx.summary.subgroup_size.filter(|_| gpu.subgroups);
+        let compiled = compile(gpu, &k, &shape, sg, (&parts_layout, &parts.reader()))?;
         let sweeps = Self {
             gpu: gpu.clone(),
-            k,
-            stage_c,
-            last1,
+            stage_c: compiled.stage_c,
+            last1: compiled.last1,
+            evaluate: compiled.evaluate,
             subgroups: sg.is_some() && shape.fused_abs,
-            table,
-            rewards,
-            goal: with_data(&gpu.inner, "goal", &goal),
-            map: with_data(&gpu.inner, "map", map),
-            v: [
-                zeroed(&gpu.inner, "V0", vbytes),
-                zeroed(&gpu.inner, "V1", vbytes),
-                zeroed(&gpu.inner, "V2", vbytes),
+            table: [
+                with_data(ctx, "row_ptr", &arrays.ptr),
+                with_data(ctx, "col", &arrays.col),
+                with_data(ctx, "weight", &arrays.weight),
             ],
-            policy: zeroed(&gpu.inner, "policy", vbytes),
-            stages,
-            rows,
-            scratch: None,
-            dv: None,
-            partial: zeroed(&gpu.inner, "max partials", 4 * partial_len),
-            diff_out,
-            params,
+            rewards: reward_buffers(gpu, plan, op, &parts),
+            goal: with_data(ctx, "goal", &goal),
+            map: with_data(ctx, "map", map),
+            v: [
+                per_core("V0"),
+                per_core("V1"),
+                if scheme.value_buffers() > 2 {
+                    per_core("V2")
+                } else {
+                    Vec::new()
+                },
+            ],
+            policy: per_core("policy"),
+            scratch: Vec::new(),
+            dv: Vec::new(),
+            stages: (0..shape.written_stages())
+                .map(|b| zeroed(ctx, "stage", shape.stage_bytes(b)))
+                .collect(),
+            rows: shape.rows_bytes().map(|b| zeroed(ctx, "rows", b)),
+            partial: zeroed(ctx, "max partials", 4 * partial_len),
+            diff_out: k
+                .diff
+                .is_some()
+                .then(|| zeroed(ctx, "diff partials", 16 * partial_len)),
+            params: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("params"),
+                size: params_cap as u64 * PARAM_STRIDE,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
             params_cap,
-            dummy_r: zeroed(&gpu.inner, "dummy", 4),
-            dummy_w: zeroed(&gpu.inner, "dummy", 4),
+            dummy_r: zeroed(ctx, "dummy", 4),
+            dummy_w: zeroed(ctx, "dummy", 4),
             binds: HashMap::new(),
+            parts_layout,
+            reads: HashMap::new(),
             profile: None,
+            k,
             shape,
         };
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -569,29 +732,32 @@ impl GpuSweeps {
         self.shape.batches
     }
 
+    /// How many parts `V` and the other per-core buffers are cut into, each within one
+    /// storage binding ([`Gpu::with_part_bytes`]): 1 unless `V` exceeds a binding.
+    #[must_use]
+    pub fn parts(&self) -> usize {
+        self.shape.parts.count()
+    }
+
     /// Bytes of device memory this run's buffers take now (the exact delta's two work
     /// buffers once it has run): at most what [`Self::new`] estimated and checked against
     /// [`AdapterSummary::memory`](crate::AdapterSummary::memory).
     #[must_use]
     pub fn device_bytes(&self) -> u64 {
         let mut all: Vec<&wgpu::Buffer> = vec![
-            &self.rewards,
             &self.goal,
             &self.map,
-            &self.policy,
             &self.partial,
             &self.params,
             &self.dummy_r,
             &self.dummy_w,
         ];
         all.extend(&self.table);
-        all.extend(&self.v);
+        all.extend(self.v.iter().flatten());
+        all.extend(self.rewards.iter().chain(&self.policy));
+        all.extend(self.scratch.iter().chain(&self.dv));
         all.extend(&self.stages);
-        all.extend(
-            [&self.rows, &self.scratch, &self.dv, &self.diff_out]
-                .into_iter()
-                .flatten(),
-        );
+        all.extend([&self.rows, &self.diff_out].into_iter().flatten());
         all.iter().map(|b| b.size()).sum()
     }
 
@@ -612,52 +778,72 @@ impl GpuSweeps {
             .collect()
     }
 
+    /// The parts of per-core buffer `b`.
+    fn parts_of(&self, b: PerCore) -> &[wgpu::Buffer] {
+        match b {
+            PerCore::V(i) => &self.v[usize::from(i)],
+            PerCore::Scratch => &self.scratch,
+            PerCore::Dv => &self.dv,
+            PerCore::Policy => &self.policy,
+            PerCore::Rewards => &self.rewards,
+        }
+    }
+
     fn buffer(&self, s: Slot) -> &wgpu::Buffer {
         match s {
-            Slot::V(i) => &self.v[usize::from(i)],
+            Slot::Part(b, k) => &self.parts_of(b)[k as usize],
             Slot::Stage(b) => &self.stages[b],
             Slot::Rows => self.rows.as_ref().expect("allocated with the rows path"),
-            Slot::Scratch => self.scratch.as_ref().expect("allocated first"),
-            Slot::Dv => self.dv.as_ref().expect("allocated first"),
-            Slot::Policy => &self.policy,
             Slot::Partial => &self.partial,
             Slot::DummyRead => &self.dummy_r,
             Slot::DummyWrite => &self.dummy_w,
         }
     }
 
-    /// The bind group reading `src`, `src2` and writing `dst`, `aux`.
-    fn bind(&mut self, slots: [Slot; 4]) {
-        if self.binds.contains_key(&slots) {
-            return;
+    /// The bind groups of dispatch `d`: group 0 reading `src`, `src2`, `rewards` and writing
+    /// `dst`, `aux`; group 1 the parts `v_at` reads, if it reads them.
+    fn bind(&mut self, d: &Dispatch) {
+        if !self.binds.contains_key(&d.slots) {
+            let [src, dst, aux, src2, rewards] = d.slots.map(|s| self.buffer(s));
+            let bufs: [&wgpu::Buffer; 11] = [
+                &self.params,
+                &self.table[0],
+                &self.table[1],
+                &self.table[2],
+                src,
+                dst,
+                aux,
+                rewards,
+                &self.goal,
+                &self.map,
+                src2,
+            ];
+            let g = bind_group(&self.gpu.inner, &self.k.layout, &bufs);
+            self.binds.insert(d.slots, g);
         }
-        let [src, dst, aux, src2] = slots.map(|s| self.buffer(s));
-        let bufs: [&wgpu::Buffer; 11] = [
-            &self.params,
-            &self.table[0],
-            &self.table[1],
-            &self.table[2],
-            src,
-            dst,
-            aux,
-            &self.rewards,
-            &self.goal,
-            &self.map,
-            src2,
-        ];
-        let g = bind_group(&self.gpu.inner, &self.k.layout, &bufs);
-        self.binds.insert(slots, g);
+        if let Some(b) = d.reads.filter(|b| !self.reads.contains_key(b)) {
+            let g = kernels::parts_group(&self.gpu.inner, &self.parts_layout, self.parts_of(b));
+            self.reads.insert(b, g);
+        }
     }
 
-    /// Runs `dispatches` (entry, parameters, bindings `[src, dst, aux, src2]`, threads or
-    /// workgroups) in one submission and waits for it.
+    fn pipeline(&self, d: &Dispatch) -> &wgpu::ComputePipeline {
+        match d.entry {
+            Entry::StageConst => &self.stage_c[d.params.b as usize],
+            Entry::LastOne => &self.last1.as_ref().expect("compiled where used").0,
+            Entry::Evaluate => self.evaluate.as_ref().expect("compiled where used"),
+            e => self.k.pipeline(e),
+        }
+    }
+
+    /// Runs `dispatches` in submissions of up to `params_cap` and waits for them.
     fn run(&mut self, dispatches: &[Dispatch]) -> Result<(), GpuError> {
         if self.profile.is_some() && dispatches.len() > 1 {
             for d in dispatches {
                 let t0 = std::time::Instant::now();
                 self.run(std::slice::from_ref(d))?;
-                let key = match d.0 {
-                    Entry::StageConst => format!("stage {}", d.1.b),
+                let key = match d.entry {
+                    Entry::StageConst => format!("stage {}", d.params.b),
                     e => format!("{e:?}"),
                 };
                 let p = self.profile.as_mut().expect("profiling");
@@ -669,24 +855,30 @@ impl GpuSweeps {
         }
         for chunk in dispatches.chunks(self.params_cap) {
             for d in chunk {
-                self.bind(d.2);
+                for s in d.slots {
+                    if let Slot::Part(b, _) = s {
+                        self.ensure(b);
+                    }
+                }
+                if let Some(b) = d.reads {
+                    self.ensure(b);
+                }
+                self.bind(d);
             }
-            let ps: Vec<Params> = chunk.iter().map(|d| d.1).collect();
+            let ps: Vec<Params> = chunk.iter().map(|d| d.params).collect();
             let gpu = &self.gpu.inner;
             gpu.queue.write_buffer(&self.params, 0, &params_bytes(&ps));
             let mut enc = gpu.device.create_command_encoder(&Default::default());
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
-                for (i, (entry, _, slots, (gx, gy))) in chunk.iter().enumerate() {
-                    let params = &chunk[i].1;
-                    pass.set_pipeline(match entry {
-                        Entry::StageConst => &self.stage_c[params.b as usize],
-                        Entry::LastOne => &self.last1.as_ref().expect("compiled where used").0,
-                        e => self.k.pipeline(*e),
-                    });
+                for (i, d) in chunk.iter().enumerate() {
+                    pass.set_pipeline(self.pipeline(d));
                     let offset = (i as u64 * PARAM_STRIDE) as u32;
-                    pass.set_bind_group(0, &self.binds[slots], &[offset]);
-                    pass.dispatch_workgroups(*gx, *gy, 1);
+                    pass.set_bind_group(0, &self.binds[&d.slots], &[offset]);
+                    if let Some(b) = d.reads {
+                        pass.set_bind_group(1, &self.reads[&b], &[]);
+                    }
+                    pass.dispatch_workgroups(d.groups.0, d.groups.1, 1);
                 }
             }
             gpu.queue.submit([enc.finish()]);
@@ -701,21 +893,29 @@ impl GpuSweeps {
         p
     }
 
+    /// `base` for a dispatch over part `k`'s cores from its core `out_lo` on: where its goal
+    /// bits and its first slab are.
+    fn in_part(&self, base: Params, k: usize, out_lo: u64) -> Params {
+        let parts = &self.shape.parts;
+        Params {
+            out_lo: index(out_lo),
+            goal_lo: index(k as u64 * parts.goal_words()),
+            part_c0: index(parts.first_slab(k)),
+            len: index(parts.len(k)),
+            ..base
+        }
+    }
+
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
-    /// `v` and writing `out` (values) and the policy buffer (actions), batch by batch
+    /// `input` and writing `out` (values, if any) and the policy (actions), batch by batch
     /// ([`Tree::steps`]).
-    fn full_pass(&mut self, input: Slot, out: Slot, mode: Mode) -> Vec<Dispatch> {
+    fn full_pass(&mut self, input: PerCore, out: Option<PerCore>, mode: Mode) -> Vec<Dispatch> {
         let s = &self.shape;
         let last = s.n_blocks() - 1;
         let fused = if mode == Mode::Abs {
             s.fused_abs
         } else {
             s.fused
-        };
-        let dst = if mode == Mode::Abs {
-            Slot::Scratch
-        } else {
-            out
         };
         let cpw = self.last1.as_ref().map(|l| l.1);
         let base = self.base();
@@ -727,104 +927,206 @@ impl GpuSweeps {
                 items,
                 src_lo,
             } = step;
-            let src = if b == 0 { input } else { Slot::Stage(b - 1) };
+            // `lo` from the first child of the source's first item: within the buffers.
+            let lo = lo - src_lo * u64::from(s.blocks[b][0]);
             let p = Params {
                 b: b as u32,
-                lo: lo as u32,
-                src_lo: src_lo as u32,
+                lo: index(lo),
                 ..base
+            };
+            let src = match b {
+                0 => Slot::Part(input, 0),
+                b => Slot::Stage(b - 1),
             };
             if b < last {
                 let count = items * s.tree.item_len(b);
                 let p = Params {
-                    count: count as u32,
+                    count: index(count),
                     ..p
                 };
-                let slots = [src, Slot::Stage(b), Slot::DummyWrite, Slot::DummyRead];
-                ds.push((Entry::StageConst, p, slots, kernels::grid(count)));
-            } else if fused {
+                // The first stage reads `V` through its parts.
+                let (src, reads) = if b == 0 {
+                    (Slot::DummyRead, Some(input))
+                } else {
+                    (src, None)
+                };
+                let slots = [
+                    src,
+                    Slot::Stage(b),
+                    Slot::DummyWrite,
+                    Slot::DummyRead,
+                    Slot::Part(PerCore::Rewards, 0),
+                ];
+                ds.push(Dispatch {
+                    entry: Entry::StageConst,
+                    params: p,
+                    slots,
+                    reads,
+                    groups: kernels::grid(count),
+                });
+                continue;
+            }
+            // The batch's cores: within one part.
+            let first = step.lo;
+            let k = s.parts.of_core(first);
+            debug_assert_eq!(s.parts.of_core(first + items - 1), k);
+            let p = self.in_part(p, k, first - s.parts.cores(k).start);
+            let part = |b: PerCore| Slot::Part(b, k as u32);
+            let dst = out.map_or(Slot::DummyWrite, part);
+            let (aux, rewards) = (part(PerCore::Policy), part(PerCore::Rewards));
+            let p = Params {
+                count: index(items),
+                mode: mode as u32,
+                ..p
+            };
+            if fused {
                 let cpw = cpw.expect("compiled where fused");
-                let p = Params {
-                    count: items as u32,
-                    mode: mode as u32,
-                    ..p
-                };
-                let slots = [src, dst, Slot::Policy, Slot::DummyRead];
-                let wgs = items.div_ceil(u64::from(cpw));
-                ds.push((Entry::LastOne, p, slots, kernels::groups(wgs)));
+                ds.push(Dispatch {
+                    entry: Entry::LastOne,
+                    params: p,
+                    slots: [src, dst, aux, Slot::DummyRead, rewards],
+                    reads: None,
+                    groups: kernels::groups(items.div_ceil(u64::from(cpw))),
+                });
             } else {
                 let count = items * s.n_product;
                 let rows = Params {
-                    count: count as u32,
+                    count: index(count),
                     ..p
                 };
-                let slots = [src, Slot::Rows, Slot::DummyWrite, Slot::DummyRead];
-                ds.push((Entry::StageConst, rows, slots, kernels::grid(count)));
+                let slots = [src, Slot::Rows, Slot::DummyWrite, Slot::DummyRead, rewards];
+                ds.push(Dispatch {
+                    entry: Entry::StageConst,
+                    params: rows,
+                    slots,
+                    reads: None,
+                    groups: kernels::grid(count),
+                });
                 let p = Params {
-                    count: items as u32,
-                    mode: mode as u32,
                     len: s.n_product as u32,
                     ..p
                 };
-                let slots = [Slot::Rows, dst, Slot::Policy, Slot::DummyRead];
-                ds.push((Entry::ReduceRows, p, slots, kernels::grid(items)));
+                ds.push(Dispatch {
+                    entry: Entry::ReduceRows,
+                    params: p,
+                    slots: [Slot::Rows, dst, aux, Slot::DummyRead, rewards],
+                    reads: None,
+                    groups: kernels::grid(items),
+                });
             }
         }
         ds
     }
 
-    fn v_slot(b: Buf) -> Slot {
-        Slot::V(b.0)
+    fn v_of(b: Buf) -> PerCore {
+        PerCore::V(b.0)
     }
 
     fn distinct(a: Buf, b: Buf) {
         assert_ne!(a, b, "a pass reads and writes distinct buffers");
     }
 
-    /// A pass over `len` values of `dst` (and `src`, `src2`).
-    fn elementwise(&mut self, entry: Entry, slots: [Slot; 4], shift: f32) -> Result<(), GpuError> {
-        let p = Params {
+    /// A pass over every part: `entry` with group 0 binding `slots(k)` for part `k`, and
+    /// group 1 the parts of `reads`.
+    fn per_part(
+        &mut self,
+        entry: Entry,
+        slots: impl Fn(u32) -> Slots,
+        reads: Option<PerCore>,
+        shift: f32,
+    ) -> Result<(), GpuError> {
+        let base = Params {
             shift,
             ..self.base()
         };
-        let g = kernels::grid(self.shape.n as u64);
-        self.run(&[(entry, p, slots, g)])
+        let ds: Vec<Dispatch> = (0..self.shape.parts.count())
+            .map(|k| {
+                let params = self.in_part(base, k, 0);
+                Dispatch {
+                    entry,
+                    params,
+                    slots: slots(k as u32),
+                    reads,
+                    groups: kernels::grid(u64::from(params.len)),
+                }
+            })
+            .collect();
+        self.run(&ds)
     }
 
-    /// The maximum of `src` (n values) from 0, as `T::max_of` folds.
-    fn max_of(&mut self, src: Slot) -> Result<f32, GpuError> {
-        let n = self.shape.n as u64;
-        let p = Params {
-            count: PER_WG as u32,
-            ..self.base()
-        };
-        let g = kernels::groups(n.div_ceil(PER_WG));
-        self.run(&[(
-            Entry::Max,
-            p,
-            [src, Slot::Partial, Slot::DummyWrite, Slot::DummyRead],
-            g,
-        )])?;
-        let parts: Vec<f32> =
-            buffers::read_as(&self.gpu.inner, &self.partial, (g.0 * g.1) as usize)?;
-        Ok(parts
-            .into_iter()
-            .fold(0.0f32, |m, x| if m >= x { m } else { x }))
+    /// The maximum of per-core buffer `src` from 0, as `T::max_of` folds (exact in any order).
+    fn max_of(&mut self, src: PerCore) -> Result<f32, GpuError> {
+        let mut m = 0.0f32;
+        for k in 0..self.shape.parts.count() {
+            let len = self.shape.parts.len(k);
+            let params = Params {
+                count: PER_WG as u32,
+                ..self.in_part(self.base(), k, 0)
+            };
+            let groups = kernels::groups(len.div_ceil(PER_WG));
+            let slots = [
+                Slot::Part(src, k as u32),
+                Slot::Partial,
+                Slot::DummyWrite,
+                Slot::DummyRead,
+                Slot::Part(PerCore::Rewards, 0),
+            ];
+            self.run(&[Dispatch {
+                entry: Entry::Max,
+                params,
+                slots,
+                reads: None,
+                groups,
+            }])?;
+            let n = (groups.0 * groups.1) as usize;
+            let parts: Vec<f32> = buffers::read_as(&self.gpu.inner, &self.partial, n)?;
+            m = parts.into_iter().fold(m, |m, x| if m >= x { m } else { x });
+        }
+        Ok(m)
     }
 
-    fn ensure(&mut self, slot: Slot) {
-        let bytes = 4 * self.shape.n as u64;
-        match slot {
-            Slot::Scratch if self.scratch.is_none() => {
-                self.scratch = Some(zeroed(&self.gpu.inner, "abs", bytes));
-            }
-            Slot::Dv if self.dv.is_none() => self.dv = Some(zeroed(&self.gpu.inner, "dv", bytes)),
-            _ => {}
+    /// Per-core buffer `b`, made (zeroed) if the run has not made it yet: the exact delta's
+    /// work buffers when it first runs, a value buffer beyond the scheme's.
+    fn ensure(&mut self, b: PerCore) {
+        if !self.parts_of(b).is_empty() {
+            return;
+        }
+        let parts = self.shape.parts;
+        let made = (0..parts.count())
+            .map(|k| zeroed(&self.gpu.inner, "per core", 4 * parts.len(k)))
+            .collect();
+        match b {
+            PerCore::V(i) => self.v[usize::from(i)] = made,
+            PerCore::Scratch => self.scratch = made,
+            PerCore::Dv => self.dv = made,
+            PerCore::Policy | PerCore::Rewards => unreachable!("made with the run"),
         }
     }
 
-    fn values_of(&self, v: Buf) -> Result<Vec<f32>, GpuError> {
-        buffers::read_as(&self.gpu.inner, &self.v[usize::from(v.0)], self.shape.n)
+    /// Per-core buffer `b` read back, its parts one after the other (zeros where it was never
+    /// made: a buffer starts at 0).
+    fn read_all<T: bytemuck::Pod>(&self, b: PerCore) -> Result<Vec<T>, GpuError> {
+        if self.parts_of(b).is_empty() {
+            return Ok(vec![T::zeroed(); self.shape.n]);
+        }
+        let mut out = Vec::with_capacity(self.shape.n);
+        for (k, buf) in self.parts_of(b).iter().enumerate() {
+            let len = self.shape.parts.len(k) as usize;
+            out.extend(buffers::read_as::<T>(&self.gpu.inner, buf, len)?);
+        }
+        Ok(out)
+    }
+
+    /// `data` (one value per core) written to per-core buffer `b`, part by part.
+    fn write_all<T: bytemuck::Pod>(&mut self, b: PerCore, data: &[T]) {
+        self.ensure(b);
+        let parts = self.shape.parts;
+        for (buf, d) in self.parts_of(b).iter().zip(parts.split(data, 1)) {
+            self.gpu
+                .inner
+                .queue
+                .write_buffer(buf, 0, bytemuck::cast_slice(d));
+        }
     }
 }
 
@@ -833,13 +1135,13 @@ impl Sweeps<f32> for GpuSweeps {
 
     fn backup(&mut self, v: Buf, out: Buf) -> Result<(), GpuError> {
         Self::distinct(v, out);
-        let ds = self.full_pass(Self::v_slot(v), Self::v_slot(out), Mode::Max);
+        let ds = self.full_pass(Self::v_of(v), Some(Self::v_of(out)), Mode::Max);
         self.run(&ds)
     }
 
     fn backup_greedy(&mut self, v: Buf, out: Buf) -> Result<(), GpuError> {
         Self::distinct(v, out);
-        let ds = self.full_pass(Self::v_slot(v), Self::v_slot(out), Mode::MaxArg);
+        let ds = self.full_pass(Self::v_of(v), Some(Self::v_of(out)), Mode::MaxArg);
         self.run(&ds)
     }
 
@@ -849,13 +1151,17 @@ impl Sweeps<f32> for GpuSweeps {
                 "computes the backup of V = 0 only for rewards of the state alone",
             ));
         }
-        let slots = [
-            Slot::DummyRead,
-            Self::v_slot(out),
-            Slot::DummyWrite,
-            Slot::DummyRead,
-        ];
-        self.elementwise(Entry::Rewards, slots, 0.0)
+        let out = Self::v_of(out);
+        let slots = |k| {
+            [
+                Slot::DummyRead,
+                Slot::Part(out, k),
+                Slot::DummyWrite,
+                Slot::DummyRead,
+                Slot::Part(PerCore::Rewards, k),
+            ]
+        };
+        self.per_part(Entry::Rewards, slots, None, 0.0)
     }
 
     fn evaluate(&mut self, v: Buf, out: Buf) -> Result<(), GpuError> {
@@ -863,13 +1169,17 @@ impl Sweeps<f32> for GpuSweeps {
         if !self.shape.can_evaluate {
             return Err(fuzzyq_core::solver::SolveError::PolicyEvaluation.into());
         }
-        let slots = [
-            Self::v_slot(v),
-            Self::v_slot(out),
-            Slot::Policy,
-            Slot::DummyRead,
-        ];
-        self.elementwise(Entry::Evaluate, slots, 0.0)
+        let out = Self::v_of(out);
+        let slots = |k| {
+            [
+                Slot::DummyRead,
+                Slot::Part(out, k),
+                Slot::Part(PerCore::Policy, k),
+                Slot::DummyRead,
+                Slot::Part(PerCore::Rewards, k),
+            ]
+        };
+        self.per_part(Entry::Evaluate, slots, Some(Self::v_of(v)), 0.0)
     }
 
     fn sweep_async(&mut self, _v: Buf) -> Result<f64, GpuError> {
@@ -879,17 +1189,104 @@ impl Sweeps<f32> for GpuSweeps {
     }
 
     fn diff_stats(&mut self, a: Buf, b: Buf, s: f32) -> Result<DiffStats, GpuError> {
-        let n = self.shape.n as u64;
-        let Some((layout, pipeline)) = self.k.diff.as_ref() else {
+        if self.k.diff.is_none() {
             // No f64 in this adapter's shaders: the statistics on the host.
             let (x, y) = (self.values_of(a)?, self.values_of(b)?);
             return Ok(fuzzyq_core::solver::diff_stats(&x, &y, s));
+        }
+        self.ensure(Self::v_of(a));
+        self.ensure(Self::v_of(b));
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for k in 0..self.shape.parts.count() {
+            let (l, h) = self.diff_range(a, b, k)?;
+            lo = lo.min(l);
+            hi = hi.max(h);
+        }
+        Ok(DiffStats::of_range(lo, hi, f64::from(s)))
+    }
+
+    fn shift(&mut self, v: Buf, s: f32) -> Result<(), GpuError> {
+        if s == 0.0 {
+            return Ok(());
+        }
+        let v = Self::v_of(v);
+        let slots = |k| {
+            [
+                Slot::DummyRead,
+                Slot::Part(v, k),
+                Slot::DummyWrite,
+                Slot::DummyRead,
+                Slot::Part(PerCore::Rewards, 0),
+            ]
         };
+        self.per_part(Entry::Shift, slots, None, s)
+    }
+
+    fn exact_delta(&mut self, a: Buf, b: Buf) -> Result<f64, GpuError> {
+        Self::distinct(a, b);
+        let (a, b) = (Self::v_of(a), Self::v_of(b));
+        let slots = |k| {
+            [
+                Slot::Part(a, k),
+                Slot::Part(PerCore::Dv, k),
+                Slot::DummyWrite,
+                Slot::Part(b, k),
+                Slot::Part(PerCore::Rewards, 0),
+            ]
+        };
+        self.per_part(Entry::Sub, slots, None, 0.0)?;
+        let ds = self.full_pass(PerCore::Dv, Some(PerCore::Scratch), Mode::Abs);
+        self.run(&ds)?;
+        let m = self.max_of(PerCore::Scratch)?;
+        Ok(f64::from(self.shape.gamma * m))
+    }
+
+    fn greedy(&mut self, v: Buf) -> Result<(), GpuError> {
+        let ds = self.full_pass(Self::v_of(v), None, Mode::Arg);
+        self.run(&ds)
+    }
+
+    fn load(&mut self, v: Buf, values: &[f32]) -> Result<(), GpuError> {
+        fuzzyq_core::error::check_len("V", self.shape.n, values.len())
+            .map_err(fuzzyq_core::solver::SolveError::from)?;
+        self.write_all(Self::v_of(v), values);
+        Ok(())
+    }
+
+    fn load_policy(&mut self, policy: &[u32]) -> Result<(), GpuError> {
+        fuzzyq_core::error::check_len("policy", self.shape.n, policy.len())
+            .map_err(fuzzyq_core::solver::SolveError::from)?;
+        self.write_all(PerCore::Policy, policy);
+        Ok(())
+    }
+
+    fn values(&self, v: Buf) -> Result<Cow<'_, [f32]>, GpuError> {
+        Ok(Cow::Owned(self.values_of(v)?))
+    }
+
+    fn policy(&self) -> Result<Cow<'_, [u32]>, GpuError> {
+        Ok(Cow::Owned(self.read_all(PerCore::Policy)?))
+    }
+
+    fn kernel(&self) -> Option<&'static str> {
+        Some("wgpu")
+    }
+}
+
+impl GpuSweeps {
+    fn values_of(&self, v: Buf) -> Result<Vec<f32>, GpuError> {
+        self.read_all(Self::v_of(v))
+    }
+
+    /// The range of `a - b` over part `k` (`diff.wgsl`, where the adapter has `f64`).
+    fn diff_range(&self, a: Buf, b: Buf, k: usize) -> Result<(f64, f64), GpuError> {
+        let (layout, pipeline) = self.k.diff.as_ref().expect("called with f64");
         let out = self.diff_out.as_ref().expect("made with f64");
         let gpu = &self.gpu.inner;
+        let n = self.shape.parts.len(k);
         let g = kernels::groups(n.div_ceil(PER_WG));
         let p = DiffParams {
-            len: n as u32,
+            len: index(n),
             per_wg: PER_WG as u32,
             zero: 0,
             pad: 0,
@@ -904,8 +1301,8 @@ impl Sweeps<f32> for GpuSweeps {
         );
         let bufs = [
             &ubuf,
-            &self.v[usize::from(a.0)],
-            &self.v[usize::from(b.0)],
+            &self.v[usize::from(a.0)][k],
+            &self.v[usize::from(b.0)][k],
             out,
         ];
         let entries: Vec<wgpu::BindGroupEntry<'_>> = bufs
@@ -935,71 +1332,6 @@ impl Sweeps<f32> for GpuSweeps {
             lo = lo.min(pair[0]);
             hi = hi.max(pair[1]);
         }
-        Ok(DiffStats::of_range(lo, hi, f64::from(s)))
-    }
-
-    fn shift(&mut self, v: Buf, s: f32) -> Result<(), GpuError> {
-        if s == 0.0 {
-            return Ok(());
-        }
-        let slots = [
-            Slot::DummyRead,
-            Self::v_slot(v),
-            Slot::DummyWrite,
-            Slot::DummyRead,
-        ];
-        self.elementwise(Entry::Shift, slots, s)
-    }
-
-    fn exact_delta(&mut self, a: Buf, b: Buf) -> Result<f64, GpuError> {
-        Self::distinct(a, b);
-        self.ensure(Slot::Dv);
-        self.ensure(Slot::Scratch);
-        let slots = [Self::v_slot(a), Slot::Dv, Slot::DummyWrite, Self::v_slot(b)];
-        self.elementwise(Entry::Sub, slots, 0.0)?;
-        let ds = self.full_pass(Slot::Dv, Slot::Scratch, Mode::Abs);
-        self.run(&ds)?;
-        let m = self.max_of(Slot::Scratch)?;
-        Ok(f64::from(self.shape.gamma * m))
-    }
-
-    fn greedy(&mut self, v: Buf) -> Result<(), GpuError> {
-        let ds = self.full_pass(Self::v_slot(v), Slot::DummyWrite, Mode::Arg);
-        self.run(&ds)
-    }
-
-    fn load(&mut self, v: Buf, values: &[f32]) -> Result<(), GpuError> {
-        fuzzyq_core::error::check_len("V", self.shape.n, values.len())
-            .map_err(fuzzyq_core::solver::SolveError::from)?;
-        let gpu = &self.gpu.inner;
-        gpu.queue
-            .write_buffer(&self.v[usize::from(v.0)], 0, bytemuck::cast_slice(values));
-        Ok(())
-    }
-
-    fn load_policy(&mut self, policy: &[u32]) -> Result<(), GpuError> {
-        fuzzyq_core::error::check_len("policy", self.shape.n, policy.len())
-            .map_err(fuzzyq_core::solver::SolveError::from)?;
-        self.gpu
-            .inner
-            .queue
-            .write_buffer(&self.policy, 0, bytemuck::cast_slice(policy));
-        Ok(())
-    }
-
-    fn values(&self, v: Buf) -> Result<Cow<'_, [f32]>, GpuError> {
-        Ok(Cow::Owned(self.values_of(v)?))
-    }
-
-    fn policy(&self) -> Result<Cow<'_, [u32]>, GpuError> {
-        Ok(Cow::Owned(buffers::read_as(
-            &self.gpu.inner,
-            &self.policy,
-            self.shape.n,
-        )?))
-    }
-
-    fn kernel(&self) -> Option<&'static str> {
-        Some("wgpu")
+        Ok((lo, hi))
     }
 }

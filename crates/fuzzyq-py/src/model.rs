@@ -558,7 +558,6 @@ impl PointMass {
             for _ in 0..self.n_agents() {
                 cores.extend([pos.clone(), pos.clone(), vel.clone(), vel.clone()]);
             }
-            // Three or more agents exceed the 2^32 cores a grid may have: a typed error.
             Grid::checked(py, cores)
         })
     }

@@ -8,7 +8,7 @@
 //! percent of the peak resident memory of the runs that matter (the paper's grid: 4.1 million
 //! cores).
 
-use fuzzyq_core::solver::{IterationOperator, Precision};
+use fuzzyq_core::solver::{Device, IterationOperator, Precision};
 
 use crate::error::SimError;
 use crate::io::config::TrainConfig;
@@ -102,6 +102,12 @@ pub fn train(config: &TrainConfig) -> Estimate {
         Precision::F64 => 8.0,
     };
     match config.solver.operator {
+        // On the GPU the host holds the rewards (and goal flags), then the result read back:
+        // `V` and the greedy actions, their grid-order copies, and the policy file's.
+        IterationOperator::Values if config.solver.device == Device::Gpu => Estimate {
+            bytes: cores * (4.0 + 1.0 + 2.0 * (4.0 + 4.0) + 2.0 * (4.0 + 4.0)),
+            what: format!("{cores:.3e} cores (V on the GPU; the rewards and the result here)"),
+        },
         IterationOperator::Values => Estimate {
             // 3 V + greedy + solution (V, greedy) + MPI (policy, pairs) + file (payload and
             // container copies of V and greedy).
@@ -115,6 +121,21 @@ pub fn train(config: &TrainConfig) -> Estimate {
                 what: format!("{pairs:.3e} Q-values (the q-values operator stores them all)"),
             }
         }
+    }
+}
+
+/// The estimate of `fuzzyq bench` on `config`'s grid: a training run's on the CPU ([`train`]);
+/// on the GPU (`gpu`) the rewards and goal flags, and `V` and the greedy actions read back
+/// once (`V` itself is on the device).
+#[must_use]
+pub fn bench(config: &TrainConfig, gpu: bool) -> Estimate {
+    if !gpu {
+        return train(config);
+    }
+    let cores: f64 = config.grid_cores().iter().map(|c| c.len() as f64).product();
+    Estimate {
+        bytes: cores * (4.0 + 1.0 + 4.0 + 4.0),
+        what: format!("{cores:.3e} cores (V on the GPU; the rewards and V read back here)"),
     }
 }
 

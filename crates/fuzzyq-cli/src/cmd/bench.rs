@@ -52,6 +52,15 @@ pub(crate) struct BenchArgs {
     /// peak and a full backup's share of it).
     #[arg(long, value_parser = output::named::<Device>(), default_value = "cpu")]
     device: Device,
+    /// With --device gpu: evaluation sweeps timed after the backups, under the greedy actions
+    /// of a further full backup [default: 3; 0 skips both, for problems whose backups take
+    /// long].
+    #[arg(long, value_name = "N")]
+    evaluations: Option<usize>,
+    /// Refuse problems estimated to need more memory than GB gigabytes on this machine
+    /// [default: 90% of its memory].
+    #[arg(long, value_name = "GB", allow_hyphen_values = true)]
+    max_memory: Option<f64>,
 }
 
 /// One cache level as the OS reports it.
@@ -104,7 +113,12 @@ pub(crate) fn run(args: BenchArgs) -> anyhow::Result<()> {
         &[(args.task.config.as_deref(), "--config")],
     )?;
     let mut config = args.task.load()?;
+    let estimate = fuzzyq_sim::memory::bench(&config, args.device == Device::Gpu);
+    output::check_memory(args.max_memory, &estimate)?;
     start_pool(args.threads)?;
+    if args.evaluations.is_some() && args.device != Device::Gpu {
+        anyhow::bail!("--evaluations times the GPU's evaluation sweeps; it needs --device gpu");
+    }
     if args.device == Device::Gpu {
         if args.kernel.is_some() {
             anyhow::bail!("--kernel chooses a CPU kernel; --device gpu has none");
@@ -358,6 +372,9 @@ struct GpuReport {
     batch_level: usize,
     items_per_batch: u64,
     batches_per_pass: u64,
+    /// The buffers `V` and the other per-core buffers are cut into, each within one storage
+    /// binding (1 unless `V` exceeds a binding).
+    v_parts: usize,
     setup_seconds: f64,
     subgroups: bool,
     evaluation_seconds: Vec<f64>,
@@ -400,7 +417,9 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     };
     let t0 = Instant::now();
     let op = solver::Operator::new(&model, grid.view(), backup, s.path)?;
-    let mut sweeps = fuzzyq_gpu::GpuSweeps::new(&gpu, &op)?;
+    // The buffers the timed passes use: `V` twice and the policy.
+    let scheme = solver::Scheme::ModifiedPolicy;
+    let mut sweeps = fuzzyq_gpu::GpuSweeps::for_scheme(&gpu, &op, scheme)?;
     let setup = t0.elapsed().as_secs_f64();
     let (cores, joint) = (config.n_cores(), config.n_joint_actions());
     let fma = op.multiply_adds_per_sweep();
@@ -425,9 +444,10 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     let fraction = rate.map(|r| r / peak);
     // Evaluation sweeps (modified policy iteration's) under the greedy actions of the last V.
     let mut evaluation = Vec::new();
-    if op.block_plan().is_some_and(|p| p.can_evaluate) {
+    let evaluations = args.evaluations.unwrap_or(3);
+    if evaluations > 0 && op.block_plan().is_some_and(|p| p.can_evaluate) {
         sweeps.backup_greedy(v, out)?;
-        for _ in 0..3 {
+        for _ in 0..evaluations {
             let t = Instant::now();
             sweeps.evaluate(out, v)?;
             evaluation.push(t.elapsed().as_secs_f64());
@@ -461,13 +481,17 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         }
     }
     println!(
-        "problem    {}: {cores} cores x {joint} joint actions{}; {}; {:.3} GB on the GPU; set-up \
-         {:.3} s",
+        "problem    {}: {cores} cores x {joint} joint actions{}; {}{}; {:.3} GB on the GPU; \
+         set-up {:.3} s",
         config.env.name(),
         fma.map_or(String::new(), |f| format!(
             ", {f:.3e} multiply-adds per full backup"
         )),
         sweeps.batches(),
+        match sweeps.parts() {
+            1 => String::new(),
+            p => format!("; V in {p} parts"),
+        },
         sweeps.device_bytes() as f64 / 1e9,
         setup
     );
@@ -497,6 +521,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             batch_level: sweeps.batches().level,
             items_per_batch: sweeps.batches().items,
             batches_per_pass: sweeps.batches().count,
+            v_parts: sweeps.parts(),
             setup_seconds: setup,
             subgroups: sweeps.uses_subgroups(),
             evaluation_seconds: evaluation,

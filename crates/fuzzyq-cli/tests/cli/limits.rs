@@ -158,6 +158,36 @@ fn runs_beyond_the_memory_limit_and_flags_that_do_not_apply_are_refused() {
             1,
         );
     std::fs::write(d.join("huge.toml"), huge).unwrap();
+    // The paper's grid for three agents: 45^6 = 8.3e9 cores, beyond 2^32 (a grid may have
+    // more), refused by its memory.
+    let three = text.replace("agents = 1 ", "agents = 3 ");
+    assert_ne!(three, text);
+    std::fs::write(d.join("three.toml"), three).unwrap();
+    assert_all_fail(
+        d,
+        &[
+            (
+                "train --config three.toml --out h.fzq",
+                "GB of memory for 8.304e9 cores",
+            ),
+            (
+                "train --config three.toml --out h.fzq --device gpu --max-memory 100",
+                "8.304e9 cores (V on the GPU; the rewards and the result here)",
+            ),
+            (
+                "bench --config huge.toml --max-memory 10",
+                "GB of memory for 6.719e8 cores",
+            ),
+            (
+                "bench --config three.toml --device gpu --max-memory 100",
+                "8.304e9 cores (V on the GPU; the rewards and V read back here)",
+            ),
+            (
+                "bench --config one.toml --max-memory 0",
+                "--max-memory must be a positive",
+            ),
+        ],
+    );
     assert_all_fail(
         d,
         &[

@@ -1378,8 +1378,9 @@ fn train_on_the_gpu_and_its_refusals() {
     );
 }
 
-/// `bench --device gpu` on three point masses with a 1 MiB stage budget: the passes run in
-/// batches below fixed cores of the first blocks, and the report says so.
+/// `bench --device gpu` on three point masses with a 1 MiB stage budget and `V` in parts of
+/// 64 KiB: the passes run in batches below fixed cores of the first blocks, over `V`'s parts,
+/// and the report says so.
 #[test]
 fn bench_on_the_gpu_batches_three_point_masses() {
     let dir = tempfile::tempdir().unwrap();
@@ -1409,6 +1410,8 @@ fn bench_on_the_gpu_batches_three_point_masses() {
             "b.json",
         ])
         .env("FUZZYQ_GPU_BATCH_MB", "1")
+        // A slab of V takes 6^5 x 4 bytes (31 KB): parts of two slabs.
+        .env("FUZZYQ_GPU_PART_KB", "64")
         .current_dir(d)
         .output()
         .unwrap();
@@ -1420,7 +1423,9 @@ fn bench_on_the_gpu_batches_three_point_masses() {
     assert!(o.status.success(), "{err}");
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("below fixed cores of block"), "{out}");
+    assert!(out.contains("; V in 3 parts;"), "{out}");
     let j = json(&d.join("b.json"));
+    assert_eq!(j["v_parts"], 3);
     assert_eq!(j["cores"], 6u64.pow(6));
     assert_eq!(j["joint_actions"], 729);
     assert!(j["batch_level"].as_u64().unwrap() >= 1, "{j}");

@@ -109,9 +109,10 @@ where
     )
 }
 
-/// Builds a [`Sweeps`] backend for a prepared operator ([`solve_with`]).
+/// Builds a [`Sweeps`] backend for a prepared operator and the scheme the run will iterate
+/// by ([`solve_with`]; [`Scheme::value_buffers`] says what the scheme asks of a backend).
 pub type MakeSweeps<'m, T, M, S> =
-    dyn FnMut(&super::Operator<'_, T, M>) -> Result<S, <S as Sweeps<T>>::Error> + 'm;
+    dyn FnMut(&super::Operator<'_, T, M>, Scheme) -> Result<S, <S as Sweeps<T>>::Error> + 'm;
 
 /// [`solve_from`] with the passes over `V` run by a backend that `make` builds from the run's
 /// operator (a GPU holding its own copy of the block tables, say): the operator is prepared
@@ -136,7 +137,7 @@ where
     config.validate()?;
     let start = Instant::now();
     let run = prepare(model, grid, config)?;
-    let mut sweeps = make(&run.op)?;
+    let mut sweeps = make(&run.op, run.scheme)?;
     // The coarse grid's backend made by `make` too. A function pointer for its observer, not
     // a closure: the recursive call instantiates this function once more, not once per nesting.
     let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =

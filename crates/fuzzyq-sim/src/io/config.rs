@@ -758,11 +758,11 @@ impl TrainConfig {
             .grid_cores()
             .iter()
             .map(Vec::len)
-            .try_fold(1u64, |a, l| a.checked_mul(l as u64));
+            .try_fold(1usize, usize::checked_mul);
         require!(
-            n.is_some_and(|n| n <= u64::from(u32::MAX)),
+            n.is_some(),
             "grid",
-            "the joint grid has more than 2^32 cores",
+            "the joint grid has more cores than this machine can index",
         );
         self.solver.validate()
     }
