@@ -61,7 +61,8 @@ pub(crate) enum Entry {
     StageConst,
     /// `last1.wgsl`, compiled per problem (not in [`Entry::ALL`]).
     LastOne,
-    /// `evaluate.wgsl`, compiled per problem with the parts of `V` (not in [`Entry::ALL`]).
+    /// `evaluate.wgsl`: compiled once ([`Kernels::evaluate`]) for a `V` in one part, else per
+    /// problem with its parts (not in [`Entry::ALL`]).
     Evaluate,
 }
 
@@ -94,6 +95,10 @@ impl Entry {
 pub(crate) struct Kernels {
     pub layout: wgpu::BindGroupLayout,
     pipelines: Vec<wgpu::ComputePipeline>,
+    /// Group 1's layout for a `V` in one part, and policy evaluation over it (`evaluate.wgsl`
+    /// with [`crate::parts::ONE_PART`]): the same for every such problem.
+    pub one_part: wgpu::BindGroupLayout,
+    pub evaluate: wgpu::ComputePipeline,
     /// `diff.wgsl`, where the adapter has `f64`.
     pub diff: Option<(wgpu::BindGroupLayout, wgpu::ComputePipeline)>,
 }
@@ -210,6 +215,22 @@ impl Kernels {
             .iter()
             .map(|e| pipeline(device, &[&layout], &module, e.name()))
             .collect();
+        let one_part = parts_layout(gpu, 1);
+        let source = [
+            include_str!("block.wgsl"),
+            crate::parts::ONE_PART,
+            include_str!("evaluate.wgsl"),
+        ]
+        .concat();
+        let evaluate = pipeline(
+            device,
+            &[&layout, &one_part],
+            &device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("evaluate.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            }),
+            "evaluate",
+        );
         let diff = gpu.summary.f64.then(|| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("diff.wgsl"),
@@ -235,6 +256,8 @@ impl Kernels {
         Ok(Self {
             layout,
             pipelines,
+            one_part,
+            evaluate,
             diff,
         })
     }

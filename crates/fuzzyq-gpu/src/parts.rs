@@ -17,6 +17,14 @@ use core::ops::Range;
 
 use crate::error::GpuError;
 
+/// [`Parts::reader`] of a `V` in one part: the same for every problem (`R_0` from the
+/// dispatch's parameters), so the kernels that read it compile once per GPU.
+pub(crate) const ONE_PART: &str = "@group(1) @binding(0) var<storage, read> vp0: array<f32>;
+fn v_at(c0: u32, r: u32) -> f32 {
+    return vp0[c0 * blk(0u).z + r];
+}
+";
+
 /// The parts of a run's per-core buffers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Parts {
@@ -110,21 +118,20 @@ impl Parts {
     }
 
     /// WGSL declaring the parts of the `V` a kernel reads as bindings `vp0..` of group 1,
-    /// and `v_at(c0, r)`: `V` at core `c0 R_0 + r`.
+    /// and `v_at(c0, r)`: `V` at core `c0 R_0 + r` ([`ONE_PART`] where there is one).
     pub(crate) fn reader(&self) -> String {
+        if self.count() == 1 {
+            return ONE_PART.to_string();
+        }
         let mut s = String::new();
         for k in 0..self.count() {
             s.push_str(&format!(
                 "@group(1) @binding({k}) var<storage, read> vp{k}: array<f32>;\n"
             ));
         }
-        s.push_str("fn v_at(c0: u32, r: u32) -> f32 {\n");
-        if self.count() == 1 {
-            s.push_str(&format!("    return vp0[c0 * {}u + r];\n}}\n", self.slab));
-            return s;
-        }
         s.push_str(&format!(
-            "    let i = (c0 % {per}u) * {slab}u + r;\n    switch c0 / {per}u {{\n",
+            "fn v_at(c0: u32, r: u32) -> f32 {{\n    let i = (c0 % {per}u) * {slab}u + r;\n    \
+             switch c0 / {per}u {{\n",
             per = self.per,
             slab = self.slab
         ));

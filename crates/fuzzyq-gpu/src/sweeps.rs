@@ -222,7 +222,7 @@ pub struct GpuSweeps {
     /// its cores per workgroup.
     last1: Option<(wgpu::ComputePipeline, u32)>,
     /// Policy evaluation compiled with the parts of `V` (`evaluate.wgsl`), where the run
-    /// can evaluate.
+    /// can evaluate and `V` takes several parts (else [`Kernels::evaluate`]).
     evaluate: Option<wgpu::ComputePipeline>,
     /// Whether `last1` reduces by subgroup operations.
     subgroups: bool,
@@ -432,7 +432,7 @@ struct Compiled {
 /// stage the passes run as a stage (the first, where several blocks contract, reading `V`'s
 /// parts through group 1, `parts`), the fused last stage (with the cores per workgroup) where
 /// the joint actions are the product's and the reward does not depend on the action, and
-/// policy evaluation where the run can evaluate. `sg`: the subgroup size the last stage
+/// policy evaluation where the run can evaluate over a `V` in several parts. `sg`: the subgroup size the last stage
 /// reduces with, if any.
 fn compile(
     gpu: &Gpu,
@@ -503,7 +503,8 @@ fn compile(
     } else {
         None
     };
-    let evaluate = if shape.can_evaluate {
+    // One part: the kernel compiled once per GPU.
+    let evaluate = if shape.can_evaluate && shape.parts.count() > 1 {
         let t = (include_str!("evaluate.wgsl"), "evaluate");
         Some(kernels::specialized(
             &gpu.inner,
@@ -651,7 +652,11 @@ impl GpuSweeps {
                 .map(|k| zeroed(ctx, label, 4 * parts.len(k)))
                 .collect()
         };
-        let parts_layout = kernels::parts_layout(ctx, parts.count());
+        let parts_layout = if parts.count() == 1 {
+            k.one_part.clone()
+        } else {
+            kernels::parts_layout(ctx, parts.count())
+        };
         let sg = ctx.summary.subgroup_size.filter(|_| gpu.subgroups);
         let compiled = compile(gpu, &k, &shape, sg, (&parts_layout, &parts.reader()))?;
         let sweeps = Self {
@@ -831,7 +836,7 @@ impl GpuSweeps {
         match d.entry {
             Entry::StageConst => &self.stage_c[d.params.b as usize],
             Entry::LastOne => &self.last1.as_ref().expect("compiled where used").0,
-            Entry::Evaluate => self.evaluate.as_ref().expect("compiled where used"),
+            Entry::Evaluate => self.evaluate.as_ref().unwrap_or(&self.k.evaluate),
             e => self.k.pipeline(e),
         }
     }
