@@ -40,9 +40,9 @@ LAYERS = {
     ],
     "fuzzyq-gpu": [
         {"error", "reference", "memory", "batches"},
-        {"parts"},
         {"context"},
         {"buffers"},
+        {"parts"},
         {"kernels"},
         {"probe"},
         {"gpu"},

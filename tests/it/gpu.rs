@@ -255,17 +255,28 @@ fn passes_match<M: Model<f32> + Sync>(g: &Gpu, op: &Operator<'_, f32, M>) {
         hs.rewards(Buf(1)).unwrap();
         same(&gs, &hs, "rewards");
     }
-    // Every buffer is allocated now (the exact delta's too), and the memory estimated before
-    // allocating is what they take, to the byte: a limit of exactly that opens the run, one
-    // byte less refuses it.
+    // Every buffer is allocated now (the exact delta's too).
     let bytes = gs.device_bytes();
     drop(gs);
-    GpuSweeps::new(&g.clone().with_memory_limit(bytes), op).expect("fits to the byte");
-    let e = GpuSweeps::new(&g.clone().with_memory_limit(bytes - 1), op).unwrap_err();
+    estimate_is_exact(g, op, Scheme::Value, bytes);
+}
+
+/// The memory estimated before allocating a run of `scheme` is `bytes`, what its buffers take,
+/// to the byte: a limit of exactly that opens the run, one byte less refuses it (the error,
+/// returned, giving the same need).
+fn estimate_is_exact<M: Model<f32> + Sync>(
+    g: &Gpu,
+    op: &Operator<'_, f32, M>,
+    scheme: Scheme,
+    bytes: u64,
+) -> GpuError {
+    GpuSweeps::for_scheme(&g.clone().with_memory_limit(bytes), op, scheme).expect("fits");
+    let e = GpuSweeps::for_scheme(&g.clone().with_memory_limit(bytes - 1), op, scheme).unwrap_err();
     assert!(
         matches!(e, GpuError::OutOfMemory { need, .. } if need == bytes),
         "{e}"
     );
+    e
 }
 
 /// The operator a run of `config` prepares.
@@ -372,7 +383,6 @@ fn every_batching_gives_the_same_bits() {
 #[test]
 fn v_in_parts_gives_the_same_bits() {
     let Some(g) = gpu() else { return };
-    eprintln!("{:?}", g.summary());
     // `V` cut into parts (one slab each at the smallest, as a `V` over one storage binding
     // is): the first stage and policy evaluation read across parts, the other passes run a
     // part at a time, the goal bits and the reward table are cut with them. Every pass keeps
@@ -433,12 +443,7 @@ fn modified_policy_iteration_holds_v_twice() {
     gs.rewards(Buf(1)).unwrap();
     gs.greedy(Buf(0)).unwrap();
     let bytes = gs.device_bytes();
-    GpuSweeps::for_scheme(&g.clone().with_memory_limit(bytes), &op, mpi).expect("fits");
-    let e = GpuSweeps::for_scheme(&g.clone().with_memory_limit(bytes - 1), &op, mpi).unwrap_err();
-    assert!(
-        matches!(e, GpuError::OutOfMemory { need, .. } if need == bytes),
-        "{e}"
-    );
+    let e = estimate_is_exact(g, &op, mpi, bytes);
     assert!(e.to_string().contains("V twice and the policy"), "{e}");
     // Value iteration's third V and the exact delta's two work buffers, made on first use.
     assert_eq!(gs.values(Buf(2)).unwrap().into_owned(), vec![0.0; n]);

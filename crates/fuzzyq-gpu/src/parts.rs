@@ -90,6 +90,18 @@ impl Parts {
         r.end - r.start
     }
 
+    /// Cores of the largest part (the first: only the last may hold fewer slabs).
+    pub(crate) fn largest(&self) -> u64 {
+        self.len(0)
+    }
+
+    /// Per-core `f32` or `u32` buffers, one zeroed buffer per part.
+    pub(crate) fn zeroed(&self, gpu: &crate::context::Context, label: &str) -> Vec<wgpu::Buffer> {
+        (0..self.count())
+            .map(|k| crate::buffers::zeroed(gpu, label, 4 * self.len(k)))
+            .collect()
+    }
+
     /// The part holding core `core`.
     pub(crate) fn of_core(&self, core: u64) -> usize {
         (core / self.slab / self.per) as usize

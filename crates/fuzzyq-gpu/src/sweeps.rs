@@ -232,8 +232,9 @@ pub struct GpuSweeps {
     rewards: Vec<wgpu::Buffer>,
     goal: wgpu::Buffer,
     map: wgpu::Buffer,
-    /// `V`'s three buffers, the policy, and the exact delta's two work buffers (made when it
-    /// first runs), each a buffer per part.
+    /// `V`'s buffers (those of the run's scheme; another when a pass first asks for it), the
+    /// policy, and the exact delta's two work buffers (made when it first runs), each a
+    /// buffer per part.
     v: [Vec<wgpu::Buffer>; 3],
     policy: Vec<wgpu::Buffer>,
     scratch: Vec<wgpu::Buffer>,
@@ -432,8 +433,8 @@ struct Compiled {
 /// stage the passes run as a stage (the first, where several blocks contract, reading `V`'s
 /// parts through group 1, `parts`), the fused last stage (with the cores per workgroup) where
 /// the joint actions are the product's and the reward does not depend on the action, and
-/// policy evaluation where the run can evaluate over a `V` in several parts. `sg`: the subgroup size the last stage
-/// reduces with, if any.
+/// policy evaluation where the run can evaluate over a `V` in several parts. `sg`: the
+/// subgroup size the last stage reduces with, if any.
 fn compile(
     gpu: &Gpu,
     k: &Kernels,
@@ -529,8 +530,7 @@ impl GpuSweeps {
     /// Uploads `op`'s block tables and allocates the run's buffers on `gpu`.
     ///
     /// Refused ([`GpuError::Unsupported`]): the generic path (no blocks), terminal states,
-    /// more than 8 blocks, a reward of the action where `V` takes more than one part.
-    /// [`GpuError::TooLarge`] where a buffer exceeds the adapter's limits, and
+    /// more than 8 blocks. [`GpuError::TooLarge`] where a buffer exceeds the adapter's limits, and
     /// [`GpuError::OutOfMemory`] where the run's buffers exceed its memory (both checked
     /// before allocating). `V` and the other per-core buffers are cut into parts of at most
     /// one storage binding ([`Gpu::with_part_bytes`]).
@@ -587,7 +587,7 @@ impl GpuSweeps {
         let parts = Parts::new(u64::from(n0), u64::from(r0), max_binding, wish, max_parts)?;
         if plan.rewards.is_none() {
             // The reward table, cut as `V` is.
-            let largest = (0..parts.count()).map(|k| parts.len(k)).max().unwrap_or(0);
+            let largest = parts.largest();
             let what = if parts.count() == 1 {
                 "the reward table"
             } else {
@@ -619,8 +619,7 @@ impl GpuSweeps {
         let parts = shape.parts;
         let map = plan.joint_to_product.unwrap_or(&[]);
         let goal = goal_bits(plan.goal, &parts);
-        let largest_part = (0..parts.count()).map(|k| parts.len(k)).max().unwrap_or(1);
-        let (gx, gy) = kernels::groups(largest_part.div_ceil(PER_WG));
+        let (gx, gy) = kernels::groups(parts.largest().div_ceil(PER_WG));
         let partial_len = u64::from(gx) * u64::from(gy);
         let k = gpu.kernels.clone();
         // Dispatches per submission: a pass's, up to 1,024.
@@ -647,11 +646,6 @@ impl GpuSweeps {
         let ctx = &gpu.inner;
         let device = &ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let per_core = |label: &str| -> Vec<wgpu::Buffer> {
-            (0..parts.count())
-                .map(|k| zeroed(ctx, label, 4 * parts.len(k)))
-                .collect()
-        };
         let parts_layout = if parts.count() == 1 {
             k.one_part.clone()
         } else {
@@ -674,15 +668,15 @@ impl GpuSweeps {
             goal: with_data(ctx, "goal", &goal),
             map: with_data(ctx, "map", map),
             v: [
-                per_core("V0"),
-                per_core("V1"),
+                parts.zeroed(ctx, "V0"),
+                parts.zeroed(ctx, "V1"),
                 if scheme.value_buffers() > 2 {
-                    per_core("V2")
+                    parts.zeroed(ctx, "V2")
                 } else {
                     Vec::new()
                 },
             ],
-            policy: per_core("policy"),
+            policy: parts.zeroed(ctx, "policy"),
             scratch: Vec::new(),
             dv: Vec::new(),
             stages: (0..shape.written_stages())
@@ -744,8 +738,9 @@ impl GpuSweeps {
         self.shape.parts.count()
     }
 
-    /// Bytes of device memory this run's buffers take now (the exact delta's two work
-    /// buffers once it has run): at most what [`Self::new`] estimated and checked against
+    /// Bytes of device memory this run's buffers take now (a buffer made on first use, such
+    /// as the exact delta's two, once a pass asked for it): for the buffers of the run's
+    /// scheme, at most what [`Self::for_scheme`] estimated and checked against
     /// [`AdapterSummary::memory`](crate::AdapterSummary::memory).
     #[must_use]
     pub fn device_bytes(&self) -> u64 {
@@ -1096,10 +1091,7 @@ impl GpuSweeps {
         if !self.parts_of(b).is_empty() {
             return;
         }
-        let parts = self.shape.parts;
-        let made = (0..parts.count())
-            .map(|k| zeroed(&self.gpu.inner, "per core", 4 * parts.len(k)))
-            .collect();
+        let made = self.shape.parts.zeroed(&self.gpu.inner, "per core");
         match b {
             PerCore::V(i) => self.v[usize::from(i)] = made,
             PerCore::Scratch => self.scratch = made,

@@ -217,3 +217,12 @@ impl<T: Real> GenericOperator<T> {
         Ok(maxima.into_iter().fold(T::ZERO, T::max_of))
     }
 }
+
+/// Refuses `n` cores for a solver whose tables index cores in 32 bits (the generic backup
+/// path, Q-iteration); the block path indexes them in `usize`.
+pub(super) fn check_u32_cores(n: usize, what: &'static str) -> Result<(), SolveError> {
+    if u32::try_from(n).is_err() {
+        return Err(SolveError::TooLarge { what });
+    }
+    Ok(())
+}

@@ -109,6 +109,27 @@ where
     )
 }
 
+impl Scheme {
+    /// The value buffers the scheme's driver asks a [`Sweeps`] backend for: `Buf(0)` up to
+    /// `Buf(n - 1)` (value iteration keeps the previous `V` beside the current one and the
+    /// sweep's output; modified policy iteration only the current one and the output). A
+    /// backend may hold just these (a GPU's memory).
+    #[must_use]
+    pub fn value_buffers(self) -> u8 {
+        match self {
+            Scheme::Value => 3,
+            Scheme::ModifiedPolicy => 2,
+        }
+    }
+
+    /// Whether the scheme's driver asks for [`Sweeps::exact_delta`] (value iteration's exact
+    /// stopping rule), for which a backend may hold work buffers.
+    #[must_use]
+    pub fn uses_exact_delta(self) -> bool {
+        self == Scheme::Value
+    }
+}
+
 /// Builds a [`Sweeps`] backend for a prepared operator and the scheme the run will iterate
 /// by ([`solve_with`]; [`Scheme::value_buffers`] says what the scheme asks of a backend).
 pub type MakeSweeps<'m, T, M, S> =

@@ -688,36 +688,6 @@ pub enum Scheme {
     ModifiedPolicy,
 }
 
-/// Refuses `n` cores for a solver whose tables index cores in 32 bits (the generic backup
-/// path, Q-iteration); the block path indexes them in `usize`.
-pub(crate) fn check_u32_cores(n: usize, what: &'static str) -> Result<(), SolveError> {
-    if u32::try_from(n).is_err() {
-        return Err(SolveError::TooLarge { what });
-    }
-    Ok(())
-}
-
-impl Scheme {
-    /// The value buffers the scheme's driver asks a [`Sweeps`] backend for: `Buf(0)` up to
-    /// `Buf(n - 1)` (value iteration keeps the previous `V` beside the current one and the
-    /// sweep's output; modified policy iteration only the current one and the output). A
-    /// backend may hold just these (a GPU's memory).
-    #[must_use]
-    pub fn value_buffers(self) -> u8 {
-        match self {
-            Scheme::Value => 3,
-            Scheme::ModifiedPolicy => 2,
-        }
-    }
-
-    /// Whether the scheme's driver asks for [`Sweeps::exact_delta`] (value iteration's exact
-    /// stopping rule), for which a backend may hold work buffers.
-    #[must_use]
-    pub fn uses_exact_delta(self) -> bool {
-        self == Scheme::Value
-    }
-}
-
 /// The result of a solve.
 #[derive(Clone, Debug)]
 pub struct Solution<T> {
@@ -883,7 +853,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
         let path = if use_blocks {
             Path::Block(BlockOperator::new(model, &grid, &joint)?)
         } else {
-            check_u32_cores(grid.n_cores(), "grid of the generic backup path")?;
+            generic::check_u32_cores(grid.n_cores(), "grid of the generic backup path")?;
             Path::Generic(GenericOperator::new(model, &grid, joint.n_joint(), table))
         };
         let m = joint.n_joint();

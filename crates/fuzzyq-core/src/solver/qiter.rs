@@ -210,7 +210,7 @@ where
     }
     let joint = joint_actions(model)?;
     let (n, m) = (view.n_cores(), joint.n_joint());
-    super::check_u32_cores(n, "grid of Q-iteration")?;
+    super::generic::check_u32_cores(n, "grid of Q-iteration")?;
     let gamma = T::from_f64(config.gamma);
     if (0..model.n_blocks()).any(|b| model.block_rows(b).is_some()) {
         return Err(SolveError::BlockRowsOnly {
