@@ -19,7 +19,12 @@
 # card, about 108 GB of the host's memory): two full backups timed. Last, three point masses
 # on a smaller grid (GPU_CHECK_THREE, a configuration; empty skips them): trained on the GPU
 # and rolled out from 20 random starts, then one full backup with 5 force levels per axis.
-# GPU_CHECK_SECTIONS picks sections (default "1 2 3 paper 4").
+# GPU_CHECK_SECTIONS picks sections (default "1 2 3 paper 4"). Two more, not run by default as
+# each takes minutes (run them as calls of their own): "paper-train" trains three point masses
+# on the paper's cores with forces of -0.2, 0 and 0.2 N per axis (729 joint actions) to the
+# paper's xi on the GPU (about 108 GB of the host's memory; the policy, about 48 GB, goes to
+# GPU_CHECK_SCRATCH, default /tmp, not $OUT), and "paper-rollout" rolls that policy out from
+# 20 starts and removes it.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-gpu-check-out}
@@ -33,7 +38,7 @@ now() { date +%s.%N; }
 secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
 # Where a run's time went, from its `train --json` summary: the device, the set-up, the coarse
 # start, the sweeps (of which evaluation), the other passes (exact changes, greedy passes),
-# the result read back, the policy written, and the command's total.
+# the result read back, the policy written, and the command's total; the process's peak memory.
 phases() {
   python3 - "$1" <<'PY' 2>/dev/null || echo "no summary"
 import json, sys
@@ -44,9 +49,21 @@ other = g("seconds") - g("setup_seconds") - coarse - g("sweep_seconds") - g("res
 parts = [("device", d.get("device_seconds")), ("setup", g("setup_seconds")), ("coarse", coarse),
          ("sweeps", g("sweep_seconds")), ("of them evaluation", g("evaluation_seconds")),
          ("other passes", other), ("result", g("result_seconds")), ("write", g("write_seconds"))]
+peak = d.get("peak_memory_mb")
 print(", ".join(f"{k} {v:.3f}" for k, v in parts if v is not None)
-      + f" = command {g('command_seconds'):.3f} s")
+      + f" = command {g('command_seconds'):.3f} s"
+      + (f"; peak memory {peak:.0f} MB" if peak else ""))
 PY
+}
+
+# A GPU training run of configuration $2 writing policy $3, timed, within $1 seconds (its log
+# $OUT/train-$4.log, its summary $OUT/$4.json): sets rc and wall.
+timed_train() {
+  local t0
+  t0=$(now)
+  timeout "$1" "$BIN" train --config "$2" --device gpu --out "$3" --json "$OUT/$4.json" >"$OUT/train-$4.log" 2>&1
+  rc=$?
+  wall=$(secs "$t0" "$(now)")
 }
 
 # The Vulkan loader, and NVIDIA's driver file.
@@ -152,11 +169,7 @@ fi
 # 4. Three point masses: six blocks, so batches below fixed cores of the first blocks.
 THREE=${GPU_CHECK_THREE-examples/three-point-masses.toml}
 if want 4 && [ -n "$THREE" ]; then
-  t0=$(now)
-  timeout 240 "$BIN" train --config "$THREE" --device gpu --out "$OUT/three.fzq" \
-    --json "$OUT/three.json" >"$OUT/train-three.log" 2>&1
-  rc=$?
-  wall=$(secs "$t0" "$(now)")
+  timed_train 240 "$THREE" "$OUT/three.fzq" three
   sweeps=$(grep -E 'converged|sweeps' "$OUT/train-three.log" | tail -1 | cut -c1-140)
   reach="no policy"
   if [ $rc = 0 ]; then
@@ -173,6 +186,33 @@ if want 4 && [ -n "$THREE" ]; then
   rc=$?
   row "GPU full backup, three point masses, 5 forces per axis" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
     "$(grep -E '^(backup|problem)' "$OUT/bench-three-5.log" | sed 's/  */ /g' | paste -sd ';' -)"
+fi
+
+# The paper's three point masses trained on the GPU (opt-in: minutes), then rolled out from
+# the policy that run left in the scratch folder (a section of its own, so that each fits one
+# call of at most 10 minutes), which is then removed.
+scratch=${GPU_CHECK_SCRATCH:-/tmp}
+if [[ " ${GPU_CHECK_SECTIONS:-} " == *" paper-train "* ]]; then
+  "$BIN" config --env pointmass | sed 's/^agents = 2 /agents = 3 /; s/^force_levels = .*/force_levels = [-0.2, 0.0, 0.2]/' \
+    >"$OUT/paper-three-3f.toml"
+  timed_train 560 "$OUT/paper-three-3f.toml" "$scratch/paper-three.fzq" paper-three
+  sweeps=$(grep -E 'converged|sweeps|error' "$OUT/train-paper-three.log" | tail -1 | cut -c1-160)
+  size=$(stat -c %s "$scratch/paper-three.fzq" 2>/dev/null || echo none)
+  row "train three point masses on the paper's cores, 3 forces per axis" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "gpu ${wall} s wall; ${sweeps}; policy file ${size} bytes"
+  row "  its seconds on the gpu" "" "$(phases "$OUT/paper-three.json")"
+fi
+if [[ " ${GPU_CHECK_SECTIONS:-} " == *" paper-rollout "* ]]; then
+  t0=$(now)
+  peak=()
+  [ -x /usr/bin/time ] && peak=(/usr/bin/time -f "peak memory %M KB")
+  timeout 560 "${peak[@]}" "$BIN" rollout --policy "$scratch/paper-three.fzq" --starts 20 \
+    >"$OUT/rollout-paper-three.log" 2>&1
+  rc=$?
+  wall=$(secs "$t0" "$(now)")
+  rm -f "$scratch/paper-three.fzq"
+  row "roll out three point masses on the paper's cores from 20 starts" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "${wall} s wall; $(grep -vE '^(peak|Command exited)' "$OUT/rollout-paper-three.log" | tail -1 | cut -c1-160); $(grep '^peak' "$OUT/rollout-paper-three.log")"
 fi
 
 echo

@@ -175,7 +175,9 @@ macro_rules! __named_option_serde {
             fn deserialize<D: $crate::options::serde::Deserializer<'de>>(
                 d: D,
             ) -> ::core::result::Result<Self, D::Error> {
-                d.deserialize_str($crate::options::NameVisitor::<Self>::new())
+                // A name is read as a transient string (`visit_str`): a format reading from a
+                // stream has no input to lend a `&'de str` from.
+                d.deserialize_string($crate::options::NameVisitor::<Self>::new())
             }
         }
     };

@@ -32,6 +32,13 @@ pub(crate) fn zeroed(gpu: &Context, label: &str, bytes: u64) -> wgpu::Buffer {
     })
 }
 
+/// Submits what the queue has staged (buffer writes, buffers made with data) and waits for
+/// it, so that the host's staging memory is freed before more is staged.
+pub(crate) fn settle(gpu: &Context) -> Result<(), GpuError> {
+    gpu.queue.submit([]);
+    wait(gpu)
+}
+
 /// Waits for every submitted command.
 pub(crate) fn wait(gpu: &Context) -> Result<(), GpuError> {
     gpu.device
@@ -48,32 +55,57 @@ pub(crate) fn read_as<T: bytemuck::Pod>(
     buffer: &wgpu::Buffer,
     len: usize,
 ) -> Result<Vec<T>, GpuError> {
-    let bytes = (len * size_of::<T>()) as u64;
+    let mut out = vec![T::zeroed(); len];
+    read_pieces(gpu, buffer, len, len, &mut |first, piece: &[T]| {
+        out[first..first + piece.len()].copy_from_slice(piece);
+    })?;
+    Ok(out)
+}
+
+/// The first `len` values of `buffer` read back `piece` values at a time (the last piece may
+/// hold fewer), each handed to `each(first, values)` from one staging buffer of a piece's
+/// size: the host never holds more than a piece beyond what `each` keeps.
+pub(crate) fn read_pieces<T: bytemuck::Pod>(
+    gpu: &Context,
+    buffer: &wgpu::Buffer,
+    len: usize,
+    piece: usize,
+    each: &mut dyn FnMut(usize, &[T]),
+) -> Result<(), GpuError> {
+    let t = size_of::<T>() as u64;
+    let piece = piece.clamp(1, len.max(1));
     let device = &gpu.device;
-    let size = bytes.max(4).next_multiple_of(4);
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
-        size,
+        size: (piece as u64 * t).max(4).next_multiple_of(4),
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let mut enc = device.create_command_encoder(&Default::default());
-    enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
-    gpu.queue.submit([enc.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    staging.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    wait(gpu)?;
-    rx.recv()
-        .map_err(|e| GpuError::Failed(e.to_string()))?
-        .map_err(|e| GpuError::Failed(e.to_string()))?;
-    let view = staging
-        .get_mapped_range(..)
-        .map_err(|e| GpuError::Failed(e.to_string()))?;
-    let mut out = vec![T::zeroed(); len];
-    bytemuck::cast_slice_mut::<T, u8>(&mut out).copy_from_slice(&view[..bytes as usize]);
-    drop(view);
-    staging.unmap();
-    Ok(out)
+    let mut values = Vec::new();
+    for first in (0..len).step_by(piece) {
+        let n = piece.min(len - first);
+        let bytes = n as u64 * t;
+        // Copies and mappings run in whole words (`wgpu::COPY_BUFFER_ALIGNMENT`).
+        let size = bytes.max(4).next_multiple_of(4);
+        let mut enc = device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(buffer, first as u64 * t, &staging, 0, size);
+        gpu.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, ..size, move |r| {
+            let _ = tx.send(r);
+        });
+        wait(gpu)?;
+        rx.recv()
+            .map_err(|e| GpuError::Failed(e.to_string()))?
+            .map_err(|e| GpuError::Failed(e.to_string()))?;
+        let view = staging
+            .get_mapped_range(..size)
+            .map_err(|e| GpuError::Failed(e.to_string()))?;
+        values.resize(n, T::zeroed());
+        bytemuck::cast_slice_mut::<T, u8>(&mut values).copy_from_slice(&view[..bytes as usize]);
+        drop(view);
+        staging.unmap();
+        each(first, &values);
+    }
+    Ok(())
 }

@@ -19,6 +19,8 @@ pub struct Gpu {
     pub(crate) batch_bytes: u64,
     /// Bytes of a part of `V` (at most one storage binding).
     pub(crate) part_bytes: u64,
+    /// Bytes of a piece of the result read back at the end of a run.
+    pub(crate) read_bytes: u64,
     /// Whether the last stage may reduce a core's lanes by subgroup operations.
     pub(crate) subgroups: bool,
 }
@@ -89,6 +91,7 @@ impl Gpu {
             memory: ctx.summary.memory,
             batch_bytes: default_batch_bytes(),
             part_bytes: env_kib("FUZZYQ_GPU_PART_KB").unwrap_or(u64::MAX),
+            read_bytes: 256 << 20,
             subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
@@ -153,6 +156,17 @@ impl Gpu {
     #[must_use]
     pub fn with_part_bytes(mut self, bytes: u64) -> Self {
         self.part_bytes = bytes;
+        self
+    }
+
+    /// This GPU reading a run's result (`V` and the greedy actions, at the end) back in pieces
+    /// of about `bytes` (whole slabs, at least one; default 256 MiB), each put in grid order
+    /// as it arrives: the host holds the result and one piece, never `V` twice (three point
+    /// masses on the paper's cores: 33 GB of `V`, 33 GB of greedy actions). Any pieces give
+    /// the same result.
+    #[must_use]
+    pub fn with_read_bytes(mut self, bytes: u64) -> Self {
+        self.read_bytes = bytes;
         self
     }
 

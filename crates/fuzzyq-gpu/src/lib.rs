@@ -8,8 +8,9 @@
 //! every pass over `V`. [`GpuSweeps`] is that backend on a GPU: the block tables
 //! ([`BlockPlan`](fuzzyq_core::solver::BlockPlan)), `V`'s buffers and the policy live on
 //! the device, and only scalars come back between passes (the range of a sweep's change, the
-//! exact delta); `V` and the greedy actions come back at the end and when an observer asks
-//! for the run's state (a checkpoint).
+//! exact delta); `V` and the greedy actions come back at the end, a few slabs at a time put
+//! in grid order as they arrive ([`Gpu::with_read_bytes`]: the host never holds `V` twice),
+//! and when an observer asks for the run's state (a checkpoint).
 //!
 //! A full backup runs the block contraction a batch at a time ([`Batches`]: a run of slabs, or
 //! where one slab's stage outputs would not fit, a run of cores of a later block below fixed

@@ -330,17 +330,25 @@ fn reward_bytes(plan: &fuzzyq_core::solver::BlockPlan<'_, f32>, n: usize) -> u64
 }
 
 /// The rewards on the device, a buffer per part: per core (`rho(x_d)`), or per core and
-/// joint action (the model's table, or the rewards `op` computes, tabulated once).
+/// joint action (the model's table, or the rewards `op` computes, tabulated once). Where
+/// there are several parts, each is on the device before the next is staged, so the host
+/// stages one part at a time.
 fn reward_buffers<M: Model<f32> + Sync + ?Sized>(
     gpu: &Gpu,
     plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
     op: &Operator<'_, f32, M>,
     parts: &Parts,
-) -> Vec<wgpu::Buffer> {
-    let made = |label: &str, data: &[f32], width: usize| -> Vec<wgpu::Buffer> {
+) -> Result<Vec<wgpu::Buffer>, GpuError> {
+    let made = |label: &str, data: &[f32], width: usize| -> Result<Vec<wgpu::Buffer>, GpuError> {
         parts
             .split(data, width)
-            .map(|d| with_data(&gpu.inner, label, d))
+            .map(|d| {
+                let b = with_data(&gpu.inner, label, d);
+                if parts.count() > 1 {
+                    buffers::settle(&gpu.inner)?;
+                }
+                Ok(b)
+            })
             .collect()
     };
     match (plan.rewards, plan.reward_table) {
@@ -664,7 +672,7 @@ impl GpuSweeps {
                 with_data(ctx, "col", &arrays.col),
                 with_data(ctx, "weight", &arrays.weight),
             ],
-            rewards: reward_buffers(gpu, plan, op, &parts),
+            rewards: reward_buffers(gpu, plan, op, &parts)?,
             goal: with_data(ctx, "goal", &goal),
             map: with_data(ctx, "map", map),
             v: [
@@ -1114,16 +1122,51 @@ impl GpuSweeps {
         Ok(out)
     }
 
+    /// Per-core buffer `b` read back a few slabs at a time ([`Gpu::with_read_bytes`], at
+    /// least one slab), each piece handed to `each(first core, values)` ([`Sweeps::values_by_piece`]):
+    /// zeros where it was never made.
+    fn read_by_piece<T: bytemuck::Pod>(
+        &self,
+        b: PerCore,
+        each: &mut dyn FnMut(usize, &[T]),
+    ) -> Result<(), GpuError> {
+        let parts = self.shape.parts;
+        let piece = (self.gpu.read_bytes / (4 * parts.slab)).max(1) * parts.slab;
+        if self.parts_of(b).is_empty() {
+            let zeros = vec![T::zeroed(); piece.min(self.shape.n as u64) as usize];
+            for first in (0..self.shape.n).step_by(zeros.len().max(1)) {
+                each(first, &zeros[..zeros.len().min(self.shape.n - first)]);
+            }
+            return Ok(());
+        }
+        for (k, buf) in self.parts_of(b).iter().enumerate() {
+            let start = parts.cores(k).start as usize;
+            let len = parts.len(k) as usize;
+            buffers::read_pieces(
+                &self.gpu.inner,
+                buf,
+                len,
+                piece as usize,
+                &mut |first, v| {
+                    each(start + first, v);
+                },
+            )?;
+        }
+        Ok(())
+    }
+
     /// `data` (one value per core) written to per-core buffer `b`, part by part.
-    fn write_all<T: bytemuck::Pod>(&mut self, b: PerCore, data: &[T]) {
+    fn write_all<T: bytemuck::Pod>(&mut self, b: PerCore, data: &[T]) -> Result<(), GpuError> {
         self.ensure(b);
         let parts = self.shape.parts;
         for (buf, d) in self.parts_of(b).iter().zip(parts.split(data, 1)) {
-            self.gpu
-                .inner
-                .queue
-                .write_buffer(buf, 0, bytemuck::cast_slice(d));
+            let gpu = &self.gpu.inner;
+            gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(d));
+            if parts.count() > 1 {
+                buffers::settle(gpu)?;
+            }
         }
+        Ok(())
     }
 }
 
@@ -1246,15 +1289,13 @@ impl Sweeps<f32> for GpuSweeps {
     fn load(&mut self, v: Buf, values: &[f32]) -> Result<(), GpuError> {
         fuzzyq_core::error::check_len("V", self.shape.n, values.len())
             .map_err(fuzzyq_core::solver::SolveError::from)?;
-        self.write_all(Self::v_of(v), values);
-        Ok(())
+        self.write_all(Self::v_of(v), values)
     }
 
     fn load_policy(&mut self, policy: &[u32]) -> Result<(), GpuError> {
         fuzzyq_core::error::check_len("policy", self.shape.n, policy.len())
             .map_err(fuzzyq_core::solver::SolveError::from)?;
-        self.write_all(PerCore::Policy, policy);
-        Ok(())
+        self.write_all(PerCore::Policy, policy)
     }
 
     fn values(&self, v: Buf) -> Result<Cow<'_, [f32]>, GpuError> {
@@ -1263,6 +1304,14 @@ impl Sweeps<f32> for GpuSweeps {
 
     fn policy(&self) -> Result<Cow<'_, [u32]>, GpuError> {
         Ok(Cow::Owned(self.read_all(PerCore::Policy)?))
+    }
+
+    fn values_by_piece(&self, v: Buf, each: &mut dyn FnMut(usize, &[f32])) -> Result<(), GpuError> {
+        self.read_by_piece(Self::v_of(v), each)
+    }
+
+    fn policy_by_piece(&self, each: &mut dyn FnMut(usize, &[u32])) -> Result<(), GpuError> {
+        self.read_by_piece(PerCore::Policy, each)
     }
 
     fn kernel(&self) -> Option<&'static str> {

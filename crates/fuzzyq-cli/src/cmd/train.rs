@@ -478,7 +478,7 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     let (artifact, learned_run) = solve(&args, &task, resume, &mut checkpoints)?;
     let written = Instant::now();
     let file = PolicyFile::Fqi(artifact);
-    output::write_file(&args.out, &file.to_bytes()?)?;
+    output::write_policy(&args.out, &file)?;
     let timings = Timings {
         device_seconds,
         write_seconds: written.elapsed().as_secs_f64(),
@@ -984,7 +984,7 @@ fn run_from_samples(args: &TrainArgs, config: &TrainConfig) -> anyhow::Result<()
         return Err(Failure::Interrupted(checkpoints.interrupted(&done)).into());
     }
     let seconds = started.elapsed().as_secs_f64();
-    output::write_file(&args.out, &learned.file.to_bytes()?)?;
+    output::write_policy(&args.out, &learned.file)?;
     sample_outputs(args, config, &fql, outcome, seconds)
 }
 

@@ -114,6 +114,19 @@ pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     transaction::stage_bytes(path, bytes)
 }
 
+/// Stages the policy `file` as the output `path` ([`write_file`]), encoded as it is written:
+/// no copy of it is held (three point masses on the paper's cores make a 50 GB policy).
+pub(crate) fn write_policy(
+    path: &Path,
+    file: &fuzzyq_sim::io::policy_file::PolicyFile,
+) -> anyhow::Result<()> {
+    transaction::stage(path, |tmp| {
+        file.write_to(std::fs::File::create(tmp)?)
+            .with_context(|| format!("cannot write the policy {}", path.display()))?;
+        Ok(())
+    })
+}
+
 /// Stages `value` as pretty JSON for the output `path` ([`write_file`]).
 pub(crate) fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> anyhow::Result<()> {
     let mut text = serde_json::to_string_pretty(value)?;

@@ -29,6 +29,15 @@ fn odometer<T>(tables: &[BlockTable<T>], mut f: impl FnMut(usize, usize)) {
     }
 }
 
+/// Side of the square tiles a reordering steps through.
+const TILE: usize = 64;
+
+/// `range` in runs of at most [`TILE`].
+fn tiles(range: core::ops::Range<usize>) -> impl Iterator<Item = core::ops::Range<usize>> + Clone {
+    let end = range.end;
+    range.step_by(TILE).map(move |t| t..end.min(t + TILE))
+}
+
 impl<T: Real> BlockOperator<T> {
     /// Calls `f(internal, grid)` for every core in internal order, stepping the block cores
     /// like an odometer (no divisions).
@@ -37,80 +46,118 @@ impl<T: Real> BlockOperator<T> {
     }
 
     /// `v` from internal to grid order (`to_grid`), or back.
-    ///
-    /// Internal index `c0 * slab_len + j` (`c0` a core of the first contracted block, `j`
-    /// the odometer over the others) is grid index `grid_offset[c0] + rest[j]`. The first
-    /// contracted block is the grid's *fastest* variables, so the conversion is a transpose
-    /// (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
-    /// each stay within a few cache lines, instead of one strided write per core. The
-    /// gather (to internal order) runs on every thread, a band of first-block cores each; so
-    /// does the scatter (to grid order) where each grid row holds one `j` (the usual layout),
-    /// a band of rows each.
     pub(in crate::solver) fn reorder<U: Copy + Default + Send + Sync>(
         &self,
         v: &[U],
         to_grid: bool,
     ) -> Vec<U> {
-        /// Side of a tile.
-        const TILE: usize = 64;
-        let slab_len = self.slab_len();
-        let (first, rest) = self.tables.split_first().expect("at least one block");
-        let g0 = &first.grid_offset;
-        let mut g_rest = Vec::with_capacity(slab_len);
-        odometer(rest, |_, g| g_rest.push(g));
         let mut out = vec![U::default(); v.len()];
-        let tiles = |n: usize| (0..n).step_by(TILE).map(move |t| t..n.min(t + TILE));
+        if to_grid {
+            self.place_slabs(0, v, &mut out);
+        } else {
+            self.gather(v, &mut out);
+        }
+        out
+    }
+
+    /// The grid indices of the cores of a slab, `g_rest[j]` for the core `j` of the later
+    /// blocks (grid index `grid_offset[c0] + g_rest[j]`), and the first block's table.
+    fn slab_offsets(&self) -> (&BlockTable<T>, Vec<usize>) {
+        let (first, rest) = self.tables.split_first().expect("at least one block");
+        let mut g_rest = Vec::with_capacity(self.slab_len());
+        odometer(rest, |_, g| g_rest.push(g));
+        (first, g_rest)
+    }
+
+    /// Places `piece`, the values of the whole slabs from `first_slab` on in internal order,
+    /// at their grid indices in `out` (every core's); the other values of `out` are left.
+    ///
+    /// Internal index `c0 * slab_len + j` (`c0` a core of the first contracted block, `j`
+    /// the odometer over the others) is grid index `grid_offset[c0] + rest[j]`. The first
+    /// contracted block is the grid's *fastest* variables, so the conversion is a transpose
+    /// (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
+    /// each stay within a few cache lines, instead of one strided write per core. Where each
+    /// grid row holds one `j` (the usual layout) bands of rows fill on every thread. A backend
+    /// that holds `V` elsewhere hands it over a few slabs at a time, so the caller holds one
+    /// copy of it ([`Operator::grid_order`]).
+    ///
+    /// # Panics
+    /// If `piece` is not whole slabs within the grid's.
+    pub(in crate::solver) fn place_slabs<U: Copy + Send + Sync>(
+        &self,
+        first_slab: usize,
+        piece: &[U],
+        out: &mut [U],
+    ) {
+        if piece.is_empty() {
+            return;
+        }
+        let slab_len = self.slab_len();
+        let (first, g_rest) = self.slab_offsets();
+        let g0 = &first.grid_offset;
         let n0 = first.n_cores;
+        assert!(
+            slab_len > 0 && piece.len().is_multiple_of(slab_len),
+            "a piece of whole slabs"
+        );
+        let c0s = first_slab..first_slab + piece.len() / slab_len;
+        assert!(c0s.end <= n0, "slabs within the grid's");
+        let at = |c0: usize, j: usize| piece[(c0 - first_slab) * slab_len + j];
         // The usual layout (the robots', the point masses'): the first block's offsets lie
         // in `0..n0` and the rest's are `j * n0`, so grid row `j` is `out[j n0..(j + 1) n0]`
         // and bands of rows fill on every thread.
         let rows_apart =
             g0.iter().all(|&g| g < n0) && g_rest.iter().enumerate().all(|(j, &g)| g == j * n0);
-        if to_grid && rows_apart && n0 > 0 {
+        if rows_apart {
             super::par::for_each_chunk_mut(
-                &mut out,
+                out,
                 TILE * n0,
                 || (),
                 |_, t, band| {
                     let js = t * TILE..t * TILE + band.len() / n0;
-                    for c0s in tiles(n0) {
+                    for c0s in tiles(c0s.clone()) {
                         for (j, row) in js.clone().zip(band.chunks_mut(n0)) {
                             for c0 in c0s.clone() {
-                                row[g0[c0]] = v[c0 * slab_len + j];
+                                row[g0[c0]] = at(c0, j);
                             }
                         }
                     }
                 },
             );
-        } else if to_grid {
-            for band in tiles(first.n_cores) {
-                for js in tiles(slab_len) {
+        } else {
+            for band in tiles(c0s) {
+                for js in tiles(0..slab_len) {
                     for c0 in band.clone() {
-                        let src = &v[c0 * slab_len..(c0 + 1) * slab_len];
                         for j in js.clone() {
-                            out[g0[c0] + g_rest[j]] = src[j];
+                            out[g0[c0] + g_rest[j]] = at(c0, j);
                         }
                     }
                 }
             }
-        } else {
-            super::par::for_each_chunk_mut(
-                &mut out,
-                TILE * slab_len,
-                || (),
-                |_, t, band| {
-                    for js in tiles(slab_len) {
-                        for (k, row) in band.chunks_mut(slab_len).enumerate() {
-                            let g = g0[t * TILE + k];
-                            for j in js.clone() {
-                                row[j] = v[g + g_rest[j]];
-                            }
+        }
+    }
+
+    /// `v` (grid order) in internal order in `out`: on every thread, a band of first-block
+    /// cores each, in tiles ([`Self::place_slabs`]).
+    fn gather<U: Copy + Send + Sync>(&self, v: &[U], out: &mut [U]) {
+        let slab_len = self.slab_len();
+        let (first, g_rest) = self.slab_offsets();
+        let g0 = &first.grid_offset;
+        super::par::for_each_chunk_mut(
+            out,
+            TILE * slab_len,
+            || (),
+            |_, t, band| {
+                for js in tiles(0..slab_len) {
+                    for (k, row) in band.chunks_mut(slab_len).enumerate() {
+                        let g = g0[t * TILE + k];
+                        for j in js.clone() {
+                            row[j] = v[g + g_rest[j]];
                         }
                     }
-                },
-            );
-        }
-        out
+                }
+            },
+        );
     }
 
     /// Every block core's coordinates on its block's variables (`n_cores x dims.len()` per

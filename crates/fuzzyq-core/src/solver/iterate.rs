@@ -349,8 +349,8 @@ where
         let op = &self.run.op;
         let (offset, sweep_seconds, evaluation_seconds) = seconds;
         let t0 = Instant::now();
-        let values = op.to_grid(&self.sweeps.values(v)?);
-        let greedy = op.to_grid(&self.sweeps.policy()?);
+        let values = super::sweeps::grid_order(op, |each| self.sweeps.values_by_piece(v, each))?;
+        let greedy = super::sweeps::grid_order(op, |each| self.sweeps.policy_by_piece(each))?;
         let result_seconds = t0.elapsed().as_secs_f64();
         Ok(Solution {
             v: values,

@@ -151,11 +151,56 @@ pub trait Sweeps<T: Real> {
     fn values(&self, v: Buf) -> Result<Cow<'_, [T]>, Self::Error>;
     /// The policy buffer.
     fn policy(&self) -> Result<Cow<'_, [u32]>, Self::Error>;
+    /// Every value of `v` handed to `each` a piece at a time, as `each(first, values)` with
+    /// `first` the index of `values[0]`: consecutive pieces covering every core once, in
+    /// order, each of whole slabs on the block path
+    /// ([`SlabLayout::slab_len`](super::SlabLayout::slab_len)). The result's `V` is put in
+    /// grid order piece by piece, so a backend that holds `V` elsewhere (a GPU) need never
+    /// have all of it on the host twice; the default hands over [`Self::values`] whole.
+    fn values_by_piece(
+        &self,
+        v: Buf,
+        each: &mut dyn FnMut(usize, &[T]),
+    ) -> Result<(), Self::Error> {
+        each(0, &self.values(v)?);
+        Ok(())
+    }
+    /// The policy buffer a piece at a time ([`Self::values_by_piece`]).
+    fn policy_by_piece(&self, each: &mut dyn FnMut(usize, &[u32])) -> Result<(), Self::Error> {
+        each(0, &self.policy()?);
+        Ok(())
+    }
     /// What computes the passes, for [`Solution::kernel`](super::Solution::kernel) (`None`:
     /// the operator's CPU kernel instance).
     fn kernel(&self) -> Option<&'static str> {
         None
     }
+}
+
+/// One value per core of `op` in grid order, from `fill`, which hands over the values in
+/// internal order a piece at a time ([`Sweeps::values_by_piece`]).
+///
+/// # Panics
+/// If the pieces are not of whole slabs on the block path, or overrun the cores.
+pub(super) fn grid_order<T, M, U, E>(
+    op: &Operator<'_, T, M>,
+    fill: impl FnOnce(&mut dyn FnMut(usize, &[U])) -> Result<(), E>,
+) -> Result<Vec<U>, E>
+where
+    T: Real,
+    M: Model<T> + Sync + ?Sized,
+    U: Copy + Default + Send + Sync,
+{
+    let mut out = vec![U::default(); op.n_cores()];
+    fill(&mut |first, piece| match &op.path {
+        super::Path::Generic(_) => out[first..first + piece.len()].copy_from_slice(piece),
+        super::Path::Block(b) => {
+            let slab_len = b.slab_len();
+            assert!(first.is_multiple_of(slab_len), "pieces of whole slabs");
+            b.place_slabs(first / slab_len, piece, &mut out);
+        }
+    })?;
+    Ok(out)
 }
 
 /// The in-process backend: the buffers in memory, each pass on the operator's threads.

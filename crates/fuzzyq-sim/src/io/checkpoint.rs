@@ -133,8 +133,9 @@ impl Checkpoint<'static> {
             path: path.to_path_buf(),
             error,
         };
-        match container::read(path, &MAGIC).map_err(read)? {
+        match container::read(path, &MAGIC, None).map_err(read)? {
             container::Read::Container(bytes) => Self::from_bytes(&bytes, path),
+            container::Read::Large(..) => unreachable!("not asked to stream"),
             container::Read::Other(head, _) => Err(CheckpointError::NotACheckpoint {
                 path: path.to_path_buf(),
                 policy: head.starts_with(&super::policy_file::MAGIC),

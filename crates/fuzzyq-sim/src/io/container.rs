@@ -38,36 +38,224 @@ pub(crate) fn encode_postcard<T: serde::Serialize + ?Sized>(
     Ok(seal(magic, version, out))
 }
 
+/// Writes the container of `value`'s postcard serialisation to `out` from its position on,
+/// as it is encoded: a placeholder header, the payload through a buffer, its CRC-32 and a count, then the header
+/// over the placeholder. The payload is never held whole (three point masses on the paper's
+/// cores make a 50 GB policy file), and the bytes are [`encode_postcard`]'s.
+pub(crate) fn write_postcard<T, W>(
+    out: W,
+    magic: &[u8; 8],
+    version: u32,
+    value: &T,
+) -> std::io::Result<W>
+where
+    T: serde::Serialize + ?Sized,
+    W: std::io::Write + std::io::Seek,
+{
+    use std::io::SeekFrom;
+    let mut sum = Summed {
+        inner: out,
+        crc: crc32fast::Hasher::new(),
+        len: 0,
+    };
+    let start = sum.inner.stream_position()?;
+    sum.inner.write_all(&[0; HEADER_LEN])?;
+    // Postcard writes a value at a time: buffered, the checksum runs over large chunks.
+    let buffered = std::io::BufWriter::with_capacity(1 << 20, sum);
+    let buffered = postcard::to_io(value, buffered).map_err(std::io::Error::other)?;
+    let sum = buffered.into_inner().map_err(|e| e.into_error())?;
+    let mut out = sum.inner;
+    out.seek(SeekFrom::Start(start))?;
+    out.write_all(&header(magic, version, sum.len, sum.crc.finalize()))?;
+    out.seek(SeekFrom::Start(start + HEADER_LEN as u64 + sum.len))?;
+    out.flush()?;
+    Ok(out)
+}
+
+/// A writer or reader that counts and checksums what passes through it.
+struct Summed<W> {
+    inner: W,
+    crc: crc32fast::Hasher,
+    len: u64,
+}
+
+impl<R: std::io::Read> std::io::Read for Summed<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.crc.update(&buf[..n]);
+        self.len += n as u64;
+        Ok(n)
+    }
+}
+
+impl<W: std::io::Write> std::io::Write for Summed<W> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.crc.update(&buf[..n]);
+        self.len += n as u64;
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// The header of a container whose payload has `len` bytes and CRC-32 `crc`.
+fn header(magic: &[u8; 8], version: u32, len: u64, crc: u32) -> [u8; HEADER_LEN] {
+    let mut h = [0; HEADER_LEN];
+    h[..8].copy_from_slice(magic);
+    h[8..12].copy_from_slice(&version.to_le_bytes());
+    h[12..20].copy_from_slice(&len.to_le_bytes());
+    h[20..24].copy_from_slice(&crc.to_le_bytes());
+    h
+}
+
 /// The value of a whole payload: postcard decodes a value from the front of its input and
 /// would ignore bytes after it, so a payload with any left over is refused. The error says in
 /// words what is wrong (postcard's own messages, such as "Found a bool that wasn't 0 or 1",
 /// name its internals, not the file).
 pub(crate) fn decode_postcard<T: serde::de::DeserializeOwned>(payload: &[u8]) -> Result<T, String> {
-    use postcard::Error as E;
     match postcard::take_from_bytes(payload) {
         Ok((value, [])) => Ok(value),
-        Ok((_, rest)) => Err(format!(
-            "its payload has {} bytes after its content",
-            rest.len()
-        )),
-        Err(E::DeserializeUnexpectedEnd) => Err("its payload ends inside its content".into()),
-        Err(_) => Err(
-            "its payload holds a value of the wrong kind or out of range (a damaged \
-             file, or one a newer fuzzyq wrote)"
-                .into(),
-        ),
+        Ok((_, rest)) => Err(left_over(rest.len() as u64)),
+        Err(e) => Err(undecodable(&e)),
+    }
+}
+
+/// What is wrong with a payload that holds `n` bytes after its content.
+fn left_over(n: u64) -> String {
+    format!("its payload has {n} bytes after its content")
+}
+
+/// What is wrong with a payload postcard cannot decode, in words.
+fn undecodable(e: &postcard::Error) -> String {
+    match e {
+        postcard::Error::DeserializeUnexpectedEnd => "its payload ends inside its content".into(),
+        _ => "its payload holds a value of the wrong kind or out of range (a damaged file, or \
+              one a newer fuzzyq wrote)"
+            .into(),
+    }
+}
+
+/// Why [`decode_streamed`] failed.
+#[derive(Debug)]
+pub(crate) enum Streamed {
+    /// Reading failed.
+    Io(std::io::Error),
+    /// The container is damaged (found in the order [`split`] checks).
+    Damage(Damage),
+    /// The payload is intact but does not decode ([`decode_postcard`]'s words).
+    Content(String),
+}
+
+/// [`split`] and [`decode_postcard`] of a container read as it is decoded: `file` is just past
+/// a header announcing a payload of `len` bytes with CRC-32 `crc`. The payload is never held
+/// whole (a policy of three point masses on the paper's cores is 50 GB), and the damage is
+/// found and named as [`split`] would: a short file, bytes after the payload, a checksum
+/// mismatch, then content that does not decode.
+pub(crate) fn decode_streamed<T: serde::de::DeserializeOwned>(
+    file: impl std::io::Read,
+    len: u64,
+    crc: u32,
+) -> Result<T, Streamed> {
+    let summed = Summed {
+        inner: file.take(len),
+        crc: crc32fast::Hasher::new(),
+        len: 0,
+    };
+    let mut flavor = Stream {
+        reader: std::io::BufReader::with_capacity(1 << 20, summed),
+        left: len,
+        temp: Vec::new(),
+    };
+    let decoded = T::deserialize(&mut postcard::Deserializer::from_flavor(&mut flavor));
+    // The rest of the payload, read through the checksum: what the content left over.
+    let rest = std::io::copy(&mut flavor.reader, &mut std::io::sink()).map_err(Streamed::Io)?;
+    let summed = flavor.reader.into_inner();
+    if summed.len < len {
+        return Err(Streamed::Damage(Damage::Truncated {
+            found: HEADER_LEN as u64 + summed.len,
+            expected: HEADER_LEN as u64 + len,
+        }));
+    }
+    let mut file = summed.inner.into_inner();
+    if file.read(&mut [0]).map_err(Streamed::Io)? > 0 {
+        return Err(Streamed::Damage(Damage::Trailing(1)));
+    }
+    if summed.crc.finalize() != crc {
+        return Err(Streamed::Damage(Damage::Checksum));
+    }
+    match decoded {
+        Ok(_) if rest > 0 => Err(Streamed::Content(left_over(rest))),
+        Ok(value) => Ok(value),
+        Err(e) => Err(Streamed::Content(undecodable(&e))),
+    }
+}
+
+/// The postcard flavor of [`decode_streamed`]: bytes from a buffered reader, at most `left`
+/// of them; a string's bytes are read into `temp`, which grows to the longest one (never past
+/// what the payload has left: a damaged length allocates no more than the file holds).
+/// Owned values only: nothing can borrow from a stream.
+struct Stream<R> {
+    reader: R,
+    left: u64,
+    temp: Vec<u8>,
+}
+
+impl<R: std::io::Read> Stream<R> {
+    fn fill(&mut self, out: &mut [u8]) -> postcard::Result<()> {
+        if out.len() as u64 > self.left {
+            return Err(postcard::Error::DeserializeUnexpectedEnd);
+        }
+        self.reader
+            .read_exact(out)
+            .map_err(|_| postcard::Error::DeserializeUnexpectedEnd)?;
+        self.left -= out.len() as u64;
+        Ok(())
+    }
+}
+
+impl<'s: 'de, 'de, R: std::io::Read + 'de> postcard::de_flavors::Flavor<'de> for &'s mut Stream<R> {
+    type Remainder = ();
+    type Source = ();
+
+    fn pop(&mut self) -> postcard::Result<u8> {
+        let mut b = [0];
+        self.fill(&mut b)?;
+        Ok(b[0])
+    }
+
+    fn try_take_n(&mut self, _ct: usize) -> postcard::Result<&'de [u8]> {
+        // Only a value borrowing from the input asks for this; fuzzyq's files hold none.
+        Err(postcard::Error::DeserializeBadEncoding)
+    }
+
+    fn try_take_n_temp<'a>(&'a mut self, ct: usize) -> postcard::Result<&'a [u8]>
+    where
+        'de: 'a,
+    {
+        if ct as u64 > self.left {
+            return Err(postcard::Error::DeserializeUnexpectedEnd);
+        }
+        let mut temp = std::mem::take(&mut self.temp);
+        temp.resize(ct, 0);
+        self.fill(&mut temp)?;
+        self.temp = temp;
+        Ok(&self.temp)
+    }
+
+    fn finalize(self) -> postcard::Result<()> {
+        Ok(())
     }
 }
 
 /// Writes the header of the container whose payload follows `HEADER_LEN` placeholder bytes
 /// in `out`.
 fn seal(magic: &[u8; 8], version: u32, mut out: Vec<u8>) -> Vec<u8> {
-    let (header, payload) = out.split_at_mut(HEADER_LEN);
+    let (head, payload) = out.split_at_mut(HEADER_LEN);
     let crc = crc32fast::hash(payload);
-    header[..8].copy_from_slice(magic);
-    header[8..12].copy_from_slice(&version.to_le_bytes());
-    header[12..20].copy_from_slice(&(payload.len() as u64).to_le_bytes());
-    header[20..24].copy_from_slice(&crc.to_le_bytes());
+    head.copy_from_slice(&header(magic, version, payload.len() as u64, crc));
     out
 }
 
@@ -121,14 +309,24 @@ pub(crate) enum Read {
     /// A container with the expected tag: the header and at most one byte more than the
     /// payload it announces.
     Container(Vec<u8>),
+    /// A container with the expected tag whose header announces a payload of at least the
+    /// bytes given to stream from: the header, and the file just past it
+    /// ([`decode_streamed`]).
+    Large([u8; HEADER_LEN], std::fs::File),
     /// Something else: its first bytes (at most a header's length) and the rest, unread.
     Other(Vec<u8>, std::fs::File),
 }
 
 /// Reads the file at `path` once (a pipe works): if it starts with `magic`, the header and as
 /// many bytes as its header announces and one more (so [`split`] sees trailing bytes; a lying
-/// header cannot make it read forever), else only its first bytes (the rest is the caller's).
-pub(crate) fn read(path: &Path, magic: &[u8; 8]) -> std::io::Result<Read> {
+/// header cannot make it read forever), or where it announces at least `stream_from` bytes
+/// (if given) the header only ([`Read::Large`]); else only its first bytes (the rest is the
+/// caller's).
+pub(crate) fn read(
+    path: &Path,
+    magic: &[u8; 8],
+    stream_from: Option<u64>,
+) -> std::io::Result<Read> {
     let mut file = crate::fs::open(path)?;
     let mut bytes = Vec::with_capacity(HEADER_LEN);
     (&mut file)
@@ -139,6 +337,10 @@ pub(crate) fn read(path: &Path, magic: &[u8; 8]) -> std::io::Result<Read> {
     }
     if bytes.len() == HEADER_LEN {
         let len = u64::from_le_bytes(bytes[12..20].try_into().unwrap_or_default());
+        if stream_from.is_some_and(|s| len >= s) {
+            let header = bytes.try_into().expect("a header's length");
+            return Ok(Read::Large(header, file));
+        }
         // At most one byte beyond the announced payload: enough to see trailing bytes.
         file.take(len.saturating_add(1)).read_to_end(&mut bytes)?;
     }
@@ -188,6 +390,18 @@ mod tests {
             assert_eq!(&built[..8], &magic);
             assert_eq!(split(&built), Ok((3, &payload[..])), "{name}");
             assert_eq!(built.len(), built.capacity(), "{name}: sized exactly");
+            // Written as it is encoded, after other bytes: the same bytes.
+            let mut out = std::io::Cursor::new(vec![7u8; 40]);
+            out.set_position(40);
+            let out = write_postcard(out, &magic, 3, &(name, v)).unwrap();
+            assert_eq!(
+                out.position(),
+                40 + built.len() as u64,
+                "{name}: left at its end"
+            );
+            let written = out.into_inner();
+            assert_eq!(written[..40], [7; 40], "{name}");
+            assert_eq!(written[40..], built, "{name}: written as encoded");
         }
     }
 }

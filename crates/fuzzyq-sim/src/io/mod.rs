@@ -20,6 +20,15 @@ use std::time::{Duration, SystemTime};
 /// ([`remove_stale`]). An error names what went wrong in words, not the temporary file's
 /// random name (the caller names `path`).
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomically_with(path, |f| f.write_all(bytes))
+}
+
+/// [`write_atomically`] of what `write` writes into the temporary file (from its start), so
+/// that a large file is written as it is encoded.
+pub fn write_atomically_with(
+    path: &Path,
+    write: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let dir = dir_of(path);
     let mut tmp = temp_file_beside(path, ".tmp").map_err(|e| {
         let why = if dir.is_dir() {
@@ -34,7 +43,7 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         std::io::Error::new(e.kind(), why)
     })?;
     remove_stale(dir, owner_of(tmp.path()));
-    tmp.write_all(bytes)?;
+    write(tmp.as_file_mut())?;
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| e.error)?;
     Ok(())

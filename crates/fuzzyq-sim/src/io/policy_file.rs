@@ -20,7 +20,9 @@
 //! policies as plain TOML; [`PolicyFile::from_bytes`] still reads them.
 //!
 //! A file is written to a temporary file in the destination's directory, flushed and renamed
-//! over the destination, so a crash or a full disk never leaves a half-written policy.
+//! over the destination, so a crash or a full disk never leaves a half-written policy. It is
+//! encoded as it is written, and a payload of a GiB or more is decoded as it is read, checked
+//! all the same (three point masses on the paper's cores make a 48 GB file, held once).
 //! Reading checks the tag, version, length, checksum and the content's consistency, and names
 //! what is wrong.
 
@@ -31,7 +33,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, PolicyFileError, SimError, require};
 use crate::io::config::{TomlDoc, TrainConfig};
-use crate::io::write_atomically;
 use crate::learn::additive::AdditiveQ;
 use crate::learn::fql::{FqlConfig, FqlOutcome};
 use crate::learn::tasks::khepera as khepera_task;
@@ -203,7 +204,7 @@ pub struct PolicyArtifact {
     pub learned: Option<Box<BlockTables>>,
 }
 
-/// A fuzzy Q-iteration policy as version 1 and the [`Payload::Fqi`] of version 2 encode it:
+/// A fuzzy Q-iteration policy as version 1 and the [`Content::Fqi`] of version 2 encode it:
 /// the configuration travels as its TOML text (postcard cannot encode the config's internally
 /// tagged enums, and TOML keeps it readable and stable across versions).
 #[derive(Deserialize)]
@@ -228,7 +229,7 @@ struct FqiPayloadRef<'a> {
 /// reading, [`FqiPayloadRef`] and a reference when writing. Variants are only ever added at
 /// the end (postcard encodes the variant's index).
 #[derive(Serialize, Deserialize)]
-enum Payload<F, L> {
+enum Content<F, L> {
     /// Fuzzy Q-iteration.
     Fqi(F),
     /// A point-mass policy learned from samples, as TOML text.
@@ -239,6 +240,51 @@ enum Payload<F, L> {
     LearnedFqi(F, L),
     /// Fuzzy Q-iteration on a model defined outside fuzzyq (version 5).
     Tabulated(Box<TabulatedArtifact>),
+}
+
+/// Payloads of at least this many bytes are decoded as they are read
+/// ([`PolicyFile::load`]): the values and greedy actions are then held once, not also as the
+/// file's bytes (three point masses on the paper's cores: 50 GB of file).
+const STREAM_FROM: u64 = 1 << 30;
+
+/// A container's payload to decode: in memory, its length and checksum checked, or the rest
+/// of a file, checked as it is read.
+enum Payload<'a> {
+    Bytes(&'a [u8]),
+    Stream {
+        file: std::fs::File,
+        len: u64,
+        crc: u32,
+    },
+}
+
+impl Payload<'_> {
+    /// The payload's content as a `T`; `path` names the file in errors.
+    fn decode<T: serde::de::DeserializeOwned>(self, path: &Path) -> Result<T, PolicyFileError> {
+        use super::container::{Damage, Streamed};
+        let (file, len, crc) = match self {
+            Self::Bytes(b) => {
+                return super::container::decode_postcard(b).map_err(|e| malformed(path, e));
+            }
+            Self::Stream { file, len, crc } => (file, len, crc),
+        };
+        super::container::decode_streamed(file, len, crc).map_err(|e| match e {
+            Streamed::Io(error) => PolicyFileError::Read {
+                path: path.to_path_buf(),
+                error,
+            },
+            Streamed::Damage(Damage::Truncated { found, expected }) => PolicyFileError::Truncated {
+                path: path.to_path_buf(),
+                found,
+                expected,
+            },
+            Streamed::Damage(Damage::Trailing(_)) => trailing(path, len),
+            Streamed::Damage(Damage::Checksum) => PolicyFileError::Checksum {
+                path: path.to_path_buf(),
+            },
+            Streamed::Content(reason) => malformed(path, reason),
+        })
+    }
 }
 
 /// A fuzzy Q-iteration solution of a model defined outside fuzzyq (a Python
@@ -518,6 +564,12 @@ impl PolicyFile {
     /// without the container's tag is read as TOML text of at most
     /// [`MAX_TEXT_BYTES`](crate::fs::MAX_TEXT_BYTES) (so `/dev/zero` is refused, not read forever).
     pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
+        Self::load_streaming_from(path, STREAM_FROM)
+    }
+
+    /// [`Self::load`], decoding a payload of at least `stream_from` bytes as it is read.
+    fn load_streaming_from(path: &Path, stream_from: u64) -> Result<Self, PolicyFileError> {
+        use super::container::Read as Found;
         use std::io::Read;
         let read_error = |error| PolicyFileError::Read {
             path: path.to_path_buf(),
@@ -526,13 +578,18 @@ impl PolicyFile {
         // A container is read no further than its header's length (and one byte to see
         // whether more follow), nothing allocated ahead: a length of 2^64 in a short file is
         // found truncated, not reserved.
-        let bytes = match super::container::read(path, &MAGIC).map_err(read_error)? {
-            super::container::Read::Container(bytes) => bytes,
-            super::container::Read::Other(head, rest) => {
-                crate::fs::read_capped(head.as_slice().chain(rest), crate::fs::MAX_TEXT_BYTES)
-                    .map_err(read_error)?
-            }
-        };
+        let bytes =
+            match super::container::read(path, &MAGIC, Some(stream_from)).map_err(read_error)? {
+                Found::Container(bytes) => bytes,
+                Found::Large(header, file) => {
+                    let (version, len, crc) = Self::header(&header, path)?;
+                    return Self::from_payload(version, Payload::Stream { file, len, crc }, path);
+                }
+                Found::Other(head, rest) => {
+                    crate::fs::read_capped(head.as_slice().chain(rest), crate::fs::MAX_TEXT_BYTES)
+                        .map_err(read_error)?
+                }
+            };
         Self::from_bytes(&bytes, path)
     }
 
@@ -547,11 +604,12 @@ impl PolicyFile {
         Self::from_legacy_toml(bytes, path)
     }
 
-    fn from_container(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
-        let path_buf = path.to_path_buf();
+    /// The version, payload length and checksum of a container's header (`bytes` from its
+    /// start), checked.
+    fn header(bytes: &[u8], path: &Path) -> Result<(u32, u64, u32), PolicyFileError> {
         if bytes.len() < HEADER_LEN {
             return Err(PolicyFileError::Truncated {
-                path: path_buf,
+                path: path.to_path_buf(),
                 found: bytes.len() as u64,
                 expected: HEADER_LEN as u64,
             });
@@ -559,50 +617,63 @@ impl PolicyFile {
         let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
         if !(1..=FORMAT_VERSION).contains(&version) {
             return Err(PolicyFileError::Version {
-                path: path_buf,
+                path: path.to_path_buf(),
                 found: version,
                 supported: FORMAT_VERSION,
             });
         }
         let len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
         let crc = u32::from_le_bytes(bytes[20..24].try_into().expect("4 bytes"));
-        let Some(expected) = len.checked_add(HEADER_LEN as u64) else {
+        if len.checked_add(HEADER_LEN as u64).is_none() {
             return Err(malformed(
                 path,
                 format!("its header claims an impossible payload length ({len} bytes)"),
             ));
-        };
+        }
+        Ok((version, len, crc))
+    }
+
+    fn from_container(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
+        let (version, len, crc) = Self::header(bytes, path)?;
+        let expected = len + HEADER_LEN as u64;
         if (bytes.len() as u64) < expected {
             return Err(PolicyFileError::Truncated {
-                path: path_buf,
+                path: path.to_path_buf(),
                 found: bytes.len() as u64,
                 expected,
             });
         }
         if (bytes.len() as u64) > expected {
-            return Err(malformed(
-                path,
-                format!("data after the end its header gives ({len}-byte payload)"),
-            ));
+            return Err(trailing(path, len));
         }
         let payload = &bytes[HEADER_LEN..];
         if crc32fast::hash(payload) != crc {
-            return Err(PolicyFileError::Checksum { path: path_buf });
+            return Err(PolicyFileError::Checksum {
+                path: path.to_path_buf(),
+            });
         }
-        let payload: Payload<FqiPayload, BlockTables> = match version {
-            1 => super::container::decode_postcard(payload).map(Payload::Fqi),
-            3 => super::container::decode_postcard(payload).map(|p: Payload<_, BlockTablesV3>| {
-                match p {
-                    Payload::LearnedFqi(f, tables) => Payload::LearnedFqi(f, tables.into()),
-                    Payload::Fqi(f) => Payload::Fqi(f),
-                    Payload::PointMass(text) => Payload::PointMass(text),
-                    Payload::Khepera(text) => Payload::Khepera(text),
-                    Payload::Tabulated(t) => Payload::Tabulated(t),
-                }
-            }),
-            _ => super::container::decode_postcard(payload),
-        }
-        .map_err(|e| malformed(path, e))?;
+        Self::from_payload(version, Payload::Bytes(payload), path)
+    }
+
+    /// The file whose container of format `version` holds `payload`, decoded and checked.
+    fn from_payload(
+        version: u32,
+        payload: Payload<'_>,
+        path: &Path,
+    ) -> Result<Self, PolicyFileError> {
+        let content: Content<FqiPayload, BlockTables> = match version {
+            1 => payload.decode(path).map(Content::Fqi),
+            3 => payload
+                .decode(path)
+                .map(|p: Content<_, BlockTablesV3>| match p {
+                    Content::LearnedFqi(f, tables) => Content::LearnedFqi(f, tables.into()),
+                    Content::Fqi(f) => Content::Fqi(f),
+                    Content::PointMass(text) => Content::PointMass(text),
+                    Content::Khepera(text) => Content::Khepera(text),
+                    Content::Tabulated(t) => Content::Tabulated(t),
+                }),
+            _ => payload.decode(path),
+        }?;
         let fqi = |p: FqiPayload, learned: Option<Box<BlockTables>>| {
             let config = TrainConfig::from_toml(&p.config_toml)
                 .map_err(|e| malformed(path, format!("its configuration: {e}")))?;
@@ -614,12 +685,12 @@ impl PolicyFile {
                 learned,
             }))
         };
-        let file = match payload {
-            Payload::Fqi(p) => fqi(p, None)?,
-            Payload::LearnedFqi(p, tables) => fqi(p, Some(Box::new(tables)))?,
-            Payload::PointMass(text) => Self::PointMass(from_toml(&text, path)?),
-            Payload::Khepera(text) => Self::Khepera(from_toml(&text, path)?),
-            Payload::Tabulated(t) => Self::Tabulated(t),
+        let file = match content {
+            Content::Fqi(p) => fqi(p, None)?,
+            Content::LearnedFqi(p, tables) => fqi(p, Some(Box::new(tables)))?,
+            Content::PointMass(text) => Self::PointMass(from_toml(&text, path)?),
+            Content::Khepera(text) => Self::Khepera(from_toml(&text, path)?),
+            Content::Tabulated(t) => Self::Tabulated(t),
         };
         file.check().map_err(|reason| malformed(path, reason))?;
         Ok(file)
@@ -680,6 +751,26 @@ impl PolicyFile {
 
     /// Encodes the file with its header.
     pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
+        self.with_payload(|version, payload| {
+            super::container::encode_postcard(&MAGIC, version, payload)
+                .expect("a policy always serialises")
+        })
+    }
+
+    /// Writes the file ([`Self::to_bytes`]'s bytes) to `out` as it is encoded, so that no copy
+    /// of a large policy is held: the caller makes it atomic (a temporary file, then a rename).
+    pub fn write_to<W: std::io::Write + std::io::Seek>(&self, out: W) -> std::io::Result<W> {
+        self.with_payload(|version, payload| {
+            super::container::write_postcard(out, &MAGIC, version, payload)
+        })
+        .map_err(|e| std::io::Error::other(e.to_string()))?
+    }
+
+    /// `f(version, payload)` of the file: what it is written as.
+    fn with_payload<R>(
+        &self,
+        f: impl FnOnce(u32, &Content<FqiPayloadRef<'_>, &BlockTables>) -> R,
+    ) -> Result<R, SimError> {
         let mut version = 2;
         let summary;
         let payload = match self {
@@ -698,18 +789,18 @@ impl PolicyFile {
                     summary: &summary,
                 };
                 match &a.learned {
-                    None => Payload::Fqi(p),
+                    None => Content::Fqi(p),
                     Some(tables) => {
                         version = 4;
-                        Payload::LearnedFqi(p, tables)
+                        Content::LearnedFqi(p, &**tables)
                     }
                 }
             }
-            Self::PointMass(f) => Payload::PointMass(to_toml(f)?),
-            Self::Khepera(f) => Payload::Khepera(to_toml(f)?),
+            Self::PointMass(f) => Content::PointMass(to_toml(f)?),
+            Self::Khepera(f) => Content::Khepera(to_toml(f)?),
             Self::Tabulated(t) => {
                 version = 5;
-                Payload::Tabulated(Box::new(TabulatedArtifact {
+                Content::Tabulated(Box::new(TabulatedArtifact {
                     summary: TrainSummary {
                         seconds: 0.0,
                         sweep_seconds: 0.0,
@@ -719,22 +810,30 @@ impl PolicyFile {
                 }))
             }
         };
-        Ok(super::container::encode_postcard(&MAGIC, version, &payload)
-            .expect("a policy always serialises"))
+        Ok(f(version, &payload))
     }
 
     /// Writes the policy file atomically (a temporary file in the same directory, then a
-    /// rename).
+    /// rename), encoding it as it goes ([`Self::write_to`]).
     pub fn save(&self, path: &Path) -> Result<(), SimError> {
-        let bytes = self.to_bytes()?;
-        write_atomically(path, &bytes).map_err(|error| {
-            PolicyFileError::Write {
-                path: path.to_path_buf(),
-                error,
-            }
-            .into()
-        })
+        super::write_atomically_with(path, |file| self.write_to(file).map(|_| ())).map_err(
+            |error| {
+                PolicyFileError::Write {
+                    path: path.to_path_buf(),
+                    error,
+                }
+                .into()
+            },
+        )
     }
+}
+
+/// A container with bytes after the `len`-byte payload its header announces.
+fn trailing(path: &Path, len: u64) -> PolicyFileError {
+    malformed(
+        path,
+        format!("data after the end its header gives ({len}-byte payload)"),
+    )
 }
 
 fn malformed(path: &Path, reason: String) -> PolicyFileError {
@@ -838,8 +937,20 @@ mod tests {
         }
     }
 
+    /// `bytes` decoded in memory, after checking that a file of them decoded as it is read
+    /// gives the same file or the same error.
     fn decode(bytes: &[u8]) -> Result<PolicyFile, PolicyFileError> {
-        PolicyFile::from_bytes(bytes, Path::new("p.fzq"))
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.fzq");
+        std::fs::write(&path, bytes).unwrap();
+        let in_memory = PolicyFile::from_bytes(bytes, &path);
+        let streamed = PolicyFile::load_streaming_from(&path, 0);
+        assert_eq!(
+            format!("{streamed:?}"),
+            format!("{in_memory:?}"),
+            "decoded as read against in memory"
+        );
+        in_memory
     }
 
     /// The same run gives the same bytes: the timings, which differ between identical runs,
@@ -921,6 +1032,32 @@ mod tests {
         }
     }
 
+    /// A solution of a model defined in Python decodes alike in memory and as it is read
+    /// (its membership functions are named: a name is read as a transient string, which a
+    /// stream can give).
+    #[test]
+    fn tabulated_solutions_decode_as_they_are_read() {
+        let a = tiny();
+        let t = TabulatedArtifact {
+            cores: vec![vec![-1.0, 1.0]; 2],
+            membership: fuzzyq_core::Membership::Crisp,
+            actions: vec![(vec![-1.0, 1.0], 1)],
+            blocks: Vec::new(),
+            values: Values::F64(vec![0.5; 4]),
+            greedy: vec![1; 4],
+            gamma: 0.9,
+            xi: 0.01,
+            absorbing_goal: false,
+            summary: a.summary,
+        };
+        let file = PolicyFile::Tabulated(Box::new(t));
+        let back = decode(&file.to_bytes().unwrap());
+        assert!(
+            back.is_ok() || !back.unwrap_err().to_string().contains("wrong kind"),
+            "decodes"
+        );
+    }
+
     /// Files of format version 1 (fuzzy Q-iteration only, no payload kind) still load.
     #[test]
     fn version_1_files_still_load() {
@@ -971,7 +1108,7 @@ mod tests {
         (a.summary.setup_seconds, a.summary.result_seconds) = (None, None);
         let tables = a.learned.as_deref().unwrap();
         assert_eq!(tables.membership, fuzzyq_core::Membership::Triangular);
-        let payload = postcard::to_stdvec(&Payload::LearnedFqi(
+        let payload = postcard::to_stdvec(&Content::LearnedFqi(
             FqiPayloadRef {
                 config_toml: a.config.to_toml(),
                 values: &a.values,
