@@ -101,11 +101,18 @@ pub(crate) fn read_pieces<T: bytemuck::Pod>(
         let view = staging
             .get_mapped_range(..size)
             .map_err(|e| GpuError::Failed(e.to_string()))?;
-        values.resize(n, T::zeroed());
-        bytemuck::cast_slice_mut::<T, u8>(&mut values).copy_from_slice(&view[..bytes as usize]);
+        // Mappings are aligned for any `T` here; a copy only where one is not.
+        match bytemuck::try_cast_slice::<u8, T>(&view[..bytes as usize]) {
+            Ok(mapped) => each(first, mapped),
+            Err(_) => {
+                values.resize(n, T::zeroed());
+                bytemuck::cast_slice_mut::<T, u8>(&mut values)
+                    .copy_from_slice(&view[..bytes as usize]);
+                each(first, &values);
+            }
+        }
         drop(view);
         staging.unmap();
-        each(first, &values);
     }
     Ok(())
 }

@@ -115,7 +115,7 @@ pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
 }
 
 /// Stages the policy `file` as the output `path` ([`write_file`]), encoded as it is written:
-/// no copy of it is held (three point masses on the paper's cores make a 50 GB policy).
+/// no copy of it is held (three point masses on the paper's cores make a 48 GB policy).
 pub(crate) fn write_policy(
     path: &Path,
     file: &fuzzyq_sim::io::policy_file::PolicyFile,

@@ -79,7 +79,7 @@ impl<T: Real> BlockOperator<T> {
     /// each stay within a few cache lines, instead of one strided write per core. Where each
     /// grid row holds one `j` (the usual layout) bands of rows fill on every thread. A backend
     /// that holds `V` elsewhere hands it over a few slabs at a time, so the caller holds one
-    /// copy of it ([`Operator::grid_order`]).
+    /// copy of it (`sweeps::grid_order`).
     ///
     /// # Panics
     /// If `piece` is not whole slabs within the grid's.

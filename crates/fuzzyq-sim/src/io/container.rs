@@ -39,9 +39,9 @@ pub(crate) fn encode_postcard<T: serde::Serialize + ?Sized>(
 }
 
 /// Writes the container of `value`'s postcard serialisation to `out` from its position on,
-/// as it is encoded: a placeholder header, the payload through a buffer, its CRC-32 and a count, then the header
-/// over the placeholder. The payload is never held whole (three point masses on the paper's
-/// cores make a 50 GB policy file), and the bytes are [`encode_postcard`]'s.
+/// as it is encoded: a placeholder header, the payload through a buffer, its CRC-32 and a
+/// count, then the header over the placeholder. The payload is never held whole (three point masses on the paper's
+/// cores make a 48 GB policy file), and the bytes are [`encode_postcard`]'s.
 pub(crate) fn write_postcard<T, W>(
     out: W,
     magic: &[u8; 8],
@@ -151,7 +151,7 @@ pub(crate) enum Streamed {
 
 /// [`split`] and [`decode_postcard`] of a container read as it is decoded: `file` is just past
 /// a header announcing a payload of `len` bytes with CRC-32 `crc`. The payload is never held
-/// whole (a policy of three point masses on the paper's cores is 50 GB), and the damage is
+/// whole (a policy of three point masses on the paper's cores is 48 GB), and the damage is
 /// found and named as [`split`] would: a short file, bytes after the payload, a checksum
 /// mismatch, then content that does not decode.
 pub(crate) fn decode_streamed<T: serde::de::DeserializeOwned>(
@@ -181,6 +181,7 @@ pub(crate) fn decode_streamed<T: serde::de::DeserializeOwned>(
     }
     let mut file = summed.inner.into_inner();
     if file.read(&mut [0]).map_err(Streamed::Io)? > 0 {
+        // At least one byte follows; as [`read`], no more is read to count them.
         return Err(Streamed::Damage(Damage::Trailing(1)));
     }
     if summed.crc.finalize() != crc {

@@ -244,7 +244,7 @@ enum Content<F, L> {
 
 /// Payloads of at least this many bytes are decoded as they are read
 /// ([`PolicyFile::load`]): the values and greedy actions are then held once, not also as the
-/// file's bytes (three point masses on the paper's cores: 50 GB of file).
+/// file's bytes (three point masses on the paper's cores: a 48 GB file).
 const STREAM_FROM: u64 = 1 << 30;
 
 /// A container's payload to decode: in memory, its length and checksum checked, or the rest
@@ -261,7 +261,7 @@ enum Payload<'a> {
 impl Payload<'_> {
     /// The payload's content as a `T`; `path` names the file in errors.
     fn decode<T: serde::de::DeserializeOwned>(self, path: &Path) -> Result<T, PolicyFileError> {
-        use super::container::{Damage, Streamed};
+        use super::container::Streamed;
         let (file, len, crc) = match self {
             Self::Bytes(b) => {
                 return super::container::decode_postcard(b).map_err(|e| malformed(path, e));
@@ -273,15 +273,7 @@ impl Payload<'_> {
                 path: path.to_path_buf(),
                 error,
             },
-            Streamed::Damage(Damage::Truncated { found, expected }) => PolicyFileError::Truncated {
-                path: path.to_path_buf(),
-                found,
-                expected,
-            },
-            Streamed::Damage(Damage::Trailing(_)) => trailing(path, len),
-            Streamed::Damage(Damage::Checksum) => PolicyFileError::Checksum {
-                path: path.to_path_buf(),
-            },
+            Streamed::Damage(d) => damaged(path, len, d),
             Streamed::Content(reason) => malformed(path, reason),
         })
     }
@@ -634,24 +626,8 @@ impl PolicyFile {
     }
 
     fn from_container(bytes: &[u8], path: &Path) -> Result<Self, PolicyFileError> {
-        let (version, len, crc) = Self::header(bytes, path)?;
-        let expected = len + HEADER_LEN as u64;
-        if (bytes.len() as u64) < expected {
-            return Err(PolicyFileError::Truncated {
-                path: path.to_path_buf(),
-                found: bytes.len() as u64,
-                expected,
-            });
-        }
-        if (bytes.len() as u64) > expected {
-            return Err(trailing(path, len));
-        }
-        let payload = &bytes[HEADER_LEN..];
-        if crc32fast::hash(payload) != crc {
-            return Err(PolicyFileError::Checksum {
-                path: path.to_path_buf(),
-            });
-        }
+        let (version, len, _) = Self::header(bytes, path)?;
+        let (_, payload) = super::container::split(bytes).map_err(|d| damaged(path, len, d))?;
         Self::from_payload(version, Payload::Bytes(payload), path)
     }
 
@@ -828,12 +804,23 @@ impl PolicyFile {
     }
 }
 
-/// A container with bytes after the `len`-byte payload its header announces.
-fn trailing(path: &Path, len: u64) -> PolicyFileError {
-    malformed(
-        path,
-        format!("data after the end its header gives ({len}-byte payload)"),
-    )
+/// The error of a container whose header announces a `len`-byte payload and that has
+/// `damage`.
+fn damaged(path: &Path, len: u64, damage: super::container::Damage) -> PolicyFileError {
+    use super::container::Damage;
+    let path = path.to_path_buf();
+    match damage {
+        Damage::Truncated { found, expected } => PolicyFileError::Truncated {
+            path,
+            found,
+            expected,
+        },
+        Damage::Trailing(_) => malformed(
+            &path,
+            format!("data after the end its header gives ({len}-byte payload)"),
+        ),
+        Damage::Checksum => PolicyFileError::Checksum { path },
+    }
 }
 
 fn malformed(path: &Path, reason: String) -> PolicyFileError {
