@@ -46,6 +46,7 @@ LAYERS = {
         {"kernels"},
         {"probe"},
         {"gpu"},
+        {"last"},
         {"sweeps"},
     ],
     "fuzzyq-cli": [

@@ -19,6 +19,7 @@
 # card, about 108 GB of the host's memory): two full backups timed. Last, three point masses
 # on a smaller grid (GPU_CHECK_THREE, a configuration; empty skips them): trained on the GPU
 # and rolled out from 20 random starts, then one full backup with 5 force levels per axis.
+# GPU_CHECK_KERNELS lists the full backup's other kernels timed beside the default (section 2).
 # GPU_CHECK_SECTIONS picks sections (default "1 2 3 paper 4"). Two more, not run by default as
 # each takes minutes (run them as calls of their own): "paper-train" trains three point masses
 # on the paper's cores with forces of -0.2, 0 and 0.2 N per axis (729 joint actions) to the
@@ -106,6 +107,20 @@ for mb in $GPU_CHECK_BATCHES; do
   row "GPU full backup, batch ${mb} MiB" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "${line:-see log}; peak ${peak}"
   prof=$(grep -E '^profile' "$OUT/bench-gpu-$mb.log" | sed 's/^profile *//' | paste -sd ';' -)
   [ -n "$prof" ] && row "  its dispatches, one at a time" "" "$prof"
+done
+# The other kernels of a full backup, each pair STAGES/LAST with its dispatches timed one at a
+# time: the stages before the last (FUZZYQ_GPU_STAGES: rows, or merged) and the fused last
+# stage (FUZZYQ_GPU_LAST: rows, or merged:N, N cores in turn). The rows above use the default,
+# merged/merged:4; rows/rows are the kernels before the merge.
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-rows/rows rows/merged:4 merged/rows merged/merged:1 merged/merged:16}
+want 2 || GPU_CHECK_KERNELS=
+for kern in $GPU_CHECK_KERNELS; do
+  log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"
+  FUZZYQ_GPU_PROFILE=1 FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" \
+    --device gpu --backups 6 --evaluations 0 --peak-seconds 0.1 --json "${log%.log}.json" >"$log" 2>&1
+  rc=$?
+  row "GPU full backup, kernels $kern" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "$(grep -E '^(backup|profile)' "$log" | sed -e 's/  */ /g' -e 's/^profile //' | paste -sd ';' -)"
 done
 # The robots' grid on the GPU, profiled.
 if want 2 && [ -z "${GPU_CHECK_BENCH_ENV:-}" ]; then
@@ -219,4 +234,4 @@ echo
 echo "| check | result | figures |"
 echo "|---|---|---|"
 tee "$OUT/table.md" <"$OUT/rows.md"
-[ -s "$OUT/adapter.txt" ] && cat "$OUT/adapter.txt"
+if [ -s "$OUT/adapter.txt" ]; then cat "$OUT/adapter.txt"; fi

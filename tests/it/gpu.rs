@@ -11,7 +11,7 @@ use fuzzyq_core::solver::{
     self, Buf, Device, Grid, Operator, Precision, Scheme, Solution, SolverConfig, Sweeps,
 };
 use fuzzyq_gpu::reference::{HostSweeps, Rounding};
-use fuzzyq_gpu::{Gpu, GpuError, GpuSweeps};
+use fuzzyq_gpu::{Gpu, GpuError, GpuSweeps, LastStage};
 use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
 use fuzzyq_sim::model::EnvKind;
 
@@ -108,6 +108,13 @@ fn pointmass_small() -> TrainConfig {
     c
 }
 
+/// [`pointmass_small`] with an absorbing goal.
+fn pointmass_goal() -> TrainConfig {
+    let mut c = pointmass_small();
+    c.solver.absorbing_goal = true;
+    c
+}
+
 /// Two robots on 5 positions and 4 headings.
 fn khepera_small() -> TrainConfig {
     let mut c = config_of(EnvKind::Khepera);
@@ -160,8 +167,7 @@ fn dcmotor_matches_the_reference_bit_for_bit() {
 
 #[test]
 fn absorbing_goals_match_the_reference() {
-    let mut c = pointmass_small();
-    c.solver.absorbing_goal = true;
+    let mut c = pointmass_goal();
     c.solver.max_sweeps = 20;
     run_config(&c);
 }
@@ -306,15 +312,8 @@ fn every_pass_matches_the_reference_on_point_masses() {
     operator_passes(&pointmass_small());
     // 15,625 joint actions: the fused last stage takes a core's 3,125 product columns in
     // chunks per lane.
-    let mut five = three_point_masses(false);
-    let EnvConfig::Pointmass(p) = &mut five.env else {
-        unreachable!("a point-mass config")
-    };
-    p.force_levels = vec![-2.0, -0.2, 0.0, 0.2, 2.0];
-    operator_passes(&five);
-    let mut goal = pointmass_small();
-    goal.solver.absorbing_goal = true;
-    operator_passes(&goal);
+    operator_passes(&three_point_masses_five_forces());
+    operator_passes(&pointmass_goal());
 }
 
 #[test]
@@ -387,11 +386,9 @@ fn v_in_parts_gives_the_same_bits() {
     // is): the first stage and policy evaluation read across parts, the other passes run a
     // part at a time, the goal bits and the reward table are cut with them. Every pass keeps
     // the reference's bits, as a whole run keeps one part's.
-    let mut goal = pointmass_small();
-    goal.solver.absorbing_goal = true;
     for c in [
         pointmass_small(),
-        goal,
+        pointmass_goal(),
         khepera_small(),
         three_point_masses(false),
         three_point_masses(true),
@@ -480,6 +477,76 @@ fn lanes_reduced_in_memory_or_by_subgroups_give_the_same_bits() {
         );
         // Every pass too, with the lanes reduced in memory.
         passes_match(&memory, &op);
+    }
+}
+
+/// The five-force three point masses of [`every_pass_matches_the_reference_on_point_masses`].
+fn three_point_masses_five_forces() -> TrainConfig {
+    let mut five = three_point_masses(false);
+    let EnvConfig::Pointmass(p) = &mut five.env else {
+        unreachable!("a point-mass config")
+    };
+    p.force_levels = vec![-2.0, -0.2, 0.0, 0.2, 2.0];
+    five
+}
+
+#[test]
+fn kernels_by_rows_or_merged_give_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // The kernels before the merge: every stage and the last one row at a time.
+    let rows = g
+        .clone()
+        .with_merged_stages(false)
+        .with_last_stage(LastStage::Rows);
+    let merged = |cores| g.clone().with_last_stage(LastStage::Merged { cores });
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let a = fuzzyq_gpu::solve_from(&rows, &model, &grid, &config, None, false, noop).unwrap();
+    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(&a, &b, "rows against merged rows");
+    // Every pass of either kernel, cores in turn or not, lanes reduced by subgroups or in
+    // memory (the default, merged rows and 4 cores in turn, in the tests above).
+    let variants = [
+        (rows.clone(), "stage_c", "last1"),
+        (merged(1).with_merged_stages(false), "stage_c", "lastm"),
+        (merged(3), "stage_m", "lastm"),
+        (
+            g.clone().with_last_stage(LastStage::Rows),
+            "stage_m",
+            "last1",
+        ),
+    ];
+    for c in [
+        pointmass_small(),
+        pointmass_goal(),
+        khepera_small(),
+        config_of(EnvKind::Dcmotor),
+    ] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let op = operator(&model, &grid, &c.solver.solver_config());
+        for (gpu, stage, last) in &variants {
+            for sg in [true, false] {
+                let gpu = gpu.clone().with_subgroups(sg);
+                let gs = GpuSweeps::new(&gpu, &op).unwrap();
+                // One block: a thread per core, rows one at a time.
+                let one_block = matches!(c.env, EnvConfig::Dcmotor(_));
+                let want = if one_block { "stage_c" } else { stage };
+                assert!(gs.stage_kernels().iter().all(|k| *k == want), "{want}");
+                assert_eq!(gs.last_stage(), Some(*last));
+                drop(gs);
+                passes_match(&gpu, &op);
+            }
+        }
+    }
+    // 15,625 joint actions, the columns in chunks per lane; and six blocks, the reward of the
+    // action (full rows): one row at a time.
+    for c in [three_point_masses_five_forces(), three_point_masses(true)] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        passes_match(&rows, &operator(&model, &grid, &c.solver.solver_config()));
     }
 }
 

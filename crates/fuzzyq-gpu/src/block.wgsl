@@ -7,7 +7,7 @@ const WG: u32 = 64u;
 const MAX_BLOCKS: u32 = 8u;
 
 struct Params {
-    // The stage (the block of `stagec.wgsl`, `last1.wgsl`).
+    // The stage (the block of `stagec.wgsl`, `stagem.wgsl`, `last1.wgsl`, `lastm.wgsl`).
     b: u32,
     // Threads (or items) of this dispatch.
     count: u32,
@@ -97,6 +97,41 @@ fn finish(core: u32, m: f32) -> f32 {
         return r;
     }
     return r + unfused(prm.gamma, m);
+}
+
+// Offers expected value `x` of product action `i` (its absolute value in mode 3) to a lane's
+// largest (`bv` at `bi`; the fused last stage): taken where it beats it, so the lowest index
+// among equals wins whatever the order of the offers.
+fn offer(x: f32, i: u32, bv: ptr<function, f32>, bi: ptr<function, u32>) {
+    var y = x;
+    if prm.mode == 3u {
+        y = abs(x);
+    }
+    if beats(y, i, *bv, *bi) {
+        *bv = y;
+        *bi = i;
+    }
+}
+
+// Writes core `core`'s largest value `bv`, at product action `bi`, as `prm.mode` says (the
+// fused last stage: `last1.wgsl`, `lastm.wgsl`).
+fn write_best(core: u32, bv: f32, bi: u32) {
+    let is_goal = goal_at(core);
+    switch prm.mode {
+        case 0u: {
+            dst[core] = finish(core, bv);
+        }
+        case 1u: {
+            dst[core] = finish(core, bv);
+            aux[core] = select(bi, 0u, is_goal);
+        }
+        case 2u: {
+            aux[core] = select(bi, 0u, is_goal);
+        }
+        default: {
+            dst[core] = select(bv, 0.0, is_goal);
+        }
+    }
 }
 
 // Whether (v, i) beats (bv, bi): larger, or equal at a lower index.

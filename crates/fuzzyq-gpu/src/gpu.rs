@@ -23,6 +23,50 @@ pub struct Gpu {
     pub(crate) read_bytes: u64,
     /// Whether the last stage may reduce a core's lanes by subgroup operations.
     pub(crate) subgroups: bool,
+    /// How the fused last stage takes a core's rows.
+    pub(crate) last: LastStage,
+    /// Whether the stages before it take a block core's rows merged by column.
+    pub(crate) merged_stages: bool,
+}
+
+/// How the fused last stage of a full backup takes a core's rows (its block actions)
+/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged` or `merged:CORES`). Every
+/// choice gives the same bits; they differ in how often the stage before is read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LastStage {
+    /// One row at a time (`last1.wgsl`): each value of the stage before is read once per row
+    /// that has its column.
+    Rows,
+    /// The core's rows merged by column (`lastm.wgsl`,
+    /// [`PlanTable::merged_steps`](fuzzyq_core::solver::PlanTable::merged_steps)): each value
+    /// is read once per core and feeds every action whose row has its column (the paper's
+    /// point masses: 8.1 steps per core against 18.3 row entries); `cores` cores in turn per
+    /// group of lanes, neighbours whose columns are mostly shared. Blocks of more than 32
+    /// actions take [`LastStage::Rows`].
+    Merged {
+        /// Cores each group of lanes takes in turn (at least 1).
+        cores: u32,
+    },
+}
+
+impl LastStage {
+    /// The default: merged rows, 4 cores in turn.
+    pub const DEFAULT: LastStage = LastStage::Merged { cores: 4 };
+
+    /// `rows`, `merged` (4 cores in turn) or `merged:CORES` (`None` for anything else).
+    #[must_use]
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.split_once(':') {
+            None if s == "rows" => Some(LastStage::Rows),
+            None if s == "merged" => Some(LastStage::DEFAULT),
+            Some(("merged", n)) => n
+                .parse::<u32>()
+                .ok()
+                .filter(|&c| c > 0)
+                .map(|cores| LastStage::Merged { cores }),
+            _ => None,
+        }
+    }
 }
 
 impl core::fmt::Debug for Gpu {
@@ -93,6 +137,11 @@ impl Gpu {
             part_bytes: env_kib("FUZZYQ_GPU_PART_KB").unwrap_or(u64::MAX),
             read_bytes: 256 << 20,
             subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
+            last: std::env::var("FUZZYQ_GPU_LAST")
+                .ok()
+                .and_then(|v| LastStage::parse(&v))
+                .unwrap_or(LastStage::DEFAULT),
+            merged_stages: std::env::var("FUZZYQ_GPU_STAGES").map_or(true, |v| v != "rows"),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
         })
@@ -142,6 +191,27 @@ impl Gpu {
     #[must_use]
     pub fn with_subgroups(mut self, on: bool) -> Self {
         self.subgroups = on;
+        self
+    }
+
+    /// This GPU with the fused last stage taking a core's rows as `last` says (the default
+    /// [`LastStage::DEFAULT`], or `FUZZYQ_GPU_LAST`). All give the same bits.
+    #[must_use]
+    pub fn with_last_stage(mut self, last: LastStage) -> Self {
+        self.last = last;
+        self
+    }
+
+    /// This GPU with the stages of a full backup before the last taking a block core's rows
+    /// merged by column (`true`, the default: a thread computes an element for every action
+    /// of the block, reading each value of the stage before once per step,
+    /// [`PlanTable::merged_steps`](fuzzyq_core::solver::PlanTable::merged_steps)), or one
+    /// row at a time (`false`, or `FUZZYQ_GPU_STAGES=rows`: a thread per element). Blocks of
+    /// more than 32 actions, and stages whose block core has fewer than 32 elements (one-block
+    /// models), take one row at a time. Both give the same bits.
+    #[must_use]
+    pub fn with_merged_stages(mut self, on: bool) -> Self {
+        self.merged_stages = on;
         self
     }
 

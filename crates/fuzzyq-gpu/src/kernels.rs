@@ -57,10 +57,11 @@ pub(crate) enum Entry {
     Sub,
     Max,
     FmaProbe,
-    /// `stagec.wgsl`, compiled per problem and stage (not in [`Entry::ALL`]).
+    /// `stagec.wgsl` or `stagem.wgsl`, compiled per problem and stage (not in [`Entry::ALL`]).
     StageConst,
-    /// `last1.wgsl`, compiled per problem (not in [`Entry::ALL`]).
-    LastOne,
+    /// The fused last stage, `last1.wgsl` or `lastm.wgsl`, compiled per problem (not in
+    /// [`Entry::ALL`]).
+    Last,
     /// `evaluate.wgsl`: compiled once ([`Kernels::evaluate`]) for a `V` in one part, else per
     /// problem with its parts (not in [`Entry::ALL`]).
     Evaluate,
@@ -86,7 +87,7 @@ impl Entry {
             Entry::Max => "max_pass",
             Entry::FmaProbe => "fma_probe",
             Entry::StageConst => "stage_c",
-            Entry::LastOne => "last1",
+            Entry::Last => "last",
         }
     }
 }
@@ -317,8 +318,8 @@ pub(crate) fn specialized(
     Ok(p)
 }
 
-/// The reduction over a core's lanes in `last1.wgsl`: by subgroup shuffles, or in
-/// workgroup memory.
+/// The reduction over a core's lanes in `last1.wgsl` and `lastm.wgsl`: by subgroup shuffles,
+/// or in workgroup memory.
 pub(crate) const REDUCE_SUBGROUP: &str = "
     for (var m = TPC / 2u; m > 0u; m = m / 2u) {
         let ov = subgroupShuffleXor(bv, m);

@@ -24,7 +24,6 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         let cb = core_of(local, NL);
         let c = cb.x;
         let base = cb.y;
-        let abs_mode = prm.mode == 3u;
         for (var a = 0u; a < AL; a++) {
             let row = prm.rows[LAST].x + c * AL + a;
             let e0 = row_ptr[row];
@@ -44,14 +43,8 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
                 }
                 for (var j = 0u; j < JC; j++) {
                     let p = p0 + TPC * j;
-                    var x = acc[j];
-                    if abs_mode {
-                        x = abs(x);
-                    }
-                    // The lowest index among equals whatever the order the chunks visit.
-                    if p < PL && beats(x, a * PL + p, bv, bi) {
-                        bv = x;
-                        bi = a * PL + p;
+                    if p < PL {
+                        offer(acc[j], a * PL + p, &bv, &bi);
                     }
                 }
             }
@@ -61,21 +54,5 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
     if !valid || lane != 0u {
         return;
     }
-    let core = prm.out_lo + local;
-    let is_goal = goal_at(core);
-    switch prm.mode {
-        case 0u: {
-            dst[core] = finish(core, bv);
-        }
-        case 1u: {
-            dst[core] = finish(core, bv);
-            aux[core] = select(bi, 0u, is_goal);
-        }
-        case 2u: {
-            aux[core] = select(bi, 0u, is_goal);
-        }
-        default: {
-            dst[core] = select(bv, 0.0, is_goal);
-        }
-    }
+    write_best(prm.out_lo + local, bv, bi);
 }

@@ -15,13 +15,19 @@
 //! A full backup runs the block contraction a batch at a time ([`Batches`]: a run of slabs, or
 //! where one slab's stage outputs would not fit, a run of cores of a later block below fixed
 //! cores of the earlier ones, whose shared stages are kept from batch to batch): each stage
-//! before the last writes its output for the batch, one thread per element (`stagec.wgsl`, compiled
-//! with the problem's sizes as constants); the last stage is fused with the maximum over
-//! actions (`last1.wgsl`: up to 32 lanes per core, each taking several of the core's columns
-//! so that a row entry's weight feeds several multiply-adds, then the lanes reduce to the
-//! largest value at the lowest action by subgroup shuffles, or in workgroup memory where the
-//! adapter has no single subgroup size or a start-up probe finds a workgroup of that size is
-//! not one subgroup) or, where the actions are renumbered or the reward depends on the action,
+//! before the last writes its output for the batch, compiled with the problem's sizes as
+//! constants, by default a thread per element and every action of its block, the block
+//! core's rows merged by column so that each value of the stage before is read once per step
+//! (`stagem.wgsl`, [`Gpu::with_merged_stages`]), or a thread per element and action
+//! (`stagec.wgsl`); the last stage is fused with the maximum over
+//! actions (up to 32 lanes per core, each taking several of the core's columns so that a
+//! weight feeds several multiply-adds; by default the core's rows merged by column,
+//! `lastm.wgsl`, so that each value of the stage before is read once per core and feeds every
+//! action whose row has its column, several neighbouring cores in turn; or one row at a time,
+//! `last1.wgsl`, [`LastStage`]; then the lanes reduce to the largest value at the lowest
+//! action by subgroup shuffles, or in workgroup memory where the adapter has no single
+//! subgroup size or a start-up probe finds a workgroup of that size is not one subgroup) or,
+//! where the actions are renumbered or the reward depends on the action,
 //! writes full rows that one thread per core reduces over the joint actions in order
 //! (`block.wgsl`). Policy evaluation runs one thread per core through the nested sums of its
 //! action. Batches bound the stage buffers (256 MiB by default, [`Gpu::with_batch_bytes`]).
@@ -64,6 +70,7 @@ mod context;
 mod error;
 mod gpu;
 mod kernels;
+mod last;
 mod memory;
 mod parts;
 mod probe;
@@ -78,7 +85,7 @@ use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
 pub use batches::Batches;
 pub use context::AdapterSummary;
 pub use error::GpuError;
-pub use gpu::Gpu;
+pub use gpu::{Gpu, LastStage};
 pub use sweeps::GpuSweeps;
 
 /// Runs fuzzy Q-iteration on `model` over `grid` on `gpu`, continued from `resume` or afresh:

@@ -17,7 +17,7 @@ pub(crate) fn fused_fma(gpu: &Context, k: &Kernels) -> Result<bool, GpuError> {
     Ok(out[0].to_bits() == fused.to_bits())
 }
 
-/// Whether subgroup shuffles reduce clusters of lanes as `last1.wgsl` needs, on workgroups
+/// Whether subgroup shuffles reduce clusters of lanes as the last stage needs, on workgroups
 /// of `wgs` threads (the adapter's subgroup size): the probe's result against the host's.
 pub(crate) fn subgroups_work(gpu: &Context, k: &Kernels, wgs: u32) -> Result<bool, GpuError> {
     let tpc = wgs.min(32);

@@ -11,9 +11,9 @@ use crate::buffers::{self, with_data, zeroed};
 use crate::error::GpuError;
 use crate::gpu::Gpu;
 use crate::kernels::{
-    self, DiffParams, Entry, Kernels, MAX_BLOCKS, PARAM_STRIDE, Params, WG, bind_group,
-    params_bytes,
+    self, DiffParams, Entry, Kernels, MAX_BLOCKS, PARAM_STRIDE, Params, bind_group, params_bytes,
 };
+use crate::last::{Last, MergedAt, compile_last};
 use crate::parts::Parts;
 
 /// The last stage's reduction (`mode` in `block.wgsl`).
@@ -216,15 +216,15 @@ pub struct GpuSweeps {
     gpu: Gpu,
     k: std::sync::Arc<Kernels>,
     /// The stages before the last (and the last, where it writes full rows), compiled with
-    /// this problem's constants (`stagec.wgsl`).
-    stage_c: Vec<wgpu::ComputePipeline>,
-    /// The fused last stage compiled for this problem (`last1.wgsl`), where it applies, with
-    /// its cores per workgroup.
-    last1: Option<(wgpu::ComputePipeline, u32)>,
+    /// this problem's constants.
+    stage_kernels: Vec<Stage>,
+    /// The fused last stage compiled for this problem (`last1.wgsl` or `lastm.wgsl`), where
+    /// it applies.
+    last: Option<Last>,
     /// Policy evaluation compiled with the parts of `V` (`evaluate.wgsl`), where the run
     /// can evaluate and `V` takes several parts (else [`Kernels::evaluate`]).
     evaluate: Option<wgpu::ComputePipeline>,
-    /// Whether `last1` reduces by subgroup operations.
+    /// Whether `last` reduces by subgroup operations.
     subgroups: bool,
     shape: Shape,
     table: [wgpu::Buffer; 3],
@@ -267,9 +267,6 @@ impl core::fmt::Debug for GpuSweeps {
     }
 }
 
-/// Columns a lane of the fused last stage accumulates at once (`JC` in `last1.wgsl`).
-const LAST_CHUNK: u32 = 8;
-
 /// Partial results of `max_pass` / `diff_range`: values per workgroup.
 const PER_WG: u64 = 4096;
 
@@ -289,6 +286,9 @@ struct BlockArrays {
     ptr: Vec<u32>,
     col: Vec<u32>,
     weight: Vec<f32>,
+    /// Where each block's merged steps start (`stagem.wgsl`, `lastm.wgsl`), if its actions
+    /// merge.
+    merged: Vec<Option<MergedAt>>,
 }
 
 impl BlockArrays {
@@ -299,6 +299,7 @@ impl BlockArrays {
             ptr: Vec::new(),
             col: Vec::new(),
             weight: Vec::new(),
+            merged: Vec::new(),
         };
         let small = |x: usize| {
             u32::try_from(x).map_err(|_| GpuError::Unsupported("runs blocks of at most 2^32 cores"))
@@ -315,6 +316,10 @@ impl BlockArrays {
             a.ptr.extend(t.ptr.iter().map(|&p| p + entry_base));
             a.col.extend_from_slice(t.col);
             a.weight.extend_from_slice(t.weight);
+        }
+        for t in &plan.tables {
+            let m = crate::last::append_merged((&mut a.ptr, &mut a.col, &mut a.weight), t);
+            a.merged.push(m);
         }
         Ok(a)
     }
@@ -430,10 +435,23 @@ fn check_memory(
     }
 }
 
+/// Elements of one block core a stage needs to take its rows merged (`stagem.wgsl`): a
+/// subgroup's worth, so that neighbouring threads share each step (one-block models, whose
+/// threads each take a core of their own, keep `stagec.wgsl`).
+const MERGED_SHARED: u64 = 32;
+
+/// A stage compiled for one problem ([`compile`]): `stagec.wgsl` (a thread per element) or
+/// `stagem.wgsl` (a thread per element's `per_thread` actions, the block's rows merged).
+struct Stage {
+    pipeline: wgpu::ComputePipeline,
+    per_thread: u64,
+    name: &'static str,
+}
+
 /// The kernels compiled for one problem ([`compile`]).
 struct Compiled {
-    stage_c: Vec<wgpu::ComputePipeline>,
-    last1: Option<(wgpu::ComputePipeline, u32)>,
+    stages: Vec<Stage>,
+    last: Option<Last>,
     evaluate: Option<wgpu::ComputePipeline>,
 }
 
@@ -449,66 +467,50 @@ fn compile(
     shape: &Shape,
     sg: Option<u32>,
     parts: (&wgpu::BindGroupLayout, &str),
+    merged: &[Option<MergedAt>],
 ) -> Result<Compiled, GpuError> {
     let nb = shape.n_blocks();
     // Every stage the passes run as a stage: those before the last, and the last where it
     // writes full rows.
     let compiled = if shape.writes_rows() { nb } else { nb - 1 };
-    let stage_c = (0..compiled)
+    let stages = (0..compiled)
         .map(|b| {
             let [n_b, a_b, r_b, p_b] = shape.blocks[b];
-            let consts = [
+            let mut consts = vec![
                 ("SB", b as u32),
                 ("SN", n_b),
                 ("SA", a_b),
                 ("SR", r_b),
                 ("SP", p_b),
             ];
-            let t = (include_str!("stagec.wgsl"), "stage_c");
-            if b == 0 && nb > 1 {
-                let at = [("SRC_AT", "v_at(col[e], r)")];
+            // A merged stage reads the step's column `k`, the other the entry's. Merged where
+            // a block core's elements fill a subgroup, whose threads then share its steps.
+            let shared = u64::from(r_b) * u64::from(p_b) >= MERGED_SHARED;
+            let (t, column, per_thread) = match merged[b].filter(|_| gpu.merged_stages && shared) {
+                Some(at) => {
+                    consts.extend(at.constants());
+                    ((include_str!("stagem.wgsl"), "stage_m"), "k", a_b)
+                }
+                None => ((include_str!("stagec.wgsl"), "stage_c"), "col[e]", 1),
+            };
+            let pipeline = if b == 0 && nb > 1 {
+                let at = format!("v_at({column}, r)");
+                let at = [("SRC_AT", at.as_str())];
                 kernels::specialized(&gpu.inner, k, t, &consts, &at, false, Some(parts))
             } else {
-                let at = [("SRC_AT", "src[((base + col[e]) * SR + r) * SP + p]")];
+                let at = format!("src[((base + {column}) * SR + r) * SP + p]");
+                let at = [("SRC_AT", at.as_str())];
                 kernels::specialized(&gpu.inner, k, t, &consts, &at, false, None)
-            }
+            }?;
+            Ok(Stage {
+                pipeline,
+                per_thread: u64::from(per_thread),
+                name: t.1,
+            })
         })
-        .collect::<Result<Vec<_>, _>>()?;
-    let last1 = if shape.fused_abs {
-        let [nl, al, _, pl] = shape.blocks[nb - 1];
-        // A workgroup of one subgroup (or of 64 threads reducing in memory); a core's
-        // lanes a power of two up to 32 (or the subgroup), each taking J columns.
-        let wgs = sg.unwrap_or(WG);
-        let tpc = pl.next_power_of_two().min(wgs).min(32);
-        let j = pl.div_ceil(tpc);
-        let jc = j.min(LAST_CHUNK);
-        let consts = [
-            ("LAST", (nb - 1) as u32),
-            ("NL", nl),
-            ("AL", al),
-            ("PL", pl),
-            ("TPC", tpc),
-            ("JC", jc),
-            ("NCH", j.div_ceil(jc)),
-            ("CPW", wgs / tpc),
-            ("WGS", wgs),
-        ];
-        let replace: &[(&str, &str)] = if sg.is_some() {
-            &[
-                ("LANE_PARAM", ", @builtin(subgroup_invocation_id) sid: u32"),
-                ("LANE_EXPR", "sid"),
-                ("REDUCE", kernels::REDUCE_SUBGROUP),
-            ]
-        } else {
-            &[
-                ("LANE_PARAM", ""),
-                ("LANE_EXPR", "li"),
-                ("REDUCE", kernels::REDUCE_MEMORY),
-            ]
-        };
-        let t = (include_str!("last1.wgsl"), "last1");
-        let p = kernels::specialized(&gpu.inner, k, t, &consts, replace, sg.is_some(), None)?;
-        Some((p, wgs / tpc))
+        .collect::<Result<Vec<_>, GpuError>>()?;
+    let last = if shape.fused_abs {
+        Some(compile_last(gpu, k, &shape.blocks, sg, merged[nb - 1])?)
     } else {
         None
     };
@@ -528,8 +530,8 @@ fn compile(
         None
     };
     Ok(Compiled {
-        stage_c,
-        last1,
+        stages,
+        last,
         evaluate,
     })
 }
@@ -660,11 +662,18 @@ impl GpuSweeps {
             kernels::parts_layout(ctx, parts.count())
         };
         let sg = ctx.summary.subgroup_size.filter(|_| gpu.subgroups);
-        let compiled = compile(gpu, &k, &shape, sg, (&parts_layout, &parts.reader()))?;
+        let compiled = compile(
+            gpu,
+            &k,
+            &shape,
+            sg,
+            (&parts_layout, &parts.reader()),
+            &arrays.merged,
+        )?;
         let sweeps = Self {
             gpu: gpu.clone(),
-            stage_c: compiled.stage_c,
-            last1: compiled.last1,
+            stage_kernels: compiled.stages,
+            last: compiled.last,
             evaluate: compiled.evaluate,
             subgroups: sg.is_some() && shape.fused_abs,
             table: [
@@ -724,6 +733,20 @@ impl GpuSweeps {
     #[must_use]
     pub fn gpu(&self) -> &Gpu {
         &self.gpu
+    }
+
+    /// The kernel of each stage a full backup runs as a stage (`stage_c`: a thread per
+    /// element; `stage_m`: a block core's rows merged, [`Gpu::with_merged_stages`]).
+    #[must_use]
+    pub fn stage_kernels(&self) -> Vec<&'static str> {
+        self.stage_kernels.iter().map(|s| s.name).collect()
+    }
+
+    /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged), where
+    /// the run has one ([`Gpu::with_last_stage`]).
+    #[must_use]
+    pub fn last_stage(&self) -> Option<&'static str> {
+        self.last.as_ref().map(|l| l.name)
     }
 
     /// Whether the last stage reduces a core's lanes by subgroup operations
@@ -837,8 +860,8 @@ impl GpuSweeps {
 
     fn pipeline(&self, d: &Dispatch) -> &wgpu::ComputePipeline {
         match d.entry {
-            Entry::StageConst => &self.stage_c[d.params.b as usize],
-            Entry::LastOne => &self.last1.as_ref().expect("compiled where used").0,
+            Entry::StageConst => &self.stage_kernels[d.params.b as usize].pipeline,
+            Entry::Last => &self.last.as_ref().expect("compiled where used").pipeline,
             Entry::Evaluate => self.evaluate.as_ref().unwrap_or(&self.k.evaluate),
             e => self.k.pipeline(e),
         }
@@ -850,9 +873,13 @@ impl GpuSweeps {
             for d in dispatches {
                 let t0 = std::time::Instant::now();
                 self.run(std::slice::from_ref(d))?;
-                let key = match d.entry {
-                    Entry::StageConst => format!("stage {}", d.params.b),
-                    e => format!("{e:?}"),
+                let key = match (d.entry, &self.last) {
+                    (Entry::StageConst, _) => {
+                        let b = d.params.b as usize;
+                        format!("stage {b} ({})", self.stage_kernels[b].name)
+                    }
+                    (Entry::Last, Some(l)) => format!("last stage ({})", l.name),
+                    (e, _) => format!("{e:?}"),
                 };
                 let p = self.profile.as_mut().expect("profiling");
                 let e = p.entry(key).or_insert((0.0, 0));
@@ -914,6 +941,11 @@ impl GpuSweeps {
         }
     }
 
+    /// The workgroups of stage `b`'s kernel over `count` elements.
+    fn stage_grid(&self, b: usize, count: u64) -> (u32, u32) {
+        kernels::grid(count / self.stage_kernels[b].per_thread)
+    }
+
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
     /// `input` and writing `out` (values, if any) and the policy (actions), batch by batch
     /// ([`Tree::steps`]).
@@ -925,7 +957,7 @@ impl GpuSweeps {
         } else {
             s.fused
         };
-        let cpw = self.last1.as_ref().map(|l| l.1);
+        let cpw = self.last.as_ref().map(|l| l.cores_per_group);
         let base = self.base();
         let mut ds = Vec::new();
         for step in s.tree.steps(&s.batches) {
@@ -970,7 +1002,7 @@ impl GpuSweeps {
                     params: p,
                     slots,
                     reads,
-                    groups: kernels::grid(count),
+                    groups: self.stage_grid(b, count),
                 });
                 continue;
             }
@@ -990,7 +1022,7 @@ impl GpuSweeps {
             if fused {
                 let cpw = cpw.expect("compiled where fused");
                 ds.push(Dispatch {
-                    entry: Entry::LastOne,
+                    entry: Entry::Last,
                     params: p,
                     slots: [src, dst, aux, Slot::DummyRead, rewards],
                     reads: None,
@@ -1008,7 +1040,7 @@ impl GpuSweeps {
                     params: rows,
                     slots,
                     reads: None,
-                    groups: kernels::grid(count),
+                    groups: self.stage_grid(b, count),
                 });
                 let p = Params {
                     len: s.n_product as u32,

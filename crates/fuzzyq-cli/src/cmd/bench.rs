@@ -377,6 +377,12 @@ struct GpuReport {
     v_parts: usize,
     setup_seconds: f64,
     subgroups: bool,
+    /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged), if the
+    /// problem has one (`FUZZYQ_GPU_LAST`).
+    last_stage: Option<&'static str>,
+    /// The kernel of each stage before it (`stage_c`: a thread per element, `stage_m`: a
+    /// block core's rows merged; `FUZZYQ_GPU_STAGES`).
+    stage_kernels: Vec<&'static str>,
     evaluation_seconds: Vec<f64>,
     /// Seconds reading `V` and the greedy actions back to the host (a run's last step).
     readback_seconds: f64,
@@ -384,6 +390,25 @@ struct GpuReport {
     median_backup_seconds: f64,
     gfma_per_second: Option<f64>,
     fraction_of_peak: Option<f64>,
+}
+
+/// One more full backup from `v` into `out` with every dispatch timed on its own
+/// (`FUZZYQ_GPU_PROFILE`), printed per kernel.
+fn profile_backup(
+    sweeps: &mut fuzzyq_gpu::GpuSweeps,
+    v: fuzzyq_core::solver::Buf,
+    out: fuzzyq_core::solver::Buf,
+) -> anyhow::Result<()> {
+    use fuzzyq_core::solver::Sweeps;
+    sweeps.set_profiling(true);
+    sweeps.backup(v, out)?;
+    for (kernel, seconds, n) in sweeps.profile() {
+        println!(
+            "profile    {kernel}: {:.3} ms in {n} dispatches",
+            1e3 * seconds
+        );
+    }
+    Ok(())
 }
 
 /// `fuzzyq bench --device gpu`: the adapter, its FMA peak, and full backups on it.
@@ -470,18 +495,10 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     let readback_seconds = t.elapsed().as_secs_f64();
     println!("read back  {readback_seconds:.4} s for V and the greedy actions");
     if std::env::var("FUZZYQ_GPU_PROFILE").is_ok_and(|v| !v.is_empty() && v != "0") {
-        // One more backup with every dispatch timed on its own.
-        sweeps.set_profiling(true);
-        sweeps.backup(v, out)?;
-        for (kernel, seconds, n) in sweeps.profile() {
-            println!(
-                "profile    {kernel}: {:.3} ms in {n} dispatches",
-                1e3 * seconds
-            );
-        }
+        profile_backup(&mut sweeps, v, out)?;
     }
     println!(
-        "problem    {}: {cores} cores x {joint} joint actions{}; {}{}; {:.3} GB on the GPU; \
+        "problem    {}: {cores} cores x {joint} joint actions{}; {}{}{}; {:.3} GB on the GPU; \
          set-up {:.3} s",
         config.env.name(),
         fma.map_or(String::new(), |f| format!(
@@ -492,6 +509,9 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             1 => String::new(),
             p => format!("; V in {p} parts"),
         },
+        sweeps
+            .last_stage()
+            .map_or(String::new(), |k| format!("; last stage {k}")),
         sweeps.device_bytes() as f64 / 1e9,
         setup
     );
@@ -524,6 +544,8 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             v_parts: sweeps.parts(),
             setup_seconds: setup,
             subgroups: sweeps.uses_subgroups(),
+            last_stage: sweeps.last_stage(),
+            stage_kernels: sweeps.stage_kernels(),
             evaluation_seconds: evaluation,
             readback_seconds,
             backup_seconds: times,

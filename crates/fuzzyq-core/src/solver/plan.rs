@@ -67,6 +67,37 @@ pub struct PlanTable<'o, T> {
     pub weight: &'o [T],
 }
 
+impl<T: Copy> PlanTable<'_, T> {
+    /// Most actions of a block [`PlanTable::merged_steps`] merges.
+    pub const MERGED_ACTIONS: usize = 32;
+
+    /// Block core `c`'s rows (one per block action) merged by column, as the CPU's merged
+    /// stage reads them: each step reads the smallest column among the rows' next entries,
+    /// and every row whose next entry reads it takes the step, so each row's entries still
+    /// come in its own order (a backend that keeps one sum per action and adds each step's
+    /// products to the sums of the rows taking it gets each row's sum in the same order).
+    /// Calls `take(step, column, action, weight)` for each action taking each step, in
+    /// order, and returns the number of steps; `None` (nothing taken) where the block has more
+    /// than [`PlanTable::MERGED_ACTIONS`] actions.
+    pub fn merged_steps(&self, c: usize, take: impl FnMut(usize, u32, usize, T)) -> Option<usize> {
+        const N: usize = PlanTable::<'static, f32>::MERGED_ACTIONS;
+        let na = self.n_actions;
+        if na > N {
+            return None;
+        }
+        let rows: [(&[u32], &[T]); N] = core::array::from_fn(|a| {
+            if a < na {
+                let row = c * na + a;
+                let (s, e) = (self.ptr[row] as usize, self.ptr[row + 1] as usize);
+                (&self.col[s..e], &self.weight[s..e])
+            } else {
+                (&[][..], &[][..])
+            }
+        });
+        super::simd::merge_rows::<T, N>(&rows[..na], usize::MAX, take)
+    }
+}
+
 impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
     /// `rho(x_d, u)` of every core (internal order) and joint action, a row of joint actions
     /// per core: the table a backend that reduces on its own needs for a reward of the action
@@ -116,5 +147,74 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
             terminals: b.has_terminals(),
             can_evaluate: self.can_evaluate(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PlanTable;
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    proptest! {
+        /// Every action's row comes back from the merged steps entry by entry, in its own
+        /// order, each step reading the smallest of the rows' next columns (rows unsorted,
+        /// with repeated columns).
+        #[test]
+        fn merged_steps_give_every_row_in_order(
+            rows in prop::collection::vec(
+                prop::collection::vec((0u32..7, 0.0f32..1.0), 0..6), 1..6),
+            cores in 1usize..3,
+        ) {
+            let na = rows.len();
+            let (mut ptr, mut col, mut weight) = (vec![0u32], Vec::new(), Vec::new());
+            for _ in 0..cores {
+                for r in &rows {
+                    col.extend(r.iter().map(|e| e.0));
+                    weight.extend(r.iter().map(|e| e.1));
+                    ptr.push(col.len() as u32);
+                }
+            }
+            let t = PlanTable { n_cores: cores, n_actions: na, r_len: 1, p_len: 1,
+                ptr: &ptr, col: &col, weight: &weight };
+            for c in 0..cores {
+                let mut got = vec![Vec::new(); na];
+                let mut order = Vec::new();
+                let steps = t
+                    .merged_steps(c, |step, k, a, w| {
+                        order.push((step, k));
+                        got[a].push((step, k, w));
+                    })
+                    .unwrap();
+                // Steps in order, every row taking a step reading its column.
+                prop_assert!(order.windows(2).all(|w| w[0].0 < w[1].0 || w[0] == w[1]));
+                for (a, r) in rows.iter().enumerate() {
+                    let entries: Vec<(u32, f32)> = got[a].iter().map(|e| (e.1, e.2)).collect();
+                    prop_assert_eq!(&entries, r);
+                    // At most one entry of a row per step.
+                    prop_assert!(got[a].windows(2).all(|w| w[0].0 < w[1].0));
+                }
+                prop_assert!(got.iter().flatten().all(|e| e.0 < steps));
+            }
+        }
+    }
+
+    #[test]
+    fn blocks_of_more_actions_are_not_merged() {
+        let n = PlanTable::<f32>::MERGED_ACTIONS + 1;
+        let ptr = vec![0u32; n + 1];
+        let t = PlanTable::<f32> {
+            n_cores: 1,
+            n_actions: n,
+            r_len: 1,
+            p_len: 1,
+            ptr: &ptr,
+            col: &[],
+            weight: &[],
+        };
+        assert_eq!(
+            t.merged_steps(0, |_, _, _, _| panic!("nothing taken")),
+            None
+        );
     }
 }

@@ -321,6 +321,45 @@ impl<'a, T: Real> Rows<'a, T> {
     }
 }
 
+/// Rows (each its columns and weights) merged by column: each step reads the smallest
+/// column among the rows' next entries, and every row whose next entry reads it takes the
+/// step, so each row's entries appear in its own order (rows need not be sorted). Calls
+/// `take(step, column, row, weight)` for each row taking each step, in order; returns the
+/// number of steps, or `None` once there would be more than `max_steps`. At most `N` rows
+/// (a bound known at compile time, so that the loops over the rows unroll where it is small).
+#[inline(always)]
+pub(crate) fn merge_rows<T: Copy, const N: usize>(
+    rows: &[(&[u32], &[T])],
+    max_steps: usize,
+    mut take: impl FnMut(usize, u32, usize, T),
+) -> Option<usize> {
+    assert!(rows.len() <= N, "at most N rows");
+    let mut heads = [0usize; N];
+    let heads = &mut heads[..rows.len()];
+    let mut n = 0;
+    loop {
+        let mut next = u32::MAX;
+        for (&(cols, _), &h) in rows.iter().zip(heads.iter()) {
+            if let Some(&k) = cols.get(h) {
+                next = next.min(k);
+            }
+        }
+        if next == u32::MAX {
+            return Some(n);
+        }
+        if n == max_steps {
+            return None;
+        }
+        for (a, (&(cols, ws), h)) in rows.iter().zip(heads.iter_mut()).enumerate() {
+            if cols.get(*h) == Some(&next) {
+                take(n, next, a, ws[*h]);
+                *h += 1;
+            }
+        }
+        n += 1;
+    }
+}
+
 impl<'a, T> Rows<'a, T> {
     pub(super) fn n_rows(&self) -> usize {
         self.ptr.len() - 1
@@ -332,21 +371,17 @@ impl<'a, T> Rows<'a, T> {
         (&self.col[s..e], &self.weight[s..e])
     }
 
-    /// Rows `first .. first + na` (`na <= N`) merged by column, for the merged
-    /// stage (`stage::Merged`, per call) and [`RowsBuf::with_groups`] (once per table): each
-    /// step reads the smallest column among the rows' next entries, and every row whose next
-    /// entry reads it takes the step, so each row's entries appear in its own order. Calls
-    /// `take(step, column, row, weight)` for each row taking each step, in order; returns the
-    /// number of steps, or `None` once there would be more than `max_steps`. (`N` bounds
-    /// the rows at compile time: the merged stage passes its action count, so that the loops
-    /// over the rows unroll.)
+    /// Rows `first .. first + na` (`na <= N`) merged by column ([`merge_rows`]), for the
+    /// merged stage (`stage::Merged`, per call) and [`RowsBuf::with_groups`] (once per
+    /// table). (`N` bounds the rows at compile time: the merged stage passes its action count,
+    /// so that the loops over the rows unroll.)
     #[inline(always)]
     pub(super) fn merge_by_column<const N: usize>(
         &self,
         first: usize,
         na: usize,
         max_steps: usize,
-        mut take: impl FnMut(usize, u32, usize, T),
+        take: impl FnMut(usize, u32, usize, T),
     ) -> Option<usize>
     where
         T: Copy,
@@ -358,29 +393,7 @@ impl<'a, T> Rows<'a, T> {
                 (&[][..], &[][..])
             }
         });
-        let mut heads = [0usize; N];
-        let mut n = 0;
-        loop {
-            let mut next = u32::MAX;
-            for (&(cols, _), &h) in entries[..na].iter().zip(&heads) {
-                if let Some(&k) = cols.get(h) {
-                    next = next.min(k);
-                }
-            }
-            if next == u32::MAX {
-                return Some(n);
-            }
-            if n == max_steps {
-                return None;
-            }
-            for (a, (&(cols, ws), h)) in entries[..na].iter().zip(&mut heads).enumerate() {
-                if cols.get(*h) == Some(&next) {
-                    take(n, next, a, ws[*h]);
-                    *h += 1;
-                }
-            }
-            n += 1;
-        }
+        merge_rows::<T, N>(&entries[..na], max_steps, take)
     }
 
     /// The merged steps of rows `g na .. (g + 1) na` (see [`GroupsBuf`]), if these rows were

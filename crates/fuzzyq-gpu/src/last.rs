@@ -1,0 +1,153 @@
+//! The fused last stage of a full backup: the last block's contraction with the maximum over
+//! joint actions, one row at a time (`last1.wgsl`) or a core's rows merged by column
+//! (`lastm.wgsl`, [`LastStage`]), compiled with the problem's sizes; and the merged steps it
+//! and the merged stages (`stagem.wgsl`) read.
+
+use fuzzyq_core::solver::PlanTable;
+
+use crate::error::GpuError;
+use crate::gpu::{Gpu, LastStage};
+use crate::kernels::{self, Kernels, WG};
+
+/// Columns a lane of the fused last stage accumulates at once (`JC` in `last1.wgsl`).
+const LAST_CHUNK: u32 = 8;
+
+/// Most sums a lane of the merged last stage keeps (`AL JC` in `lastm.wgsl`).
+const MERGED_SUMS: u32 = 40;
+
+/// The fused last stage compiled for one problem ([`compile_last`]).
+pub(crate) struct Last {
+    /// `last1.wgsl` or `lastm.wgsl` with the problem's constants.
+    pub pipeline: wgpu::ComputePipeline,
+    /// Cores a workgroup takes.
+    pub cores_per_group: u32,
+    /// Its kernel (`last1` or `lastm`).
+    pub name: &'static str,
+}
+
+/// Where the last block's rows merged by column ([`PlanTable::merged_steps`]) lie in the
+/// block tables' arrays (`sweeps.rs`), after every block's table: step `s` of block core `c`
+/// for `s` in `ptr[ptr_at + c]..ptr[ptr_at + c + 1]` reads column `col[col_at + s]`; action
+/// `a` takes it where bit `a` of `col[mask_at + s]` is set, with weight
+/// `weight[weight_at + s A + a]`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MergedAt {
+    ptr_at: u32,
+    col_at: u32,
+    mask_at: u32,
+    weight_at: u32,
+}
+
+impl MergedAt {
+    /// The kernels' constants for where the steps lie (`MP`, `MC`, `MM`, `MW`).
+    pub(crate) fn constants(self) -> [(&'static str, u32); 4] {
+        [
+            ("MP", self.ptr_at),
+            ("MC", self.col_at),
+            ("MM", self.mask_at),
+            ("MW", self.weight_at),
+        ]
+    }
+}
+
+/// Appends `t`'s rows merged by column, per block core, to the tables' arrays ([`MergedAt`]);
+/// `None` (nothing appended) where its actions do not merge.
+pub(crate) fn append_merged(
+    (ptr, col, weight): (&mut Vec<u32>, &mut Vec<u32>, &mut Vec<f32>),
+    t: &PlanTable<'_, f32>,
+) -> Option<MergedAt> {
+    let na = t.n_actions;
+    let (mut starts, mut cols, mut masks, mut ws) = (vec![0u32], vec![], vec![], vec![]);
+    for c in 0..t.n_cores {
+        let first = cols.len();
+        t.merged_steps(c, |step, k, a, w| {
+            let s = first + step;
+            if s == cols.len() {
+                cols.push(k);
+                masks.push(0u32);
+                ws.resize(ws.len() + na, 0.0);
+            }
+            masks[s] |= 1 << a;
+            ws[s * na + a] = w;
+        })?;
+        starts.push(cols.len() as u32);
+    }
+    let at = MergedAt {
+        ptr_at: ptr.len() as u32,
+        col_at: col.len() as u32,
+        mask_at: (col.len() + cols.len()) as u32,
+        weight_at: weight.len() as u32,
+    };
+    ptr.extend(starts);
+    col.extend(cols);
+    col.extend(masks);
+    weight.extend(ws);
+    Some(at)
+}
+
+/// The fused last stage compiled for a problem of `blocks` (`[cores, actions, R, P]` in
+/// contraction order), as [`Gpu::with_last_stage`] says (rows
+/// one at a time where the last block's actions do not merge, `merged` `None`), with its
+/// reduction over a core's lanes: a workgroup of one subgroup of `sg` lanes reducing by
+/// shuffles, or of 64 threads reducing in memory.
+pub(crate) fn compile_last(
+    gpu: &Gpu,
+    k: &Kernels,
+    blocks: &[[u32; 4]],
+    sg: Option<u32>,
+    merged: Option<MergedAt>,
+) -> Result<Last, GpuError> {
+    let nb = blocks.len();
+    let [nl, al, _, pl] = blocks[nb - 1];
+    // A core's lanes: a power of two up to 32 (or the subgroup), each taking J columns, JC
+    // at a time (so that the sums stay in registers: of every action where rows merge).
+    let wgs = sg.unwrap_or(WG);
+    let tpc = pl.next_power_of_two().min(wgs).min(32);
+    let j = pl.div_ceil(tpc);
+    let (merged, cores) = match (gpu.last, merged) {
+        (LastStage::Merged { cores }, Some(at)) => (Some(at), cores.max(1)),
+        _ => (None, 1),
+    };
+    let jc = match merged {
+        Some(_) => j.min(LAST_CHUNK).min((MERGED_SUMS / al).max(1)),
+        None => j.min(LAST_CHUNK),
+    };
+    let mut consts = vec![
+        ("LAST", (nb - 1) as u32),
+        ("NL", nl),
+        ("AL", al),
+        ("PL", pl),
+        ("TPC", tpc),
+        ("JC", jc),
+        ("NCH", j.div_ceil(jc)),
+        ("CPW", wgs / tpc),
+        ("WGS", wgs),
+    ];
+    let t = match merged {
+        Some(at) => {
+            consts.push(("CR", cores));
+            consts.extend(at.constants());
+            (include_str!("lastm.wgsl"), "lastm")
+        }
+        None => (include_str!("last1.wgsl"), "last1"),
+    };
+    let replace: &[(&str, &str)] = if sg.is_some() {
+        &[
+            ("LANE_PARAM", ", @builtin(subgroup_invocation_id) sid: u32"),
+            ("LANE_EXPR", "sid"),
+            ("REDUCE", kernels::REDUCE_SUBGROUP),
+        ]
+    } else {
+        &[
+            ("LANE_PARAM", ""),
+            ("LANE_EXPR", "li"),
+            ("REDUCE", kernels::REDUCE_MEMORY),
+        ]
+    };
+    let pipeline = kernels::specialized(&gpu.inner, k, t, &consts, replace, sg.is_some(), None)?;
+    Ok(Last {
+        pipeline,
+        cores_per_group: wgs / tpc * cores,
+        name: t.1,
+    })
+}
