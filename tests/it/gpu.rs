@@ -550,6 +550,28 @@ fn kernels_by_rows_or_merged_give_the_same_bits() {
     }
 }
 
+/// What the merged kernels save on the paper's grid (no adapter needed): every block core's
+/// 5 rows hold 18.3 entries between them and merge into 8.1 steps (the figures of
+/// `LastStage::Merged` and BENCHMARKS.md).
+#[test]
+fn the_papers_rows_merge_into_fewer_steps() {
+    let c = config_of(EnvKind::Pointmass);
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let op = operator(&model, &grid, &c.solver.solver_config());
+    let plan = op.block_plan().unwrap();
+    assert_eq!(plan.tables.len(), 4);
+    for t in &plan.tables {
+        let steps: usize = (0..t.n_cores)
+            .map(|core| t.merged_steps(core, |_, _, _, _| {}).unwrap())
+            .sum();
+        let per_core = |n: usize| format!("{:.1}", n as f64 / t.n_cores as f64);
+        assert_eq!((t.n_cores, t.n_actions), (45, 5));
+        assert_eq!(per_core(t.col.len()), "18.3");
+        assert_eq!(per_core(steps), "8.1");
+    }
+}
+
 #[test]
 fn refusals_are_one_line_errors() {
     let Some(g) = gpu() else { return };

@@ -25,8 +25,8 @@ pub(crate) struct Last {
     pub name: &'static str,
 }
 
-/// Where the last block's rows merged by column ([`PlanTable::merged_steps`]) lie in the
-/// block tables' arrays (`sweeps.rs`), after every block's table: step `s` of block core `c`
+/// Where a block's rows merged by column ([`PlanTable::merged_steps`]) lie in the block
+/// tables' arrays (`sweeps.rs`), after every block's table: step `s` of block core `c`
 /// for `s` in `ptr[ptr_at + c]..ptr[ptr_at + c + 1]` reads column `col[col_at + s]`; action
 /// `a` takes it where bit `a` of `col[mask_at + s]` is set, with weight
 /// `weight[weight_at + s A + a]`.

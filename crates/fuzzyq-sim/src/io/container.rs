@@ -40,8 +40,9 @@ pub(crate) fn encode_postcard<T: serde::Serialize + ?Sized>(
 
 /// Writes the container of `value`'s postcard serialisation to `out` from its position on,
 /// as it is encoded: a placeholder header, the payload through a buffer, its CRC-32 and a
-/// count, then the header over the placeholder. The payload is never held whole (three point masses on the paper's
-/// cores make a 48 GB policy file), and the bytes are [`encode_postcard`]'s.
+/// count, then the header over the placeholder. The payload is never held whole (three point
+/// masses on the paper's cores make a 48 GB policy file), and the bytes are
+/// [`encode_postcard`]'s.
 pub(crate) fn write_postcard<T, W>(
     out: W,
     magic: &[u8; 8],
