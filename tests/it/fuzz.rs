@@ -439,6 +439,24 @@ fn enormous_lengths_are_refused_without_allocating_them() {
         assert!(!from_file.contains('\n'), "{from_file}");
         assert!(start.elapsed() < SLOW);
     }
+    // Regression: a header announcing 2^45 bytes (so the file is decoded as it is read) and
+    // a fuzzy Q-iteration payload whose configuration claims 2^40 bytes: the string's buffer
+    // was reserved at that length and the process aborted. It grows as the bytes arrive.
+    let mut b = MAGIC.to_vec();
+    b.extend_from_slice(&2u32.to_le_bytes());
+    b.extend_from_slice(&(1u64 << 45).to_le_bytes());
+    b.extend_from_slice(&0u32.to_le_bytes());
+    b.extend_from_slice(&[0, 0x80, 0x80, 0x80, 0x80, 0x80, 0x20]);
+    b.extend_from_slice(b"[env]");
+    std::fs::write(&path, &b).unwrap();
+    let start = Instant::now();
+    let e = PolicyFile::load(&path).unwrap_err();
+    assert!(matches!(e, PolicyFileError::Truncated { .. }), "{e}");
+    assert_eq!(
+        e.to_string(),
+        PolicyFile::from_bytes(&b, &path).unwrap_err().to_string()
+    );
+    assert!(start.elapsed() < SLOW);
     // A fuzzy Q-iteration payload (kind 0) with a valid configuration, then values in single
     // precision (variant 0) claiming 2^60 of them.
     let config = TrainConfig::default().to_toml();

@@ -659,3 +659,54 @@ fn training_on_the_gpu_writes_the_reference_policy() {
     };
     assert_eq!(artifact.greedy, reference.greedy);
 }
+
+/// A GPU run checkpointed after some sweeps and continued from each checkpoint file ends in
+/// the uninterrupted run's policy, bit for bit, in both schemes: modified policy iteration
+/// (`V` and the policy read back) and extrapolated value iteration (`V`, the previous `V` and
+/// the shift). The checkpoints borrow the state read back, written as they are encoded.
+#[test]
+fn gpu_runs_continue_from_their_checkpoints_bit_for_bit() {
+    use fuzzyq_sim::io::checkpoint::{Checkpoint, RunState};
+    if gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // 3 positions x 3 velocities per axis (6,561 cores): what is tested is the state's way
+    // through the file and back onto the device.
+    let mut policy = pointmass_small();
+    policy.grid.position_cores = vec![-6.0, 0.0, 6.0];
+    let mut value = policy.clone();
+    value.solver.evaluation_sweeps = 0;
+    for (what, mut c) in [("policy", policy), ("value", value)] {
+        c.solver.device = Device::Gpu;
+        let mut saved = Vec::new();
+        let whole = fuzzyq_sim::train::train_showing(&c, None, true, |p, s| {
+            if let Some(s) = s.filter(|_| [2, 5].contains(&p.record.sweep)) {
+                let path = dir.path().join(format!("{what}-{}.ckpt", p.record.sweep));
+                let state = RunState::Fqi(s.borrowed());
+                let checkpoint = Checkpoint {
+                    settings: what.into(),
+                    state,
+                };
+                checkpoint.save(&path).unwrap();
+                saved.push(path);
+            }
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+        assert_eq!(saved.len(), 2, "{what} iteration: checkpoints written");
+        for path in saved {
+            let RunState::Fqi(state) = Checkpoint::load(&path).unwrap().state else {
+                unreachable!("a fuzzy Q-iteration checkpoint")
+            };
+            let continued = fuzzyq_sim::train::train_showing(&c, Some(state), false, |_, _| {
+                ControlFlow::Continue(())
+            })
+            .unwrap();
+            let at = path.display();
+            assert_eq!(continued.values, whole.values, "{at}: V");
+            assert_eq!(continued.greedy, whole.greedy, "{at}: greedy actions");
+            assert_eq!(continued.summary.sweeps, whole.summary.sweeps, "{at}");
+        }
+    }
+}

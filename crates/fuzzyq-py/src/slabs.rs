@@ -501,7 +501,7 @@ pub(crate) fn train_sharded(
                     if let (Some(path), Some(s)) = (&checkpoint, s) {
                         let c = Checkpoint {
                             settings: Cow::Borrowed(&settings),
-                            state: RunState::Fqi(s.clone()),
+                            state: RunState::Fqi(s.borrowed()),
                         };
                         c.save(path)
                             .map_err(|e| error(py, Kind::PolicyFile, format!("checkpoint: {e}")))?;

@@ -106,7 +106,8 @@ pub fn train(config: &TrainConfig) -> Estimate {
         // On the GPU the host holds the rewards (and goal flags), then the result read back a
         // piece at a time into grid order: `V` and the greedy actions, once each (the file is
         // encoded as it is written). A coarse start's `V`, interpolated and reordered for the
-        // device, takes as much for a moment.
+        // device, takes as much for a moment, and so does a checkpoint (`V` and the previous
+        // `V` or the policy read back whole, written as encoded, before the result exists).
         IterationOperator::Values if config.solver.device == Device::Gpu => Estimate {
             bytes: cores * (4.0 + 1.0 + 4.0 + 4.0),
             what: format!("{cores:.3e} cores (V on the GPU; the rewards and the result here)"),

@@ -716,7 +716,7 @@ fn solve(
         }
         let interrupted = stop_if(&stop).is_break();
         checkpoints.after(p.record.sweep, interrupted, || {
-            state.map(|s| RunState::Fqi(s.clone()))
+            state.map(|s| RunState::Fqi(s.borrowed()))
         })
     };
     let with_run = |r: train::LearnedModelRun| (r.artifact.clone(), Some(r));

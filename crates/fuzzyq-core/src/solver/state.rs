@@ -64,6 +64,25 @@ impl<T: Clone> SolverState<'_, T> {
         }
     }
 
+    /// A view of this state that borrows its buffers (no copy, whether they are borrowed or
+    /// owned here: a checkpoint of a GPU run, whose `V` was read back, writes this).
+    #[must_use]
+    pub fn borrowed(&self) -> SolverState<'_, T> {
+        SolverState {
+            scheme: self.scheme,
+            v: Cow::Borrowed(&self.v),
+            v_prev: Cow::Borrowed(&self.v_prev),
+            policy: Cow::Borrowed(&self.policy),
+            shift: self.shift,
+            evaluations_left: self.evaluations_left,
+            evaluation_tolerance: self.evaluation_tolerance,
+            final_delta: self.final_delta,
+            sweep_seconds: self.sweep_seconds,
+            evaluation_seconds: self.evaluation_seconds,
+            records: Cow::Borrowed(&self.records),
+        }
+    }
+
     /// Sweeps done (full backups and evaluation sweeps).
     #[must_use]
     pub fn sweeps(&self) -> usize {

@@ -42,6 +42,16 @@ impl FqiState<'_> {
         }
     }
 
+    /// A view that borrows the state's buffers ([`SolverState::borrowed`]): what a checkpoint
+    /// writes, with no copy of `V`.
+    #[must_use]
+    pub fn borrowed(&self) -> FqiState<'_> {
+        match self {
+            Self::F32(s) => FqiState::F32(s.borrowed()),
+            Self::F64(s) => FqiState::F64(s.borrowed()),
+        }
+    }
+
     /// An owned copy.
     #[must_use]
     pub fn into_owned(self) -> FqiState<'static> {
@@ -90,9 +100,14 @@ impl Checkpoint<'_> {
         container::encode_postcard(&MAGIC, FORMAT_VERSION, self).unwrap_or_default()
     }
 
-    /// Writes the checkpoint atomically (a temporary file beside `path`, then a rename).
+    /// Writes the checkpoint atomically (a temporary file beside `path`, then a rename),
+    /// encoding it as it goes: [`Self::to_bytes`]'s bytes, never held whole (a checkpoint of
+    /// three point masses on the paper's cores holds 66 GB of `V` and policy).
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
-        super::write_atomically(path, &self.to_bytes()).map_err(|error| CheckpointError::Write {
+        super::write_atomically_with(path, |file| {
+            container::write_postcard(file, &MAGIC, FORMAT_VERSION, self).map(|_| ())
+        })
+        .map_err(|error| CheckpointError::Write {
             path: path.to_path_buf(),
             error,
         })
@@ -127,15 +142,22 @@ impl Checkpoint<'_> {
 
 impl Checkpoint<'static> {
     /// Reads and checks the checkpoint at `path` (read once: a pipe works; never more than
-    /// its header announces).
+    /// its header announces). A payload of 1 GiB or more is decoded as it is read, so that
+    /// the state is held once, not also as the file's bytes; the checks and their messages
+    /// are [`Self::from_bytes`]'s.
     pub fn load(path: &Path) -> Result<Self, CheckpointError> {
+        Self::load_streaming_from(path, STREAM_FROM)
+    }
+
+    /// [`Self::load`], decoding a payload of at least `stream_from` bytes as it is read.
+    fn load_streaming_from(path: &Path, stream_from: u64) -> Result<Self, CheckpointError> {
         let read = |error| CheckpointError::Read {
             path: path.to_path_buf(),
             error,
         };
-        match container::read(path, &MAGIC, None).map_err(read)? {
+        match container::read(path, &MAGIC, Some(stream_from)).map_err(read)? {
             container::Read::Container(bytes) => Self::from_bytes(&bytes, path),
-            container::Read::Large(..) => unreachable!("not asked to stream"),
+            container::Read::Large(header, file) => Self::from_stream(&header, file, path),
             container::Read::Other(head, _) => Err(CheckpointError::NotACheckpoint {
                 path: path.to_path_buf(),
                 policy: head.starts_with(&super::policy_file::MAGIC),
@@ -143,33 +165,89 @@ impl Checkpoint<'static> {
         }
     }
 
+    /// The checkpoint whose container starts with `header` and whose payload is the rest of
+    /// `file`, decoded as it is read. The damage is found in [`Self::from_bytes`]'s order
+    /// (length, checksum, version, content), so a file gives the same error either way.
+    fn from_stream(
+        header: &[u8; container::HEADER_LEN],
+        file: std::fs::File,
+        path: &Path,
+    ) -> Result<Self, CheckpointError> {
+        use container::Streamed;
+        let field = |r: std::ops::Range<usize>| {
+            let mut b = [0; 8];
+            b[..r.len()].copy_from_slice(&header[r]);
+            u64::from_le_bytes(b)
+        };
+        let (version, len, crc) = (field(8..12) as u32, field(12..20), field(20..24) as u32);
+        let error = |e| match e {
+            Streamed::Io(error) => CheckpointError::Read {
+                path: path.to_path_buf(),
+                error,
+            },
+            Streamed::Damage(d) => damaged(path, d),
+            Streamed::Content(reason) => {
+                damaged_because(path, format!("cannot be decoded: {reason}"))
+            }
+        };
+        if version != FORMAT_VERSION {
+            // Another version's content is not ours to decode, but its damage comes first:
+            // the payload is read through as the empty value, which leaves all of it over.
+            return match container::decode_streamed::<()>(file, len, crc) {
+                Ok(()) | Err(Streamed::Content(_)) => Err(wrong_version(path, version)),
+                Err(e) => Err(error(e)),
+            };
+        }
+        container::decode_streamed(file, len, crc).map_err(error)
+    }
+
     /// Decodes a checkpoint's bytes (`path` names it in errors).
     pub fn from_bytes(bytes: &[u8], path: &Path) -> Result<Self, CheckpointError> {
-        let damaged = |reason: String| CheckpointError::Damaged {
-            path: path.to_path_buf(),
-            reason,
-        };
         if !bytes.starts_with(&MAGIC) {
             return Err(CheckpointError::NotACheckpoint {
                 path: path.to_path_buf(),
                 policy: bytes.starts_with(&super::policy_file::MAGIC),
             });
         }
-        let (version, payload) = container::split(bytes).map_err(|d| {
-            damaged(match d {
-                Damage::Truncated { found, expected } => {
-                    format!("is truncated ({found} of {expected} bytes)")
-                }
-                Damage::Trailing(n) => format!("has {n} bytes after its content"),
-                Damage::Checksum => "is corrupted (checksum mismatch)".into(),
-            })
-        })?;
+        let (version, payload) = container::split(bytes).map_err(|d| damaged(path, d))?;
         if version != FORMAT_VERSION {
-            return Err(damaged(format!(
-                "has format version {version}; this build reads version {FORMAT_VERSION}"
-            )));
+            return Err(wrong_version(path, version));
         }
-        container::decode_postcard(payload).map_err(|e| damaged(format!("cannot be decoded: {e}")))
+        container::decode_postcard(payload)
+            .map_err(|e| damaged_because(path, format!("cannot be decoded: {e}")))
+    }
+}
+
+/// Payloads of at least this many bytes are decoded as they are read ([`Checkpoint::load`]).
+const STREAM_FROM: u64 = 1 << 30;
+
+/// The error of a checkpoint at `path` whose container has `damage`.
+fn damaged(path: &Path, damage: Damage) -> CheckpointError {
+    damaged_because(
+        path,
+        match damage {
+            Damage::Truncated { found, expected } => {
+                format!("is truncated ({found} of {expected} bytes)")
+            }
+            Damage::Trailing(n) => format!("has {n} bytes after its content"),
+            Damage::Checksum => "is corrupted (checksum mismatch)".into(),
+        },
+    )
+}
+
+/// The error of a checkpoint at `path` of another format `version`.
+fn wrong_version(path: &Path, version: u32) -> CheckpointError {
+    damaged_because(
+        path,
+        format!("has format version {version}; this build reads version {FORMAT_VERSION}"),
+    )
+}
+
+/// The error of a damaged checkpoint at `path`: it `reason` (`"is truncated (...)"`).
+fn damaged_because(path: &Path, reason: String) -> CheckpointError {
+    CheckpointError::Damaged {
+        path: path.to_path_buf(),
+        reason,
     }
 }
 
@@ -198,6 +276,93 @@ mod tests {
                 records: Cow::Owned(Vec::new()),
             })),
         }
+    }
+
+    /// `bytes` decoded in memory, after checking that a file of them decoded as it is read
+    /// gives the same checkpoint or the same error.
+    fn decode(bytes: &[u8]) -> Result<Checkpoint<'static>, CheckpointError> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.ckpt");
+        std::fs::write(&path, bytes).unwrap();
+        let in_memory = Checkpoint::from_bytes(bytes, &path);
+        let streamed = Checkpoint::load_streaming_from(&path, 0);
+        assert_eq!(
+            format!("{streamed:?}"),
+            format!("{in_memory:?}"),
+            "decoded as read against in memory"
+        );
+        in_memory
+    }
+
+    /// Saved as it is encoded: the bytes of `to_bytes`, which both ways of reading give back.
+    #[test]
+    fn saved_as_encoded_and_read_back_either_way() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("c.ckpt");
+        checkpoint().save(&path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!(bytes, checkpoint().to_bytes());
+        assert_eq!(decode(&bytes).unwrap(), checkpoint());
+        assert_eq!(Checkpoint::load(&path).unwrap(), checkpoint());
+    }
+
+    /// Damage gives the same one-line error whether the file is decoded in memory or as it
+    /// is read (checkpoints of 1 GiB or more).
+    #[test]
+    fn damage_is_named_alike_in_memory_and_as_read() {
+        let bytes = checkpoint().to_bytes();
+        let reason = |bytes: &[u8]| match decode(bytes).unwrap_err() {
+            CheckpointError::Damaged { reason, .. } => reason,
+            e => panic!("{e}"),
+        };
+        let n = bytes.len();
+        assert_eq!(
+            reason(&bytes[..n - 3]),
+            format!("is truncated ({} of {n} bytes)", n - 3)
+        );
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert_eq!(reason(&longer), "has 1 bytes after its content");
+        let mut flipped = bytes.clone();
+        flipped[n - 1] ^= 1;
+        assert_eq!(reason(&flipped), "is corrupted (checksum mismatch)");
+        let mut v2 = bytes.clone();
+        v2[8] = 2;
+        assert_eq!(
+            reason(&v2),
+            "has format version 2; this build reads version 1"
+        );
+        // Another version's damage is named first, as in memory.
+        v2[n - 1] ^= 1;
+        assert_eq!(reason(&v2), "is corrupted (checksum mismatch)");
+        let payload = &bytes[container::HEADER_LEN..];
+        let wrong = container::encode(&MAGIC, FORMAT_VERSION, &payload[..payload.len() - 1]);
+        assert!(
+            reason(&wrong).starts_with("cannot be decoded: "),
+            "{}",
+            reason(&wrong)
+        );
+        let mut huge = bytes[..container::HEADER_LEN].to_vec();
+        huge[12..20].copy_from_slice(&u64::MAX.to_le_bytes());
+        assert_eq!(
+            reason(&huge),
+            format!("is truncated (24 of {} bytes)", u64::MAX)
+        );
+    }
+
+    /// A header announcing a terabyte and a settings string claiming as much, in a file of a
+    /// few bytes: refused as truncated, nothing allocated ahead (it aborted the process).
+    #[test]
+    fn a_string_longer_than_the_file_allocates_nothing_ahead() {
+        let mut file = MAGIC.to_vec();
+        file.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        file.extend_from_slice(&(1u64 << 45).to_le_bytes());
+        file.extend_from_slice(&0u32.to_le_bytes());
+        // The settings' length, 2^40, as a postcard varint.
+        file.extend_from_slice(&[0x80, 0x80, 0x80, 0x80, 0x80, 0x20]);
+        file.extend_from_slice(b"gamma");
+        let e = decode(&file).unwrap_err().to_string();
+        assert!(e.contains("is truncated (35 of"), "{e}");
     }
 
     /// Regression (issue 49): bytes appended inside the checksummed payload were ignored.

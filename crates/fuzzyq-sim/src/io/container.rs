@@ -177,7 +177,7 @@ pub(crate) fn decode_streamed<T: serde::de::DeserializeOwned>(
     if summed.len < len {
         return Err(Streamed::Damage(Damage::Truncated {
             found: HEADER_LEN as u64 + summed.len,
-            expected: HEADER_LEN as u64 + len,
+            expected: (HEADER_LEN as u64).saturating_add(len),
         }));
     }
     let mut file = summed.inner.into_inner();
@@ -196,8 +196,9 @@ pub(crate) fn decode_streamed<T: serde::de::DeserializeOwned>(
 }
 
 /// The postcard flavor of [`decode_streamed`]: bytes from a buffered reader, at most `left`
-/// of them; a string's bytes are read into `temp`, which grows to the longest one (never past
-/// what the payload has left: a damaged length allocates no more than the file holds).
+/// of them; a string's bytes are read into `temp`, which grows to the longest one as its
+/// bytes arrive (a damaged length allocates no more than the file holds, whatever the header
+/// announces).
 /// Owned values only: nothing can borrow from a stream.
 struct Stream<R> {
     reader: R,
@@ -240,10 +241,17 @@ impl<'s: 'de, 'de, R: std::io::Read + 'de> postcard::de_flavors::Flavor<'de> for
         if ct as u64 > self.left {
             return Err(postcard::Error::DeserializeUnexpectedEnd);
         }
-        let mut temp = std::mem::take(&mut self.temp);
-        temp.resize(ct, 0);
-        self.fill(&mut temp)?;
-        self.temp = temp;
+        // Grown as the bytes arrive, not to the length a damaged header and string claim
+        // (which a short file can set to a terabyte: an abort, not an error).
+        self.temp.clear();
+        let got = (&mut self.reader)
+            .take(ct as u64)
+            .read_to_end(&mut self.temp)
+            .map_err(|_| postcard::Error::DeserializeUnexpectedEnd)?;
+        if got < ct {
+            return Err(postcard::Error::DeserializeUnexpectedEnd);
+        }
+        self.left -= ct as u64;
         Ok(&self.temp)
     }
 

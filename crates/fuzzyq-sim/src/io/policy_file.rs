@@ -1019,6 +1019,31 @@ mod tests {
         }
     }
 
+    /// Regression: a 40-byte file whose header announces a terabyte payload and whose first
+    /// string claims a terabyte was decoded as it is read, and the string's buffer was
+    /// allocated at the claimed length: the process aborted. Now it is a truncated file.
+    #[test]
+    fn a_string_longer_than_the_file_allocates_nothing_ahead() {
+        let varint = |mut n: u64| {
+            let mut out = Vec::new();
+            while n >= 0x80 {
+                out.push((n as u8) | 0x80);
+                n >>= 7;
+            }
+            out.push(n as u8);
+            out
+        };
+        let mut file = MAGIC.to_vec();
+        file.extend_from_slice(&2u32.to_le_bytes());
+        file.extend_from_slice(&(1u64 << 45).to_le_bytes());
+        file.extend_from_slice(&0u32.to_le_bytes());
+        file.extend(varint(0)); // fuzzy Q-iteration
+        file.extend(varint(1 << 40)); // its configuration's length
+        file.extend_from_slice(b"[env]");
+        let e = decode(&file).unwrap_err();
+        assert!(matches!(e, PolicyFileError::Truncated { .. }), "{e}");
+    }
+
     /// A solution of a model defined in Python decodes alike in memory and as it is read
     /// (its membership functions are named: a name is read as a transient string, which a
     /// stream can give).
