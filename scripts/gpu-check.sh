@@ -47,7 +47,8 @@ d = json.load(open(sys.argv[1]))
 g = lambda k: d.get(k) or 0.0
 coarse = (d.get("coarse_start") or {}).get("seconds", 0.0)
 other = g("seconds") - g("setup_seconds") - coarse - g("sweep_seconds") - g("result_seconds")
-parts = [("device", d.get("device_seconds")), ("setup", g("setup_seconds")), ("coarse", coarse),
+device = "device (beside setup)" if d.get("device_beside_setup") else "device"
+parts = [(device, d.get("device_seconds")), ("setup", g("setup_seconds")), ("coarse", coarse),
          ("sweeps", g("sweep_seconds")), ("of them evaluation", g("evaluation_seconds")),
          ("other passes", other), ("result", g("result_seconds")), ("write", g("write_seconds"))]
 peak = d.get("peak_memory_mb")
@@ -168,6 +169,14 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
     if [ -s "$OUT/$env-parts.bin" ] && cmp -s "$OUT/$env-parts.bin" "$OUT/$env-cpu.bin"; then same="identical"; fi
     row "train --env $env, V in parts of 1 MiB" "$([ $rc = 0 ] && [ "$same" = identical ] && echo PASS || echo "FAIL (rc=$rc, exports $same)")" \
       "exported V + greedy against the cpu's: $same"
+    # The GPU opened before the set-up instead of beside it (the default for this run).
+    t0=$(now)
+    FUZZYQ_GPU_OPEN=first timeout 180 "$BIN" train --env "$env" --device gpu ${GPU_CHECK_TRAIN_ARGS:-} \
+      --out "$OUT/$env-first.fzq" --json "$OUT/$env-first.json" >"$OUT/train-$env-first.log" 2>&1
+    rc=$?
+    wall=$(secs "$t0" "$(now)")
+    row "train --env $env, GPU opened first" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+      "gpu ${wall} s wall (beside the set-up: ${wall_gpu} s); $(phases "$OUT/$env-first.json")"
   fi
 done
 

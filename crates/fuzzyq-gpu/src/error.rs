@@ -4,7 +4,7 @@ use fuzzyq_core::solver::SolveError;
 
 /// An error of the GPU path: no adapter, a problem it cannot hold or run, a device failure,
 /// or the solver's own error.
-#[derive(Debug, thiserror::Error)]
+#[derive(Clone, Debug, thiserror::Error)]
 pub enum GpuError {
     /// No GPU adapter was found (no Vulkan, Metal or DX12 driver, or none that wgpu accepts).
     #[error("no GPU adapter found (wgpu found no Vulkan, Metal or DX12 device{hint})")]

@@ -69,6 +69,39 @@ impl LastStage {
     }
 }
 
+/// The process's GPU ([`Gpu::shared`]).
+enum Shared {
+    /// Not opened (or a failed open already reported).
+    Closed,
+    /// Open.
+    Open(Gpu),
+    /// A background open failed; the next [`Gpu::shared`] reports it.
+    Failed(GpuError),
+}
+
+/// The process's GPU, locked while it is being opened.
+fn shared_slot() -> std::sync::MutexGuard<'static, Shared> {
+    static SHARED: std::sync::Mutex<Shared> = std::sync::Mutex::new(Shared::Closed);
+    SHARED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The process's GPU being opened on a thread of its own
+/// ([`Gpu::open_shared_in_background`]).
+#[derive(Debug)]
+pub struct Opening(std::thread::JoinHandle<Result<f64, GpuError>>);
+
+impl Opening {
+    /// Waits for the open: its seconds (next to none where the GPU was open already), or why
+    /// it failed.
+    pub fn wait(self) -> Result<f64, GpuError> {
+        self.0
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    }
+}
+
 impl core::fmt::Debug for Gpu {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("Gpu")
@@ -148,14 +181,52 @@ impl Gpu {
     }
 
     /// The process's GPU: opened by the first call ([`Gpu::new`]) and shared by every later
-    /// one (a failed open is tried again next time).
+    /// one; a call while another thread opens it waits for that open. A failed open is tried
+    /// again next time, except that a failed [`Gpu::open_shared_in_background`] is reported
+    /// by the next call instead (the driver is not asked twice in a row).
     pub fn shared() -> Result<Self, GpuError> {
-        static SHARED: std::sync::OnceLock<Gpu> = std::sync::OnceLock::new();
-        if let Some(g) = SHARED.get() {
-            return Ok(g.clone());
+        let mut slot = shared_slot();
+        match std::mem::replace(&mut *slot, Shared::Closed) {
+            Shared::Open(g) => {
+                *slot = Shared::Open(g.clone());
+                Ok(g)
+            }
+            Shared::Failed(e) => Err(e),
+            Shared::Closed => {
+                let g = Self::new()?;
+                *slot = Shared::Open(g.clone());
+                Ok(g)
+            }
         }
-        let g = Self::new()?;
-        Ok(SHARED.get_or_init(|| g).clone())
+    }
+
+    /// Starts opening the process's GPU ([`Gpu::shared`]) on a thread of its own and returns
+    /// once that thread holds it, so that the host's set-up of a run (the rewards, the block
+    /// tables) overlaps the driver's start-up and the run's own [`Gpu::shared`] waits for
+    /// this open instead of starting another. `opened` is called with the GPU on that thread
+    /// when it is open. [`Opening::wait`] gives the open's seconds or its error.
+    pub fn open_shared_in_background(opened: impl FnOnce(&Gpu) + Send + 'static) -> Opening {
+        let (holding, held) = std::sync::mpsc::sync_channel(0);
+        let thread = std::thread::spawn(move || {
+            let t0 = std::time::Instant::now();
+            let mut slot = shared_slot();
+            // The caller goes on only now: its next `shared` waits for this open.
+            let _ = holding.send(());
+            if !matches!(*slot, Shared::Open(_)) {
+                *slot = Self::new().map_or_else(Shared::Failed, Shared::Open);
+            }
+            let seconds = t0.elapsed().as_secs_f64();
+            match &*slot {
+                Shared::Open(g) => {
+                    opened(g);
+                    Ok(seconds)
+                }
+                Shared::Failed(e) => Err(e.clone()),
+                Shared::Closed => unreachable!("just opened or failed"),
+            }
+        });
+        let _ = held.recv();
+        Opening(thread)
     }
 
     /// The adapter and what was measured of it.

@@ -214,9 +214,14 @@ struct Summary<'a> {
 #[derive(Clone, Copy, Serialize)]
 struct Timings {
     /// `--device gpu`: seconds opening the GPU (the adapter, its start-up probes and the
-    /// kernels every problem shares), before `seconds`.
+    /// kernels every problem shares): before `seconds`, or beside its set-up
+    /// (`device_beside_setup`).
     #[serde(skip_serializing_if = "Option::is_none")]
     device_seconds: Option<f64>,
+    /// `--device gpu`: whether the GPU was opened on a thread of its own while the run was
+    /// set up on the host ([`open_device`]), so that `device_seconds` overlap `seconds`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    device_beside_setup: Option<bool>,
     /// Seconds encoding the policy file and writing it (staged; put in place at the end).
     write_seconds: f64,
     /// Seconds from the start of the command to its policy file written: the configuration,
@@ -452,14 +457,6 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     start_pool(args.threads)?;
     let threads = rayon::current_num_threads();
-    // Opened here, once for the run (the solver shares it), and timed.
-    let device_seconds = (config.solver.device == Device::Gpu)
-        .then(|| {
-            let t0 = Instant::now();
-            fuzzyq_gpu::Gpu::shared().map(|_| t0.elapsed().as_secs_f64())
-        })
-        .transpose()
-        .map_err(SimError::from)?;
     if !args.quiet {
         announce(&args, &config, threads, learning.as_ref(), logged.as_ref())?;
         if let (Some(state), Some(path)) = (&resume, &args.resume) {
@@ -470,17 +467,26 @@ pub(crate) fn run(args: TrainArgs) -> anyhow::Result<()> {
             );
         }
     }
+    let device = open_device(&config, args.quiet)?;
     let task = Task {
         config: &config,
         learning: learning.as_ref(),
         logged: logged.as_ref(),
     };
     let (artifact, learned_run) = solve(&args, &task, resume, &mut checkpoints)?;
+    let (device_seconds, device_beside_setup) = match device {
+        Some(Opened::Before(seconds)) => (Some(seconds), Some(false)),
+        Some(Opened::Beside(opening)) => {
+            (Some(opening.wait().map_err(SimError::from)?), Some(true))
+        }
+        None => (None, None),
+    };
     let written = Instant::now();
     let file = PolicyFile::Fqi(artifact);
     output::write_policy(&args.out, &file)?;
     let timings = Timings {
         device_seconds,
+        device_beside_setup,
         write_seconds: written.elapsed().as_secs_f64(),
         command_seconds: started.elapsed().as_secs_f64(),
     };
@@ -601,6 +607,54 @@ fn model_learning(
 
 /// The run's opening lines on stderr: the problem, the GPU (opened here, once for the run:
 /// the solver shares it), and where a learned model's data come from.
+/// The GPU of a `--device gpu` run: opened before the run, or being opened beside its set-up.
+enum Opened {
+    /// Opened first, in this many seconds.
+    Before(f64),
+    /// Being opened on a thread of its own while the run is set up on the host.
+    Beside(fuzzyq_gpu::Opening),
+}
+
+/// Host estimates below which a run opens the GPU beside its set-up ([`open_device`]).
+const BESIDE_SETUP_BELOW: f64 = (1u64 << 30) as f64;
+
+/// Opens the GPU of a `--device gpu` run, once for the run (the solver shares it), and says
+/// which (unless `quiet`). A run whose host estimate is under 1 GiB opens it on a thread of
+/// its own while the host computes its rewards and tables (the solver's open waits for it):
+/// the driver's start-up is then hidden behind that set-up. A larger run opens it first, so
+/// that a machine without a GPU says so before a set-up of seconds or minutes, and so does
+/// every run under `FUZZYQ_GPU_OPEN=first` (for timing the two).
+fn open_device(config: &TrainConfig, quiet: bool) -> anyhow::Result<Option<Opened>> {
+    if config.solver.device != Device::Gpu {
+        return Ok(None);
+    }
+    let show = move |gpu: &fuzzyq_gpu::Gpu| {
+        let a = gpu.summary();
+        if !quiet {
+            eprintln!(
+                "GPU: {} ({}, {}; {}; fma {})",
+                a.name,
+                a.backend,
+                a.driver,
+                super::bench::gpu_memory(a.memory),
+                if a.fused_fma {
+                    "fused: the CPU's bits"
+                } else {
+                    "not fused: each product rounded first, so the last bits differ from the \
+                     CPU's"
+                }
+            );
+        }
+    };
+    let opening = fuzzyq_gpu::Gpu::open_shared_in_background(show);
+    let first = std::env::var("FUZZYQ_GPU_OPEN").is_ok_and(|v| v == "first");
+    if !first && fuzzyq_sim::memory::train(config).bytes < BESIDE_SETUP_BELOW {
+        return Ok(Some(Opened::Beside(opening)));
+    }
+    let seconds = opening.wait().map_err(SimError::from)?;
+    Ok(Some(Opened::Before(seconds)))
+}
+
 fn announce(
     args: &TrainArgs,
     config: &TrainConfig,
@@ -623,22 +677,6 @@ fn announce(
             "asynchronous"
         },
     );
-    if config.solver.device == Device::Gpu {
-        let gpu = fuzzyq_gpu::Gpu::shared().map_err(SimError::from)?;
-        let a = gpu.summary();
-        eprintln!(
-            "GPU: {} ({}, {}; {}; fma {})",
-            a.name,
-            a.backend,
-            a.driver,
-            super::bench::gpu_memory(a.memory),
-            if a.fused_fma {
-                "fused: the CPU's bits"
-            } else {
-                "not fused: each product rounded first, so the last bits differ from the CPU's"
-            }
-        );
-    }
     match (learning, logged) {
         (_, Some(data)) => eprintln!(
             "learned model: {} logged transitions from {}, fitted per dynamics block, then solved",
