@@ -605,8 +605,6 @@ fn model_learning(
     Ok(Some(l))
 }
 
-/// The run's opening lines on stderr: the problem, the GPU (opened here, once for the run:
-/// the solver shares it), and where a learned model's data come from.
 /// The GPU of a `--device gpu` run: opened before the run, or being opened beside its set-up.
 enum Opened {
     /// Opened first, in this many seconds.
@@ -655,6 +653,8 @@ fn open_device(config: &TrainConfig, quiet: bool) -> anyhow::Result<Option<Opene
     Ok(Some(Opened::Before(seconds)))
 }
 
+/// The run's opening lines on stderr: the problem and where a learned model's data come from
+/// (the GPU's line comes when it is open: [`open_device`]).
 fn announce(
     args: &TrainArgs,
     config: &TrainConfig,
