@@ -174,12 +174,7 @@ impl Checkpoint<'static> {
         path: &Path,
     ) -> Result<Self, CheckpointError> {
         use container::Streamed;
-        let field = |r: std::ops::Range<usize>| {
-            let mut b = [0; 8];
-            b[..r.len()].copy_from_slice(&header[r]);
-            u64::from_le_bytes(b)
-        };
-        let (version, len, crc) = (field(8..12) as u32, field(12..20), field(20..24) as u32);
+        let (version, len, crc) = container::fields(header);
         let error = |e| match e {
             Streamed::Io(error) => CheckpointError::Read {
                 path: path.to_path_buf(),

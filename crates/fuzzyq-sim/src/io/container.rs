@@ -293,13 +293,7 @@ pub(crate) fn split(bytes: &[u8]) -> Result<(u32, &[u8]), Damage> {
         found,
         expected: HEADER_LEN as u64,
     })?;
-    let field = |r: std::ops::Range<usize>| {
-        header[r]
-            .iter()
-            .rev()
-            .fold(0u64, |acc, &b| (acc << 8) | u64::from(b))
-    };
-    let (version, len, crc) = (field(8..12) as u32, field(12..20), field(20..24) as u32);
+    let (version, len, crc) = fields(header.try_into().expect("a header's length"));
     let expected = (HEADER_LEN as u64).saturating_add(len);
     if found < expected {
         return Err(Damage::Truncated { found, expected });
@@ -312,6 +306,17 @@ pub(crate) fn split(bytes: &[u8]) -> Result<(u32, &[u8]), Damage> {
         return Err(Damage::Checksum);
     }
     Ok((version, payload))
+}
+
+/// A header's format version, payload length and payload CRC-32 (its tag unchecked).
+pub(crate) fn fields(header: &[u8; HEADER_LEN]) -> (u32, u64, u32) {
+    let field = |r: std::ops::Range<usize>| {
+        header[r]
+            .iter()
+            .rev()
+            .fold(0u64, |acc, &b| (acc << 8) | u64::from(b))
+    };
+    (field(8..12) as u32, field(12..20), field(20..24) as u32)
 }
 
 /// What [`read`] found.
