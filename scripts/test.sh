@@ -10,7 +10,20 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Layers")
+# The wheel builds (release, a target directory of its own) beside the tests' build: on two
+# cores either build's serial stretches (one crate's code generation) leave a core to the
+# other. Its log is shown when it is waited for below.
+mkdir -p target
+wheel_log=target/wheel-build.log
+rm -rf target/wheels
+CARGO_TARGET_DIR=target/wheel-build setsid ./scripts/build-wheels.sh target/wheels \
+    > "$wheel_log" 2>&1 &
+wheel_pid=$!
+trap 'kill -- -"$wheel_pid" 2>/dev/null || true' EXIT
 cargo test --workspace --locked
+# fuzzyq-core alone with the standard library and serde, as a dependent that asks for both
+# builds it (inside the workspace other crates' features hide a missing one).
+cargo check -p fuzzyq-core --features parallel,serde --locked
 cargo build --release --locked \
     --manifest-path ci/nostd-check/Cargo.toml --target-dir target/nostd-check
 # The example robot controller as firmware: `no_std`, no allocator, its own panic handler, a
@@ -18,18 +31,24 @@ cargo build --release --locked \
 cargo rustc --locked -p fuzzyq-embedded-controller --lib --profile firmware \
     --features firmware --crate-type staticlib
 
+if ! wait "$wheel_pid"; then
+    cat "$wheel_log"
+    echo "error: the wheel's build (scripts/build-wheels.sh) failed" >&2
+    exit 1
+fi
+tail -n 3 "$wheel_log"
 venv=target/python-test-venv
 rm -rf "$venv"
-./scripts/setup-python.sh "$venv"
+./scripts/setup-python.sh "$venv" "$(ls "$PWD"/target/wheels/fuzzyq-*.whl)"
 "$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib joblib "ray>=2.9"
 # Run from outside the source tree so that `import fuzzyq` finds the installed wheel; the
 # Python-CLI tests use the binary `cargo test` just built from this checkout.
 export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"
-# The wheel setup-python.sh built: test_wheel.py installs it into a fresh environment with no
+# The wheel built above: test_wheel.py installs it into a fresh environment with no
 # cargo on PATH and runs the package, the `fuzzyq` command and `python -m fuzzyq` there.
 FUZZYQ_WHEEL=$(ls "$PWD"/target/wheels/fuzzyq-*.whl)
 export FUZZYQ_WHEEL
-(cd target && "$OLDPWD/$venv/bin/python" -m pytest "$OLDPWD/python/tests" -q -p no:cacheprovider)
+(cd target && "$OLDPWD/$venv/bin/python" -m pytest "$OLDPWD/python/tests" -q -p no:cacheprovider --durations=10)
 # (The pytest run above includes `mypy --strict` on every README python block and
 # examples/*.py, python/tests/test_readme.py, and the package's doctests, test_docs.py.)
 # The documentation site (mkdocs.yml): the pinned tools, then a strict build (any warning fails).
