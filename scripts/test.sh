@@ -19,7 +19,7 @@ rm -rf target/wheels
 CARGO_TARGET_DIR=target/wheel-build setsid ./scripts/build-wheels.sh target/wheels \
     > "$wheel_log" 2>&1 &
 wheel_pid=$!
-trap 'kill -- -"$wheel_pid" 2>/dev/null || true' EXIT
+trap 'kill -- -"$wheel_pid" 2>/dev/null || kill "$wheel_pid" 2>/dev/null || true' EXIT
 cargo test --workspace --locked
 # fuzzyq-core alone with the standard library and serde, as a dependent that asks for both
 # builds it (inside the workspace other crates' features hide a missing one).
