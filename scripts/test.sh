@@ -15,7 +15,6 @@ python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Laye
 # other. Its log is shown when it is waited for below.
 mkdir -p target
 wheel_log=target/wheel-build.log
-rm -rf target/wheels
 CARGO_TARGET_DIR=target/wheel-build setsid ./scripts/build-wheels.sh target/wheels \
     > "$wheel_log" 2>&1 &
 wheel_pid=$!
@@ -37,17 +36,18 @@ if ! wait "$wheel_pid"; then
     exit 1
 fi
 tail -n 3 "$wheel_log"
+# The wheel built above (build-wheels.sh leaves only it there): test_wheel.py installs it into
+# a fresh environment with no cargo on PATH and runs the package, the `fuzzyq` command and
+# `python -m fuzzyq` there.
+FUZZYQ_WHEEL=$(ls "$PWD"/target/wheels/fuzzyq-*.whl)
+export FUZZYQ_WHEEL
 venv=target/python-test-venv
 rm -rf "$venv"
-./scripts/setup-python.sh "$venv" "$(ls "$PWD"/target/wheels/fuzzyq-*.whl)"
+./scripts/setup-python.sh "$venv" "$FUZZYQ_WHEEL"
 "$venv/bin/pip" install --quiet pytest hypothesis mypy gymnasium pettingzoo matplotlib joblib "ray>=2.9"
 # Run from outside the source tree so that `import fuzzyq` finds the installed wheel; the
 # Python-CLI tests use the binary `cargo test` just built from this checkout.
 export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"
-# The wheel built above: test_wheel.py installs it into a fresh environment with no
-# cargo on PATH and runs the package, the `fuzzyq` command and `python -m fuzzyq` there.
-FUZZYQ_WHEEL=$(ls "$PWD"/target/wheels/fuzzyq-*.whl)
-export FUZZYQ_WHEEL
 (cd target && "$OLDPWD/$venv/bin/python" -m pytest "$OLDPWD/python/tests" -q -p no:cacheprovider --durations=10)
 # (The pytest run above includes `mypy --strict` on every README python block and
 # examples/*.py, python/tests/test_readme.py, and the package's doctests, test_docs.py.)
