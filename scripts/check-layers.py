@@ -47,6 +47,7 @@ LAYERS = {
         {"probe"},
         {"gpu"},
         {"last"},
+        {"shape"},
         {"sweeps"},
     ],
     "fuzzyq-cli": [

@@ -15,13 +15,17 @@
 # GPU_CHECK_TRAIN_ARGS="--precision f32" GPU_CHECK_BENCH_ENV=dcmotor GPU_CHECK_BATCHES=256
 # scripts/gpu-check.sh`; there the exports differ, as lavapipe does not fuse `fma`). Each
 # train row is followed by where its seconds went, from its `--json` summary. Then three point
-# masses on the paper's cores (45^6 = 8.3e9 cores, 15,625 joint actions; `V` in 9 parts on the
-# card, about 108 GB of the host's memory): two full backups timed. Last, three point masses
-# on a smaller grid (GPU_CHECK_THREE, a configuration; empty skips them): trained on the GPU
-# and rolled out from 20 random starts, then one full backup with 5 force levels per axis.
+# masses on the paper's cores (45^6 = 8.3e9 cores; `V` in 23 parts on the card, about 108 GB
+# of the host's memory) with 3 force levels per axis (729 joint actions): one full backup
+# timed. Last, three point masses on a smaller grid (GPU_CHECK_THREE, a configuration; empty
+# skips them): trained on the GPU and rolled out from 20 random starts, then one full backup
+# with 5 force levels per axis.
 # GPU_CHECK_KERNELS lists the full backup's other kernels timed beside the default (section 2).
-# GPU_CHECK_SECTIONS picks sections (default "1 2 3 paper 4"). Two more, not run by default as
-# each takes minutes (run them as calls of their own): "paper-train" trains three point masses
+# GPU_CHECK_UNTIL (below) runs several sections in the order a caller wants within one call.
+# GPU_CHECK_SECTIONS picks sections (default "1 2 3 paper 4"). Three more, not run by default as
+# each takes minutes (run them as calls of their own): "paper-5" times one full backup of the
+# paper's cores with the paper's 5 forces per axis (15,625 joint actions; the H200's kernels
+# of November 2026 would take about half an hour), "paper-train" trains three point masses
 # on the paper's cores with forces of -0.2, 0 and 0.2 N per axis (729 joint actions) to the
 # paper's xi on the GPU (about 108 GB of the host's memory; the policy, about 48 GB, goes to
 # GPU_CHECK_SCRATCH, default /tmp, not $OUT), and "paper-rollout" rolls that policy out from
@@ -33,7 +37,21 @@ mkdir -p "$OUT"
 : >"$OUT/rows.md"
 BIN=${FUZZYQ_BIN:-$( [ -x .gpucheck/fuzzyq ] && echo .gpucheck/fuzzyq || echo target/release/fuzzyq )}
 TESTS=${FUZZYQ_TESTS:-.gpucheck/integration}
-want() { [[ " ${GPU_CHECK_SECTIONS:-1 2 3 paper 4} " == *" $1 "* ]]; }
+# GPU_CHECK_UNTIL (seconds since the epoch, optional): every step's time limit is cut to what is
+# left before it, and sections not yet started when it has passed are skipped, so that one call
+# of a lent machine can run several invocations of this script in the order it wants.
+limit() {
+  local t=$1
+  if [ -n "${GPU_CHECK_UNTIL:-}" ]; then
+    local left=$((GPU_CHECK_UNTIL - $(date +%s)))
+    ((left < t)) && t=$left
+  fi
+  echo $((t > 1 ? t : 1))
+}
+want() {
+  [[ " ${GPU_CHECK_SECTIONS:-1 2 3 paper 4} " == *" $1 "* ]] || return 1
+  [ -z "${GPU_CHECK_UNTIL:-}" ] || (($(date +%s) + 5 < GPU_CHECK_UNTIL)) || { row "section $1" "SKIPPED" "out of time (GPU_CHECK_UNTIL)"; return 1; }
+}
 row() { printf '| %s | %s | %s |\n' "$1" "$2" "$3" >>"$OUT/rows.md"; }
 now() { date +%s.%N; }
 secs() { python3 -c "print(f'{$2 - $1:.2f}')" 2>/dev/null || echo "?"; }
@@ -63,7 +81,7 @@ PY
 timed_train() {
   local t0
   t0=$(now)
-  timeout "$1" "$BIN" train --config "$2" --device gpu --out "$3" --json "$OUT/$4.json" >"$OUT/train-$4.log" 2>&1
+  timeout "$(limit "$1")" "$BIN" train --config "$2" --device gpu --out "$3" --json "$OUT/$4.json" >"$OUT/train-$4.log" 2>&1
   rc=$?
   wall=$(secs "$t0" "$(now)")
 }
@@ -87,7 +105,7 @@ row "host" "${gpu:-no nvidia-smi}" "$cpu, $nproc_ CPUs"
 if ! want 1; then
   :
 elif [ -x "$TESTS" ]; then
-  FUZZYQ_REQUIRE_GPU=1 timeout 240 "$TESTS" gpu:: --test-threads 4 >"$OUT/tests.log" 2>&1
+  FUZZYQ_REQUIRE_GPU=1 timeout "$(limit 240)" "$TESTS" gpu:: --test-threads 4 >"$OUT/tests.log" 2>&1
   rc=$?
   res=$(grep -E '^test result' "$OUT/tests.log" | tail -1)
   row "GPU tests (integration gpu::)" "$([ $rc = 0 ] && echo PASS || echo "FAIL rc=$rc")" "${res:-no result line}"
@@ -100,7 +118,7 @@ fi
 GPU_CHECK_BATCHES=${GPU_CHECK_BATCHES:-256 64 1024}
 want 2 || GPU_CHECK_BATCHES=
 for mb in $GPU_CHECK_BATCHES; do
-  FUZZYQ_GPU_PROFILE=$([ "$mb" = "${GPU_CHECK_BATCHES%% *}" ] && echo 1) FUZZYQ_GPU_BATCH_MB=$mb timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --device gpu --backups 6 --peak-seconds 0.5 \
+  FUZZYQ_GPU_PROFILE=$([ "$mb" = "${GPU_CHECK_BATCHES%% *}" ] && echo 1) FUZZYQ_GPU_BATCH_MB=$mb timeout "$(limit 120)" "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --device gpu --backups 6 --peak-seconds 0.5 \
     --json "$OUT/bench-gpu-$mb.json" >"$OUT/bench-gpu-$mb.log" 2>&1
   rc=$?
   line=$(grep -E '^(backup|evaluate|read back|problem)' "$OUT/bench-gpu-$mb.log" | sed 's/  */ /g' | paste -sd ';' -)
@@ -111,13 +129,13 @@ for mb in $GPU_CHECK_BATCHES; do
 done
 # The other kernels of a full backup, each pair STAGES/LAST with its dispatches timed one at a
 # time: the stages before the last (FUZZYQ_GPU_STAGES: rows, or merged) and the fused last
-# stage (FUZZYQ_GPU_LAST: rows, or merged:N, N cores in turn). The rows above use the default,
-# merged/merged:4; rows/rows are the kernels before the merge.
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-rows/rows rows/merged:4 merged/rows merged/merged:1 merged/merged:16}
+# stage (FUZZYQ_GPU_LAST: rows, or merged:N, N cores in turn). The rows above use the default
+# on a GPU, merged/rows; rows/rows are the kernels before the merge.
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-rows/rows merged/merged:1 merged/merged:4}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"
-  FUZZYQ_GPU_PROFILE=1 FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" \
+  FUZZYQ_GPU_PROFILE=1 FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout "$(limit 120)" "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" \
     --device gpu --backups 6 --evaluations 0 --peak-seconds 0.1 --json "${log%.log}.json" >"$log" 2>&1
   rc=$?
   row "GPU full backup, kernels $kern" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
@@ -125,13 +143,13 @@ for kern in $GPU_CHECK_KERNELS; do
 done
 # The robots' grid on the GPU, profiled.
 if want 2 && [ -z "${GPU_CHECK_BENCH_ENV:-}" ]; then
-  FUZZYQ_GPU_PROFILE=1 timeout 120 "$BIN" bench --env khepera --device gpu --backups 4 --peak-seconds 0.2 \
+  FUZZYQ_GPU_PROFILE=1 timeout "$(limit 120)" "$BIN" bench --env khepera --device gpu --backups 4 --peak-seconds 0.2 \
     --json "$OUT/bench-gpu-khepera.json" >"$OUT/bench-gpu-khepera.log" 2>&1
   rc=$?
   row "GPU full backup, khepera" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^(backup|evaluate|read back|profile)' "$OUT/bench-gpu-khepera.log" | sed 's/  */ /g' | paste -sd ';' -)"
 fi
 if want 2; then
-  timeout 120 "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --backups 4 --peak-seconds 0.5 --json "$OUT/bench-cpu.json" >"$OUT/bench-cpu.log" 2>&1
+  timeout "$(limit 120)" "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" --backups 4 --peak-seconds 0.5 --json "$OUT/bench-cpu.json" >"$OUT/bench-cpu.log" 2>&1
   rc=$?
   row "CPU full backup ($nproc_ threads)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "$(grep -E '^backup' "$OUT/bench-cpu.log" | sed 's/^backup *//')"
 fi
@@ -142,7 +160,7 @@ want 3 || GPU_CHECK_ENVS=" "
 for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
   for dev in gpu cpu; do
     t0=$(now)
-    timeout 180 "$BIN" train --env "$env" --device "$dev" ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-$dev.fzq" \
+    timeout "$(limit 180)" "$BIN" train --env "$env" --device "$dev" ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-$dev.fzq" \
       --json "$OUT/$env-$dev.json" >"$OUT/train-$env-$dev.log" 2>&1
     rc=$?
     t1=$(now)
@@ -161,7 +179,7 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
   # V cut into parts of 1 MiB (about two slabs each: 23 parts on the paper's grid) where one
   # would do: the same bytes.
   if [ "$env" = pointmass ]; then
-    FUZZYQ_GPU_PART_KB=1024 timeout 180 "$BIN" train --env "$env" --device gpu ${GPU_CHECK_TRAIN_ARGS:-} \
+    FUZZYQ_GPU_PART_KB=1024 timeout "$(limit 180)" "$BIN" train --env "$env" --device gpu ${GPU_CHECK_TRAIN_ARGS:-} \
       --out "$OUT/$env-parts.fzq" >"$OUT/train-$env-parts.log" 2>&1
     rc=$?
     [ $rc = 0 ] && "$BIN" export --policy "$OUT/$env-parts.fzq" --out "$OUT/$env-parts.bin" >/dev/null 2>&1
@@ -171,7 +189,7 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
       "exported V + greedy against the cpu's: $same"
     # The GPU opened before the set-up instead of beside it (the default for this run).
     t0=$(now)
-    FUZZYQ_GPU_OPEN=first timeout 180 "$BIN" train --env "$env" --device gpu ${GPU_CHECK_TRAIN_ARGS:-} \
+    FUZZYQ_GPU_OPEN=first timeout "$(limit 180)" "$BIN" train --env "$env" --device gpu ${GPU_CHECK_TRAIN_ARGS:-} \
       --out "$OUT/$env-first.fzq" --json "$OUT/$env-first.json" >"$OUT/train-$env-first.log" 2>&1
     rc=$?
     wall=$(secs "$t0" "$(now)")
@@ -180,15 +198,23 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
   fi
 done
 
-# The paper's three point masses: 45^6 cores, 15,625 joint actions, V in 9 parts on the card.
-if want paper; then
-  "$BIN" config --env pointmass | sed 's/^agents = 2 /agents = 3 /' >"$OUT/paper-three.toml"
-  timeout 300 "$BIN" bench --config "$OUT/paper-three.toml" --device gpu --backups 1 --evaluations 0 \
-    --peak-seconds 0.2 --json "$OUT/bench-paper-three.json" >"$OUT/bench-paper-three.log" 2>&1
+# The paper's three point masses: 45^6 cores, V in 23 parts on the card, one slab's first
+# stage (3.69 GB) in parts; 3 forces per axis (729 joint actions), or the paper's 5 (15,625).
+for sec in paper paper-5; do
+  if [ $sec = paper ]; then
+    want paper || continue
+    forces='s/^force_levels = .*/force_levels = [-0.2, 0.0, 0.2]/' cap=240
+  else
+    [[ " ${GPU_CHECK_SECTIONS:-} " == *" paper-5 "* ]] || continue
+    forces='s/^x/x/' cap=560
+  fi
+  "$BIN" config --env pointmass | sed "s/^agents = 2 /agents = 3 /; $forces" >"$OUT/$sec-three.toml"
+  timeout "$(limit $cap)" "$BIN" bench --config "$OUT/$sec-three.toml" --device gpu --backups 1 --evaluations 0 \
+    --peak-seconds 0.2 --json "$OUT/bench-$sec-three.json" >"$OUT/bench-$sec-three.log" 2>&1
   rc=$?
-  row "GPU full backup, three point masses on the paper's cores" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
-    "$(grep -E '^(backup|problem|read back)|error' "$OUT/bench-paper-three.log" | sed 's/  */ /g' | paste -sd ';' -)"
-fi
+  row "GPU full backup, three point masses on the paper's cores ($sec)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "$(grep -E '^(backup|problem|read back)|error' "$OUT/bench-$sec-three.log" | sed 's/  */ /g' | paste -sd ';' -)"
+done
 
 # 4. Three point masses: six blocks, so batches below fixed cores of the first blocks.
 THREE=${GPU_CHECK_THREE-examples/three-point-masses.toml}
@@ -197,7 +223,7 @@ if want 4 && [ -n "$THREE" ]; then
   sweeps=$(grep -E 'converged|sweeps' "$OUT/train-three.log" | tail -1 | cut -c1-140)
   reach="no policy"
   if [ $rc = 0 ]; then
-    timeout 60 "$BIN" rollout --policy "$OUT/three.fzq" --starts 20 >"$OUT/rollout-three.log" 2>&1
+    timeout "$(limit 60)" "$BIN" rollout --policy "$OUT/three.fzq" --starts 20 >"$OUT/rollout-three.log" 2>&1
     reach=$(tail -1 "$OUT/rollout-three.log" | cut -c1-160)
   fi
   row "train $THREE (three point masses)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
@@ -205,7 +231,7 @@ if want 4 && [ -n "$THREE" ]; then
   row "  its seconds on the gpu" "" "$(phases "$OUT/three.json")"
   # The same grid with the paper's 5 force levels per axis: one full backup.
   sed 's/^force_levels = .*/force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]/' "$THREE" >"$OUT/three-5.toml"
-  timeout 150 "$BIN" bench --config "$OUT/three-5.toml" --device gpu --backups 1 --peak-seconds 0.2 \
+  timeout "$(limit 150)" "$BIN" bench --config "$OUT/three-5.toml" --device gpu --backups 1 --peak-seconds 0.2 \
     --json "$OUT/bench-three-5.json" >"$OUT/bench-three-5.log" 2>&1
   rc=$?
   row "GPU full backup, three point masses, 5 forces per axis" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
@@ -230,7 +256,7 @@ if [[ " ${GPU_CHECK_SECTIONS:-} " == *" paper-rollout "* ]]; then
   t0=$(now)
   peak=()
   [ -x /usr/bin/time ] && peak=(/usr/bin/time -f "peak memory %M KB")
-  timeout 560 "${peak[@]}" "$BIN" rollout --policy "$scratch/paper-three.fzq" --starts 20 \
+  timeout "$(limit 560)" "${peak[@]}" "$BIN" rollout --policy "$scratch/paper-three.fzq" --starts 20 \
     >"$OUT/rollout-paper-three.log" 2>&1
   rc=$?
   wall=$(secs "$t0" "$(now)")

@@ -426,6 +426,33 @@ fn v_in_parts_gives_the_same_bits() {
 }
 
 #[test]
+fn stage_outputs_over_a_binding_in_parts_give_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // Three point masses on the paper's cores have one slab's first stage at 3.69 GB, over
+    // wgpu's 2 GiB binding (refused on an H200 before stage outputs came in parts). Here
+    // blocks of 4 cores and 3 actions: one slab of `V` 4 KB, the first stage's one item
+    // 12 KB, the second's 9 KB; under a binding of 8 KB both are cut into parts of whole
+    // columns' values, under 4 KB the first four. Every pass keeps the reference's bits and
+    // a whole run the uncut run's.
+    let c = three_point_masses(false);
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let op = operator(&model, &grid, &config);
+    assert_eq!(GpuSweeps::new(g, &op).unwrap().stage_parts(), [1; 5]);
+    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    for (kb, want) in [(8, [2, 2, 1, 1, 1]), (4, [4, 4, 2, 2, 1])] {
+        let cut = g.clone().with_binding_limit(kb << 10);
+        let gs = GpuSweeps::new(&cut, &op).unwrap();
+        assert_eq!(gs.stage_parts(), want, "{kb} KB: {}", gs.batches());
+        drop(gs);
+        passes_match(&cut, &op);
+        let a = fuzzyq_gpu::solve_from(&cut, &model, &grid, &config, None, false, noop).unwrap();
+        assert_same(&a, &b, "stage outputs in parts against one buffer each");
+    }
+}
+
+#[test]
 fn modified_policy_iteration_holds_v_twice() {
     let Some(g) = gpu() else { return };
     // The buffers modified policy iteration's driver uses: V twice and the policy, checked
@@ -505,9 +532,19 @@ fn kernels_by_rows_or_merged_give_the_same_bits() {
     let config = c.solver.solver_config();
     let a = fuzzyq_gpu::solve_from(&rows, &model, &grid, &config, None, false, noop).unwrap();
     let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
-    assert_same(&a, &b, "rows against merged rows");
+    assert_same(&a, &b, "rows against the adapter's default");
+    // The default last stage: merged rows on a software adapter (lavapipe), one row at a time
+    // on a GPU (`LastStage::for_adapter`, as measured).
+    let op = operator(&model, &grid, &config);
+    let default = GpuSweeps::new(g, &op).unwrap().last_stage();
+    let want = if g.summary().software {
+        "lastm"
+    } else {
+        "last1"
+    };
+    assert_eq!(default, Some(want), "{:?}", g.summary());
     // Every pass of either kernel, cores in turn or not, lanes reduced by subgroups or in
-    // memory (the default, merged rows and 4 cores in turn, in the tests above).
+    // memory (the adapter's default in the tests above).
     let variants = [
         (rows.clone(), "stage_c", "last1"),
         (merged(1).with_merged_stages(false), "stage_c", "lastm"),

@@ -134,12 +134,18 @@ impl Tree {
 
     /// The largest buffer of a batch of `items` items of `level`, in bytes (at least 4).
     fn largest(&self, level: usize, items: u64) -> u64 {
+        self.largest_from(0, level, items)
+    }
+
+    /// The largest buffer of stages `first..` (and the rows) of a batch of `items` items of
+    /// `level`, in bytes (at least 4).
+    fn largest_from(&self, first: usize, level: usize, items: u64) -> u64 {
         let b = Batches {
             level,
             items,
             count: 0,
         };
-        (0..self.last())
+        (first..self.last())
             .map(|s| self.stage_bytes(s, &b))
             .chain(self.rows_bytes(&b))
             .max()
@@ -148,9 +154,11 @@ impl Tree {
     }
 
     /// The batches whose largest buffer fits `budget` bytes: the lowest level at which one
-    /// item does, with as many items as fit. Where no level's one item fits, the budget is
-    /// raised to the smallest such buffer (the caller checks it against the adapter's
-    /// limits): one slab's first stage, at its level.
+    /// item does, with as many items as fit. Where no level's one item fits, the level whose
+    /// one item's largest buffer is smallest (one slab's first stage, at its level: the
+    /// caller cuts a buffer over a storage binding into parts), with as many items as keep
+    /// the batch's own buffers (the stages from its level on, which grow with its items)
+    /// within the budget, or one.
     pub(crate) fn choose(&self, budget: u64) -> Batches {
         let levels = 0..=self.last();
         let floor = levels
@@ -158,12 +166,13 @@ impl Tree {
             .map(|l| self.largest(l, 1))
             .min()
             .expect("at least one block");
-        let budget = budget.max(floor);
         let level = levels
             .into_iter()
-            .find(|&l| self.largest(l, 1) <= budget)
+            .find(|&l| self.largest(l, 1) <= budget.max(floor))
             .expect("the floor fits");
-        let fits = |m: u64| self.largest(level, m) <= budget;
+        let own = |m: u64| self.largest_from(level, level, m);
+        let budget = budget.max(own(1));
+        let fits = |m: u64| own(m) <= budget;
         // The largest buffer grows linearly in the items: bisect the largest that fits.
         let (mut lo, mut hi) = (1u64, self.n[level]);
         while lo < hi {
@@ -192,6 +201,7 @@ impl Tree {
     }
 
     /// The largest buffer of `batches`, in bytes.
+    #[cfg(test)]
     pub(crate) fn largest_of(&self, batches: &Batches) -> u64 {
         self.largest(batches.level, batches.items)
     }
@@ -330,11 +340,17 @@ mod tests {
         // else from level 1 on the first stage's one slab dominates.
         assert_eq!(t.choose(1), t.batches(1, 1));
         let deep = tree(true).choose(1);
-        assert_eq!((deep.level, deep.items, deep.count), (2, 3, 24));
+        assert_eq!((deep.level, deep.items, deep.count), (2, 1, 60));
         assert_eq!(
             deep.to_string(),
-            "24 batches of 3 core(s) of block 2 below fixed cores of blocks 0-1"
+            "60 batches of 1 core(s) of block 2 below fixed cores of blocks 0-1"
         );
+        // Its own buffers (the stages from its level on) within a budget that one item's
+        // ancestors exceed: as many items as fit it.
+        let fixed = tree(true).largest_from(0, 2, 1);
+        let own = tree(true).largest_from(2, 2, 1);
+        assert!(fixed > 2 * own, "{fixed} {own}");
+        assert_eq!(tree(true).choose(2 * own).items, 2);
     }
 
     /// Three point masses: six blocks of `n` cores and `a` actions (contraction order).
@@ -351,7 +367,9 @@ mod tests {
         let t = three_masses(45, 5);
         let b = t.choose(256 << 20);
         let max = u64::from(u32::MAX);
-        let parts = crate::parts::Parts::new(45, 45u64.pow(5), max, max, 100).unwrap();
+        // wgpu's largest binding: 23 parts of 2 slabs.
+        let binding = (1 << 31) - 4;
+        let parts = crate::parts::Parts::new(45, 45u64.pow(5), binding, binding, 100).unwrap();
         let mut last = 0;
         for s in t.steps(&b) {
             assert!(s.lo - s.src_lo * t.n[s.stage] <= max, "{s:?}");
@@ -369,12 +387,19 @@ mod tests {
     #[test]
     fn three_point_masses_on_the_papers_cores_batch_below_two_blocks() {
         // Six blocks of 45 cores and 5 actions: one slab's first stage (45^5 x 5 values,
-        // 3.69 GB) is the smallest largest buffer; below two fixed blocks, three cores of the
-        // third fit beside it.
+        // 3.69 GB, over a binding: cut into parts) is the smallest largest buffer; below two
+        // fixed blocks, one core of the third, whose last written stage (1.14 GB) is over
+        // the budget but within a binding.
         let t = three_masses(45, 5);
         let b = t.choose(256 << 20);
-        assert_eq!((b.level, b.items, b.count), (2, 3, 45 * 45 * 15));
+        assert_eq!((b.level, b.items, b.count), (2, 1, 45 * 45 * 45));
         assert_eq!(t.largest_of(&b), 4 * 45u64.pow(5) * 5);
+        assert_eq!(t.largest_from(2, 2, 1), 4 * 45u64.pow(3) * 5u64.pow(5));
+        // With 3 forces per axis, three cores of the third fit the budget.
+        let t = three_masses(45, 3);
+        let b = t.choose(256 << 20);
+        assert_eq!((b.level, b.items, b.count), (2, 3, 45 * 45 * 15));
+        assert!(t.largest_from(2, 2, 3) <= 256 << 20);
         // examples/three-point-masses.toml: 21 cores and 3 actions per block; one slab's last
         // written stage would take 3.97 GB, one core of block 1's 189 MB.
         let t = three_masses(21, 3);

@@ -36,6 +36,9 @@ pub struct AdapterSummary {
     /// workgroup of that many threads is one subgroup whose shuffles reduce as the last stage
     /// needs (checked at start-up); the last stage then reduces a core's lanes with them.
     pub subgroup_size: Option<u32>,
+    /// Whether the adapter is software on the host's CPU (wgpu's `DeviceType::Cpu`: Mesa's
+    /// lavapipe, WARP); the fused last stage's default differs ([`crate::LastStage::for_adapter`]).
+    pub software: bool,
 }
 
 /// wgpu's device and queue, and the adapter's summary.

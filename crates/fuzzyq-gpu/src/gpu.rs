@@ -30,7 +30,8 @@ pub struct Gpu {
 }
 
 /// How the fused last stage of a full backup takes a core's rows (its block actions)
-/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged` or `merged:CORES`). Every
+/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged` or `merged:CORES`; the
+/// default [`LastStage::for_adapter`]). Every
 /// choice gives the same bits; they differ in how often the stage before is read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LastStage {
@@ -50,15 +51,29 @@ pub enum LastStage {
 }
 
 impl LastStage {
-    /// The default: merged rows, 4 cores in turn.
-    pub const DEFAULT: LastStage = LastStage::Merged { cores: 4 };
+    /// Merged rows, 4 cores in turn (`merged`).
+    pub const MERGED: LastStage = LastStage::Merged { cores: 4 };
+
+    /// The default on an adapter, as measured: one row at a time on a GPU (an H200: the last
+    /// stage of a full backup of the paper's grid 21.6 ms, against 25.3-29.8 ms merged with
+    /// 1-16 cores in turn), merged with 4 cores in turn on a software adapter (`software`:
+    /// Mesa's lavapipe, 5-17% less than one row at a time), whose multiply-adds cost what
+    /// its loads do.
+    #[must_use]
+    pub fn for_adapter(software: bool) -> LastStage {
+        if software {
+            LastStage::MERGED
+        } else {
+            LastStage::Rows
+        }
+    }
 
     /// `rows`, `merged` (4 cores in turn) or `merged:CORES` (`None` for anything else).
     #[must_use]
     pub fn parse(s: &str) -> Option<Self> {
         match s.split_once(':') {
             None if s == "rows" => Some(LastStage::Rows),
-            None if s == "merged" => Some(LastStage::DEFAULT),
+            None if s == "merged" => Some(LastStage::MERGED),
             Some(("merged", n)) => n
                 .parse::<u32>()
                 .ok()
@@ -150,6 +165,7 @@ impl Gpu {
                 && info.subgroup_min_size == info.subgroup_max_size
                 && (4..=64).contains(&info.subgroup_min_size))
             .then_some(info.subgroup_min_size),
+            software: info.device_type == wgpu::DeviceType::Cpu,
         };
         let mut ctx = Context {
             device,
@@ -173,7 +189,7 @@ impl Gpu {
             last: std::env::var("FUZZYQ_GPU_LAST")
                 .ok()
                 .and_then(|v| LastStage::parse(&v))
-                .unwrap_or(LastStage::DEFAULT),
+                .unwrap_or(LastStage::for_adapter(ctx.summary.software)),
             merged_stages: std::env::var("FUZZYQ_GPU_STAGES").map_or(true, |v| v != "rows"),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
@@ -266,7 +282,7 @@ impl Gpu {
     }
 
     /// This GPU with the fused last stage taking a core's rows as `last` says (the default
-    /// [`LastStage::DEFAULT`], or `FUZZYQ_GPU_LAST`). All give the same bits.
+    /// [`LastStage::for_adapter`], or `FUZZYQ_GPU_LAST`). All give the same bits.
     #[must_use]
     pub fn with_last_stage(mut self, last: LastStage) -> Self {
         self.last = last;
@@ -293,7 +309,7 @@ impl Gpu {
     /// less ten). The
     /// first stage of a full backup and policy evaluation read `V` through all its parts;
     /// the other passes run a part at a time. Any parts give the same bits; a `V` larger
-    /// than one binding (three point masses on the paper's cores: 33 GB, 9 parts) needs them.
+    /// than one binding (three point masses on the paper's cores: 33 GB, 23 parts) needs them.
     #[must_use]
     pub fn with_part_bytes(mut self, bytes: u64) -> Self {
         self.part_bytes = bytes;

@@ -133,19 +133,30 @@ fn uniform(binding: u32, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
 /// The layout of group 1 of the kernels that read `V` at other cores: its `parts`
 /// read-only parts (`vp0..`, [`crate::parts::Parts::reader`]).
 pub(crate) fn parts_layout(gpu: &Context, parts: usize) -> wgpu::BindGroupLayout {
-    let entries: Vec<_> = (0..parts as u32).map(|k| storage(k, true)).collect();
+    group1_layout(gpu, (0..parts).map(|_| true))
+}
+
+/// A layout of group 1: storage bindings `0..`, each read-only or not (`read_only`).
+pub(crate) fn group1_layout(
+    gpu: &Context,
+    read_only: impl Iterator<Item = bool>,
+) -> wgpu::BindGroupLayout {
+    let entries: Vec<_> = read_only
+        .enumerate()
+        .map(|(k, r)| storage(k as u32, r))
+        .collect();
     gpu.device
         .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("parts of V"),
+            label: Some("parts"),
             entries: &entries,
         })
 }
 
-/// A bind group of [`parts_layout`] binding `parts`.
+/// A bind group of a group 1 layout ([`group1_layout`]) binding `parts` in order.
 pub(crate) fn parts_group(
     gpu: &Context,
     layout: &wgpu::BindGroupLayout,
-    parts: &[wgpu::Buffer],
+    parts: &[&wgpu::Buffer],
 ) -> wgpu::BindGroup {
     let entries: Vec<_> = parts
         .iter()
@@ -156,7 +167,7 @@ pub(crate) fn parts_group(
         })
         .collect();
     gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("parts of V"),
+        label: Some("parts"),
         layout,
         entries: &entries,
     })

@@ -21,10 +21,11 @@
 //! (`stagem.wgsl`, [`Gpu::with_merged_stages`]), or a thread per element and action
 //! (`stagec.wgsl`); the last stage is fused with the maximum over
 //! actions (up to 32 lanes per core, each taking several of the core's columns so that a
-//! weight feeds several multiply-adds; by default the core's rows merged by column,
-//! `lastm.wgsl`, so that each value of the stage before is read once per core and feeds every
-//! action whose row has its column, several neighbouring cores in turn; or one row at a time,
-//! `last1.wgsl`, [`LastStage`]; then the lanes reduce to the largest value at the lowest
+//! weight feeds several multiply-adds; one row at a time, `last1.wgsl`, the default on GPUs,
+//! or the core's rows merged by column, `lastm.wgsl`, so that each value of the stage before
+//! is read once per core and feeds every action whose row has its column, several
+//! neighbouring cores in turn, the default on software adapters: [`LastStage::for_adapter`],
+//! as measured on an H200 and on lavapipe; then the lanes reduce to the largest value at the lowest
 //! action by subgroup shuffles, or in workgroup memory where the adapter has no single
 //! subgroup size or a start-up probe finds a workgroup of that size is not one subgroup) or,
 //! where the actions are renumbered or the reward depends on the action,
@@ -54,8 +55,10 @@
 //!
 //! # Parts of `V`
 //! `V` and the other per-core buffers (the policy, the rewards, the exact delta's work
-//! buffers) are cut into parts of whole slabs, each within one storage binding (4 GiB on most
-//! adapters; three point masses on the paper's cores, `V` 33 GB, take 9). Every index a shader
+//! buffers) are cut into parts of whole slabs, each within one storage binding (2 GiB through
+//! wgpu, on every backend; three point masses on the paper's cores, `V` 33 GB, take 23). A
+//! stage's output over one binding (there, one slab's first stage: 3.69 GB) is cut the same
+//! way, into runs of the values one column of the next stage reads. Every index a shader
 //! computes is within a part or a stage buffer, so it fits `u32` however many cores the grid
 //! has. The first stage of a full backup and policy evaluation read `V` at other cores: they
 //! bind every part (group 1) and pick one from the first block's core (`v_at`); the other
@@ -64,8 +67,9 @@
 //!
 //! # Limits
 //! `f32` only; the block path only (a model that declares no blocks is refused, as are models
-//! with terminal states and asynchronous sweeps); one slab of `V` and each batch's stage
-//! output must fit one storage binding, and `V`'s parts a kernel's storage bindings
+//! with terminal states and asynchronous sweeps); one slab of `V`, one column's values of a
+//! stage's output and the last stage's input for one batch must fit one storage binding, and
+//! the parts a kernel binds its storage bindings
 //! ([`AdapterSummary::max_storage_buffers`] less ten). All of a run's buffers must fit the
 //! adapter's memory: `V` as often as the run's scheme uses it
 //! ([`Scheme::value_buffers`](fuzzyq_core::solver::Scheme::value_buffers): twice for modified
@@ -85,6 +89,7 @@ mod memory;
 mod parts;
 mod probe;
 pub mod reference;
+mod shape;
 mod sweeps;
 
 use core::ops::ControlFlow;

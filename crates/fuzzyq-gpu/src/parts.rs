@@ -5,8 +5,10 @@
 //! first block's core and `r < R_0` runs over the later blocks' cores. A *slab* is the `R_0`
 //! cores of one `c_0`; a part is a run of `per` consecutive slabs (the last part may hold
 //! fewer), so every index a shader computes within a part fits `u32` however many cores the
-//! grid has. One binding holds at most 4 GiB: three point masses on the paper's cores
-//! (`V` 33 GB, a slab 738 MB) take 9 parts of 5 slabs.
+//! grid has. One binding holds at most 2 GiB through wgpu (`i32::MAX` bytes, on every
+//! backend): three point masses on the paper's cores (`V` 33 GB, a slab 738 MB) take 23 parts
+//! of 2 slabs. A stage's output over one binding is cut the same way, in units of the values
+//! one column of the next stage reads (`sweeps.rs`).
 //!
 //! The passes that write per-core values run a part at a time (a batch of the last stage never
 //! straddles two parts); the two that read `V` at other cores (the first stage of a full backup
@@ -135,28 +137,55 @@ impl Parts {
         if self.count() == 1 {
             return ONE_PART.to_string();
         }
-        let mut s = String::new();
-        for k in 0..self.count() {
-            s.push_str(&format!(
-                "@group(1) @binding({k}) var<storage, read> vp{k}: array<f32>;\n"
-            ));
-        }
-        s.push_str(&format!(
-            "fn v_at(c0: u32, r: u32) -> f32 {{\n    let i = (c0 % {per}u) * {slab}u + r;\n    \
-             switch c0 / {per}u {{\n",
+        self.declare(0, "vp", "read") + &self.getter("v_at", "vp")
+    }
+
+    /// WGSL declaring the parts as bindings `first..` of group 1 named `{name}0..`
+    /// (`access`: `read` or `read_write`).
+    pub(crate) fn declare(&self, first: usize, name: &str, access: &str) -> String {
+        (0..self.count())
+            .map(|k| {
+                let b = first + k;
+                format!("@group(1) @binding({b}) var<storage, {access}> {name}{k}: array<f32>;\n")
+            })
+            .collect()
+    }
+
+    /// `switch` arms over the parts, the last one `default`: `body(k)` per part `k`.
+    fn arms(&self, body: impl Fn(usize) -> String) -> String {
+        (0..self.count())
+            .map(|k| {
+                let case = if k + 1 == self.count() {
+                    "default".to_string()
+                } else {
+                    format!("case {k}u")
+                };
+                format!("        {case}: {{ {} }}\n", body(k))
+            })
+            .collect()
+    }
+
+    /// WGSL of `fn {f}(u: u32, i: u32) -> f32`: element `i` of slab (unit) `u` of the parts
+    /// [`Self::declare`]d as `{name}`.
+    pub(crate) fn getter(&self, f: &str, name: &str) -> String {
+        format!(
+            "fn {f}(u: u32, i: u32) -> f32 {{\n    let j = (u % {per}u) * {slab}u + i;\n    \
+             switch u / {per}u {{\n{arms}    }}\n}}\n",
             per = self.per,
-            slab = self.slab
-        ));
-        for k in 0..self.count() {
-            let case = if k + 1 == self.count() {
-                "default".to_string()
-            } else {
-                format!("case {k}u")
-            };
-            s.push_str(&format!("        {case}: {{ return vp{k}[i]; }}\n"));
-        }
-        s.push_str("    }\n}\n");
-        s
+            slab = self.slab,
+            arms = self.arms(|k| format!("return {name}{k}[j];")),
+        )
+    }
+
+    /// WGSL of `fn {f}(o: u32, x: f32)`: element `o`, counted over every part in order, of
+    /// the parts [`Self::declare`]d as `{name}` set to `x`.
+    pub(crate) fn setter(&self, f: &str, name: &str) -> String {
+        format!(
+            "fn {f}(o: u32, x: f32) {{\n    let j = o % {span}u;\n    \
+             switch o / {span}u {{\n{arms}    }}\n}}\n",
+            span = self.per * self.slab,
+            arms = self.arms(|k| format!("{name}{k}[j] = x;")),
+        )
     }
 }
 
@@ -196,12 +225,35 @@ mod tests {
         assert!(e.starts_with("V in 4 parts"), "{e}");
     }
 
+    /// wgpu's largest storage binding on every backend: `i32::MAX` bytes, in whole `f32`s.
+    const WGPU_MAX_BINDING: u64 = (1 << 31) - 4;
+
     #[test]
-    fn the_papers_three_point_masses_take_nine_parts_of_five_slabs() {
-        let max = u64::from(u32::MAX);
+    fn the_papers_three_point_masses_take_23_parts_of_two_slabs() {
+        let max = WGPU_MAX_BINDING;
         let p = Parts::new(45, 45u64.pow(5), max, max, 100).unwrap();
-        assert_eq!((p.count(), p.per), (9, 5));
+        assert_eq!((p.count(), p.per), (23, 2));
         // Every index within a part fits u32.
         assert!(p.per * p.slab < 1 << 32);
+    }
+
+    #[test]
+    fn the_wgsl_of_parts_names_each_part_once() {
+        let p = Parts::new(5, 10, 80, 80, 100).unwrap();
+        assert_eq!((p.count(), p.per), (3, 2));
+        let d = p.declare(4, "dp", "read_write");
+        assert_eq!(d.lines().count(), 3);
+        assert!(d.contains("@group(1) @binding(6) var<storage, read_write> dp2: array<f32>;"));
+        let g = p.getter("s_at", "sp");
+        assert!(g.contains("let j = (u % 2u) * 10u + i;"), "{g}");
+        assert!(
+            g.contains("case 1u: { return sp1[j]; }") && g.contains("default: { return sp2[j]; }")
+        );
+        let s = p.setter("put", "dp");
+        assert!(
+            s.contains("let j = o % 20u;") && s.contains("switch o / 20u"),
+            "{s}"
+        );
+        assert!(s.contains("case 0u: { dp0[j] = x; }") && s.contains("default: { dp2[j] = x; }"));
     }
 }

@@ -1,7 +1,9 @@
 // Stage SB of a full backup with the problem's constants (`sweeps.rs`: SB, SN cores, SA
 // actions, SR, SP), so that every index is arithmetic on constants. The first stage of a
 // contraction of several blocks reads `V` through `v_at` (its parts, `parts.rs`): SRC_AT is
-// `v_at(col[e], r)` there and `src[...]` (the stage before) elsewhere.
+// `v_at(col[e], r)` there and `src[...]` (the stage before) elsewhere, or `s_at(...)` where the
+// stage before is in parts; `put(o, x)` writes element `o` of the output (`dst`, or its parts:
+// `sweeps.rs`, `Shape::stage_cut`).
 
 @compute @workgroup_size(64)
 fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
@@ -25,5 +27,5 @@ fn stage_c(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id)
     for (var e = row_ptr[row]; e < e1; e++) {
         acc = fma(weight[e], SRC_AT, acc);
     }
-    dst[o] = acc;
+    put(o, acc);
 }

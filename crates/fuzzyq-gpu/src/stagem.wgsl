@@ -6,7 +6,7 @@
 // every action whose row has that column, where `stage_c` reads it once per row; each row's
 // entries still meet its sum in the row's order: the same bits. Neighbouring threads take
 // neighbouring `(r, p)` of one block core, so they read one run of the stage before and
-// share each step. SRC_AT as in `stagec.wgsl`, with the step's column `k`.
+// share each step. SRC_AT and `put` as in `stagec.wgsl`, with the step's column `k`.
 
 @compute @workgroup_size(64)
 fn stage_m(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
@@ -38,6 +38,6 @@ fn stage_m(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id)
     }
     let out = (q * SR + r) * SA * SP + p;
     for (var a = 0u; a < SA; a++) {
-        dst[out + a * SP] = acc[a];
+        put(out + a * SP, acc[a]);
     }
 }

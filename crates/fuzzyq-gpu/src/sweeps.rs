@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Buf, DiffStats, Operator, Scheme, Sweeps};
 
-use crate::batches::{Batches, Step, Tree};
+use crate::batches::{Batches, Step};
 use crate::buffers::{self, with_data, zeroed};
 use crate::error::GpuError;
 use crate::gpu::Gpu;
@@ -15,6 +15,7 @@ use crate::kernels::{
 };
 use crate::last::{Last, MergedAt, compile_last};
 use crate::parts::Parts;
+use crate::shape::Shape;
 
 /// The last stage's reduction (`mode` in `block.wgsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -57,154 +58,28 @@ enum Slot {
 /// Group 0's bindings of a dispatch: `[src, dst, aux, src2, rewards]`.
 type Slots = [Slot; 5];
 
+/// What group 1 of a dispatch binds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Group1 {
+    /// The parts of a per-core buffer (`v_at`: the first stage of a full backup and policy
+    /// evaluation read `V` at other cores).
+    V(PerCore),
+    /// Stage `b`'s own, where its input or output is cut into parts ([`Shape::stage_parts`]):
+    /// the parts it reads (of the per-core buffer, for the first stage, else of the stage
+    /// before, where that is cut), then those it writes (where its own output is cut).
+    Stage(usize, Option<PerCore>),
+}
+
 /// One dispatch.
 #[derive(Clone, Copy, Debug)]
 struct Dispatch {
     entry: Entry,
     params: Params,
     slots: Slots,
-    /// The per-core buffer whose parts group 1 binds (`v_at`: the first stage and policy
-    /// evaluation read `V` at other cores).
-    reads: Option<PerCore>,
+    /// What group 1 binds, if anything.
+    group1: Option<Group1>,
     /// Workgroups `(x, y)`.
     groups: (u32, u32),
-}
-
-/// The shape of the block path, from [`fuzzyq_core::solver::BlockPlan`].
-#[derive(Clone, Debug)]
-struct Shape {
-    /// Cores.
-    n: usize,
-    /// Per block (contraction order): (cores, actions, R, P).
-    blocks: Vec<[u32; 4]>,
-    /// Per block: the index of its first row start in the joint `row_ptr` buffer.
-    row_base: Vec<u32>,
-    /// Joint actions.
-    n_joint: u32,
-    /// Product actions (`P` of the last block times its actions).
-    n_product: u64,
-    /// The blocks' sizes for batching, and the batches a pass runs in.
-    tree: Tree,
-    batches: Batches,
-    /// The parts of the per-core buffers.
-    parts: Parts,
-    /// Whether the last stage reduces in place (the identity action map and a state-only
-    /// reward); else it writes full rows that `reduce_rows` reduces.
-    fused: bool,
-    /// Whether the absolute maximum reduces in place (the identity map).
-    fused_abs: bool,
-
-    gamma: f32,
-    has_goal: bool,
-    reward_table: bool,
-    can_evaluate: bool,
-}
-
-impl Shape {
-    /// The shape of `plan`'s block path over `n` cores, its blocks' sizes and row bases from
-    /// [`BlockArrays`]; batches of one slab until [`Self::batch_within`].
-    fn of(
-        plan: &fuzzyq_core::solver::BlockPlan<'_, f32>,
-        n: usize,
-        blocks: Vec<[u32; 4]>,
-        row_base: Vec<u32>,
-        parts: Parts,
-    ) -> Self {
-        let last = plan.tables.last().expect("at least one block");
-        let identity = plan.joint_to_product.is_none();
-        let reward_table = plan.rewards.is_none();
-        let n_product = (last.p_len * last.n_actions) as u64;
-        let (fused, fused_abs) = (identity && !reward_table, identity);
-        let rows = (!fused || !fused_abs).then_some(n_product);
-        let tree = Tree::new(&blocks, rows);
-        Self {
-            n,
-            batches: tree.batches(0, 1),
-            tree,
-            parts,
-            blocks,
-            row_base,
-            n_joint: plan.n_joint as u32,
-            n_product,
-            fused,
-            fused_abs,
-            gamma: plan.gamma,
-            has_goal: !plan.goal.is_empty(),
-            reward_table,
-            can_evaluate: plan.can_evaluate,
-        }
-    }
-
-    /// Whether some pass writes full rows for `reduce_rows` (a renumbered joint action or a
-    /// reward of the action).
-    fn writes_rows(&self) -> bool {
-        self.rows_bytes().is_some()
-    }
-
-    /// Batches whose largest buffer takes at most `budget` bytes where one item's can
-    /// ([`Tree::choose`]), runs of slabs never straddling two parts; refused where the
-    /// smallest batch's buffer exceeds one storage binding of `max_binding` bytes.
-    fn batch_within(&mut self, budget: u64, max_binding: u64) -> Result<(), GpuError> {
-        self.batches = self.tree.choose(budget.min(max_binding));
-        if self.batches.level == 0 && self.parts.count() > 1 {
-            // Parts start at multiples of `per` slabs: batches of a divisor of it.
-            let per = self.parts.per;
-            let items = (1..=self.batches.items.min(per))
-                .rev()
-                .find(|&i| per.is_multiple_of(i))
-                .expect("1 divides");
-            self.batches = self.tree.batches(0, items);
-        }
-        let largest = self.tree.largest_of(&self.batches);
-        if largest > max_binding {
-            return Err(GpuError::over_binding(
-                "the smallest batch's stage output",
-                largest,
-                max_binding,
-            ));
-        }
-        Ok(())
-    }
-
-    /// Bytes of the buffer of stage `b`'s output for one batch.
-    fn stage_bytes(&self, b: usize) -> u64 {
-        self.tree.stage_bytes(b, &self.batches)
-    }
-
-    /// Bytes of the full rows of one batch, where a pass writes them.
-    fn rows_bytes(&self) -> Option<u64> {
-        self.tree.rows_bytes(&self.batches)
-    }
-
-    fn n_blocks(&self) -> usize {
-        self.blocks.len()
-    }
-
-    /// The stages whose outputs go to memory (those before the last).
-    fn written_stages(&self) -> usize {
-        self.n_blocks() - 1
-    }
-
-    /// The base parameters of every dispatch.
-    fn params(&self) -> Params {
-        let mut blocks = [[0u32; 4]; MAX_BLOCKS];
-        let mut rows = [[0u32; 4]; MAX_BLOCKS];
-        for (b, blk) in self.blocks.iter().enumerate() {
-            blocks[b] = *blk;
-            rows[b][0] = self.row_base[b];
-        }
-        Params {
-            n_joint: self.n_joint,
-            has_map: 0,
-            reward_table: u32::from(self.reward_table),
-            has_goal: u32::from(self.has_goal),
-            gamma: self.gamma,
-            n_blocks: self.blocks.len() as u32,
-            blocks,
-            rows,
-            ..Params::default()
-        }
-    }
 }
 
 /// The passes over `V` of one run on a GPU ([`Sweeps`]): the block tables, `V`'s three
@@ -239,7 +114,8 @@ pub struct GpuSweeps {
     policy: Vec<wgpu::Buffer>,
     scratch: Vec<wgpu::Buffer>,
     dv: Vec<wgpu::Buffer>,
-    stages: Vec<wgpu::Buffer>,
+    /// Each written stage's output for one batch: one buffer, or its parts.
+    stages: Vec<Vec<wgpu::Buffer>>,
     rows: Option<wgpu::Buffer>,
     partial: wgpu::Buffer,
     diff_out: Option<wgpu::Buffer>,
@@ -248,9 +124,10 @@ pub struct GpuSweeps {
     dummy_r: wgpu::Buffer,
     dummy_w: wgpu::Buffer,
     binds: HashMap<Slots, wgpu::BindGroup>,
-    /// Group 1's layout, and its bind group per per-core buffer read through `v_at`.
+    /// Group 1's layout for the parts of a per-core buffer read through `v_at`, and group
+    /// 1's bind groups.
     parts_layout: wgpu::BindGroupLayout,
-    reads: HashMap<PerCore, wgpu::BindGroup>,
+    group1: HashMap<Group1, wgpu::BindGroup>,
     /// Seconds and dispatches per kernel (and stage), when profiling
     /// ([`GpuSweeps::set_profiling`]).
     profile: Option<std::collections::BTreeMap<String, (f64, usize)>>,
@@ -446,6 +323,9 @@ struct Stage {
     pipeline: wgpu::ComputePipeline,
     per_thread: u64,
     name: &'static str,
+    /// Its group 1's layout where it reads or writes a stage output in parts
+    /// ([`Group1::Stage`]).
+    group1: Option<wgpu::BindGroupLayout>,
 }
 
 /// The kernels compiled for one problem ([`compile`]).
@@ -453,6 +333,95 @@ struct Compiled {
     stages: Vec<Stage>,
     last: Option<Last>,
     evaluate: Option<wgpu::ComputePipeline>,
+}
+
+/// Stage `b`'s kernel compiled with the problem's sizes as constants (`stagec.wgsl`, or
+/// `stagem.wgsl` where `merged` and the block core's elements fill a subgroup): reading `V`
+/// through its parts (`parts`: group 1's layout and `v_at`) for the first stage of several
+/// blocks, else the stage before (`src`, or its parts), and writing its output (`dst`, or
+/// its parts: `put`).
+fn compile_stage(
+    gpu: &Gpu,
+    k: &Kernels,
+    shape: &Shape,
+    b: usize,
+    parts: (&wgpu::BindGroupLayout, &str),
+    merged: Option<MergedAt>,
+) -> Result<Stage, GpuError> {
+    let nb = shape.n_blocks();
+    let [n_b, a_b, r_b, p_b] = shape.blocks[b];
+    let mut consts = vec![
+        ("SB", b as u32),
+        ("SN", n_b),
+        ("SA", a_b),
+        ("SR", r_b),
+        ("SP", p_b),
+    ];
+    // A merged stage reads the step's column `k`, the other the entry's. Merged where a
+    // block core's elements fill a subgroup, whose threads then share its steps.
+    let shared = u64::from(r_b) * u64::from(p_b) >= MERGED_SHARED;
+    let (t, column, per_thread) = match merged.filter(|_| gpu.merged_stages && shared) {
+        Some(at) => {
+            consts.extend(at.constants());
+            ((include_str!("stagem.wgsl"), "stage_m"), "k", a_b)
+        }
+        None => ((include_str!("stagec.wgsl"), "stage_c"), "col[e]", 1),
+    };
+    let reads_v = b == 0 && nb > 1;
+    let parts_in = match b {
+        0 => None,
+        b => shape.stage_parts.get(b - 1).and_then(Option::as_ref),
+    };
+    let parts_out = shape.stage_parts.get(b).and_then(Option::as_ref);
+    // Group 1: the parts read (of `V`, or of the stage before), then those written.
+    let first_out = if reads_v {
+        shape.parts.count()
+    } else {
+        parts_in.map_or(0, Parts::count)
+    };
+    let mut io = String::new();
+    let at = if reads_v {
+        io.push_str(parts.1);
+        format!("v_at({column}, r)")
+    } else if let Some(p) = parts_in {
+        io.push_str(&(p.declare(0, "sp", "read") + &p.getter("s_at", "sp")));
+        format!("s_at(base + {column}, r * SP + p)")
+    } else {
+        format!("src[((base + {column}) * SR + r) * SP + p]")
+    };
+    match parts_out {
+        Some(p) => {
+            io.push_str(&(p.declare(first_out, "dp", "read_write") + &p.setter("put", "dp")))
+        }
+        None => io.push_str("fn put(o: u32, x: f32) {\n    dst[o] = x;\n}\n"),
+    }
+    let own = (parts_in.is_some() || parts_out.is_some()).then(|| {
+        let reads = (0..first_out).map(|_| true);
+        let writes = (0..parts_out.map_or(0, Parts::count)).map(|_| false);
+        kernels::group1_layout(&gpu.inner, reads.chain(writes))
+    });
+    let layout = match (&own, reads_v) {
+        (Some(l), _) => Some(l),
+        (None, true) => Some(parts.0),
+        (None, false) => None,
+    };
+    let replace = [("SRC_AT", at.as_str())];
+    let body = io + t.0;
+    let pipeline = kernels::specialized(
+        &gpu.inner,
+        k,
+        (&body, t.1),
+        &consts,
+        &replace,
+        false,
+        layout.map(|l| (l, "")),
+    )?;
+    Ok(Stage {
+        pipeline,
+        per_thread: u64::from(per_thread),
+        name: t.1,
+        group1: own,
+    })
 }
 
 /// The problem's kernels, compiled with its sizes as constants: the stage kernel of every
@@ -474,40 +443,7 @@ fn compile(
     // writes full rows.
     let compiled = if shape.writes_rows() { nb } else { nb - 1 };
     let stages = (0..compiled)
-        .map(|b| {
-            let [n_b, a_b, r_b, p_b] = shape.blocks[b];
-            let mut consts = vec![
-                ("SB", b as u32),
-                ("SN", n_b),
-                ("SA", a_b),
-                ("SR", r_b),
-                ("SP", p_b),
-            ];
-            // A merged stage reads the step's column `k`, the other the entry's. Merged where
-            // a block core's elements fill a subgroup, whose threads then share its steps.
-            let shared = u64::from(r_b) * u64::from(p_b) >= MERGED_SHARED;
-            let (t, column, per_thread) = match merged[b].filter(|_| gpu.merged_stages && shared) {
-                Some(at) => {
-                    consts.extend(at.constants());
-                    ((include_str!("stagem.wgsl"), "stage_m"), "k", a_b)
-                }
-                None => ((include_str!("stagec.wgsl"), "stage_c"), "col[e]", 1),
-            };
-            let pipeline = if b == 0 && nb > 1 {
-                let at = format!("v_at({column}, r)");
-                let at = [("SRC_AT", at.as_str())];
-                kernels::specialized(&gpu.inner, k, t, &consts, &at, false, Some(parts))
-            } else {
-                let at = format!("src[((base + {column}) * SR + r) * SP + p]");
-                let at = [("SRC_AT", at.as_str())];
-                kernels::specialized(&gpu.inner, k, t, &consts, &at, false, None)
-            }?;
-            Ok(Stage {
-                pipeline,
-                per_thread: u64::from(per_thread),
-                name: t.1,
-            })
-        })
+        .map(|b| compile_stage(gpu, k, shape, b, parts, merged[b]))
         .collect::<Result<Vec<_>, GpuError>>()?;
     let last = if shape.fused_abs {
         Some(compile_last(gpu, k, &shape.blocks, sg, merged[nb - 1])?)
@@ -612,7 +548,7 @@ impl GpuSweeps {
             arrays.row_base.clone(),
             parts,
         );
-        shape.batch_within(gpu.batch_bytes, max_binding)?;
+        shape.batch_within(gpu.batch_bytes, max_binding, max_parts)?;
         let rewards_bytes = reward_bytes(&plan, n);
         Self::allocate(gpu, op, &plan, (shape, scheme), &arrays, rewards_bytes)
     }
@@ -697,7 +633,10 @@ impl GpuSweeps {
             scratch: Vec::new(),
             dv: Vec::new(),
             stages: (0..shape.written_stages())
-                .map(|b| zeroed(ctx, "stage", shape.stage_bytes(b)))
+                .map(|b| match &shape.stage_parts[b] {
+                    None => vec![zeroed(ctx, "stage", shape.stage_bytes(b))],
+                    Some(p) => p.zeroed(ctx, "stage part"),
+                })
                 .collect(),
             rows: shape.rows_bytes().map(|b| zeroed(ctx, "rows", b)),
             partial: zeroed(ctx, "max partials", 4 * partial_len),
@@ -716,7 +655,7 @@ impl GpuSweeps {
             dummy_w: zeroed(ctx, "dummy", 4),
             binds: HashMap::new(),
             parts_layout,
-            reads: HashMap::new(),
+            group1: HashMap::new(),
             profile: None,
             k,
             shape,
@@ -769,6 +708,14 @@ impl GpuSweeps {
         self.shape.parts.count()
     }
 
+    /// How many parts each written stage's output for one batch is cut into: 1 unless it
+    /// exceeds one storage binding ([`Gpu::with_binding_limit`]; three point masses on the
+    /// paper's cores: the first stage's, 3.69 GB, in 2 parts of wgpu's 2 GiB).
+    #[must_use]
+    pub fn stage_parts(&self) -> Vec<usize> {
+        self.stages.iter().map(Vec::len).collect()
+    }
+
     /// Bytes of device memory this run's buffers take now (a buffer made on first use, such
     /// as the exact delta's two, once a pass asked for it): for the buffers of the run's
     /// scheme, at most what [`Self::for_scheme`] estimated and checked against
@@ -787,7 +734,7 @@ impl GpuSweeps {
         all.extend(self.v.iter().flatten());
         all.extend(self.rewards.iter().chain(&self.policy));
         all.extend(self.scratch.iter().chain(&self.dv));
-        all.extend(&self.stages);
+        all.extend(self.stages.iter().flatten());
         all.extend([&self.rows, &self.diff_out].into_iter().flatten());
         all.iter().map(|b| b.size()).sum()
     }
@@ -823,7 +770,7 @@ impl GpuSweeps {
     fn buffer(&self, s: Slot) -> &wgpu::Buffer {
         match s {
             Slot::Part(b, k) => &self.parts_of(b)[k as usize],
-            Slot::Stage(b) => &self.stages[b],
+            Slot::Stage(b) => &self.stages[b][0],
             Slot::Rows => self.rows.as_ref().expect("allocated with the rows path"),
             Slot::Partial => &self.partial,
             Slot::DummyRead => &self.dummy_r,
@@ -832,7 +779,7 @@ impl GpuSweeps {
     }
 
     /// The bind groups of dispatch `d`: group 0 reading `src`, `src2`, `rewards` and writing
-    /// `dst`, `aux`; group 1 the parts `v_at` reads, if it reads them.
+    /// `dst`, `aux`; group 1 the parts it reads or writes, if any ([`Group1`]).
     fn bind(&mut self, d: &Dispatch) {
         if !self.binds.contains_key(&d.slots) {
             let [src, dst, aux, src2, rewards] = d.slots.map(|s| self.buffer(s));
@@ -852,9 +799,30 @@ impl GpuSweeps {
             let g = bind_group(&self.gpu.inner, &self.k.layout, &bufs);
             self.binds.insert(d.slots, g);
         }
-        if let Some(b) = d.reads.filter(|b| !self.reads.contains_key(b)) {
-            let g = kernels::parts_group(&self.gpu.inner, &self.parts_layout, self.parts_of(b));
-            self.reads.insert(b, g);
+        if let Some(g1) = d.group1.filter(|g| !self.group1.contains_key(g)) {
+            let g = match g1 {
+                Group1::V(b) => {
+                    let parts: Vec<_> = self.parts_of(b).iter().collect();
+                    kernels::parts_group(&self.gpu.inner, &self.parts_layout, &parts)
+                }
+                Group1::Stage(b, v) => {
+                    let reads = match (v, b) {
+                        (Some(v), _) => self.parts_of(v),
+                        (None, 0) => &[],
+                        (None, b) if self.shape.stage_parts[b - 1].is_some() => &self.stages[b - 1],
+                        (None, _) => &[],
+                    };
+                    let writes = match self.shape.stage_parts.get(b) {
+                        Some(Some(_)) => &self.stages[b][..],
+                        _ => &[],
+                    };
+                    let parts: Vec<_> = reads.iter().chain(writes).collect();
+                    let layout = self.stage_kernels[b].group1.as_ref();
+                    let layout = layout.expect("compiled with group 1 where its stage is in parts");
+                    kernels::parts_group(&self.gpu.inner, layout, &parts)
+                }
+            };
+            self.group1.insert(g1, g);
         }
     }
 
@@ -895,7 +863,7 @@ impl GpuSweeps {
                         self.ensure(b);
                     }
                 }
-                if let Some(b) = d.reads {
+                if let Some(Group1::V(b) | Group1::Stage(_, Some(b))) = d.group1 {
                     self.ensure(b);
                 }
                 self.bind(d);
@@ -910,8 +878,8 @@ impl GpuSweeps {
                     pass.set_pipeline(self.pipeline(d));
                     let offset = (i as u64 * PARAM_STRIDE) as u32;
                     pass.set_bind_group(0, &self.binds[&d.slots], &[offset]);
-                    if let Some(b) = d.reads {
-                        pass.set_bind_group(1, &self.reads[&b], &[]);
+                    if let Some(g) = d.group1 {
+                        pass.set_bind_group(1, &self.group1[&g], &[]);
                     }
                     pass.dispatch_workgroups(d.groups.0, d.groups.1, 1);
                 }
@@ -948,7 +916,7 @@ impl GpuSweeps {
 
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
     /// `input` and writing `out` (values, if any) and the policy (actions), batch by batch
-    /// ([`Tree::steps`]).
+    /// ([`Tree::steps`](crate::batches::Tree::steps)).
     fn full_pass(&mut self, input: PerCore, out: Option<PerCore>, mode: Mode) -> Vec<Dispatch> {
         let s = &self.shape;
         let last = s.n_blocks() - 1;
@@ -984,15 +952,29 @@ impl GpuSweeps {
                     count: index(count),
                     ..p
                 };
-                // The first stage reads `V` through its parts.
-                let (src, reads) = if b == 0 {
-                    (Slot::DummyRead, Some(input))
+                // The first stage reads `V` through its parts; a stage output in parts is
+                // read and written through group 1.
+                let parts_in = b > 0 && s.stage_parts[b - 1].is_some();
+                let parts_out = s.stage_parts[b].is_some();
+                let v = (b == 0).then_some(input);
+                let group1 = if parts_in || parts_out {
+                    Some(Group1::Stage(b, v))
                 } else {
-                    (src, None)
+                    v.map(Group1::V)
+                };
+                let src = if b == 0 || parts_in {
+                    Slot::DummyRead
+                } else {
+                    src
+                };
+                let dst = if parts_out {
+                    Slot::DummyWrite
+                } else {
+                    Slot::Stage(b)
                 };
                 let slots = [
                     src,
-                    Slot::Stage(b),
+                    dst,
                     Slot::DummyWrite,
                     Slot::DummyRead,
                     Slot::Part(PerCore::Rewards, 0),
@@ -1001,7 +983,7 @@ impl GpuSweeps {
                     entry: Entry::StageConst,
                     params: p,
                     slots,
-                    reads,
+                    group1,
                     groups: self.stage_grid(b, count),
                 });
                 continue;
@@ -1025,7 +1007,7 @@ impl GpuSweeps {
                     entry: Entry::Last,
                     params: p,
                     slots: [src, dst, aux, Slot::DummyRead, rewards],
-                    reads: None,
+                    group1: None,
                     groups: kernels::groups(items.div_ceil(u64::from(cpw))),
                 });
             } else {
@@ -1039,7 +1021,7 @@ impl GpuSweeps {
                     entry: Entry::StageConst,
                     params: rows,
                     slots,
-                    reads: None,
+                    group1: None,
                     groups: self.stage_grid(b, count),
                 });
                 let p = Params {
@@ -1050,7 +1032,7 @@ impl GpuSweeps {
                     entry: Entry::ReduceRows,
                     params: p,
                     slots: [Slot::Rows, dst, aux, Slot::DummyRead, rewards],
-                    reads: None,
+                    group1: None,
                     groups: kernels::grid(items),
                 });
             }
@@ -1086,7 +1068,7 @@ impl GpuSweeps {
                     entry,
                     params,
                     slots: slots(k as u32),
-                    reads,
+                    group1: reads.map(Group1::V),
                     groups: kernels::grid(u64::from(params.len)),
                 }
             })
@@ -1115,7 +1097,7 @@ impl GpuSweeps {
                 entry: Entry::Max,
                 params,
                 slots,
-                reads: None,
+                group1: None,
                 groups,
             }])?;
             let n = (groups.0 * groups.1) as usize;
