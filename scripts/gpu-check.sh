@@ -129,9 +129,10 @@ for mb in $GPU_CHECK_BATCHES; do
 done
 # The other kernels of a full backup, each pair STAGES/LAST with its dispatches timed one at a
 # time: the stages before the last (FUZZYQ_GPU_STAGES: rows, or merged) and the fused last
-# stage (FUZZYQ_GPU_LAST: rows, or merged:N, N cores in turn). The rows above use the default
-# on a GPU, merged/rows; rows/rows are the kernels before the merge.
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-rows/rows merged/merged:1 merged/merged:4}
+# stage (FUZZYQ_GPU_LAST: rows; merged:N, N cores in turn; tile:T, a workgroup of T threads
+# per item of the stage before, its values in workgroup memory). The rows above use the
+# default on a GPU, merged/rows; rows/rows are the kernels before the merge.
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-rows/rows merged/merged:4 merged/tile:64 merged/tile:128 merged/tile:256}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"

@@ -426,6 +426,65 @@ fn v_in_parts_gives_the_same_bits() {
 }
 
 #[test]
+fn the_last_stage_from_workgroup_memory_gives_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // `LastStage::Tile`: a workgroup per item of the stage before, whose values it loads once
+    // into workgroup memory (the last block's cores times the product actions before it:
+    // 4.5 KB for these point masses), its cores' lanes reading them there. Every pass of
+    // every mode keeps the reference's bits, with batches of whole slabs or of cores below
+    // fixed blocks, and a whole run the default kernels' bits.
+    let tile = |threads| g.clone().with_last_stage(LastStage::Tile { threads });
+    let runs = [
+        (pointmass_small(), vec![32, 256]),
+        (three_point_masses(false), vec![64]),
+        (pointmass_goal(), vec![128]),
+        (khepera_small(), vec![128]),
+    ];
+    for (c, threads) in runs {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let op = operator(&model, &grid, &config);
+        for t in threads {
+            let gs = GpuSweeps::new(&tile(t), &op).unwrap();
+            let name = gs.last_stage();
+            eprintln!(
+                "{} cores, {t} threads: {name:?}, {}",
+                op.n_cores(),
+                gs.batches()
+            );
+            if matches!(c.env, EnvConfig::Pointmass(_)) {
+                assert_eq!(name, Some("lastw"), "the item's values fit");
+                assert!(!gs.uses_subgroups());
+            }
+            drop(gs);
+            passes_match(&tile(t), &op);
+            passes_match(&tile(t).with_batch_bytes(1), &op);
+        }
+    }
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let a = fuzzyq_gpu::solve_from(&tile(128), &model, &grid, &config, None, false, noop).unwrap();
+    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(
+        &a,
+        &b,
+        "the last stage from workgroup memory against the default",
+    );
+    assert_eq!(
+        LastStage::parse("tile"),
+        Some(LastStage::Tile { threads: 128 })
+    );
+    assert_eq!(
+        LastStage::parse("tile:64"),
+        Some(LastStage::Tile { threads: 64 })
+    );
+    assert_eq!(LastStage::parse("tile:100"), None);
+}
+
+#[test]
 fn stage_outputs_over_a_binding_in_parts_give_the_same_bits() {
     let Some(g) = gpu() else { return };
     // Three point masses on the paper's cores have one slab's first stage at 3.69 GB, over

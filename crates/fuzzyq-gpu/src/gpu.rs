@@ -30,7 +30,8 @@ pub struct Gpu {
 }
 
 /// How the fused last stage of a full backup takes a core's rows (its block actions)
-/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged` or `merged:CORES`; the
+/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged`, `merged:CORES`, `tile`
+/// or `tile:THREADS`; the
 /// default [`LastStage::for_adapter`]). Every
 /// choice gives the same bits; they differ in how often the stage before is read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -47,6 +48,15 @@ pub enum LastStage {
     Merged {
         /// Cores each group of lanes takes in turn (at least 1).
         cores: u32,
+    },
+    /// A workgroup of `threads` threads per item of the stage before (`lastw.wgsl`): the
+    /// item's values (the last block's cores times the product actions before it: 22.5 KB on
+    /// the paper's grid) loaded once into workgroup memory, which its cores' lanes then read,
+    /// one row at a time; where they do not fit the adapter's workgroup memory,
+    /// [`LastStage::Rows`]. Not a default: the next GPU measurement decides.
+    Tile {
+        /// Threads per workgroup (a power of two from 32 to 256).
+        threads: u32,
     },
 }
 
@@ -68,17 +78,21 @@ impl LastStage {
         }
     }
 
-    /// `rows`, `merged` (4 cores in turn) or `merged:CORES` (`None` for anything else).
+    /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads) or
+    /// `tile:THREADS` (`None` for anything else).
     #[must_use]
     pub fn parse(s: &str) -> Option<Self> {
+        let n = |n: &str| n.parse::<u32>().ok();
         match s.split_once(':') {
             None if s == "rows" => Some(LastStage::Rows),
             None if s == "merged" => Some(LastStage::MERGED),
-            Some(("merged", n)) => n
-                .parse::<u32>()
-                .ok()
+            None if s == "tile" => Some(LastStage::Tile { threads: 128 }),
+            Some(("merged", c)) => n(c)
                 .filter(|&c| c > 0)
                 .map(|cores| LastStage::Merged { cores }),
+            Some(("tile", t)) => n(t)
+                .filter(|t| t.is_power_of_two() && (32..=256).contains(t))
+                .map(|threads| LastStage::Tile { threads }),
             _ => None,
         }
     }

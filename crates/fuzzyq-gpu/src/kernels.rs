@@ -341,6 +341,38 @@ pub(crate) const REDUCE_SUBGROUP: &str = "
         }
     }";
 
+/// A core's rows one at a time in `last1.wgsl` and `lastw.wgsl` (`CORE_ROWS`): for core `c` of
+/// the last block, each action's row entries in order, `JC` of the lane's columns at a time,
+/// each sum offered to the lane's largest. `ROW_ITEM` is where a row entry's column starts in
+/// units of `PL` values of `ROW_VALUES` (the stage before's buffer, or the workgroup's tile).
+pub(crate) const CORE_ROWS: &str = "
+        for (var a = 0u; a < AL; a++) {
+            let row = prm.rows[LAST].x + c * AL + a;
+            let e0 = row_ptr[row];
+            let e1 = row_ptr[row + 1u];
+            for (var ch = 0u; ch < NCH; ch++) {
+                let p0 = lane + TPC * JC * ch;
+                var acc: array<f32, JC>;
+                for (var j = 0u; j < JC; j++) {
+                    acc[j] = 0.0;
+                }
+                for (var e = e0; e < e1; e++) {
+                    let w = weight[e];
+                    let k = ROW_ITEM * PL;
+                    for (var j = 0u; j < JC; j++) {
+                        acc[j] = fma(w, ROW_VALUES[k + min(p0 + TPC * j, PL - 1u)], acc[j]);
+                    }
+                }
+                for (var j = 0u; j < JC; j++) {
+                    let p = p0 + TPC * j;
+                    if p < PL {
+                        offer(acc[j], a * PL + p, &bv, &bi);
+                    }
+                }
+            }
+        }
+";
+
 /// See [`REDUCE_SUBGROUP`].
 pub(crate) const REDUCE_MEMORY: &str = "
     tv[li] = bv;

@@ -17,11 +17,11 @@ const MERGED_SUMS: u32 = 40;
 
 /// The fused last stage compiled for one problem ([`compile_last`]).
 pub(crate) struct Last {
-    /// `last1.wgsl` or `lastm.wgsl` with the problem's constants.
+    /// `last1.wgsl`, `lastm.wgsl` or `lastw.wgsl` with the problem's constants.
     pub pipeline: wgpu::ComputePipeline,
-    /// Cores a workgroup takes.
-    pub cores_per_group: u32,
-    /// Its kernel (`last1` or `lastm`).
+    /// Cores a workgroup takes (`None`: a workgroup per item of the stage before, `lastw`).
+    pub cores_per_group: Option<u32>,
+    /// Its kernel (`last1`, `lastm` or `lastw`).
     pub name: &'static str,
 }
 
@@ -99,6 +99,16 @@ pub(crate) fn compile_last(
 ) -> Result<Last, GpuError> {
     let nb = blocks.len();
     let [nl, al, _, pl] = blocks[nb - 1];
+    if let LastStage::Tile { threads } = gpu.last {
+        // The item's values and the reduction's two arrays in workgroup memory.
+        let tile = 4 * (u64::from(nl) * u64::from(pl) + 2 * u64::from(threads));
+        let limits = gpu.inner.device.limits();
+        let fits = tile <= u64::from(limits.max_compute_workgroup_storage_size)
+            && threads <= limits.max_compute_invocations_per_workgroup;
+        if fits {
+            return compile_tile(gpu, k, blocks, threads);
+        }
+    }
     // A core's lanes: a power of two up to 32 (or the subgroup), each taking J columns, JC
     // at a time (so that the sums stay in registers: of every action where rows merge).
     let wgs = sg.unwrap_or(WG);
@@ -112,17 +122,7 @@ pub(crate) fn compile_last(
         Some(_) => j.min(LAST_CHUNK).min((MERGED_SUMS / al).max(1)),
         None => j.min(LAST_CHUNK),
     };
-    let mut consts = vec![
-        ("LAST", (nb - 1) as u32),
-        ("NL", nl),
-        ("AL", al),
-        ("PL", pl),
-        ("TPC", tpc),
-        ("JC", jc),
-        ("NCH", j.div_ceil(jc)),
-        ("CPW", wgs / tpc),
-        ("WGS", wgs),
-    ];
+    let mut consts = lane_constants(blocks, wgs, tpc, jc);
     let t = match merged {
         Some(at) => {
             consts.push(("CR", cores));
@@ -136,18 +136,74 @@ pub(crate) fn compile_last(
             ("LANE_PARAM", ", @builtin(subgroup_invocation_id) sid: u32"),
             ("LANE_EXPR", "sid"),
             ("REDUCE", kernels::REDUCE_SUBGROUP),
+            ("CORE_ROWS", kernels::CORE_ROWS),
+            ("ROW_ITEM", "(base + col[e])"),
+            ("ROW_VALUES", "src"),
         ]
     } else {
         &[
             ("LANE_PARAM", ""),
             ("LANE_EXPR", "li"),
             ("REDUCE", kernels::REDUCE_MEMORY),
+            ("CORE_ROWS", kernels::CORE_ROWS),
+            ("ROW_ITEM", "(base + col[e])"),
+            ("ROW_VALUES", "src"),
         ]
     };
     let pipeline = kernels::specialized(&gpu.inner, k, t, &consts, replace, sg.is_some(), None)?;
     Ok(Last {
         pipeline,
-        cores_per_group: wgs / tpc * cores,
+        cores_per_group: Some(wgs / tpc * cores),
+        name: t.1,
+    })
+}
+
+/// The constants the fused last stages share: the last block (`LAST`) and its sizes (`NL`
+/// cores, `AL` actions, `PL` product actions before it), `TPC` lanes per core in a workgroup
+/// of `WGS = wgs` threads (`CPW` cores at a time), each lane taking `J` of a core's `PL`
+/// columns, `JC` at a time in `NCH` chunks.
+fn lane_constants(blocks: &[[u32; 4]], wgs: u32, tpc: u32, jc: u32) -> Vec<(&'static str, u32)> {
+    let nb = blocks.len();
+    let [nl, al, _, pl] = blocks[nb - 1];
+    let j = pl.div_ceil(tpc);
+    vec![
+        ("LAST", (nb - 1) as u32),
+        ("NL", nl),
+        ("AL", al),
+        ("PL", pl),
+        ("TPC", tpc),
+        ("JC", jc),
+        ("NCH", j.div_ceil(jc)),
+        ("CPW", wgs / tpc),
+        ("WGS", wgs),
+    ]
+}
+
+/// The fused last stage with a workgroup of `threads` per item of the stage before
+/// (`lastw.wgsl`, [`LastStage::Tile`]): lanes and columns per lane as `last1.wgsl`, reduced in
+/// workgroup memory.
+fn compile_tile(
+    gpu: &Gpu,
+    k: &Kernels,
+    blocks: &[[u32; 4]],
+    threads: u32,
+) -> Result<Last, GpuError> {
+    let [nl, _, _, pl] = blocks[blocks.len() - 1];
+    let tpc = pl.next_power_of_two().min(threads).min(32);
+    let jc = pl.div_ceil(tpc).min(LAST_CHUNK);
+    let mut consts = lane_constants(blocks, threads, tpc, jc);
+    consts.push(("TILE", nl * pl));
+    let t = (include_str!("lastw.wgsl"), "lastw");
+    let replace = [
+        ("REDUCE", kernels::REDUCE_MEMORY),
+        ("CORE_ROWS", kernels::CORE_ROWS),
+        ("ROW_ITEM", "col[e]"),
+        ("ROW_VALUES", "tile"),
+    ];
+    let pipeline = kernels::specialized(&gpu.inner, k, t, &consts, &replace, false, None)?;
+    Ok(Last {
+        pipeline,
+        cores_per_group: None,
         name: t.1,
     })
 }

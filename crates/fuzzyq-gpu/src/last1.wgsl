@@ -24,31 +24,7 @@ fn last1(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: ve
         let cb = core_of(local, NL);
         let c = cb.x;
         let base = cb.y;
-        for (var a = 0u; a < AL; a++) {
-            let row = prm.rows[LAST].x + c * AL + a;
-            let e0 = row_ptr[row];
-            let e1 = row_ptr[row + 1u];
-            for (var ch = 0u; ch < NCH; ch++) {
-                let p0 = lane + TPC * JC * ch;
-                var acc: array<f32, JC>;
-                for (var j = 0u; j < JC; j++) {
-                    acc[j] = 0.0;
-                }
-                for (var e = e0; e < e1; e++) {
-                    let w = weight[e];
-                    let k = (base + col[e]) * PL;
-                    for (var j = 0u; j < JC; j++) {
-                        acc[j] = fma(w, src[k + min(p0 + TPC * j, PL - 1u)], acc[j]);
-                    }
-                }
-                for (var j = 0u; j < JC; j++) {
-                    let p = p0 + TPC * j;
-                    if p < PL {
-                        offer(acc[j], a * PL + p, &bv, &bi);
-                    }
-                }
-            }
-        }
+        CORE_ROWS
     }
     REDUCE
     if !valid || lane != 0u {

@@ -25,7 +25,9 @@
 //! or the core's rows merged by column, `lastm.wgsl`, so that each value of the stage before
 //! is read once per core and feeds every action whose row has its column, several
 //! neighbouring cores in turn, the default on software adapters: [`LastStage::for_adapter`],
-//! as measured on an H200 and on lavapipe; then the lanes reduce to the largest value at the lowest
+//! as measured on an H200 and on lavapipe; or a workgroup per item of the stage before,
+//! whose values it loads into workgroup memory once, `lastw.wgsl`, [`LastStage::Tile`];
+//! then the lanes reduce to the largest value at the lowest
 //! action by subgroup shuffles, or in workgroup memory where the adapter has no single
 //! subgroup size or a start-up probe finds a workgroup of that size is not one subgroup) or,
 //! where the actions are renumbered or the reward depends on the action,

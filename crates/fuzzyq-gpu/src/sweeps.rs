@@ -606,12 +606,14 @@ impl GpuSweeps {
             (&parts_layout, &parts.reader()),
             &arrays.merged,
         )?;
+        // `lastw` reduces in workgroup memory.
+        let subgroups = sg.is_some() && compiled.last.as_ref().is_some_and(|l| l.name != "lastw");
         let sweeps = Self {
             gpu: gpu.clone(),
             stage_kernels: compiled.stages,
             last: compiled.last,
             evaluate: compiled.evaluate,
-            subgroups: sg.is_some() && shape.fused_abs,
+            subgroups,
             table: [
                 with_data(ctx, "row_ptr", &arrays.ptr),
                 with_data(ctx, "col", &arrays.col),
@@ -1002,13 +1004,20 @@ impl GpuSweeps {
                 ..p
             };
             if fused {
-                let cpw = cpw.expect("compiled where fused");
+                let groups = match cpw.expect("compiled where fused") {
+                    Some(cpw) => items.div_ceil(u64::from(cpw)),
+                    // A workgroup per item of the stage before that the cores touch.
+                    None => {
+                        let nl = u64::from(s.blocks[last][0]);
+                        (lo + items - 1) / nl - lo / nl + 1
+                    }
+                };
                 ds.push(Dispatch {
                     entry: Entry::Last,
                     params: p,
                     slots: [src, dst, aux, Slot::DummyRead, rewards],
                     group1: None,
-                    groups: kernels::groups(items.div_ceil(u64::from(cpw))),
+                    groups: kernels::groups(groups),
                 });
             } else {
                 let count = items * s.n_product;
