@@ -23,6 +23,8 @@ pub(crate) struct Last {
     pub cores_per_group: Option<u32>,
     /// Its kernel (`last1`, `lastm` or `lastw`).
     pub name: &'static str,
+    /// Whether it reduces a core's lanes by subgroup operations.
+    pub subgroups: bool,
 }
 
 /// Where a block's rows merged by column ([`PlanTable::merged_steps`]) lie in the block
@@ -155,6 +157,7 @@ pub(crate) fn compile_last(
         pipeline,
         cores_per_group: Some(wgs / tpc * cores),
         name: t.1,
+        subgroups: sg.is_some(),
     })
 }
 
@@ -205,5 +208,6 @@ fn compile_tile(
         pipeline,
         cores_per_group: None,
         name: t.1,
+        subgroups: false,
     })
 }

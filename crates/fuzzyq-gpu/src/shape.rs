@@ -147,12 +147,9 @@ impl Shape {
             ));
         }
         if bytes / 4 > u64::from(u32::MAX) {
-            return Err(GpuError::TooLarge {
-                what: "a stage's output for one batch",
-                need: bytes,
-                limit: 4 * u64::from(u32::MAX),
-                kind: "stage output (32-bit indices)",
-            });
+            return Err(GpuError::Unsupported(
+                "runs stage outputs of at most 2^32 values for one batch",
+            ));
         }
         let [_, _, r, p] = self.blocks[b + 1];
         let unit = u64::from(r) * u64::from(p);

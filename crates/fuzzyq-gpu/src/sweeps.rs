@@ -99,8 +99,6 @@ pub struct GpuSweeps {
     /// Policy evaluation compiled with the parts of `V` (`evaluate.wgsl`), where the run
     /// can evaluate and `V` takes several parts (else [`Kernels::evaluate`]).
     evaluate: Option<wgpu::ComputePipeline>,
-    /// Whether `last` reduces by subgroup operations.
-    subgroups: bool,
     shape: Shape,
     table: [wgpu::Buffer; 3],
     /// The rewards per core, a buffer per part (or the reward table, one buffer).
@@ -606,14 +604,11 @@ impl GpuSweeps {
             (&parts_layout, &parts.reader()),
             &arrays.merged,
         )?;
-        // `lastw` reduces in workgroup memory.
-        let subgroups = sg.is_some() && compiled.last.as_ref().is_some_and(|l| l.name != "lastw");
         let sweeps = Self {
             gpu: gpu.clone(),
             stage_kernels: compiled.stages,
             last: compiled.last,
             evaluate: compiled.evaluate,
-            subgroups,
             table: [
                 with_data(ctx, "row_ptr", &arrays.ptr),
                 with_data(ctx, "col", &arrays.col),
@@ -694,7 +689,7 @@ impl GpuSweeps {
     /// ([`Gpu::with_subgroups`]).
     #[must_use]
     pub fn uses_subgroups(&self) -> bool {
-        self.subgroups
+        self.last.as_ref().is_some_and(|l| l.subgroups)
     }
 
     /// The batches a full pass runs in (the stage buffers hold one batch).
@@ -808,16 +803,13 @@ impl GpuSweeps {
                     kernels::parts_group(&self.gpu.inner, &self.parts_layout, &parts)
                 }
                 Group1::Stage(b, v) => {
-                    let reads = match (v, b) {
-                        (Some(v), _) => self.parts_of(v),
-                        (None, 0) => &[],
-                        (None, b) if self.shape.stage_parts[b - 1].is_some() => &self.stages[b - 1],
-                        (None, _) => &[],
+                    let cut = |b: usize| self.shape.stage_parts[b].is_some();
+                    let reads = match v {
+                        Some(v) => self.parts_of(v),
+                        None if cut(b - 1) => &self.stages[b - 1],
+                        None => &[],
                     };
-                    let writes = match self.shape.stage_parts.get(b) {
-                        Some(Some(_)) => &self.stages[b][..],
-                        _ => &[],
-                    };
+                    let writes = if cut(b) { &self.stages[b][..] } else { &[] };
                     let parts: Vec<_> = reads.iter().chain(writes).collect();
                     let layout = self.stage_kernels[b].group1.as_ref();
                     let layout = layout.expect("compiled with group 1 where its stage is in parts");
