@@ -7,9 +7,21 @@
 #
 #   ./scripts/build-wheels.sh [OUT_DIR]      # default: dist/
 #   pip install dist/fuzzyq-*.whl            # anywhere: no cargo needed
+#
+#   ./scripts/build-wheels.sh --tests OUT    # scripts/test.sh: the same package for this host
+#
+# `--tests` builds the wheel from `cargo test`'s build instead (the dev profile, which the test
+# profile inherits: optimised, with debug assertions; this host's linker; a `linux_x86_64`
+# tag): every crate below the extension module is already compiled there, so CI builds the
+# workspace once, not twice (BENCHMARKS.md, "CI on two cores").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+build=(--release --zig --compatibility manylinux2014)
+if [ "${1:-}" = --tests ]; then
+    build=(--profile dev --compatibility linux)
+    shift
+fi
 out=${1:-dist}
 venv=target/wheel-build-venv
 python=${PYTHON:-python3}
@@ -20,7 +32,6 @@ if [ ! -x "$venv/bin/maturin" ]; then
 fi
 rm -f "$out"/fuzzyq-*.whl
 # maturin finds zig as `python3 -m ziglang`: the build environment's Python first on PATH.
-PATH="$PWD/$venv/bin:$PATH" "$venv/bin/maturin" build --release --locked --quiet --zig --compatibility manylinux2014 \
-    --out "$out"
+PATH="$PWD/$venv/bin:$PATH" "$venv/bin/maturin" build "${build[@]}" --locked --quiet --out "$out"
 wheel=$(ls "$out"/fuzzyq-*.whl)
 echo "built $wheel ($(du -h "$wheel" | cut -f1))"

@@ -10,16 +10,22 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Layers")
-# The wheel builds (release, a target directory of its own) beside the tests' build: on two
-# cores either build's serial stretches (one crate's code generation) leave a core to the
-# other. Its log is shown when it is waited for below.
+# fuzzyq-core's unit tests (`test = false` in its manifest: they compile the kernels once more)
+# build from the start beside the workspace's build, in a target directory of their own, so
+# that their compile is not the last step of it; they run after the workspace's tests.
 mkdir -p target
-wheel_log=target/wheel-build.log
-CARGO_TARGET_DIR=target/wheel-build setsid ./scripts/build-wheels.sh target/wheels \
-    > "$wheel_log" 2>&1 &
-wheel_pid=$!
-trap 'kill -- -"$wheel_pid" 2>/dev/null || kill "$wheel_pid" 2>/dev/null || true' EXIT
+core_log=target/core-unit-build.log
+CARGO_TARGET_DIR=target/core-unit setsid cargo test -p fuzzyq-core --features parallel,serde \
+    --lib --no-run --locked > "$core_log" 2>&1 &
+core_pid=$!
+trap 'kill -- -"$core_pid" 2>/dev/null || kill "$core_pid" 2>/dev/null || true' EXIT
 cargo test --workspace --locked
+if ! wait "$core_pid"; then
+    cat "$core_log"
+    echo "error: the build of fuzzyq-core's unit tests failed" >&2
+    exit 1
+fi
+CARGO_TARGET_DIR=target/core-unit cargo test -p fuzzyq-core --features parallel,serde --lib --locked
 # fuzzyq-core alone with the standard library and serde, as a dependent that asks for both
 # builds it (inside the workspace other crates' features hide a missing one).
 cargo check -p fuzzyq-core --features parallel,serde --locked
@@ -30,12 +36,11 @@ cargo build --release --locked \
 cargo rustc --locked -p fuzzyq-embedded-controller --lib --profile firmware \
     --features firmware --crate-type staticlib
 
-if ! wait "$wheel_pid"; then
-    cat "$wheel_log"
-    echo "error: the wheel's build (scripts/build-wheels.sh) failed" >&2
-    exit 1
-fi
-tail -n 3 "$wheel_log"
+# The Python package's wheel from the build above (test profile, this host): only the
+# extension module is compiled again. The release wheel (scripts/build-wheels.sh without
+# `--tests`: release profile, zig, manylinux2014) is the same package built with other flags;
+# building it here too compiled the workspace a second time (BENCHMARKS.md, "CI on two cores").
+./scripts/build-wheels.sh --tests target/wheels
 # The wheel built above (build-wheels.sh leaves only it there): test_wheel.py installs it into
 # a fresh environment with no cargo on PATH and runs the package, the `fuzzyq` command and
 # `python -m fuzzyq` there.
