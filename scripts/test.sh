@@ -36,10 +36,24 @@ cargo build --release --locked \
 cargo rustc --locked -p fuzzyq-embedded-controller --lib --profile firmware \
     --features firmware --crate-type staticlib
 
-# The Python package's wheel from the build above (test profile, this host): only the
-# extension module is compiled again. The release wheel (scripts/build-wheels.sh without
-# `--tests`: release profile, zig, manylinux2014) is the same package built with other flags;
-# building it here too compiled the workspace a second time (BENCHMARKS.md, "CI on two cores").
+# The Python package's wheel from the build above (the dev profile, which the test profile
+# is): only the extension module is compiled again, where every crate below it has the
+# features it has in the workspace's build (fuzzyq-py's manifest asks for those the workspace
+# adds). A crate that differs would be compiled again, with all above it: said and refused.
+# The release wheel (scripts/build-wheels.sh without `--tests`: release profile, zig,
+# manylinux2014) is the same package built with other flags; building it here too compiled the
+# workspace a second time (BENCHMARKS.md, "CI on two cores").
+features() {
+    cargo tree --locked -q -e features -f '{p} {f}' --prefix none "$@" \
+        | grep -v ' feature ' | sed 's/ (\*)$//' | sort -u
+}
+features --workspace -e normal,build,dev > target/features-workspace.txt
+features -p fuzzyq-py -e normal,build > target/features-wheel.txt
+if differ=$(comm -23 target/features-wheel.txt target/features-workspace.txt | grep .); then
+    echo "error: the wheel's crates differ in features from the tests' build (align them in" \
+        "crates/fuzzyq-py/Cargo.toml as its comment says): $(echo "$differ" | tr '\n' ';')" >&2
+    exit 1
+fi
 ./scripts/build-wheels.sh --tests target/wheels
 # The wheel built above (build-wheels.sh leaves only it there): test_wheel.py installs it into
 # a fresh environment with no cargo on PATH and runs the package, the `fuzzyq` command and
