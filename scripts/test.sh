@@ -11,21 +11,17 @@ cd "$(dirname "$0")/.."
 
 python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Layers")
 # fuzzyq-core's unit tests (`test = false` in its manifest: they compile the kernels once more)
-# build from the start beside the workspace's build, in a target directory of their own, so
-# that their compile is not the last step of it; they run after the workspace's tests.
+# build in a target directory of their own (profile `core-unit`: opt-level 1), started now at
+# the lowest CPU priority: on two cores they take what the steps after the workspace's build
+# leave idle (the wheel's build, the Python tests), not the build's time. They run last.
 mkdir -p target
 core_log=target/core-unit-build.log
-CARGO_TARGET_DIR=target/core-unit setsid cargo test -p fuzzyq-core --features parallel,serde \
-    --lib --no-run --locked > "$core_log" 2>&1 &
+core_unit=(cargo test -p fuzzyq-core --features parallel,serde --lib --profile core-unit --locked)
+CARGO_TARGET_DIR=target/core-unit setsid nice -n 19 "${core_unit[@]}" --no-run \
+    > "$core_log" 2>&1 &
 core_pid=$!
 trap 'kill -- -"$core_pid" 2>/dev/null || kill "$core_pid" 2>/dev/null || true' EXIT
 cargo test --workspace --locked
-if ! wait "$core_pid"; then
-    cat "$core_log"
-    echo "error: the build of fuzzyq-core's unit tests failed" >&2
-    exit 1
-fi
-CARGO_TARGET_DIR=target/core-unit cargo test -p fuzzyq-core --features parallel,serde --lib --locked
 # fuzzyq-core alone with the standard library and serde, as a dependent that asks for both
 # builds it (inside the workspace other crates' features hide a missing one).
 cargo check -p fuzzyq-core --features parallel,serde --locked
@@ -74,4 +70,10 @@ export FUZZYQ_BIN="$PWD/target/debug/fuzzyq"
 "$venv/bin/pip" install --quiet -r docs/requirements.txt
 NO_MKDOCS_2_WARNING=1 "$venv/bin/mkdocs" build --strict --quiet --site-dir target/site
 (cd target && "$OLDPWD/$venv/bin/python" -m mypy.stubtest fuzzyq._fuzzyq)
+if ! wait "$core_pid"; then
+    cat "$core_log"
+    echo "error: the build of fuzzyq-core's unit tests failed" >&2
+    exit 1
+fi
+CARGO_TARGET_DIR=target/core-unit "${core_unit[@]}"
 echo "all tests passed"

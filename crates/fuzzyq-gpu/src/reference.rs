@@ -24,12 +24,39 @@ pub enum Rounding {
 }
 
 impl Rounding {
-    #[inline]
-    fn fma(self, w: f32, x: f32, acc: f32) -> f32 {
+    /// `acc[i] = w * x[i] + acc[i]` for every `i`, rounded as `self` says.
+    fn chain(self, w: f32, x: &[f32], acc: &mut [f32]) {
         match self {
-            Rounding::Fused => w.mul_add(x, acc),
-            Rounding::Product => w * x + acc,
+            Rounding::Fused => fused_chain(w, x, acc),
+            Rounding::Product => {
+                for (a, &x) in acc.iter_mut().zip(x) {
+                    *a += w * x;
+                }
+            }
         }
+    }
+}
+
+/// [`Rounding::Fused`]'s step: `f32::mul_add`, one instruction where the CPU has FMA (else
+/// the library's correctly rounded `fmaf`, the same bits, many times slower).
+fn fused_chain(w: f32, x: &[f32], acc: &mut [f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("fma") {
+        #[target_feature(enable = "fma")]
+        fn with_fma(w: f32, x: &[f32], acc: &mut [f32]) {
+            for (a, &x) in acc.iter_mut().zip(x) {
+                *a = w.mul_add(x, *a);
+            }
+        }
+        // SAFETY: the CPU has FMA (checked above), the only feature `with_fma` enables.
+        #[allow(unsafe_code)]
+        unsafe {
+            with_fma(w, x, acc)
+        };
+        return;
+    }
+    for (a, &x) in acc.iter_mut().zip(x) {
+        *a = w.mul_add(x, *a);
     }
 }
 
@@ -105,53 +132,53 @@ impl HostSweeps {
         })
     }
 
-    /// Every core's expected values, a row of product actions per core: the stages of each
-    /// slab in turn.
-    fn expected(&self, v: &[f32]) -> Vec<f32> {
+    /// Every core's expected values under `v`, a row of product actions per core, given to
+    /// `each(core, row)` in order of the cores: the stages of each slab in turn. Each element
+    /// is its row's chain over the entries in order from `0.0`; the loops run an entry at a
+    /// time over a row's contiguous elements, which sums every element in the same order as
+    /// one element at a time would.
+    fn expected(&self, v: &[f32], mut each: impl FnMut(usize, &[f32])) {
         let nb = self.tables.len();
         let last = &self.tables[nb - 1];
         let width = last.p_len * last.n_actions;
         let slab = self.tables[0].r_len;
-        let mut out = vec![0.0f32; self.n * width];
+        let (mut input, mut next) = (Vec::new(), Vec::new());
         for c0 in 0..self.tables[0].n_cores {
             // The slab's tensor through the stages: `[prefix][r][a][p]`.
-            let mut input: Vec<f32> = v.to_vec();
             let mut prefixes = 1usize;
             for (b, t) in self.tables.iter().enumerate() {
                 let (r_len, p_len, na) = (t.r_len, t.p_len, t.n_actions);
-                let cores: Vec<usize> = if b == 0 {
-                    vec![c0]
-                } else {
-                    (0..t.n_cores).collect()
-                };
-                let mut next = vec![0.0f32; prefixes * cores.len() * r_len * na * p_len];
+                let cores = if b == 0 { c0..c0 + 1 } else { 0..t.n_cores };
+                let src: &[f32] = if b == 0 { v } else { &input };
+                next.clear();
+                next.resize(prefixes * cores.len() * r_len * na * p_len, 0.0f32);
                 for q in 0..prefixes {
-                    for (ci, &c) in cores.iter().enumerate() {
+                    let base = if b == 0 { 0 } else { q * t.n_cores };
+                    for (ci, c) in cores.clone().enumerate() {
                         let oq = q * cores.len() + ci;
                         for a in 0..na {
                             let row = c * na + a;
-                            let (e0, e1) = (t.ptr[row] as usize, t.ptr[row + 1] as usize);
-                            for r in 0..r_len {
-                                for p in 0..p_len {
-                                    let mut acc = 0.0f32;
-                                    for e in e0..e1 {
-                                        let k = t.col[e] as usize;
-                                        let base = if b == 0 { 0 } else { q * t.n_cores };
-                                        let x = input[((base + k) * r_len + r) * p_len + p];
-                                        acc = self.rounding.fma(t.weight[e], x, acc);
-                                    }
-                                    next[((oq * r_len + r) * na + a) * p_len + p] = acc;
+                            for e in t.ptr[row] as usize..t.ptr[row + 1] as usize {
+                                let x0 = (base + t.col[e] as usize) * r_len * p_len;
+                                for r in 0..r_len {
+                                    let o = ((oq * r_len + r) * na + a) * p_len;
+                                    self.rounding.chain(
+                                        t.weight[e],
+                                        &src[x0 + r * p_len..x0 + (r + 1) * p_len],
+                                        &mut next[o..o + p_len],
+                                    );
                                 }
                             }
                         }
                     }
                 }
                 prefixes *= cores.len();
-                input = next;
+                std::mem::swap(&mut input, &mut next);
             }
-            out[c0 * slab * width..(c0 + 1) * slab * width].copy_from_slice(&input);
+            for (j, row) in input.chunks_exact(width).enumerate() {
+                each(c0 * slab + j, row);
+            }
         }
-        out
     }
 
     fn at(&self, row: &[f32], u: usize) -> f32 {
@@ -198,11 +225,10 @@ impl HostSweeps {
     }
 
     fn full(&mut self, v: Buf, out: Option<Buf>, greedy: bool) {
-        let ev = self.expected(&self.bufs[usize::from(v.0)]);
-        let width = ev.len() / self.n;
-        let reduced: Vec<(f32, u32)> = (0..self.n)
-            .map(|i| self.reduce(i, &ev[i * width..(i + 1) * width]))
-            .collect();
+        let mut reduced = Vec::with_capacity(self.n);
+        self.expected(&self.bufs[usize::from(v.0)], |i, row| {
+            reduced.push(self.reduce(i, row));
+        });
         if let Some(o) = out {
             for (x, r) in self.bufs[usize::from(o.0)].iter_mut().zip(&reduced) {
                 *x = r.0;
@@ -243,13 +269,12 @@ impl Sweeps<f32> for HostSweeps {
         if !self.can_evaluate {
             return Err(SolveError::PolicyEvaluation);
         }
-        let ev = self.expected(&self.bufs[usize::from(v.0)]);
-        let width = ev.len() / self.n;
         let r = self.rewards.as_ref().ok_or(SolveError::PolicyEvaluation)?;
         let g = self.gamma;
-        let values: Vec<f32> = (0..self.n)
-            .map(|i| r[i] + g * ev[i * width + self.policy[i] as usize])
-            .collect();
+        let mut values = Vec::with_capacity(self.n);
+        self.expected(&self.bufs[usize::from(v.0)], |i, row| {
+            values.push(r[i] + g * row[self.policy[i] as usize]);
+        });
         self.bufs[usize::from(out.0)] = values;
         Ok(())
     }
@@ -274,19 +299,15 @@ impl Sweeps<f32> for HostSweeps {
             .zip(&self.bufs[usize::from(b.0)])
             .map(|(&x, &y)| x - y)
             .collect();
-        let ev = self.expected(&dv);
-        let width = ev.len() / self.n;
         let mut m = 0.0f32;
-        for i in 0..self.n {
-            if self.is_goal(i) {
-                continue;
+        self.expected(&dv, |i, row| {
+            if !self.is_goal(i) {
+                for u in 0..self.n_joint {
+                    let x = self.at(row, u).abs();
+                    m = if m >= x { m } else { x };
+                }
             }
-            let row = &ev[i * width..(i + 1) * width];
-            for u in 0..self.n_joint {
-                let x = self.at(row, u).abs();
-                m = if m >= x { m } else { x };
-            }
-        }
+        });
         Ok(f64::from(self.gamma * m))
     }
 
