@@ -14,12 +14,16 @@ python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Laye
 # build in a target directory of their own (profile `core-unit`: opt-level 1), started now at
 # the lowest CPU priority: on two cores they take what the steps after the workspace's build
 # leave idle (the wheel's build, the Python tests), not the build's time. They run last.
+# A process group of their own (`set -m`), to be stopped as one, but not a session of their
+# own: Linux schedules each session's processes as one group (autogroups) beside the others,
+# which would give them half the CPU whatever their niceness.
 mkdir -p target
 core_log=target/core-unit-build.log
 core_unit=(cargo test -p fuzzyq-core --features parallel,serde --lib --profile core-unit --locked)
-CARGO_TARGET_DIR=target/core-unit setsid nice -n 19 "${core_unit[@]}" --no-run \
-    > "$core_log" 2>&1 &
+set -m
+CARGO_TARGET_DIR=target/core-unit nice -n 19 "${core_unit[@]}" --no-run > "$core_log" 2>&1 &
 core_pid=$!
+set +m
 trap 'kill -- -"$core_pid" 2>/dev/null || kill "$core_pid" 2>/dev/null || true' EXIT
 cargo test --workspace --locked
 # fuzzyq-core alone with the standard library and serde, as a dependent that asks for both
