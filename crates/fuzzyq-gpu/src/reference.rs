@@ -40,13 +40,17 @@ impl Rounding {
 /// [`Rounding::Fused`]'s step: `f32::mul_add`, one instruction where the CPU has FMA (else
 /// the library's correctly rounded `fmaf`, the same bits, many times slower).
 fn fused_chain(w: f32, x: &[f32], acc: &mut [f32]) {
+    #[inline(always)]
+    fn body(w: f32, x: &[f32], acc: &mut [f32]) {
+        for (a, &x) in acc.iter_mut().zip(x) {
+            *a = w.mul_add(x, *a);
+        }
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("fma") {
         #[target_feature(enable = "fma")]
         fn with_fma(w: f32, x: &[f32], acc: &mut [f32]) {
-            for (a, &x) in acc.iter_mut().zip(x) {
-                *a = w.mul_add(x, *a);
-            }
+            body(w, x, acc)
         }
         // SAFETY: the CPU has FMA (checked above), the only feature `with_fma` enables.
         #[allow(unsafe_code)]
@@ -55,9 +59,7 @@ fn fused_chain(w: f32, x: &[f32], acc: &mut [f32]) {
         };
         return;
     }
-    for (a, &x) in acc.iter_mut().zip(x) {
-        *a = w.mul_add(x, *a);
-    }
+    body(w, x, acc)
 }
 
 /// One table, owned.
