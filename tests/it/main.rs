@@ -10,6 +10,10 @@ mod khepera;
 mod large_grids;
 mod learned;
 mod memberships;
+// The Python package's panic guard, plain `std`: its test runs here, so that the extension
+// module needs no unit-test binary of its own (crates/fuzzyq-py/Cargo.toml).
+#[path = "../../crates/fuzzyq-py/src/panics.rs"]
+mod python_panics;
 mod schemes;
 mod sharded;
 mod slabs;

@@ -29,9 +29,6 @@
 //! `InternalError` (pyo3's own `PanicException` derives from `BaseException`, so that
 //! `except Exception` would miss it).
 
-use std::any::Any;
-use std::panic::{AssertUnwindSafe, catch_unwind};
-
 use fuzzyq_core::EvalError;
 use fuzzyq_core::solver::SolveError;
 use fuzzyq_sim::memory::Limit;
@@ -40,6 +37,8 @@ use pyo3::exceptions::{PyException, PyOSError, PyRuntimeError, PyTypeError, PyVa
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyTuple, PyType};
+
+use crate::panics::catch;
 
 /// The exception classes, created once.
 struct Classes {
@@ -271,42 +270,4 @@ pub(crate) fn guard<T>(py: Python<'_>, body: impl FnOnce() -> PyResult<T>) -> Py
             format!("internal error (a bug in fuzzyq, please report it): {message}"),
         ))
     })
-}
-
-/// `f()`, or the message of the panic it raised.
-fn catch<R>(f: impl FnOnce() -> R) -> Result<R, String> {
-    catch_unwind(AssertUnwindSafe(f)).map_err(|payload| panic_message(&*payload))
-}
-
-/// The message of a panic's payload.
-fn panic_message(payload: &(dyn Any + Send)) -> String {
-    if let Some(s) = payload.downcast_ref::<&str>() {
-        (*s).to_string()
-    } else if let Some(s) = payload.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "a panic without a message".to_string()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::catch;
-
-    #[test]
-    fn catch_returns_the_value_or_the_panic_message() {
-        assert_eq!(catch(|| 7), Ok(7));
-        let v: Vec<u32> = Vec::new();
-        let index = v.len() + 3;
-        let err = catch(|| v[index]).expect_err("an out-of-bounds index panics");
-        assert!(err.contains("index out of bounds"), "{err}");
-        assert_eq!(
-            catch(|| -> u8 { panic!("{} went wrong", "something") }),
-            Err("something went wrong".to_string())
-        );
-        assert_eq!(
-            catch(|| -> u8 { std::panic::panic_any(42_u32) }),
-            Err("a panic without a message".to_string())
-        );
-    }
 }

@@ -14,6 +14,7 @@ mod joint;
 mod json;
 mod khepera;
 mod model;
+mod panics;
 mod pickle;
 mod policy;
 mod pool;

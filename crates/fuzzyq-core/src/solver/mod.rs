@@ -557,6 +557,12 @@ impl core::fmt::Display for SolveError {
                  without terminal states or an absorbing goal, with rewards of the state alone, \
                  can be written as tables"
             ),
+            Self::KernelUnavailable(k) if simd::left_out(*k) => write!(
+                f,
+                "this build has no {} kernels (it was built with FUZZYQ_KERNELS=host on a CPU \
+                 that cannot run them)",
+                k.name()
+            ),
             Self::KernelUnavailable(k) => {
                 write!(f, "this CPU cannot run the {} kernels", k.name())
             }

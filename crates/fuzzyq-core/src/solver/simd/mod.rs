@@ -1257,7 +1257,7 @@ fn diff_range_lanes<T: Real, U>(a: &[U], b: &[T], value: &impl Fn(&U) -> T) -> (
     (lo, hi)
 }
 
-#[cfg(target_arch = "x86_64")]
+#[cfg(fuzzyq_avx512)]
 fn has_avx512() -> bool {
     std::arch::is_x86_feature_detected!("avx512f")
         && std::arch::is_x86_feature_detected!("avx512vl")
@@ -1272,7 +1272,9 @@ fn has_avx2() -> bool {
 // The scalar instance needs no features: its "detection" is `true`.
 instance!(scalar_f32, "scalar", f32, Scalar, [], true);
 instance!(scalar_f64, "scalar", f64, Scalar, [], true);
-#[cfg(target_arch = "x86_64")]
+// The AVX-512 instances: on x86-64, unless `FUZZYQ_KERNELS=host` on a CPU without AVX-512
+// (build.rs).
+#[cfg(fuzzyq_avx512)]
 instance!(
     avx512_f32,
     "avx512",
@@ -1281,7 +1283,7 @@ instance!(
     ["avx512f,avx512vl,fma"],
     has_avx512()
 );
-#[cfg(target_arch = "x86_64")]
+#[cfg(fuzzyq_avx512)]
 instance!(
     avx512_f64,
     "avx512",
@@ -1349,6 +1351,7 @@ macro_rules! kernel_set {
                     let mut v = Vec::new();
                     #[cfg(target_arch = "x86_64")]
                     {
+                        #[cfg(fuzzyq_avx512)]
                         if has_avx512() {
                             v.push($avx512::KERNELS);
                         }
@@ -1369,6 +1372,12 @@ macro_rules! kernel_set {
 
 kernel_set!(f32, scalar_f32, portable_f32, avx2_f32, avx512_f32);
 kernel_set!(f64, scalar_f64, portable_f64, avx2_f64, avx512_f64);
+
+/// Whether the instance was left out of this build for its build machine's CPU
+/// (`FUZZYQ_KERNELS=host`, build.rs), rather than being foreign to the target.
+pub(crate) fn left_out(kernel: super::Kernel) -> bool {
+    cfg!(target_arch = "x86_64") && !cfg!(fuzzyq_avx512) && kernel == super::Kernel::Avx512
+}
 
 /// The instance to use: `choice` if given (`None` if this CPU cannot run it), else the best
 /// available.

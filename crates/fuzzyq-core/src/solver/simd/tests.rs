@@ -736,6 +736,7 @@ fn reduce_max_of_minus_infinities_is_minus_infinity() {
     check::<f64, portable::Portable<true>>();
     #[cfg(target_arch = "x86_64")]
     {
+        #[cfg(fuzzyq_avx512)]
         if has_avx512() {
             check::<f32, x86::Avx512>();
             check::<f64, x86::Avx512>();
@@ -743,6 +744,22 @@ fn reduce_max_of_minus_infinities_is_minus_infinity() {
         if has_avx2() {
             check::<f32, x86::Avx2>();
             check::<f64, x86::Avx2>();
+        }
+    }
+}
+
+#[test]
+fn an_unavailable_instance_is_refused_saying_why() {
+    use crate::options::NamedOption;
+    use crate::solver::{Kernel, SolveError};
+    for &k in Kernel::ALL {
+        let message = SolveError::KernelUnavailable(k).to_string();
+        if left_out(k) {
+            // `FUZZYQ_KERNELS=host` on a CPU without the instance (build.rs).
+            assert!(select::<f32>(Some(k)).is_none() && select::<f64>(Some(k)).is_none());
+            assert!(message.contains("FUZZYQ_KERNELS=host"), "{message}");
+        } else {
+            assert!(message.starts_with("this CPU cannot run"), "{message}");
         }
     }
 }

@@ -6,11 +6,14 @@ use core::arch::x86_64::*;
 
 use super::Isa;
 
-/// AVX-512F instance (compiled with AVX-512VL too).
+/// AVX-512F instance (compiled with AVX-512VL too), unless `FUZZYQ_KERNELS=host` on a CPU
+/// without AVX-512 (build.rs).
+#[cfg(fuzzyq_avx512)]
 pub(super) struct Avx512;
 /// AVX2 + FMA instance.
 pub(super) struct Avx2;
 
+#[cfg(fuzzyq_avx512)]
 impl Isa<f32> for Avx512 {
     type V = __m512;
     type M = __mmask16;
@@ -95,6 +98,7 @@ impl Isa<f32> for Avx512 {
     }
 }
 
+#[cfg(fuzzyq_avx512)]
 impl Isa<f64> for Avx512 {
     type V = __m512d;
     type M = __mmask8;
