@@ -10,9 +10,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 python3 scripts/check-layers.py   # layers without cycles (docs/design.md, "Layers")
-# Compile only the kernel instances this machine's CPU runs (crates/fuzzyq-core/build.rs): on
-# a CPU without AVX-512 its kernels, which no test here could run, are left out of the build.
-export FUZZYQ_KERNELS=host
 # fuzzyq-core's unit tests (`test = false` in its manifest: they compile the kernels once more)
 # build in a target directory of their own (profile `core-unit`: opt-level 1), started now at
 # the lowest CPU priority: on two cores they take what the steps after the workspace's build

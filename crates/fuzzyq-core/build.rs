@@ -2,14 +2,16 @@
 //!
 //! On x86-64 the block path's kernels are compiled four times per scalar type: AVX-512,
 //! AVX2, portable (built for AVX2) and scalar. The solver picks, at run time, the fastest one
-//! the CPU runs, so every build normally holds all of them. `FUZZYQ_KERNELS` changes that:
+//! the CPU runs. A release build (a profile that inherits `release`: `cargo install`, the
+//! wheels, the benchmarks) holds every instance, wherever it is built. A development build
+//! (`dev`, `test` and the profiles that inherit them) for the machine that builds it holds
+//! only the instances that machine's CPU runs: on a CPU without AVX-512 (with VL and FMA) the
+//! AVX-512 instances, which nothing built there could run, are left out. They are over a
+//! quarter of this crate's compile time (96 of 346 CPU-seconds of its test build on a Zen 4;
+//! BENCHMARKS.md, "CI on two cores").
 //!
-//! - unset, empty or `all`: every instance (what a release or a wheel must hold);
-//! - `host`: only the instances the CPU running the build can run, where the build is for that
-//!   same machine. On a CPU without AVX-512 (with VL and FMA) the AVX-512 instances are left
-//!   out; they could not run there, so no test on that machine loses anything, and their code
-//!   is over a quarter of this crate's compile time (96 of 346 CPU-seconds of its test build
-//!   on a Zen 4; BENCHMARKS.md). `scripts/test.sh` sets it.
+//! `FUZZYQ_KERNELS` overrides the choice: `all` (every instance; `.ci/run` lints that way) or
+//! `host` (only those the building CPU runs, for a build for that same machine).
 //!
 //! Emits `cfg(fuzzyq_avx512)` where the AVX-512 instances are compiled.
 
@@ -20,24 +22,21 @@ fn main() -> ExitCode {
     println!("cargo::rustc-check-cfg=cfg(fuzzyq_avx512)");
     println!("cargo::rerun-if-env-changed=FUZZYQ_KERNELS");
     let x86_64 = env::var("CARGO_CFG_TARGET_ARCH").is_ok_and(|a| a == "x86_64");
+    // `PROFILE` is `debug` for every profile rooted in `dev`, `release` for the others.
+    let development = env::var("PROFILE").is_ok_and(|p| p == "debug");
     let host_only = match env::var("FUZZYQ_KERNELS").as_deref() {
-        Err(_) | Ok("" | "all") => false,
+        Err(_) | Ok("") => development,
+        Ok("all") => false,
         Ok("host") => true,
         Ok(other) => {
             eprintln!("error: FUZZYQ_KERNELS={other:?}: expected `all` or `host`");
             return ExitCode::FAILURE;
         }
     };
-    // `host` describes the build machine: it says nothing about another target's CPU.
+    // The building CPU says nothing about another target's.
     let native = env::var("HOST").ok() == env::var("TARGET").ok();
     if x86_64 && !(host_only && native && !host_has_avx512()) {
         println!("cargo::rustc-cfg=fuzzyq_avx512");
-    } else if x86_64 {
-        println!(
-            "cargo::warning=FUZZYQ_KERNELS=host: this CPU has no AVX-512 (F, VL and FMA), \
-             so its kernels are left out of this build, which refuses `--kernel avx512` and \
-             runs AVX2 at best on any CPU"
-        );
     }
     ExitCode::SUCCESS
 }

@@ -559,8 +559,8 @@ impl core::fmt::Display for SolveError {
             ),
             Self::KernelUnavailable(k) if simd::left_out(*k) => write!(
                 f,
-                "this build has no {} kernels (it was built with FUZZYQ_KERNELS=host on a CPU \
-                 that cannot run them)",
+                "this build has no {} kernels (a development build on a CPU that cannot run \
+                 them; a release build, or FUZZYQ_KERNELS=all, holds every instance)",
                 k.name()
             ),
             Self::KernelUnavailable(k) => {

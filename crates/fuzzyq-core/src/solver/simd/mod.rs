@@ -1272,7 +1272,7 @@ fn has_avx2() -> bool {
 // The scalar instance needs no features: its "detection" is `true`.
 instance!(scalar_f32, "scalar", f32, Scalar, [], true);
 instance!(scalar_f64, "scalar", f64, Scalar, [], true);
-// The AVX-512 instances: on x86-64, unless `FUZZYQ_KERNELS=host` on a CPU without AVX-512
+// The AVX-512 instances: on x86-64, but not in a development build on a CPU without AVX-512
 // (build.rs).
 #[cfg(fuzzyq_avx512)]
 instance!(
@@ -1374,7 +1374,8 @@ kernel_set!(f32, scalar_f32, portable_f32, avx2_f32, avx512_f32);
 kernel_set!(f64, scalar_f64, portable_f64, avx2_f64, avx512_f64);
 
 /// Whether the instance was left out of this build for its build machine's CPU
-/// (`FUZZYQ_KERNELS=host`, build.rs), rather than being foreign to the target.
+/// (a development build, or `FUZZYQ_KERNELS=host`: build.rs), rather than being foreign to the
+/// target.
 pub(crate) fn left_out(kernel: super::Kernel) -> bool {
     cfg!(target_arch = "x86_64") && !cfg!(fuzzyq_avx512) && kernel == super::Kernel::Avx512
 }

@@ -6,7 +6,7 @@ use core::arch::x86_64::*;
 
 use super::Isa;
 
-/// AVX-512F instance (compiled with AVX-512VL too), unless `FUZZYQ_KERNELS=host` on a CPU
+/// AVX-512F instance (compiled with AVX-512VL too); not in a development build on a CPU
 /// without AVX-512 (build.rs).
 #[cfg(fuzzyq_avx512)]
 pub(super) struct Avx512;
