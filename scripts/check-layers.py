@@ -39,7 +39,7 @@ LAYERS = {
         {"compare"},
     ],
     "fuzzyq-gpu": [
-        {"error", "reference", "memory", "batches"},
+        {"error", "reference", "memory", "batches", "unrolled"},
         {"context"},
         {"buffers"},
         {"parts"},

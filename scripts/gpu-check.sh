@@ -130,9 +130,11 @@ done
 # The other kernels of a full backup, each pair STAGES/LAST with its dispatches timed one at a
 # time: the stages before the last (FUZZYQ_GPU_STAGES: rows, or merged) and the fused last
 # stage (FUZZYQ_GPU_LAST: rows; merged:N, N cores in turn; tile:T, a workgroup of T threads
-# per item of the stage before, its values in workgroup memory). The rows above use the
-# default on a GPU, merged/rows; rows/rows are the kernels before the merge.
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-rows/rows merged/merged:4 merged/tile:64 merged/tile:128 merged/tile:256}
+# per item of the stage before, its values in workgroup memory; unrolled, the last block's
+# rows compiled into the kernel). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
+# rows in. The rows above use the default on a GPU, merged/rows; rows/rows are the kernels
+# before the merge.
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-unrolled/unrolled merged/unrolled unrolled/rows rows/rows merged/tile:128 merged/tile:256}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"
@@ -197,10 +199,26 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
     row "train --env $env, GPU opened first" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
       "gpu ${wall} s wall (beside the set-up: ${wall_gpu} s); $(phases "$OUT/$env-first.json")"
   fi
+  # Every stage's rows compiled into its kernel (GPU_CHECK_TRAIN_KERNELS, STAGES/LAST; empty
+  # skips it): the wall time and the CPU's bytes.
+  kern=${GPU_CHECK_TRAIN_KERNELS-unrolled/unrolled}
+  if [ -n "$kern" ]; then
+    t0=$(now)
+    FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout "$(limit 180)" "$BIN" train --env "$env" --device gpu \
+      ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-kern.fzq" --json "$OUT/$env-kern.json" >"$OUT/train-$env-kern.log" 2>&1
+    rc=$?
+    wall=$(secs "$t0" "$(now)")
+    [ $rc = 0 ] && "$BIN" export --policy "$OUT/$env-kern.fzq" --out "$OUT/$env-kern.bin" >/dev/null 2>&1
+    same="differ"
+    if [ -s "$OUT/$env-kern.bin" ] && cmp -s "$OUT/$env-kern.bin" "$OUT/$env-cpu.bin"; then same="identical"; fi
+    row "train --env $env, kernels $kern" "$([ $rc = 0 ] && [ "$same" = identical ] && echo PASS || echo "FAIL (rc=$rc, exports $same)")" \
+      "gpu ${wall} s wall; exported V + greedy against the cpu's: $same; $(phases "$OUT/$env-kern.json")"
+  fi
 done
 
 # The paper's three point masses: 45^6 cores, V in 23 parts on the card, one slab's first
-# stage (3.69 GB) in parts; 3 forces per axis (729 joint actions), or the paper's 5 (15,625).
+# stage (3.69 GB) in parts; 3 forces per axis (729 joint actions), or the paper's 5 (15,625);
+# the kernels GPU_CHECK_PAPER_KERNELS (STAGES/LAST, default unrolled/unrolled).
 for sec in paper paper-5; do
   if [ $sec = paper ]; then
     want paper || continue
@@ -210,10 +228,11 @@ for sec in paper paper-5; do
     forces='' cap=560
   fi
   "$BIN" config --env pointmass | sed "s/^agents = 2 /agents = 3 /; $forces" >"$OUT/$sec-three.toml"
-  timeout "$(limit $cap)" "$BIN" bench --config "$OUT/$sec-three.toml" --device gpu --backups 1 --evaluations 0 \
+  kern=${GPU_CHECK_PAPER_KERNELS:-unrolled/unrolled}
+  FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout "$(limit $cap)" "$BIN" bench --config "$OUT/$sec-three.toml" --device gpu --backups 1 --evaluations 0 \
     --peak-seconds 0.2 --json "$OUT/bench-$sec-three.json" >"$OUT/bench-$sec-three.log" 2>&1
   rc=$?
-  row "GPU full backup, three point masses on the paper's cores ($sec)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+  row "GPU full backup, three point masses on the paper's cores ($sec, kernels $kern)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
     "$(grep -E '^(backup|problem|read back)|error' "$OUT/bench-$sec-three.log" | sed 's/  */ /g' | paste -sd ';' -)"
 done
 

@@ -495,6 +495,113 @@ fn the_last_stage_from_workgroup_memory_gives_the_same_bits() {
 }
 
 #[test]
+fn the_last_stage_with_its_rows_compiled_in_gives_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // `LastStage::Unrolled`: the last block's rows compiled into the kernel as constants, a
+    // workgroup per item of the stage before, the cores' maxima reduced over the lanes by
+    // halving (subgroup shuffles where the adapter has them, and through workgroup memory).
+    // Every pass of every mode keeps the reference's bits, with batches of whole slabs or of
+    // cores below fixed blocks (items cut at a batch's ends), and a whole run the default
+    // kernels' bits. Three point masses have 243 product actions before the last block and
+    // seven forces 343: several chunks of columns per lane, the last one past the end.
+    let unrolled = |subgroups| {
+        g.clone()
+            .with_last_stage(LastStage::Unrolled)
+            .with_subgroups(subgroups)
+    };
+    for c in [
+        pointmass_small(),
+        pointmass_goal(),
+        khepera_small(),
+        three_point_masses(false),
+        seven_forces(),
+    ] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let op = operator(&model, &grid, &config);
+        for subgroups in [true, false] {
+            let gs = GpuSweeps::new(&unrolled(subgroups), &op).unwrap();
+            eprintln!(
+                "{} cores, subgroups {subgroups}: {:?}, {}",
+                op.n_cores(),
+                gs.last_stage(),
+                gs.batches()
+            );
+            assert_eq!(gs.last_stage(), Some("lastu"), "the rows compile in");
+            assert_eq!(
+                gs.uses_subgroups(),
+                subgroups && g.summary().subgroup_size.is_some()
+            );
+            drop(gs);
+            passes_match(&unrolled(subgroups), &op);
+            passes_match(&unrolled(subgroups).with_batch_bytes(1), &op);
+        }
+    }
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let a =
+        fuzzyq_gpu::solve_from(&unrolled(true), &model, &grid, &config, None, false, noop).unwrap();
+    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(&a, &b, "the rows compiled in against the default");
+    assert_eq!(LastStage::parse("unrolled"), Some(LastStage::Unrolled));
+}
+
+#[test]
+fn the_stages_with_their_rows_compiled_in_give_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // `Gpu::with_unrolled_stages`: every stage a full backup runs as a stage compiled with its
+    // block's rows as constants, a thread per element of an item of the stage before taking
+    // every core below it. Every pass of every mode keeps the reference's bits: with `V` read
+    // through its parts by the first stage, with batches of whole slabs, of cores below fixed
+    // blocks (items cut at a batch's ends) and of stage outputs in parts, and where the last
+    // stage writes full rows (the shaped reward of three point masses, dcmotor's renumbered
+    // actions, one block of 14,089 cores, too many rows to compile in: the kernel it had);
+    // a whole run keeps the default kernels' bits.
+    let unrolled = g.clone().with_unrolled_stages(true);
+    for (c, want) in [
+        (pointmass_small(), "stage_u"),
+        (khepera_small(), "stage_u"),
+        (three_point_masses(false), "stage_u"),
+        (three_point_masses(true), "stage_u"),
+        (config_of(EnvKind::Dcmotor), "stage_c"),
+    ] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let op = operator(&model, &grid, &config);
+        let gs = GpuSweeps::new(&unrolled, &op).unwrap();
+        let kernels = gs.stage_kernels();
+        eprintln!("{} cores: {kernels:?}, {}", op.n_cores(), gs.batches());
+        assert!(!kernels.is_empty() && kernels.iter().all(|k| *k == want));
+        drop(gs);
+        passes_match(&unrolled, &op);
+        for budget in [1, 1 << 10] {
+            passes_match(&unrolled.clone().with_batch_bytes(budget), &op);
+        }
+    }
+    let c = three_point_masses(false);
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let op = operator(&model, &grid, &config);
+    let cut = unrolled
+        .clone()
+        .with_binding_limit(4 << 10)
+        .with_part_bytes(1);
+    assert_eq!(
+        GpuSweeps::new(&cut, &op).unwrap().stage_parts(),
+        [4, 4, 2, 2, 1]
+    );
+    passes_match(&cut, &op);
+    let a = fuzzyq_gpu::solve_from(&unrolled, &model, &grid, &config, None, false, noop).unwrap();
+    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(&a, &b, "the stages' rows compiled in against the default");
+}
+
+#[test]
 fn stage_outputs_over_a_binding_in_parts_give_the_same_bits() {
     let Some(g) = gpu() else { return };
     // Three point masses on the paper's cores have one slab's first stage at 3.69 GB, over
@@ -594,12 +701,14 @@ fn seven_forces() -> TrainConfig {
 #[test]
 fn kernels_by_rows_or_merged_give_the_same_bits() {
     let Some(g) = gpu() else { return };
-    // The kernels before the merge: every stage and the last one row at a time.
-    let rows = g
+    // The kernels before the merge: every stage and the last one row at a time (the stages'
+    // rows not compiled in, as they are by default on a software adapter).
+    let plain = g.clone().with_unrolled_stages(false);
+    let rows = plain
         .clone()
         .with_merged_stages(false)
         .with_last_stage(LastStage::Rows);
-    let merged = |cores| g.clone().with_last_stage(LastStage::Merged { cores });
+    let merged = |cores| plain.clone().with_last_stage(LastStage::Merged { cores });
     let c = pointmass_small();
     let model = c.build_model().unwrap();
     let grid = c.grid::<f32>().unwrap();
@@ -607,16 +716,23 @@ fn kernels_by_rows_or_merged_give_the_same_bits() {
     let a = fuzzyq_gpu::solve_from(&rows, &model, &grid, &config, None, false, noop).unwrap();
     let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
     assert_same(&a, &b, "rows against the adapter's default");
-    // The default last stage: merged rows on a software adapter (lavapipe), one row at a time
-    // on a GPU (`LastStage::for_adapter`, as measured).
+    // The default kernels: the rows compiled in on a software adapter (lavapipe), merged
+    // stages and the last one row at a time on a GPU (`LastStage::for_adapter`, as
+    // measured).
     let op = operator(&model, &grid, &config);
-    let default = GpuSweeps::new(g, &op).unwrap().last_stage();
+    let default = GpuSweeps::new(g, &op).unwrap();
     let want = if g.summary().software {
-        "lastm"
+        ("stage_u", "lastu")
     } else {
-        "last1"
+        ("stage_m", "last1")
     };
-    assert_eq!(default, Some(want), "{:?}", g.summary());
+    assert_eq!(
+        (default.stage_kernels()[0], default.last_stage()),
+        (want.0, Some(want.1)),
+        "{:?}",
+        g.summary()
+    );
+    drop(default);
     // Every pass of either kernel, cores in turn or not, lanes reduced by subgroups or in
     // memory (the adapter's default in the tests above).
     let variants = [
@@ -624,7 +740,7 @@ fn kernels_by_rows_or_merged_give_the_same_bits() {
         (merged(1).with_merged_stages(false), "stage_c", "lastm"),
         (merged(3), "stage_m", "lastm"),
         (
-            g.clone().with_last_stage(LastStage::Rows),
+            plain.clone().with_last_stage(LastStage::Rows),
             "stage_m",
             "last1",
         ),

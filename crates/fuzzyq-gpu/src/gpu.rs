@@ -27,11 +27,13 @@ pub struct Gpu {
     pub(crate) last: LastStage,
     /// Whether the stages before it take a block core's rows merged by column.
     pub(crate) merged_stages: bool,
+    /// Whether the stages before it have their block's rows compiled in.
+    pub(crate) unrolled_stages: bool,
 }
 
 /// How the fused last stage of a full backup takes a core's rows (its block actions)
-/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged`, `merged:CORES`, `tile`
-/// or `tile:THREADS`; the
+/// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged`, `merged:CORES`, `tile`,
+/// `tile:THREADS` or `unrolled`; the
 /// default [`LastStage::for_adapter`]). Every
 /// choice gives the same bits; they differ in how often the stage before is read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,6 +60,16 @@ pub enum LastStage {
         /// Threads per workgroup (a power of two from 32 to 256).
         threads: u32,
     },
+    /// The last block's rows compiled into the kernel as constants (`lastu`): a workgroup per
+    /// item of the stage before, each lane taking a few of the item's product-action columns
+    /// for every core, loading each value a core's rows read once and running each row as a
+    /// chain of `fma`s with constant weights; the cores' maxima then reduce over the lanes a
+    /// chunk of cores at a time, each exchange halving the cores a lane holds. Where the
+    /// table is too large to compile in, [`LastStage::MERGED`] on a software adapter and
+    /// [`LastStage::Rows`] on a GPU. The next GPU measurement decides
+    /// on a GPU; the default on a software adapter
+    /// ([`LastStage::for_adapter`]).
+    Unrolled,
 }
 
 impl LastStage {
@@ -66,20 +78,20 @@ impl LastStage {
 
     /// The default on an adapter, as measured: one row at a time on a GPU (an H200: the last
     /// stage of a full backup of the paper's grid 21.6 ms, against 25.3-29.8 ms merged with
-    /// 1-16 cores in turn), merged with 4 cores in turn on a software adapter (`software`:
-    /// Mesa's lavapipe, 5-17% less than one row at a time), whose multiply-adds cost what
-    /// its loads do.
+    /// 1-16 cores in turn; the rows compiled in are not measured there yet), the rows
+    /// compiled in on a software adapter (`software`: Mesa's lavapipe, 8.8 times faster than
+    /// merged rows with 4 cores in turn, which were 5-17% faster than one row at a time).
     #[must_use]
     pub fn for_adapter(software: bool) -> LastStage {
         if software {
-            LastStage::MERGED
+            LastStage::Unrolled
         } else {
             LastStage::Rows
         }
     }
 
-    /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads) or
-    /// `tile:THREADS` (`None` for anything else).
+    /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads),
+    /// `tile:THREADS` or `unrolled` (`None` for anything else).
     #[must_use]
     pub fn parse(s: &str) -> Option<Self> {
         let n = |n: &str| n.parse::<u32>().ok();
@@ -87,6 +99,7 @@ impl LastStage {
             None if s == "rows" => Some(LastStage::Rows),
             None if s == "merged" => Some(LastStage::MERGED),
             None if s == "tile" => Some(LastStage::Tile { threads: 128 }),
+            None if s == "unrolled" => Some(LastStage::Unrolled),
             Some(("merged", c)) => n(c)
                 .filter(|&c| c > 0)
                 .map(|cores| LastStage::Merged { cores }),
@@ -193,6 +206,9 @@ impl Gpu {
             Some(s) if crate::probe::subgroups_work(&ctx, &kernels, s)? => Some(s),
             _ => None,
         };
+        // The stages before the last: `rows`, `merged` or `unrolled` (the rows compiled in:
+        // the default on a software adapter, as measured on lavapipe).
+        let stages = std::env::var("FUZZYQ_GPU_STAGES").ok();
         Ok(Self {
             max_binding: ctx.summary.max_binding,
             memory: ctx.summary.memory,
@@ -204,7 +220,8 @@ impl Gpu {
                 .ok()
                 .and_then(|v| LastStage::parse(&v))
                 .unwrap_or(LastStage::for_adapter(ctx.summary.software)),
-            merged_stages: std::env::var("FUZZYQ_GPU_STAGES").map_or(true, |v| v != "rows"),
+            merged_stages: stages.as_deref() != Some("rows"),
+            unrolled_stages: stages.map_or(ctx.summary.software, |v| v == "unrolled"),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
         })
@@ -313,6 +330,20 @@ impl Gpu {
     #[must_use]
     pub fn with_merged_stages(mut self, on: bool) -> Self {
         self.merged_stages = on;
+        self
+    }
+
+    /// This GPU with the stages of a full backup before the last (and the last, where it
+    /// writes full rows) compiled with their block's rows as constants (`true`, or
+    /// `FUZZYQ_GPU_STAGES=unrolled`): a thread per element of an item of the stage before,
+    /// taking every core of the block below it, the values each core's rows read loaded once
+    /// and each row a chain of `fma`s with constant weights. A block whose table is too
+    /// large to compile in takes [`Gpu::with_merged_stages`]'s choice. The same bits. The
+    /// default on a software adapter (lavapipe: 2-3.5 times faster than merged rows), not yet
+    /// on a GPU, where it is not measured (`FUZZYQ_GPU_STAGES=merged` or `rows` chooses).
+    #[must_use]
+    pub fn with_unrolled_stages(mut self, on: bool) -> Self {
+        self.unrolled_stages = on;
         self
     }
 

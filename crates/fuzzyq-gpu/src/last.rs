@@ -1,7 +1,8 @@
 //! The fused last stage of a full backup: the last block's contraction with the maximum over
-//! joint actions, one row at a time (`last1.wgsl`) or a core's rows merged by column
-//! (`lastm.wgsl`, [`LastStage`]), compiled with the problem's sizes; and the merged steps it
-//! and the merged stages (`stagem.wgsl`) read.
+//! joint actions, one row at a time (`last1.wgsl`), a core's rows merged by column
+//! (`lastm.wgsl`), an item's values from workgroup memory (`lastw.wgsl`) or the rows compiled
+//! into the kernel (`unrolled.rs`) ([`LastStage`]), compiled with the problem's sizes; and the
+//! merged steps it and the merged stages (`stagem.wgsl`) read.
 
 use fuzzyq_core::solver::PlanTable;
 
@@ -98,10 +99,45 @@ pub(crate) fn compile_last(
     blocks: &[[u32; 4]],
     sg: Option<u32>,
     merged: Option<MergedAt>,
+    table: &PlanTable<'_, f32>,
 ) -> Result<Last, GpuError> {
     let nb = blocks.len();
     let [nl, al, _, pl] = blocks[nb - 1];
-    if let LastStage::Tile { threads } = gpu.last {
+    if gpu.last == LastStage::Unrolled {
+        // A workgroup of one subgroup exchanging by shuffles, else of 32 threads exchanging
+        // through workgroup memory.
+        let lanes = sg.unwrap_or(32);
+        if let Some(text) = crate::unrolled::source(table, pl, lanes, sg.is_some()) {
+            let consts = [
+                ("LAST", (nb - 1) as u32),
+                ("NL", nl),
+                ("AL", al),
+                ("PL", pl),
+            ];
+            let pipeline = kernels::specialized(
+                &gpu.inner,
+                k,
+                (text.as_str(), "lastu"),
+                &consts,
+                &[],
+                sg.is_some(),
+                None,
+            )?;
+            return Ok(Last {
+                pipeline,
+                cores_per_group: None,
+                name: "lastu",
+                subgroups: sg.is_some(),
+            });
+        }
+    }
+    // Rows too many to compile in: merged on a software adapter, else one at a time.
+    let choice = match gpu.last {
+        LastStage::Unrolled if gpu.summary().software => LastStage::MERGED,
+        LastStage::Unrolled => LastStage::Rows,
+        other => other,
+    };
+    if let LastStage::Tile { threads } = choice {
         // The item's values and the reduction's two arrays in workgroup memory.
         let tile = 4 * (u64::from(nl) * u64::from(pl) + 2 * u64::from(threads));
         let limits = gpu.inner.device.limits();
@@ -116,7 +152,7 @@ pub(crate) fn compile_last(
     let wgs = sg.unwrap_or(WG);
     let tpc = pl.next_power_of_two().min(wgs).min(32);
     let j = pl.div_ceil(tpc);
-    let (merged, cores) = match (gpu.last, merged) {
+    let (merged, cores) = match (choice, merged) {
         (LastStage::Merged { cores }, Some(at)) => (Some(at), cores.max(1)),
         _ => (None, 1),
     };

@@ -14,26 +14,38 @@
 //!
 //! A full backup runs the block contraction a batch at a time ([`Batches`]: a run of slabs, or
 //! where one slab's stage outputs would not fit, a run of cores of a later block below fixed
-//! cores of the earlier ones, whose shared stages are kept from batch to batch): each stage
-//! before the last writes its output for the batch, compiled with the problem's sizes as
-//! constants, by default a thread per element and every action of its block, the block
-//! core's rows merged by column so that each value of the stage before is read once per step
-//! (`stagem.wgsl`, [`Gpu::with_merged_stages`]), or a thread per element and action
-//! (`stagec.wgsl`); the last stage is fused with the maximum over
-//! actions (up to 32 lanes per core, each taking several of the core's columns so that a
-//! weight feeds several multiply-adds; one row at a time, `last1.wgsl`, the default on GPUs,
-//! or the core's rows merged by column, `lastm.wgsl`, so that each value of the stage before
-//! is read once per core and feeds every action whose row has its column, several
-//! neighbouring cores in turn, the default on software adapters: [`LastStage::for_adapter`],
-//! as measured on an H200 and on lavapipe; or a workgroup per item of the stage before,
-//! whose values it loads into workgroup memory once, `lastw.wgsl`, [`LastStage::Tile`];
-//! then the lanes reduce to the largest value at the lowest
-//! action by subgroup shuffles, or in workgroup memory where the adapter has no single
-//! subgroup size or a start-up probe finds a workgroup of that size is not one subgroup) or,
-//! where the actions are renumbered or the reward depends on the action,
-//! writes full rows that one thread per core reduces over the joint actions in order
-//! (`block.wgsl`). Policy evaluation runs one thread per core through the nested sums of its
-//! action. Batches bound the stage buffers (256 MiB by default, [`Gpu::with_batch_bytes`]).
+//! cores of the earlier ones, whose shared stages are kept from batch to batch). Batches bound
+//! the stage buffers (256 MiB by default, [`Gpu::with_batch_bytes`]). Every kernel is compiled
+//! with the problem's sizes as constants.
+//!
+//! Each stage before the last writes its output for the batch, by one of three kernels:
+//! - a thread per element and every action of its block, the block core's rows merged by
+//!   column so that each value of the stage before is read once per step (`stagem.wgsl`,
+//!   [`Gpu::with_merged_stages`]; the default on GPUs);
+//! - a thread per element and action (`stagec.wgsl`);
+//! - a thread per element of an item of the stage before, taking every core of the block
+//!   below it, with the block's rows compiled into the kernel as constants (`unrolled.rs`,
+//!   [`Gpu::with_unrolled_stages`]; the default on software adapters).
+//!
+//! The last stage is fused with the maximum over actions ([`LastStage`]; the default
+//! [`LastStage::for_adapter`], as measured on an H200 and on lavapipe):
+//! - one row at a time, up to 32 lanes per core, each taking several of the core's columns
+//!   so that a weight feeds several multiply-adds (`last1.wgsl`; the default on GPUs);
+//! - the core's rows merged by column, so that each value of the stage before is read once
+//!   per core and feeds every action whose row has its column, several neighbouring cores in
+//!   turn (`lastm.wgsl`);
+//! - a workgroup per item of the stage before, whose values it loads into workgroup memory
+//!   once (`lastw.wgsl`);
+//! - a workgroup per item with the last block's rows compiled in, each lane taking a few of
+//!   the item's columns for every core, the cores' maxima reduced over the lanes by halving
+//!   (`unrolled.rs`; the default on software adapters).
+//!
+//! The lanes reduce to the largest value at the lowest action by subgroup shuffles, or in
+//! workgroup memory where the adapter has no single subgroup size or a start-up probe finds a
+//! workgroup of that size is not one subgroup. Where the actions are renumbered or the reward
+//! depends on the action, the last stage instead writes full rows that one thread per core
+//! reduces over the joint actions in order (`block.wgsl`). Policy evaluation runs one thread
+//! per core through the nested sums of its action.
 //!
 //! # The CPU's bits
 //! Every element is the CPU's sum: a chain over its row's entries in order, `fma` from 0, and
@@ -93,6 +105,7 @@ mod probe;
 pub mod reference;
 mod shape;
 mod sweeps;
+mod unrolled;
 
 use core::ops::ControlFlow;
 

@@ -4,7 +4,7 @@ use std::borrow::Cow;
 use std::collections::HashMap;
 
 use fuzzyq_core::Model;
-use fuzzyq_core::solver::{Buf, DiffStats, Operator, Scheme, Sweeps};
+use fuzzyq_core::solver::{Buf, DiffStats, Operator, PlanTable, Scheme, Sweeps};
 
 use crate::batches::{Batches, Step};
 use crate::buffers::{self, with_data, zeroed};
@@ -345,6 +345,7 @@ fn compile_stage(
     b: usize,
     parts: (&wgpu::BindGroupLayout, &str),
     merged: Option<MergedAt>,
+    table: &PlanTable<'_, f32>,
 ) -> Result<Stage, GpuError> {
     let nb = shape.n_blocks();
     let [n_b, a_b, r_b, p_b] = shape.blocks[b];
@@ -378,15 +379,27 @@ fn compile_stage(
         parts_in.map_or(0, Parts::count)
     };
     let mut io = String::new();
-    let at = if reads_v {
+    if reads_v {
         io.push_str(parts.1);
-        format!("v_at({column}, r)")
     } else if let Some(p) = parts_in {
         io.push_str(&(p.declare(0, "sp", "read") + &p.getter("s_at", "sp")));
-        format!("s_at(base + {column}, r * SP + p)")
-    } else {
-        format!("src[((base + {column}) * SR + r) * SP + p]")
+    }
+    // The value of column `column` at the thread's `(r, p)`.
+    let src_at = |column: &str| {
+        if reads_v {
+            format!("v_at({column}, r)")
+        } else if parts_in.is_some() {
+            format!("s_at(base + {column}, r * SP + p)")
+        } else {
+            format!("src[((base + {column}) * SR + r) * SP + p]")
+        }
     };
+    // The block's rows compiled in, where asked for and the table is small enough.
+    let unrolled = gpu
+        .unrolled_stages
+        .then(|| crate::unrolled::stage_source(table, |k| src_at(&format!("{k}u"))))
+        .flatten();
+    let at = src_at(column);
     match parts_out {
         Some(p) => {
             io.push_str(&(p.declare(first_out, "dp", "read_write") + &p.setter("put", "dp")))
@@ -404,7 +417,10 @@ fn compile_stage(
         (None, false) => None,
     };
     let replace = [("SRC_AT", at.as_str())];
-    let body = io + t.0;
+    let (body, t, per_thread) = match unrolled {
+        Some(text) => (io + &text, (t.0, "stage_u"), 0),
+        None => (io + t.0, t, per_thread),
+    };
     let pipeline = kernels::specialized(
         &gpu.inner,
         k,
@@ -435,16 +451,24 @@ fn compile(
     sg: Option<u32>,
     parts: (&wgpu::BindGroupLayout, &str),
     merged: &[Option<MergedAt>],
+    tables: &[PlanTable<'_, f32>],
 ) -> Result<Compiled, GpuError> {
     let nb = shape.n_blocks();
     // Every stage the passes run as a stage: those before the last, and the last where it
     // writes full rows.
     let compiled = if shape.writes_rows() { nb } else { nb - 1 };
     let stages = (0..compiled)
-        .map(|b| compile_stage(gpu, k, shape, b, parts, merged[b]))
+        .map(|b| compile_stage(gpu, k, shape, b, parts, merged[b], &tables[b]))
         .collect::<Result<Vec<_>, GpuError>>()?;
     let last = if shape.fused_abs {
-        Some(compile_last(gpu, k, &shape.blocks, sg, merged[nb - 1])?)
+        Some(compile_last(
+            gpu,
+            k,
+            &shape.blocks,
+            sg,
+            merged[nb - 1],
+            &tables[nb - 1],
+        )?)
     } else {
         None
     };
@@ -603,6 +627,7 @@ impl GpuSweeps {
             sg,
             (&parts_layout, &parts.reader()),
             &arrays.merged,
+            &plan.tables,
         )?;
         let sweeps = Self {
             gpu: gpu.clone(),
@@ -672,13 +697,15 @@ impl GpuSweeps {
     }
 
     /// The kernel of each stage a full backup runs as a stage (`stage_c`: a thread per
-    /// element; `stage_m`: a block core's rows merged, [`Gpu::with_merged_stages`]).
+    /// element; `stage_m`: a block core's rows merged, [`Gpu::with_merged_stages`];
+    /// `stage_u`: the block's rows compiled in, [`Gpu::with_unrolled_stages`]).
     #[must_use]
     pub fn stage_kernels(&self) -> Vec<&'static str> {
         self.stage_kernels.iter().map(|s| s.name).collect()
     }
 
-    /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged), where
+    /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged, `lastw`:
+    /// from workgroup memory, `lastu`: the rows compiled in), where
     /// the run has one ([`Gpu::with_last_stage`]).
     #[must_use]
     pub fn last_stage(&self) -> Option<&'static str> {
@@ -903,9 +930,18 @@ impl GpuSweeps {
         }
     }
 
-    /// The workgroups of stage `b`'s kernel over `count` elements.
-    fn stage_grid(&self, b: usize, count: u64) -> (u32, u32) {
-        kernels::grid(count / self.stage_kernels[b].per_thread)
+    /// The workgroups of stage `b`'s kernel over `count` elements from item `lo` (counted
+    /// from the first child of the source's first item): a thread per element's
+    /// `per_thread` actions, or with the rows compiled in (`per_thread` 0), per element of
+    /// each item of the stage before that the dispatch's items lie below.
+    fn stage_grid(&self, b: usize, lo: u64, count: u64) -> (u32, u32) {
+        if let Some(threads) = count.checked_div(self.stage_kernels[b].per_thread) {
+            return kernels::grid(threads);
+        }
+        let [n, a, r, p] = self.shape.blocks[b].map(u64::from);
+        let items = count / (a * r * p);
+        let parents = (lo + items - 1) / n - lo / n + 1;
+        kernels::grid(parents * r * p)
     }
 
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
@@ -978,7 +1014,7 @@ impl GpuSweeps {
                     params: p,
                     slots,
                     group1,
-                    groups: self.stage_grid(b, count),
+                    groups: self.stage_grid(b, lo, count),
                 });
                 continue;
             }
@@ -1023,7 +1059,7 @@ impl GpuSweeps {
                     params: rows,
                     slots,
                     group1: None,
-                    groups: self.stage_grid(b, count),
+                    groups: self.stage_grid(b, lo, count),
                 });
                 let p = Params {
                     len: s.n_product as u32,

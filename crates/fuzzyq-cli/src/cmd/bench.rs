@@ -377,11 +377,13 @@ struct GpuReport {
     v_parts: usize,
     setup_seconds: f64,
     subgroups: bool,
-    /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged), if the
-    /// problem has one (`FUZZYQ_GPU_LAST`).
+    /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged, `lastw`:
+    /// from workgroup memory, `lastu`: the rows compiled in), if the problem has one
+    /// (`FUZZYQ_GPU_LAST`).
     last_stage: Option<&'static str>,
     /// The kernel of each stage before it (`stage_c`: a thread per element, `stage_m`: a
-    /// block core's rows merged; `FUZZYQ_GPU_STAGES`).
+    /// block core's rows merged, `stage_u`: the block's rows compiled in;
+    /// `FUZZYQ_GPU_STAGES`).
     stage_kernels: Vec<&'static str>,
     evaluation_seconds: Vec<f64>,
     /// Seconds reading `V` and the greedy actions back to the host (a run's last step).

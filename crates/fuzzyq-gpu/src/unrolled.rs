@@ -1,0 +1,429 @@
+//! The fused last stage with the last block's rows compiled into the kernel (`lastu`,
+//! [`LastStage::Unrolled`](crate::LastStage::Unrolled)).
+//!
+//! The last block's table is the same for every item of the stage before (a run of the
+//! earlier blocks' cores), and small: 45 cores x 5 actions x at most 4 entries on the paper's
+//! grid. So instead of reading each row's columns and weights from buffers, the kernel is
+//! generated with them as constants: for each core of the item, the values of the columns its
+//! rows read are loaded once, and each row is a straight chain of `fma`s with constant
+//! weights. A workgroup of `LANES` threads takes one item; lane `l` takes the product-action
+//! columns `p = l + LANES (JC ch + j)`, `JC` at a time as the components of one vector (so
+//! neighbouring lanes read neighbouring values), in `NCH` chunks.
+//!
+//! Each lane keeps, per component, the largest of its actions' sums by a strict `>` in
+//! increasing index order (the lowest index among equals), then folds its components and
+//! chunks with `beats`. The cores of the item then reduce over the lanes a chunk of cores at
+//! a time by halving: at each step a lane keeps half of the chunk's cores and sends the other
+//! half to its partner (`lane ^ m`), so a chunk of 16 cores costs 16 exchanges over 32 lanes
+//! where a reduction per core would cost 80. Exchanges are subgroup shuffles where the
+//! workgroup is one subgroup, else go through workgroup memory.
+//!
+//! The same sums in the same order as `last1.wgsl` (and the CPU), and the maximum at the
+//! lowest index: the same bits. One case differs from `beats`: a lane whose every candidate
+//! is `-inf` or NaN keeps no index there, where `beats` takes the first `-inf`; its sums
+//! come from a finite `V` and finite weights, so that needs a `V` that is not finite.
+
+use std::fmt::Write as _;
+
+use fuzzyq_core::solver::PlanTable;
+
+/// Most columns a lane takes at once (the components of a vector).
+const MAX_JC: u32 = 4;
+
+/// Most cores reduced over the lanes at once (two registers each per lane).
+const CHUNK: usize = 16;
+
+/// Most terms the kernel may hold (row entries times the vector chunks), so that its text
+/// stays within what a driver compiles quickly (the paper's grid: 824 entries).
+pub(crate) const MAX_TERMS: usize = 16_384;
+
+/// The kernel's layout for a last block of `pl` product actions before it over `lanes`
+/// lanes: `(JC, NCH)`.
+fn columns(pl: u32, lanes: u32) -> (u32, u32) {
+    let jc = pl.div_ceil(lanes).clamp(1, MAX_JC);
+    (jc, pl.div_ceil(lanes * jc))
+}
+
+/// The kernel's text (after `block.wgsl`'s declarations and the constants `NL`, `AL`, `PL`),
+/// for the last block's `table`, `pl` product actions before it, a workgroup of `lanes`
+/// threads exchanging by subgroup shuffles (`subgroups`) or through workgroup memory; `None`
+/// where the table holds more terms than [`MAX_TERMS`].
+pub(crate) fn source(
+    table: &PlanTable<'_, f32>,
+    pl: u32,
+    lanes: u32,
+    subgroups: bool,
+) -> Option<String> {
+    let (jc, nch) = columns(pl, lanes);
+    if table.col.len() * nch as usize > MAX_TERMS {
+        return None;
+    }
+    let g = Gen {
+        t: table,
+        pl,
+        lanes,
+        jc,
+        nch,
+        padded: lanes * jc * nch > pl,
+        subgroups,
+    };
+    Some(g.kernel())
+}
+
+struct Gen<'a, 'o> {
+    t: &'a PlanTable<'o, f32>,
+    pl: u32,
+    lanes: u32,
+    jc: u32,
+    nch: u32,
+    /// Whether some lane's columns run past `PL` (then masked).
+    padded: bool,
+    subgroups: bool,
+}
+
+/// A WGSL `f32` constant with exactly `w`'s bits.
+fn weight(w: f32) -> String {
+    format!("bitcast<f32>({:#010x}u)", w.to_bits())
+}
+
+impl Gen<'_, '_> {
+    /// The vector types of a lane's columns: values, indices, flags.
+    fn vf(&self) -> String {
+        self.vec("f32")
+    }
+
+    fn vu(&self) -> String {
+        self.vec("u32")
+    }
+
+    fn vec(&self, t: &str) -> String {
+        match self.jc {
+            1 => t.to_owned(),
+            n => format!("vec{n}<{t}>"),
+        }
+    }
+
+    /// Component `j` of a lane's vector `v`.
+    fn comp(&self, v: &str, j: u32) -> String {
+        match self.jc {
+            1 => v.to_owned(),
+            _ => format!("{v}[{j}]"),
+        }
+    }
+
+    fn kernel(&self) -> String {
+        let mut s = String::new();
+        let lanes = self.lanes;
+        let _ = writeln!(s, "const LANES: u32 = {lanes}u;");
+        let _ = writeln!(s, "const NONE: u32 = 0xffffffffu;");
+        if !self.subgroups {
+            s.push_str(
+                "var<workgroup> xf: array<f32, LANES>;\n\
+                 var<workgroup> xu: array<u32, LANES>;\n\
+                 fn shuf_f(x: f32, m: u32, lane: u32) -> f32 {\n\
+                 \x20   workgroupBarrier();\n    xf[lane] = x;\n    workgroupBarrier();\n\
+                 \x20   return xf[lane ^ m];\n}\n\
+                 fn shuf_u(x: u32, m: u32, lane: u32) -> u32 {\n\
+                 \x20   workgroupBarrier();\n    xu[lane] = x;\n    workgroupBarrier();\n\
+                 \x20   return xu[lane ^ m];\n}\n",
+            );
+        }
+        let lane_param = if self.subgroups {
+            ", @builtin(subgroup_invocation_id) sid: u32"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            s,
+            "@compute @workgroup_size(LANES)\n\
+             fn lastu(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,\n\
+             \x20        @builtin(local_invocation_index) li: u32{lane_param}) {{"
+        );
+        let lane = if self.subgroups { "sid" } else { "li" };
+        let (vf, vu) = (self.vf(), self.vu());
+        let _ = writeln!(
+            s,
+            "    let lane = {lane};\n\
+             \x20   let item = prm.lo / NL + wid.y * nwg.x + wid.x;\n\
+             \x20   let c_lo = max(prm.lo, item * NL);\n\
+             \x20   let c_hi = min(prm.lo + prm.count, item * NL + NL);\n\
+             \x20   let z = {vf}(bitcast<f32>(prm.zero));\n\
+             \x20   let ab = prm.mode == 3u;\n\
+             \x20   let ninf = bitcast<f32>(0xff800000u ^ prm.zero);"
+        );
+        let offsets: Vec<String> = (0..self.jc).map(|j| format!("{}u", lanes * j)).collect();
+        let _ = writeln!(s, "    let steps = {vu}({});", offsets.join(", "));
+        let n = self.t.n_cores;
+        for c0 in (0..n).step_by(CHUNK) {
+            let c1 = (c0 + CHUNK).min(n);
+            self.chunk(&mut s, c0..c1);
+        }
+        s.push_str("}\n");
+        s
+    }
+
+    /// Cores `cores` of the item: their largest values over the lane's columns, reduced over
+    /// the lanes, written.
+    fn chunk(&self, s: &mut String, cores: core::ops::Range<usize>) {
+        let (vf, vu) = (self.vf(), self.vu());
+        s.push_str("    {\n");
+        for c in cores.clone() {
+            let _ = writeln!(s, "        var v{c} = ninf;\n        var n{c} = NONE;");
+        }
+        let chunked = self.nch > 1;
+        if chunked {
+            let _ = writeln!(s, "        for (var ch = 0u; ch < {}u; ch++) {{", self.nch);
+        } else {
+            s.push_str("        {\n            let ch = 0u;\n");
+        }
+        let _ = writeln!(
+            s,
+            "            let pj = lane + LANES * {jc}u * ch + steps;\n\
+             \x20           let q = item * NL * PL + min(pj, {vu}(PL - 1u));",
+            jc = self.jc
+        );
+        if self.padded {
+            s.push_str("            let ok = pj < ");
+            let _ = writeln!(s, "{vu}(PL);");
+        }
+        for c in cores.clone() {
+            self.core(s, c, &vf, &vu);
+        }
+        s.push_str("        }\n");
+        self.reduce(s, cores);
+        s.push_str("    }\n");
+    }
+
+    /// Core `c`'s rows over the lane's columns `pj` (of this chunk), folded into `v{c}`,
+    /// `n{c}`.
+    fn core(&self, s: &mut String, c: usize, vf: &str, vu: &str) {
+        let t = self.t;
+        let na = t.n_actions;
+        let rows = (c * na..(c + 1) * na).map(|r| t.ptr[r] as usize..t.ptr[r + 1] as usize);
+        let mut cols: Vec<u32> = rows.clone().flat_map(|e| t.col[e].to_vec()).collect();
+        cols.sort_unstable();
+        cols.dedup();
+        s.push_str("            {\n");
+        for k in &cols {
+            let parts: Vec<String> = (0..self.jc)
+                .map(|j| format!("src[{} + {}u]", self.comp("q", j), k * self.pl))
+                .collect();
+            let _ = writeln!(s, "                let x{k} = {vf}({});", parts.join(", "));
+        }
+        let _ = writeln!(
+            s,
+            "                var bv = {vf}(ninf);\n                var bk = {vu}(NONE);"
+        );
+        for (a, e) in rows.enumerate() {
+            s.push_str("                {\n                    var s = z;\n");
+            for i in e {
+                let _ = writeln!(
+                    s,
+                    "                    s = fma({vf}({}), x{}, s);",
+                    weight(t.weight[i]),
+                    t.col[i]
+                );
+            }
+            s.push_str("                    var y = select(s, abs(s), ab);\n");
+            if self.padded {
+                let _ = writeln!(s, "                    y = select({vf}(ninf), y, ok);");
+            }
+            let _ = writeln!(
+                s,
+                "                    let t = y > bv;\n\
+                 \x20                   bv = select(bv, y, t);\n\
+                 \x20                   bk = select(bk, {vu}({a}u), t);\n                }}"
+            );
+        }
+        // The components (and chunks) in turn: any order gives the lowest index.
+        for j in 0..self.jc {
+            let (v, k, p) = (self.comp("bv", j), self.comp("bk", j), self.comp("pj", j));
+            let _ = writeln!(
+                s,
+                "                {{\n\
+                 \x20                   let i = select(NONE, {k} * PL + {p}, {k} != NONE);\n\
+                 \x20                   if beats({v}, i, v{c}, n{c}) {{\n\
+                 \x20                       v{c} = {v};\n                        n{c} = i;\n\
+                 \x20                   }}\n                }}"
+            );
+        }
+        s.push_str("            }\n");
+    }
+
+    /// The chunk's cores reduced over the lanes by halving, then written by the lane that
+    /// holds each.
+    fn reduce(&self, s: &mut String, cores: core::ops::Range<usize>) {
+        let c0 = cores.start;
+        let n = cores.len();
+        let (sf, su) = if self.subgroups {
+            ("subgroupShuffleXor", "subgroupShuffleXor")
+        } else {
+            ("shuf_f", "shuf_u")
+        };
+        let extra = if self.subgroups { "" } else { ", lane" };
+        let mut held: Vec<(String, String)> = cores
+            .clone()
+            .map(|c| (format!("v{c}"), format!("n{c}")))
+            .collect();
+        s.push_str("        var off = 0u;\n");
+        let mut copies = 0u32;
+        let mut m = self.lanes / 2;
+        let mut step = 0;
+        while m > 0 {
+            let _ = writeln!(s, "        let u{step} = (lane & {m}u) != 0u;");
+            let mut next = Vec::new();
+            if held.len() > 1 {
+                let h = held.len().div_ceil(2);
+                let _ = writeln!(s, "        off += select(0u, {h}u, u{step});");
+                for i in 0..h {
+                    let (lv, li) = &held[i];
+                    let (hv, hi) = held
+                        .get(h + i)
+                        .cloned()
+                        .unwrap_or(("ninf".into(), "NONE".into()));
+                    let (kv, ki) = (format!("k{step}_{i}v"), format!("k{step}_{i}i"));
+                    let _ = writeln!(
+                        s,
+                        "        let {kv}0 = select({lv}, {hv}, u{step});\n\
+                         \x20       let {ki}0 = select({li}, {hi}, u{step});\n\
+                         \x20       let {kv}r = {sf}(select({hv}, {lv}, u{step}), {m}u{extra});\n\
+                         \x20       let {ki}r = {su}(select({hi}, {li}, u{step}), {m}u{extra});\n\
+                         \x20       let {kv}t = beats({kv}r, {ki}r, {kv}0, {ki}0);\n\
+                         \x20       let {kv} = select({kv}0, {kv}r, {kv}t);\n\
+                         \x20       let {ki} = select({ki}0, {ki}r, {kv}t);"
+                    );
+                    next.push((kv, ki));
+                }
+            } else {
+                // One core left: the partners hold the same one (a butterfly).
+                copies |= m;
+                let (lv, li) = &held[0];
+                let (kv, ki) = (format!("k{step}_0v"), format!("k{step}_0i"));
+                let _ = writeln!(
+                    s,
+                    "        let {kv}r = {sf}({lv}, {m}u{extra});\n\
+                     \x20       let {ki}r = {su}({li}, {m}u{extra});\n\
+                     \x20       let {kv}t = beats({kv}r, {ki}r, {lv}, {li});\n\
+                     \x20       let {kv} = select({lv}, {kv}r, {kv}t);\n\
+                     \x20       let {ki} = select({li}, {ki}r, {kv}t);"
+                );
+                next.push((kv, ki));
+            }
+            held = next;
+            m /= 2;
+            step += 1;
+        }
+        // Lanes past the chunk's cores (there are more lanes than cores) hold padding.
+        let (v, i) = &held[0];
+        let _ = writeln!(
+            s,
+            "        let g = item * NL + {c0}u + off;\n\
+             \x20       if off < {n}u && (lane & {copies}u) == 0u && g >= c_lo && g < c_hi {{\n\
+             \x20           write_best(prm.out_lo + (g - prm.lo), {v}, {i});\n        }}"
+        );
+    }
+}
+
+/// The text of a stage before the last with its block's rows compiled in (`stage_u`, after
+/// `block.wgsl`'s declarations, the stage's constants `SN`, `SA`, `SR`, `SP`, and `put`):
+/// a thread per element `(r, p)` of an item of the stage before, taking every core of the
+/// block that the dispatch covers below that item, and for each, the values its rows read
+/// (`at(k)`: the expression of column `k`'s value at the thread's `(r, p)`) loaded once and
+/// each row a chain of `fma`s with constant weights, written as `stagec.wgsl` writes it.
+/// `None` where the table holds more than [`MAX_TERMS`] entries.
+pub(crate) fn stage_source(
+    table: &PlanTable<'_, f32>,
+    at: impl Fn(u32) -> String,
+) -> Option<String> {
+    if table.col.len() > MAX_TERMS {
+        return None;
+    }
+    let mut s = String::from(
+        "@compute @workgroup_size(64)
+         fn stage_u(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+                    @builtin(num_workgroups) nwg: vec3<u32>) {
+             let o = linear(gid, wid, nwg);
+             let items = prm.count / (SR * SA * SP);
+             let base = (prm.lo / SN + o / (SR * SP)) * SN;
+             let r = (o % (SR * SP)) / SP;
+             let p = o % SP;
+             let lo = max(prm.lo, base) - base;
+             let hi = min(prm.lo + items, base + SN);
+             if hi <= base {
+        return;
+    }
+             let z = bitcast<f32>(prm.zero);
+",
+    );
+    let na = table.n_actions;
+    for c in 0..table.n_cores {
+        let rows = (c * na..(c + 1) * na).map(|r| table.ptr[r] as usize..table.ptr[r + 1] as usize);
+        let mut cols: Vec<u32> = rows.clone().flat_map(|e| table.col[e].to_vec()).collect();
+        cols.sort_unstable();
+        cols.dedup();
+        let _ = writeln!(s, "    if {c}u >= lo && base + {c}u < hi {{");
+        for k in &cols {
+            let _ = writeln!(s, "        let x{k} = {};", at(*k));
+        }
+        let _ = writeln!(
+            s,
+            "        let out = ((base + {c}u - prm.lo) * SR + r) * (SA * SP) + p;"
+        );
+        for (a, e) in rows.enumerate() {
+            s.push_str(
+                "        {
+            var s = z;
+",
+            );
+            for i in e {
+                let _ = writeln!(
+                    s,
+                    "            s = fma({}, x{}, s);",
+                    weight(table.weight[i]),
+                    table.col[i]
+                );
+            }
+            let _ = writeln!(
+                s,
+                "            put(out + {a}u * SP, s);
+        }}"
+            );
+        }
+        s.push_str(
+            "    }
+",
+        );
+    }
+    s.push_str(
+        "}
+",
+    );
+    Some(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_columns_cover_the_product_actions() {
+        assert_eq!(columns(125, 32), (4, 1));
+        assert_eq!(columns(243, 32), (4, 2));
+        assert_eq!(columns(5, 32), (1, 1));
+        assert_eq!(columns(3125, 32), (4, 25));
+        for (pl, lanes) in [(125, 32), (243, 32), (5, 8), (3125, 64), (64, 16)] {
+            let (jc, nch) = columns(pl, lanes);
+            assert!(lanes * jc * nch >= pl);
+            assert!(
+                lanes * jc * (nch - 1) < pl,
+                "no chunk wholly past the columns"
+            );
+        }
+    }
+
+    #[test]
+    fn a_weight_keeps_its_bits() {
+        assert_eq!(weight(1.0), "bitcast<f32>(0x3f800000u)");
+        assert_eq!(weight(f32::from_bits(1)), "bitcast<f32>(0x00000001u)");
+    }
+}
