@@ -131,10 +131,11 @@ done
 # time: the stages before the last (FUZZYQ_GPU_STAGES: rows, or merged) and the fused last
 # stage (FUZZYQ_GPU_LAST: rows; merged:N, N cores in turn; tile:T, a workgroup of T threads
 # per item of the stage before, its values in workgroup memory; unrolled, the last block's
-# rows compiled into the kernel). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
+# rows compiled into the kernel; joined, that kernel computing the stage before it itself,
+# which is then not dispatched). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
 # rows in. The rows above use the default on a GPU, merged/rows; rows/rows are the kernels
 # before the merge.
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-unrolled/unrolled merged/unrolled unrolled/rows rows/rows merged/tile:128 merged/tile:256}
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows merged/tile:128}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"

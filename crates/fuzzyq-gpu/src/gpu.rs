@@ -33,7 +33,7 @@ pub struct Gpu {
 
 /// How the fused last stage of a full backup takes a core's rows (its block actions)
 /// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged`, `merged:CORES`, `tile`,
-/// `tile:THREADS` or `unrolled`; the
+/// `tile:THREADS`, `unrolled` or `joined`; the
 /// default [`LastStage::for_adapter`]). Every
 /// choice gives the same bits; they differ in how often the stage before is read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,6 +70,14 @@ pub enum LastStage {
     /// on a GPU; the default on a software adapter
     /// ([`LastStage::for_adapter`]).
     Unrolled,
+    /// [`LastStage::Unrolled`] with the stage before it joined in (`lastj`): the workgroup
+    /// of an item computes the item's values itself, each lane those of its own columns where
+    /// a core first reads them, from the stage before that (its block core's rows read from
+    /// the tables), so the stage before the last is neither dispatched nor written (on the
+    /// paper's grid, 2 GB written and read again per full backup). Where there is no such
+    /// stage (two blocks or fewer), its output is cut into parts, or its rows hold more than
+    /// 16 entries, [`LastStage::Unrolled`]. Not a default: the next GPU measurement decides.
+    Joined,
 }
 
 impl LastStage {
@@ -91,7 +99,7 @@ impl LastStage {
     }
 
     /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads),
-    /// `tile:THREADS` or `unrolled` (`None` for anything else).
+    /// `tile:THREADS`, `unrolled` or `joined` (`None` for anything else).
     #[must_use]
     pub fn parse(s: &str) -> Option<Self> {
         let n = |n: &str| n.parse::<u32>().ok();
@@ -100,6 +108,7 @@ impl LastStage {
             None if s == "merged" => Some(LastStage::MERGED),
             None if s == "tile" => Some(LastStage::Tile { threads: 128 }),
             None if s == "unrolled" => Some(LastStage::Unrolled),
+            None if s == "joined" => Some(LastStage::Joined),
             Some(("merged", c)) => n(c)
                 .filter(|&c| c > 0)
                 .map(|cores| LastStage::Merged { cores }),

@@ -9,6 +9,7 @@ use fuzzyq_core::solver::PlanTable;
 use crate::error::GpuError;
 use crate::gpu::{Gpu, LastStage};
 use crate::kernels::{self, Kernels, WG};
+use crate::unrolled::Before;
 
 /// Columns a lane of the fused last stage accumulates at once (`JC` in `last1.wgsl`).
 const LAST_CHUNK: u32 = 8;
@@ -18,14 +19,17 @@ const MERGED_SUMS: u32 = 40;
 
 /// The fused last stage compiled for one problem ([`compile_last`]).
 pub(crate) struct Last {
-    /// `last1.wgsl`, `lastm.wgsl` or `lastw.wgsl` with the problem's constants.
+    /// `last1.wgsl`, `lastm.wgsl`, `lastw.wgsl` or `unrolled.rs`'s with the problem's
+    /// constants.
     pub pipeline: wgpu::ComputePipeline,
     /// Cores a workgroup takes (`None`: a workgroup per item of the stage before, `lastw`).
     pub cores_per_group: Option<u32>,
-    /// Its kernel (`last1`, `lastm` or `lastw`).
+    /// Its kernel (`last1`, `lastm`, `lastw`, `lastu` or `lastj`).
     pub name: &'static str,
     /// Whether it reduces a core's lanes by subgroup operations.
     pub subgroups: bool,
+    /// Whether it computes the stage before it itself (`lastj`), reading the one before that.
+    pub joined: bool,
 }
 
 /// Where a block's rows merged by column ([`PlanTable::merged_steps`]) lie in the block
@@ -100,24 +104,27 @@ pub(crate) fn compile_last(
     sg: Option<u32>,
     merged: Option<MergedAt>,
     table: &PlanTable<'_, f32>,
+    before: Option<Before>,
 ) -> Result<Last, GpuError> {
     let nb = blocks.len();
     let [nl, al, _, pl] = blocks[nb - 1];
-    if gpu.last == LastStage::Unrolled {
+    if matches!(gpu.last, LastStage::Unrolled | LastStage::Joined) {
         // A workgroup of one subgroup exchanging by shuffles, else of 32 threads exchanging
-        // through workgroup memory.
+        // through workgroup memory; the stage before joined in where asked for and it can be.
         let lanes = sg.unwrap_or(32);
-        if let Some(text) = crate::unrolled::source(table, pl, lanes, sg.is_some()) {
+        let before = before.filter(|_| gpu.last == LastStage::Joined);
+        if let Some(text) = crate::unrolled::source(table, pl, lanes, sg.is_some(), before) {
             let consts = [
                 ("LAST", (nb - 1) as u32),
                 ("NL", nl),
                 ("AL", al),
                 ("PL", pl),
             ];
+            let name = if before.is_some() { "lastj" } else { "lastu" };
             let pipeline = kernels::specialized(
                 &gpu.inner,
                 k,
-                (text.as_str(), "lastu"),
+                (text.as_str(), name),
                 &consts,
                 &[],
                 sg.is_some(),
@@ -126,15 +133,16 @@ pub(crate) fn compile_last(
             return Ok(Last {
                 pipeline,
                 cores_per_group: None,
-                name: "lastu",
+                name,
                 subgroups: sg.is_some(),
+                joined: before.is_some(),
             });
         }
     }
     // Rows too many to compile in: merged on a software adapter, else one at a time.
     let choice = match gpu.last {
-        LastStage::Unrolled if gpu.summary().software => LastStage::MERGED,
-        LastStage::Unrolled => LastStage::Rows,
+        LastStage::Unrolled | LastStage::Joined if gpu.summary().software => LastStage::MERGED,
+        LastStage::Unrolled | LastStage::Joined => LastStage::Rows,
         other => other,
     };
     if let LastStage::Tile { threads } = choice {
@@ -194,6 +202,7 @@ pub(crate) fn compile_last(
         cores_per_group: Some(wgs / tpc * cores),
         name: t.1,
         subgroups: sg.is_some(),
+        joined: false,
     })
 }
 
@@ -245,5 +254,6 @@ fn compile_tile(
         cores_per_group: None,
         name: t.1,
         subgroups: false,
+        joined: false,
     })
 }

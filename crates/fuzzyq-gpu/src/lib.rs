@@ -38,7 +38,10 @@
 //!   once (`lastw.wgsl`);
 //! - a workgroup per item with the last block's rows compiled in, each lane taking a few of
 //!   the item's columns for every core, the cores' maxima reduced over the lanes by halving
-//!   (`unrolled.rs`; the default on software adapters).
+//!   (`unrolled.rs`; the default on software adapters);
+//! - the same computing the stage before it too, each lane the values of its own columns
+//!   where a core first reads them, so that stage is neither dispatched nor written
+//!   ([`LastStage::Joined`]).
 //!
 //! The lanes reduce to the largest value at the lowest action by subgroup shuffles, or in
 //! workgroup memory where the adapter has no single subgroup size or a start-up probe finds a

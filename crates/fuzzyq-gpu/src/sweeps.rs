@@ -460,6 +460,15 @@ fn compile(
     let stages = (0..compiled)
         .map(|b| compile_stage(gpu, k, shape, b, parts, merged[b], &tables[b]))
         .collect::<Result<Vec<_>, GpuError>>()?;
+    // The stage before the last joined into it (`lastj`): where there is a stage before
+    // that (read from its buffer, not `V` or parts), its rows are short enough, and the
+    // stages between write one buffer each.
+    let before = (nb >= 3
+        && shape.stage_parts[nb - 3..nb - 1]
+            .iter()
+            .all(Option::is_none))
+    .then(|| crate::unrolled::Before::of(&tables[nb - 2]))
+    .flatten();
     let last = if shape.fused_abs {
         Some(compile_last(
             gpu,
@@ -468,6 +477,7 @@ fn compile(
             sg,
             merged[nb - 1],
             &tables[nb - 1],
+            before,
         )?)
     } else {
         None
@@ -956,6 +966,10 @@ impl GpuSweeps {
             s.fused
         };
         let cpw = self.last.as_ref().map(|l| l.cores_per_group);
+        // The last stage computing the stage before it (`lastj`): that stage is not
+        // dispatched, and the last reads the one before it, from its item `src_lo_before`.
+        let join = fused && self.last.as_ref().is_some_and(|l| l.joined);
+        let mut src_lo_before = 0;
         let base = self.base();
         let mut ds = Vec::new();
         for step in s.tree.steps(&s.batches) {
@@ -965,8 +979,16 @@ impl GpuSweeps {
                 items,
                 src_lo,
             } = step;
+            if join && b + 1 == last {
+                src_lo_before = src_lo;
+                continue;
+            }
             // `lo` from the first child of the source's first item: within the buffers.
-            let lo = lo - src_lo * u64::from(s.blocks[b][0]);
+            let lo = if join && b == last {
+                lo - src_lo_before * u64::from(s.blocks[b - 1][0]) * u64::from(s.blocks[b][0])
+            } else {
+                lo - src_lo * u64::from(s.blocks[b][0])
+            };
             let p = Params {
                 b: b as u32,
                 lo: index(lo),
@@ -974,6 +996,7 @@ impl GpuSweeps {
             };
             let src = match b {
                 0 => Slot::Part(input, 0),
+                b if join && b == last => Slot::Stage(b - 2),
                 b => Slot::Stage(b - 1),
             };
             if b < last {

@@ -23,6 +23,7 @@
 //! is `-inf` or NaN keeps no index there, where `beats` takes the first `-inf`; its sums
 //! come from a finite `V` and finite weights, so that needs a `V` that is not finite.
 
+use std::collections::BTreeSet;
 use std::fmt::Write as _;
 
 use fuzzyq_core::solver::PlanTable;
@@ -44,15 +45,48 @@ fn columns(pl: u32, lanes: u32) -> (u32, u32) {
     (jc, pl.div_ceil(lanes * jc))
 }
 
-/// The kernel's text (after `block.wgsl`'s declarations and the constants `NL`, `AL`, `PL`),
-/// for the last block's `table`, `pl` product actions before it, a workgroup of `lanes`
-/// threads exchanging by subgroup shuffles (`subgroups`) or through workgroup memory; `None`
+/// Most entries of a row of the stage before the last that the joined kernel (`lastj`) takes.
+const MAX_BEFORE_ENTRIES: u32 = 16;
+
+/// The stage before the last, where the kernel computes it itself (`lastj`,
+/// [`LastStage::Joined`](crate::LastStage::Joined)): its block's cores, actions and product
+/// actions before it, and the most entries of its rows. Its rows are read from the tables
+/// (block `LAST - 1`), as its block core is the workgroup's; each lane's values of an item
+/// are computed where a core of the last block first reads them, from the stage before it
+/// (`src`), instead of being read from a buffer that stage wrote.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Before {
+    pub n: u32,
+    pub a: u32,
+    pub p: u32,
+    pub max_entries: u32,
+}
+
+impl Before {
+    /// The stage before the last of `table`'s block (`None` where a row holds more than
+    /// [`MAX_BEFORE_ENTRIES`] entries).
+    pub(crate) fn of(table: &PlanTable<'_, f32>) -> Option<Self> {
+        let max_entries = table.ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+        (max_entries <= MAX_BEFORE_ENTRIES).then(|| Before {
+            n: table.n_cores as u32,
+            a: table.n_actions as u32,
+            p: table.p_len as u32,
+            max_entries: max_entries.max(1),
+        })
+    }
+}
+
+/// The kernel's text (after `block.wgsl`'s declarations and the constants `LAST`, `NL`,
+/// `AL`, `PL`), for the last block's `table`, `pl` product actions before it, a workgroup of
+/// `lanes` threads exchanging by subgroup shuffles (`subgroups`) or through workgroup memory,
+/// reading the stage before's output (`lastu`) or computing it (`before`, `lastj`); `None`
 /// where the table holds more terms than [`MAX_TERMS`].
 pub(crate) fn source(
     table: &PlanTable<'_, f32>,
     pl: u32,
     lanes: u32,
     subgroups: bool,
+    before: Option<Before>,
 ) -> Option<String> {
     let (jc, nch) = columns(pl, lanes);
     if table.col.len() * nch as usize > MAX_TERMS {
@@ -66,6 +100,7 @@ pub(crate) fn source(
         nch,
         padded: lanes * jc * nch > pl,
         subgroups,
+        before,
     };
     Some(g.kernel())
 }
@@ -79,10 +114,46 @@ struct Gen<'a, 'o> {
     /// Whether some lane's columns run past `PL` (then masked).
     padded: bool,
     subgroups: bool,
+    before: Option<Before>,
 }
 
+/// The joined kernel's rows of the stage before the last: `row1` reads the row of product
+/// column `q` (its action `q / P1` of block core `c1`; the entries' weights and where each
+/// reads the stage before it, less the last block's core), `xs` sums it at the last block's
+/// core `k`, in the row's order from 0, as `stagec.wgsl` does.
+const BEFORE_FNS: &str = "
+struct Row1 {
+    w: array<f32, ME>,
+    o: array<u32, ME>,
+    n: u32,
+}
+
+fn row1(q: u32, c1: u32, base1: u32) -> Row1 {
+    let row = prm.rows[LAST - 1u].x + c1 * A1 + q / P1;
+    let e0 = row_ptr[row];
+    var r: Row1;
+    r.n = row_ptr[row + 1u] - e0;
+    for (var e = 0u; e < ME; e++) {
+        let i = e0 + min(e, max(r.n, 1u) - 1u);
+        r.w[e] = weight[i];
+        r.o[e] = (base1 + col[i]) * NL * P1 + q % P1;
+    }
+    return r;
+}
+
+fn xs(r: Row1, k: u32) -> f32 {
+    var t = bitcast<f32>(prm.zero);
+    for (var e = 0u; e < ME; e++) {
+        if e < r.n {
+            t = fma(r.w[e], src[r.o[e] + k * P1], t);
+        }
+    }
+    return t;
+}
+";
+
 /// A WGSL `f32` constant with exactly `w`'s bits.
-fn weight(w: f32) -> String {
+fn weight_text(w: f32) -> String {
     format!("bitcast<f32>({:#010x}u)", w.to_bits())
 }
 
@@ -128,15 +199,25 @@ impl Gen<'_, '_> {
                  \x20   return xu[lane ^ m];\n}\n",
             );
         }
+        if let Some(b) = self.before {
+            let _ = writeln!(
+                s,
+                "const N1: u32 = {}u;\nconst A1: u32 = {}u;\nconst P1: u32 = {}u;\n\
+                 const ME: u32 = {}u;",
+                b.n, b.a, b.p, b.max_entries
+            );
+            s.push_str(BEFORE_FNS);
+        }
         let lane_param = if self.subgroups {
             ", @builtin(subgroup_invocation_id) sid: u32"
         } else {
             ""
         };
+        let entry = self.entry();
         let _ = writeln!(
             s,
             "@compute @workgroup_size(LANES)\n\
-             fn lastu(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,\n\
+             fn {entry}(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>,\n\
              \x20        @builtin(local_invocation_index) li: u32{lane_param}) {{"
         );
         let lane = if self.subgroups { "sid" } else { "li" };
@@ -153,13 +234,85 @@ impl Gen<'_, '_> {
         );
         let offsets: Vec<String> = (0..self.jc).map(|j| format!("{}u", lanes * j)).collect();
         let _ = writeln!(s, "    let steps = {vu}({});", offsets.join(", "));
+        if self.before.is_some() {
+            s.push_str("    let c1 = item % N1;\n    let base1 = item - c1;\n");
+        }
+        // One chunk of columns: set up once, and the values of the stage before computed
+        // once for every core.
+        let mut defined = BTreeSet::new();
+        if self.nch == 1 {
+            s.push_str("    let ch = 0u;\n");
+            self.columns_setup(&mut s, "    ");
+        }
         let n = self.t.n_cores;
         for c0 in (0..n).step_by(CHUNK) {
             let c1 = (c0 + CHUNK).min(n);
+            if self.nch == 1 {
+                for c in c0..c1 {
+                    self.define(&mut s, c, &mut defined, "    ");
+                }
+            }
             self.chunk(&mut s, c0..c1);
         }
         s.push_str("}\n");
         s
+    }
+
+    /// The kernel's entry point.
+    fn entry(&self) -> &'static str {
+        if self.before.is_some() {
+            "lastj"
+        } else {
+            "lastu"
+        }
+    }
+
+    /// The columns `pj` of chunk `ch` of the lane, where they are read (`q`), which are past
+    /// the end (`ok`), and for the joined kernel, each column's row of the stage before.
+    fn columns_setup(&self, s: &mut String, ind: &str) {
+        let vu = self.vu();
+        let _ = writeln!(
+            s,
+            "{ind}let pj = lane + LANES * {jc}u * ch + steps;\n\
+             {ind}let q = item * NL * PL + min(pj, {vu}(PL - 1u));",
+            jc = self.jc
+        );
+        if self.padded {
+            let _ = writeln!(s, "{ind}let ok = pj < {vu}(PL);");
+        }
+        if self.before.is_some() {
+            for j in 0..self.jc {
+                let p = self.comp("pj", j);
+                let _ = writeln!(s, "{ind}let r{j} = row1(min({p}, PL - 1u), c1, base1);");
+            }
+        }
+    }
+
+    /// For the joined kernel, the lane's values `x{k}` that core `c`'s rows read and that are
+    /// not yet `defined`, computed from the stage before's rows.
+    fn define(&self, s: &mut String, c: usize, defined: &mut BTreeSet<u32>, ind: &str) {
+        if self.before.is_none() {
+            return;
+        }
+        let vf = self.vf();
+        for k in self.columns_of(c) {
+            if defined.insert(k) {
+                let parts: Vec<String> = (0..self.jc).map(|j| format!("xs(r{j}, {k}u)")).collect();
+                let _ = writeln!(s, "{ind}let x{k} = {vf}({});", parts.join(", "));
+            }
+        }
+    }
+
+    /// The columns core `c`'s rows read, in order.
+    fn columns_of(&self, c: usize) -> Vec<u32> {
+        let t = self.t;
+        let na = t.n_actions;
+        let mut cols: Vec<u32> = (c * na..(c + 1) * na)
+            .flat_map(|r| t.col[t.ptr[r] as usize..t.ptr[r + 1] as usize].to_vec())
+            .collect();
+        cols.sort_unstable();
+        cols.dedup();
+        cols
     }
 
     /// Cores `cores` of the item: their largest values over the lane's columns, reduced over
@@ -170,26 +323,23 @@ impl Gen<'_, '_> {
         for c in cores.clone() {
             let _ = writeln!(s, "        var v{c} = ninf;\n        var n{c} = NONE;");
         }
+        // Several chunks of columns: each set up, and the values of the stage before computed,
+        // per chunk of cores.
         let chunked = self.nch > 1;
+        let mut defined = BTreeSet::new();
         if chunked {
             let _ = writeln!(s, "        for (var ch = 0u; ch < {}u; ch++) {{", self.nch);
-        } else {
-            s.push_str("        {\n            let ch = 0u;\n");
-        }
-        let _ = writeln!(
-            s,
-            "            let pj = lane + LANES * {jc}u * ch + steps;\n\
-             \x20           let q = item * NL * PL + min(pj, {vu}(PL - 1u));",
-            jc = self.jc
-        );
-        if self.padded {
-            s.push_str("            let ok = pj < ");
-            let _ = writeln!(s, "{vu}(PL);");
+            self.columns_setup(s, "            ");
         }
         for c in cores.clone() {
+            if chunked {
+                self.define(s, c, &mut defined, "            ");
+            }
             self.core(s, c, &vf, &vu);
         }
-        s.push_str("        }\n");
+        if chunked {
+            s.push_str("        }\n");
+        }
         self.reduce(s, cores);
         s.push_str("    }\n");
     }
@@ -200,15 +350,15 @@ impl Gen<'_, '_> {
         let t = self.t;
         let na = t.n_actions;
         let rows = (c * na..(c + 1) * na).map(|r| t.ptr[r] as usize..t.ptr[r + 1] as usize);
-        let mut cols: Vec<u32> = rows.clone().flat_map(|e| t.col[e].to_vec()).collect();
-        cols.sort_unstable();
-        cols.dedup();
         s.push_str("            {\n");
-        for k in &cols {
-            let parts: Vec<String> = (0..self.jc)
-                .map(|j| format!("src[{} + {}u]", self.comp("q", j), k * self.pl))
-                .collect();
-            let _ = writeln!(s, "                let x{k} = {vf}({});", parts.join(", "));
+        // Read from the stage before's output, once per core (the joined kernel has them).
+        if self.before.is_none() {
+            for k in self.columns_of(c) {
+                let parts: Vec<String> = (0..self.jc)
+                    .map(|j| format!("src[{} + {}u]", self.comp("q", j), k * self.pl))
+                    .collect();
+                let _ = writeln!(s, "                let x{k} = {vf}({});", parts.join(", "));
+            }
         }
         let _ = writeln!(
             s,
@@ -220,7 +370,7 @@ impl Gen<'_, '_> {
                 let _ = writeln!(
                     s,
                     "                    s = fma({vf}({}), x{}, s);",
-                    weight(t.weight[i]),
+                    weight_text(t.weight[i]),
                     t.col[i]
                 );
             }
@@ -379,7 +529,7 @@ pub(crate) fn stage_source(
                 let _ = writeln!(
                     s,
                     "            s = fma({}, x{}, s);",
-                    weight(table.weight[i]),
+                    weight_text(table.weight[i]),
                     table.col[i]
                 );
             }
@@ -421,9 +571,77 @@ mod tests {
         }
     }
 
+    /// A table of `n` cores and 2 actions, each row two entries (its core and the next).
+    fn table(n: usize) -> (Vec<u32>, Vec<u32>, Vec<f32>) {
+        let ptr = (0..=2 * n as u32).map(|r| 2 * r).collect();
+        let col = (0..2 * n)
+            .flat_map(|r| [(r / 2) as u32, ((r / 2 + 1) % n) as u32])
+            .collect();
+        let weight = (0..4 * n).map(|i| i as f32 / 8.0).collect();
+        (ptr, col, weight)
+    }
+
+    #[test]
+    fn a_chunk_of_cores_reduces_in_as_many_exchanges() {
+        // 16 cores over 32 lanes: 8 + 4 + 2 + 1 exchanges halving them, then 1 between lanes
+        // holding the same core; each exchange shuffles a value and an index.
+        let (ptr, col, weight) = table(16);
+        let t = PlanTable {
+            n_cores: 16,
+            n_actions: 2,
+            r_len: 1,
+            p_len: 125,
+            ptr: &ptr,
+            col: &col,
+            weight: &weight,
+        };
+        let text = source(&t, 125, 32, true, None).unwrap();
+        assert_eq!(text.matches("subgroupShuffleXor(").count(), 2 * 16);
+        assert!(text.contains("fn lastu("));
+        // Every row's weights, in order, with their bits.
+        for w in &weight {
+            assert!(text.contains(&weight_text(*w)), "{w}");
+        }
+        // Through workgroup memory, the same exchanges.
+        let text = source(&t, 125, 32, false, None).unwrap();
+        assert_eq!(text.matches("= shuf_f(").count(), 16);
+        assert_eq!(text.matches("= shuf_u(").count(), 16);
+        // The stage before joined in: its rows read where a core first needs a value.
+        let before = Before {
+            n: 3,
+            a: 5,
+            p: 25,
+            max_entries: 4,
+        };
+        let text = source(&t, 125, 32, true, Some(before)).unwrap();
+        assert!(text.contains("fn lastj("));
+        assert_eq!(
+            text.matches("let x").count(),
+            16,
+            "each value computed once"
+        );
+    }
+
+    #[test]
+    fn a_table_too_large_is_not_compiled_in() {
+        let n = MAX_TERMS / 4 + 1;
+        let (ptr, col, weight) = table(n);
+        let t = PlanTable {
+            n_cores: n,
+            n_actions: 2,
+            r_len: 1,
+            p_len: 5,
+            ptr: &ptr,
+            col: &col,
+            weight: &weight,
+        };
+        assert!(source(&t, 5, 32, true, None).is_none());
+        assert!(stage_source(&t, |k| format!("v{k}")).is_none());
+    }
+
     #[test]
     fn a_weight_keeps_its_bits() {
-        assert_eq!(weight(1.0), "bitcast<f32>(0x3f800000u)");
-        assert_eq!(weight(f32::from_bits(1)), "bitcast<f32>(0x00000001u)");
+        assert_eq!(weight_text(1.0), "bitcast<f32>(0x3f800000u)");
+        assert_eq!(weight_text(f32::from_bits(1)), "bitcast<f32>(0x00000001u)");
     }
 }
