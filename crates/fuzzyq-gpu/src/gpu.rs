@@ -87,8 +87,9 @@ impl LastStage {
     /// The default on an adapter, as measured: one row at a time on a GPU (an H200: the last
     /// stage of a full backup of the paper's grid 21.6 ms, against 25.3-29.8 ms merged with
     /// 1-16 cores in turn; the rows compiled in are not measured there yet), the rows
-    /// compiled in on a software adapter (`software`: Mesa's lavapipe, 8.8 times faster than
-    /// merged rows with 4 cores in turn, which were 5-17% faster than one row at a time).
+    /// compiled in on a software adapter (`software`: Mesa's lavapipe, where that last stage
+    /// is 9.5-19 times faster than merged rows with 4 cores in turn and 6-8.6 times faster
+    /// than one row at a time).
     #[must_use]
     pub fn for_adapter(software: bool) -> LastStage {
         if software {
@@ -348,7 +349,7 @@ impl Gpu {
     /// taking every core of the block below it, the values each core's rows read loaded once
     /// and each row a chain of `fma`s with constant weights. A block whose table is too
     /// large to compile in takes [`Gpu::with_merged_stages`]'s choice. The same bits. The
-    /// default on a software adapter (lavapipe: 2-3.5 times faster than merged rows), not yet
+    /// default on a software adapter (lavapipe: 2.7-3.5 times faster than merged rows), not yet
     /// on a GPU, where it is not measured (`FUZZYQ_GPU_STAGES=merged` or `rows` chooses).
     #[must_use]
     pub fn with_unrolled_stages(mut self, on: bool) -> Self {

@@ -283,6 +283,45 @@ impl Kernels {
     }
 }
 
+/// The text of a kernel of `template` ([`specialized`]): the constants `consts`, then
+/// `block.wgsl`'s declarations and `reader` (group 1's, if any), then `template` with its
+/// `replace` pairs substituted.
+pub(crate) fn source_text(
+    template: &str,
+    consts: &[(&str, u32)],
+    replace: &[(&str, &str)],
+    reader: Option<&str>,
+) -> String {
+    let mut source = String::new();
+    for (name, v) in consts {
+        source.push_str(&format!("const {name}: u32 = {v}u;\n"));
+    }
+    source.push_str(include_str!("block.wgsl"));
+    source.push_str(reader.unwrap_or(""));
+    let mut body = template.to_owned();
+    for (from, to) in replace {
+        body = body.replace(from, to);
+    }
+    source.push_str(&body);
+    source
+}
+
+/// Whether `text` is a valid WGSL module (naga's parser and validator, as wgpu runs them,
+/// with subgroup operations and `f64`): for the tests of generated kernels, without an
+/// adapter.
+#[cfg(test)]
+pub(crate) fn check_wgsl(text: &str) -> Result<(), String> {
+    use wgpu::naga;
+    let module = naga::front::wgsl::parse_str(text).map_err(|e| e.emit_to_string(text))?;
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .map(|_| ())
+    .map_err(|e| e.emit_to_string(text))
+}
+
 /// A kernel of `template` compiled with the problem's constants `consts` (prepended, with
 /// `block.wgsl`'s declarations), its text's `replace` pairs substituted; `subgroups` when it
 /// uses subgroup operations; `parts`: group 1's layout and declarations (`v_at`), for a kernel
@@ -299,19 +338,7 @@ pub(crate) fn specialized(
     // Naga takes subgroup operations without `enable subgroups;` (which it does not parse
     // yet) where the device has the feature; the flag only names the kernel's needs.
     let _ = subgroups;
-    let mut source = String::new();
-    for (name, v) in consts {
-        source.push_str(&format!("const {name}: u32 = {v}u;\n"));
-    }
-    source.push_str(include_str!("block.wgsl"));
-    if let Some((_, reader)) = parts {
-        source.push_str(reader);
-    }
-    let mut body = template.to_owned();
-    for (from, to) in replace {
-        body = body.replace(from, to);
-    }
-    source.push_str(&body);
+    let source = source_text(template, consts, replace, parts.map(|p| p.1));
     let device = &gpu.device;
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

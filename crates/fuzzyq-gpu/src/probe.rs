@@ -17,14 +17,23 @@ pub(crate) fn fused_fma(gpu: &Context, k: &Kernels) -> Result<bool, GpuError> {
     Ok(out[0].to_bits() == fused.to_bits())
 }
 
+/// The subgroup probe's substitution: the last stage's reduction.
+const SG_PROBE_REPLACE: [(&str, &str); 1] = [("REDUCE", crate::kernels::REDUCE_SUBGROUP)];
+
+/// The subgroup probe's constants for workgroups of `wgs` threads (`WGS`, and `TPC` lanes
+/// per cluster).
+fn sg_probe_consts(wgs: u32) -> [(&'static str, u32); 2] {
+    [("WGS", wgs), ("TPC", wgs.min(32))]
+}
+
 /// Whether subgroup shuffles reduce clusters of lanes as the last stage needs, on workgroups
 /// of `wgs` threads (the adapter's subgroup size): the probe's result against the host's.
 pub(crate) fn subgroups_work(gpu: &Context, k: &Kernels, wgs: u32) -> Result<bool, GpuError> {
-    let tpc = wgs.min(32);
-    let consts = [("WGS", wgs), ("TPC", tpc)];
+    let consts = sg_probe_consts(wgs);
     let t = (include_str!("sgprobe.wgsl"), "sg_probe");
-    let replace = [("REDUCE", crate::kernels::REDUCE_SUBGROUP)];
-    let Ok(pipeline) = crate::kernels::specialized(gpu, k, t, &consts, &replace, true, None) else {
+    let Ok(pipeline) =
+        crate::kernels::specialized(gpu, k, t, &consts, &SG_PROBE_REPLACE, true, None)
+    else {
         return Ok(false);
     };
     let groups = 64u32;
@@ -52,7 +61,7 @@ pub(crate) fn subgroups_work(gpu: &Context, k: &Kernels, wgs: u32) -> Result<boo
     }
     gpu.queue.submit([enc.finish()]);
     let (m, a): (Vec<f32>, Vec<u32>) = (read_as(gpu, &dst, n)?, read_as(gpu, &aux, n)?);
-    let tpc = tpc as usize;
+    let tpc = consts[1].1 as usize;
     Ok((0..n).all(|g| {
         let cluster = g / tpc * tpc..g / tpc * tpc + tpc;
         let best = cluster
@@ -94,4 +103,26 @@ pub(crate) fn run_probe(
     }
     gpu.queue.submit([enc.finish()]);
     read_as(gpu, &dst, x.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_subgroup_probe_is_valid_wgsl() {
+        // A probe that does not compile reads as an adapter whose subgroups do not reduce,
+        // and turns subgroups off everywhere without a word (its header comment once named
+        // the placeholder it substitutes, which put the loop in the comment's place).
+        for wgs in [8, 32, 64] {
+            let consts = sg_probe_consts(wgs);
+            let text = crate::kernels::source_text(
+                include_str!("sgprobe.wgsl"),
+                &consts,
+                &SG_PROBE_REPLACE,
+                None,
+            );
+            crate::kernels::check_wgsl(&text).unwrap();
+        }
+    }
 }

@@ -1,5 +1,6 @@
 // Probe: whether a workgroup of WGS threads is one subgroup whose lanes `subgroupShuffleXor`
-// exchanges, as `last1.wgsl` relies on (REDUCE is its reduction, `REDUCE_SUBGROUP`): every cluster of TPC lanes reduces `src` to its
+// exchanges, as `last1.wgsl` relies on (the body below takes the last stage's reduction,
+// from `kernels.rs`): every cluster of TPC lanes reduces `src` to its
 // largest value at the lowest index, each lane writing the result at its own element.
 
 @compute @workgroup_size(WGS)

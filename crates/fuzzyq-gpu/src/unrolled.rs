@@ -1,14 +1,19 @@
-//! The fused last stage with the last block's rows compiled into the kernel (`lastu`,
-//! [`LastStage::Unrolled`](crate::LastStage::Unrolled)).
+//! Kernels with a block's rows compiled in: the stages before the last (`stage_u`,
+//! [`Gpu::with_unrolled_stages`](crate::Gpu::with_unrolled_stages)), the fused last stage
+//! (`lastu`, [`LastStage::Unrolled`](crate::LastStage::Unrolled)), and the last stage that
+//! computes the stage before it too (`lastj`, [`LastStage::Joined`](crate::LastStage::Joined)).
 //!
-//! The last block's table is the same for every item of the stage before (a run of the
-//! earlier blocks' cores), and small: 45 cores x 5 actions x at most 4 entries on the paper's
-//! grid. So instead of reading each row's columns and weights from buffers, the kernel is
-//! generated with them as constants: for each core of the item, the values of the columns its
-//! rows read are loaded once, and each row is a straight chain of `fma`s with constant
-//! weights. A workgroup of `LANES` threads takes one item; lane `l` takes the product-action
-//! columns `p = l + LANES (JC ch + j)`, `JC` at a time as the components of one vector (so
-//! neighbouring lanes read neighbouring values), in `NCH` chunks.
+//! A block's table is the same for every item of the stage before (a run of the earlier
+//! blocks' cores), and small: 45 cores x 5 actions x at most 4 entries on the paper's grid.
+//! So instead of reading each row's columns and weights from buffers, the kernels are
+//! generated with them as constants: for each core, the values of the columns its rows read
+//! are loaded once, and each row is a straight chain of `fma`s with constant weights (their
+//! exact bits). A stage before the last gives a thread each element of an item of the stage
+//! before and runs every core of the block below it ([`stage_source`]).
+//!
+//! The last stage ([`source`]) gives a workgroup of `LANES` threads each item; lane `l` takes
+//! the product-action columns `p = l + LANES (JC ch + j)`, `JC` at a time as the components
+//! of one vector (so neighbouring lanes read neighbouring values), in `NCH` chunks.
 //!
 //! Each lane keeps, per component, the largest of its actions' sums by a strict `>` in
 //! increasing index order (the lowest index among equals), then folds its components and
@@ -31,7 +36,8 @@ use fuzzyq_core::solver::PlanTable;
 /// Most columns a lane takes at once (the components of a vector).
 const MAX_JC: u32 = 4;
 
-/// Most cores reduced over the lanes at once (two registers each per lane).
+/// Most cores reduced over the lanes at once (two registers each per lane; at most the
+/// lanes, so that the halving leaves each lane one core).
 const CHUNK: usize = 16;
 
 /// Most terms the kernel may hold (row entries times the vector chunks), so that its text
@@ -244,15 +250,17 @@ impl Gen<'_, '_> {
             s.push_str("    let ch = 0u;\n");
             self.columns_setup(&mut s, "    ");
         }
+        // At most one core per lane at the end of the halving.
+        let chunk = CHUNK.min(self.lanes as usize);
         let n = self.t.n_cores;
-        for c0 in (0..n).step_by(CHUNK) {
-            let c1 = (c0 + CHUNK).min(n);
+        for first in (0..n).step_by(chunk) {
+            let end = (first + chunk).min(n);
             if self.nch == 1 {
-                for c in c0..c1 {
+                for c in first..end {
                     self.define(&mut s, c, &mut defined, "    ");
                 }
             }
-            self.chunk(&mut s, c0..c1);
+            self.chunk(&mut s, first..end);
         }
         s.push_str("}\n");
         s
@@ -273,10 +281,12 @@ impl Gen<'_, '_> {
         let vu = self.vu();
         let _ = writeln!(
             s,
-            "{ind}let pj = lane + LANES * {jc}u * ch + steps;\n\
-             {ind}let q = item * NL * PL + min(pj, {vu}(PL - 1u));",
+            "{ind}let pj = lane + LANES * {jc}u * ch + steps;",
             jc = self.jc
         );
+        if self.before.is_none() {
+            let _ = writeln!(s, "{ind}let q = item * NL * PL + min(pj, {vu}(PL - 1u));");
+        }
         if self.padded {
             let _ = writeln!(s, "{ind}let ok = pj < {vu}(PL);");
         }
@@ -464,6 +474,7 @@ impl Gen<'_, '_> {
             step += 1;
         }
         // Lanes past the chunk's cores (there are more lanes than cores) hold padding.
+        assert_eq!(held.len(), 1, "a chunk of at most one core per lane");
         let (v, i) = &held[0];
         let _ = writeln!(
             s,
@@ -581,25 +592,30 @@ mod tests {
         (ptr, col, weight)
     }
 
+    /// The block table of `t` ([`table`]) with `p_len` product actions before it.
+    fn plan(t: &(Vec<u32>, Vec<u32>, Vec<f32>), p_len: usize) -> PlanTable<'_, f32> {
+        PlanTable {
+            n_cores: (t.0.len() - 1) / 2,
+            n_actions: 2,
+            r_len: 1,
+            p_len,
+            ptr: &t.0,
+            col: &t.1,
+            weight: &t.2,
+        }
+    }
+
     #[test]
     fn a_chunk_of_cores_reduces_in_as_many_exchanges() {
         // 16 cores over 32 lanes: 8 + 4 + 2 + 1 exchanges halving them, then 1 between lanes
         // holding the same core; each exchange shuffles a value and an index.
-        let (ptr, col, weight) = table(16);
-        let t = PlanTable {
-            n_cores: 16,
-            n_actions: 2,
-            r_len: 1,
-            p_len: 125,
-            ptr: &ptr,
-            col: &col,
-            weight: &weight,
-        };
+        let tab = table(16);
+        let t = plan(&tab, 125);
         let text = source(&t, 125, 32, true, None).unwrap();
         assert_eq!(text.matches("subgroupShuffleXor(").count(), 2 * 16);
         assert!(text.contains("fn lastu("));
         // Every row's weights, in order, with their bits.
-        for w in &weight {
+        for w in &tab.2 {
             assert!(text.contains(&weight_text(*w)), "{w}");
         }
         // Through workgroup memory, the same exchanges.
@@ -623,18 +639,65 @@ mod tests {
     }
 
     #[test]
+    fn the_generated_kernels_are_valid_wgsl() {
+        // Every variant through naga's parser and validator, as wgpu runs them: one chunk of
+        // columns and several, lanes of 8 and 32 exchanging by shuffles or in memory, the
+        // stage before joined in or not; and a stage before the last.
+        let tab = table(16);
+        let t = |p_len| plan(&tab, p_len);
+        let before = Before {
+            n: 3,
+            a: 5,
+            p: 25,
+            max_entries: 4,
+        };
+        for (pl, lanes, subgroups, joined) in [
+            (125u32, 32, true, false),
+            (125, 32, false, false),
+            (125, 8, true, true),
+            (243, 32, true, true),
+            (243, 32, false, true),
+            (5, 32, false, false),
+        ] {
+            let text = source(
+                &t(pl as usize),
+                pl,
+                lanes,
+                subgroups,
+                joined.then_some(before),
+            )
+            .unwrap();
+            let consts = [("LAST", 3), ("NL", 16), ("AL", 2), ("PL", pl)];
+            let text = crate::kernels::source_text(&text, &consts, &[], None);
+            crate::kernels::check_wgsl(&text)
+                .unwrap_or_else(|e| panic!("{pl} {lanes} {subgroups} {joined}: {e}"));
+        }
+        let stage = stage_source(&t(25), |k| {
+            format!("src[((base + {k}u) * SR + r) * SP + p]")
+        })
+        .unwrap();
+        let consts = [("SB", 1), ("SN", 16), ("SA", 2), ("SR", 45), ("SP", 25)];
+        let put = "fn put(o: u32, x: f32) {\n    dst[o] = x;\n}\n";
+        let text = crate::kernels::source_text(&(put.to_owned() + &stage), &consts, &[], None);
+        crate::kernels::check_wgsl(&text).unwrap();
+    }
+
+    #[test]
+    fn fewer_lanes_than_a_chunk_take_chunks_of_their_count() {
+        // Subgroups of 8 (lavapipe's): 16 cores in two chunks of 8, each 4 + 2 + 1
+        // exchanges; a chunk of 16 would leave each lane two cores, one never written.
+        let tab = table(16);
+        let t = plan(&tab, 125);
+        let text = source(&t, 125, 8, true, None).unwrap();
+        assert_eq!(text.matches("subgroupShuffleXor(").count(), 2 * 2 * 7);
+        assert_eq!(text.matches("write_best(").count(), 2);
+    }
+
+    #[test]
     fn a_table_too_large_is_not_compiled_in() {
         let n = MAX_TERMS / 4 + 1;
-        let (ptr, col, weight) = table(n);
-        let t = PlanTable {
-            n_cores: n,
-            n_actions: 2,
-            r_len: 1,
-            p_len: 5,
-            ptr: &ptr,
-            col: &col,
-            weight: &weight,
-        };
+        let tab = table(n);
+        let t = plan(&tab, 5);
         assert!(source(&t, 5, 32, true, None).is_none());
         assert!(stage_source(&t, |k| format!("v{k}")).is_none());
     }
