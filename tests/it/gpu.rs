@@ -494,8 +494,8 @@ fn the_last_stage_from_workgroup_memory_gives_the_same_bits() {
     assert_eq!(LastStage::parse("tile:100"), None);
 }
 
-/// How lanes may exchange values on `g`: by subgroup operations (where it has them) and
-/// through workgroup memory; both ways ask for the latter where it has none.
+/// How lanes may exchange values on `g`: by subgroup operations where it has them, and
+/// always through workgroup memory.
 fn exchanges(g: &Gpu) -> Vec<bool> {
     if g.summary().subgroup_size.is_some() {
         vec![true, false]
@@ -504,76 +504,20 @@ fn exchanges(g: &Gpu) -> Vec<bool> {
     }
 }
 
-#[test]
-fn the_last_stage_with_its_rows_compiled_in_gives_the_same_bits() {
-    let Some(g) = gpu() else { return };
-    // `LastStage::Unrolled`: the last block's rows compiled into the kernel as constants, a
-    // workgroup per item of the stage before, the cores' maxima reduced over the lanes by
-    // halving (subgroup shuffles where the adapter has them, and through workgroup memory).
-    // Every pass of every mode keeps the reference's bits, with batches of whole slabs or of
-    // cores below fixed blocks (items cut at a batch's ends), and a whole run the default
-    // kernels' bits. Three point masses have 243 product actions before the last block and
-    // seven forces 343: several chunks of columns per lane, the last one past the end.
-    let unrolled = |subgroups| {
-        g.clone()
-            .with_last_stage(LastStage::Unrolled)
-            .with_subgroups(subgroups)
-    };
-    for c in [
-        pointmass_small(),
-        pointmass_goal(),
-        khepera_small(),
-        three_point_masses(false),
-        seven_forces(),
-    ] {
-        let model = c.build_model().unwrap();
-        let grid = c.grid::<f32>().unwrap();
-        let config = c.solver.solver_config();
-        let op = operator(&model, &grid, &config);
-        for subgroups in exchanges(g) {
-            let gs = GpuSweeps::new(&unrolled(subgroups), &op).unwrap();
-            eprintln!(
-                "{} cores, subgroups {subgroups}: {:?}, {}",
-                op.n_cores(),
-                gs.last_stage(),
-                gs.batches()
-            );
-            assert_eq!(gs.last_stage(), Some("lastu"), "the rows compile in");
-            assert_eq!(
-                gs.uses_subgroups(),
-                subgroups && g.summary().subgroup_size.is_some()
-            );
-            drop(gs);
-            passes_match(&unrolled(subgroups), &op);
-            passes_match(&unrolled(subgroups).with_batch_bytes(1), &op);
-        }
-    }
-    let c = pointmass_small();
-    let model = c.build_model().unwrap();
-    let grid = c.grid::<f32>().unwrap();
-    let config = c.solver.solver_config();
-    let a =
-        fuzzyq_gpu::solve_from(&unrolled(true), &model, &grid, &config, None, false, noop).unwrap();
-    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
-    assert_same(&a, &b, "the rows compiled in against the default");
-    assert_eq!(LastStage::parse("unrolled"), Some(LastStage::Unrolled));
-}
-
-#[test]
-fn the_last_stage_joined_with_the_stage_before_gives_the_same_bits() {
-    let Some(g) = gpu() else { return };
-    // `LastStage::Joined`: the last stage's kernel computes the stage before it (each lane
-    // its own columns' values, from the stage before that), which is then not dispatched.
-    // Every pass of every mode keeps the reference's bits with batches of whole slabs and of
-    // one item of the stage before each (cores below fixed blocks, read from the stage
-    // before that, held across batches), lanes exchanging by subgroups or in memory; a whole
-    // run keeps the default's.
-    // Models of two blocks or fewer (Khepera here) take the last stage unrolled.
-    let joined = |subgroups| {
-        g.clone()
-            .with_last_stage(LastStage::Joined)
-            .with_subgroups(subgroups)
-    };
+/// A last stage with the rows compiled in (`last`) against the reference: every pass of
+/// every mode on the models below, lanes exchanging by subgroups and through workgroup
+/// memory, with batches of whole slabs and the smallest (cores below fixed blocks, items cut
+/// at a batch's ends); its kernel on each model is `want(blocks)`. Then a whole run of
+/// `whole` against the default kernels' bits. Three point masses have 243 product actions
+/// before the last block and seven forces 343: several chunks of columns per lane, the last
+/// one past the end.
+fn compiled_last_stage_matches(
+    g: &Gpu,
+    last: LastStage,
+    want: fn(usize) -> &'static str,
+    whole: TrainConfig,
+) {
+    let gpu = |subgroups| g.clone().with_last_stage(last).with_subgroups(subgroups);
     for c in [
         pointmass_small(),
         pointmass_goal(),
@@ -586,31 +530,53 @@ fn the_last_stage_joined_with_the_stage_before_gives_the_same_bits() {
         let config = c.solver.solver_config();
         let op = operator(&model, &grid, &config);
         let blocks = op.block_plan().unwrap().tables.len();
-        let want = if blocks >= 3 { "lastj" } else { "lastu" };
         for subgroups in exchanges(g) {
-            let gs = GpuSweeps::new(&joined(subgroups), &op).unwrap();
+            let gs = GpuSweeps::new(&gpu(subgroups), &op).unwrap();
             eprintln!(
-                "{} cores, {blocks} blocks, subgroups {subgroups}: {:?}",
+                "{} cores, {blocks} blocks, subgroups {subgroups}: {:?}, {}",
                 op.n_cores(),
                 gs.last_stage(),
+                gs.batches()
             );
-            assert_eq!(gs.last_stage(), Some(want));
+            assert_eq!(gs.last_stage(), Some(want(blocks)));
+            assert_eq!(
+                gs.uses_subgroups(),
+                subgroups && g.summary().subgroup_size.is_some()
+            );
             drop(gs);
             for budget in [u64::MAX, 1] {
-                let gpu = joined(subgroups).with_batch_bytes(budget);
-                eprintln!("  {}", GpuSweeps::new(&gpu, &op).unwrap().batches());
-                passes_match(&gpu, &op);
+                passes_match(&gpu(subgroups).with_batch_bytes(budget), &op);
             }
         }
     }
-    let c = three_point_masses(false);
-    let model = c.build_model().unwrap();
-    let grid = c.grid::<f32>().unwrap();
-    let config = c.solver.solver_config();
-    let a =
-        fuzzyq_gpu::solve_from(&joined(true), &model, &grid, &config, None, false, noop).unwrap();
+    let model = whole.build_model().unwrap();
+    let grid = whole.grid::<f32>().unwrap();
+    let config = whole.solver.solver_config();
+    let a = fuzzyq_gpu::solve_from(&gpu(true), &model, &grid, &config, None, false, noop).unwrap();
     let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
-    assert_same(&a, &b, "the stage before joined in against the default");
+    assert_same(&a, &b, "the rows compiled in against the default");
+}
+
+#[test]
+fn the_last_stage_with_its_rows_compiled_in_gives_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // `LastStage::Unrolled`: the last block's rows compiled into the kernel as constants, a
+    // workgroup per item of the stage before, the cores' maxima reduced over the lanes by
+    // halving.
+    compiled_last_stage_matches(g, LastStage::Unrolled, |_| "lastu", pointmass_small());
+    assert_eq!(LastStage::parse("unrolled"), Some(LastStage::Unrolled));
+}
+
+#[test]
+fn the_last_stage_joined_with_the_stage_before_gives_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // `LastStage::Joined`: the last stage's kernel computes the stage before it (each lane
+    // its own columns' values, from the stage before that), which is then not dispatched;
+    // with the smallest batches, one item of the stage before each, read from the stage
+    // before that, held across batches. Models of two blocks or fewer (Khepera here) take
+    // the last stage unrolled.
+    let want = |blocks| if blocks >= 3 { "lastj" } else { "lastu" };
+    compiled_last_stage_matches(g, LastStage::Joined, want, three_point_masses(false));
     assert_eq!(LastStage::parse("joined"), Some(LastStage::Joined));
 }
 

@@ -66,9 +66,8 @@ pub enum LastStage {
     /// chain of `fma`s with constant weights; the cores' maxima then reduce over the lanes a
     /// chunk of cores at a time, each exchange halving the cores a lane holds. Where the
     /// table is too large to compile in, [`LastStage::MERGED`] on a software adapter and
-    /// [`LastStage::Rows`] on a GPU. The next GPU measurement decides
-    /// on a GPU; the default on a software adapter
-    /// ([`LastStage::for_adapter`]).
+    /// [`LastStage::Rows`] on a GPU. The default on a software adapter
+    /// ([`LastStage::for_adapter`]); on a GPU the next measurement there decides.
     Unrolled,
     /// [`LastStage::Unrolled`] with the stage before it joined in (`lastj`): the workgroup
     /// of an item computes the item's values itself, each lane those of its own columns where

@@ -61,7 +61,8 @@ pub(crate) fn subgroups_work(gpu: &Context, k: &Kernels, wgs: u32) -> Result<boo
     }
     gpu.queue.submit([enc.finish()]);
     let (m, a): (Vec<f32>, Vec<u32>) = (read_as(gpu, &dst, n)?, read_as(gpu, &aux, n)?);
-    let tpc = consts[1].1 as usize;
+    let [_, (_, tpc)] = consts;
+    let tpc = tpc as usize;
     Ok((0..n).all(|g| {
         let cluster = g / tpc * tpc..g / tpc * tpc + tpc;
         let best = cluster

@@ -147,6 +147,11 @@ const PER_WG: u64 = 4096;
 
 /// A count or index of a dispatch as the shaders take it: within one storage binding (a part
 /// of `V`, a stage buffer), so within `u32` whatever the grid's core count.
+/// Items of the stage before that `items` items from `lo` (`n` below each) lie below.
+fn parents(lo: u64, items: u64, n: u64) -> u64 {
+    (lo + items - 1) / n - lo / n + 1
+}
+
 fn index(x: u64) -> u32 {
     u32::try_from(x).expect("an index within one binding fits u32")
 }
@@ -315,11 +320,13 @@ fn check_memory(
 /// threads each take a core of their own, keep `stagec.wgsl`).
 const MERGED_SHARED: u64 = 32;
 
-/// A stage compiled for one problem ([`compile`]): `stagec.wgsl` (a thread per element) or
-/// `stagem.wgsl` (a thread per element's `per_thread` actions, the block's rows merged).
+/// A stage compiled for one problem ([`compile`]): `stagec.wgsl` (a thread per element),
+/// `stagem.wgsl` (a thread per element's `per_thread` actions, the block's rows merged) or
+/// `stage_u` (`per_thread` `None`: a thread per element of each item of the stage before,
+/// taking every core below it).
 struct Stage {
     pipeline: wgpu::ComputePipeline,
-    per_thread: u64,
+    per_thread: Option<u64>,
     name: &'static str,
     /// Its group 1's layout where it reads or writes a stage output in parts
     /// ([`Group1::Stage`]).
@@ -418,8 +425,8 @@ fn compile_stage(
     };
     let replace = [("SRC_AT", at.as_str())];
     let (body, t, per_thread) = match unrolled {
-        Some(text) => (io + &text, (t.0, "stage_u"), 0),
-        None => (io + t.0, t, per_thread),
+        Some(text) => (io + &text, (t.0, "stage_u"), None),
+        None => (io + t.0, t, Some(u64::from(per_thread))),
     };
     let pipeline = kernels::specialized(
         &gpu.inner,
@@ -432,7 +439,7 @@ fn compile_stage(
     )?;
     Ok(Stage {
         pipeline,
-        per_thread: u64::from(per_thread),
+        per_thread,
         name: t.1,
         group1: own,
     })
@@ -715,7 +722,8 @@ impl GpuSweeps {
     }
 
     /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged, `lastw`:
-    /// from workgroup memory, `lastu`: the rows compiled in), where
+    /// from workgroup memory, `lastu`: the rows compiled in, `lastj`: and the stage before
+    /// joined in), where
     /// the run has one ([`Gpu::with_last_stage`]).
     #[must_use]
     pub fn last_stage(&self) -> Option<&'static str> {
@@ -942,16 +950,14 @@ impl GpuSweeps {
 
     /// The workgroups of stage `b`'s kernel over `count` elements from item `lo` (counted
     /// from the first child of the source's first item): a thread per element's
-    /// `per_thread` actions, or with the rows compiled in (`per_thread` 0), per element of
-    /// each item of the stage before that the dispatch's items lie below.
+    /// `per_thread` actions, or with the rows compiled in, per element of each item of the
+    /// stage before that the dispatch's items lie below.
     fn stage_grid(&self, b: usize, lo: u64, count: u64) -> (u32, u32) {
-        if let Some(threads) = count.checked_div(self.stage_kernels[b].per_thread) {
-            return kernels::grid(threads);
-        }
         let [n, a, r, p] = self.shape.blocks[b].map(u64::from);
-        let items = count / (a * r * p);
-        let parents = (lo + items - 1) / n - lo / n + 1;
-        kernels::grid(parents * r * p)
+        match self.stage_kernels[b].per_thread {
+            Some(per_thread) => kernels::grid(count / per_thread),
+            None => kernels::grid(parents(lo, count / (a * r * p), n) * r * p),
+        }
     }
 
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
@@ -1058,10 +1064,7 @@ impl GpuSweeps {
                 let groups = match cpw.expect("compiled where fused") {
                     Some(cpw) => items.div_ceil(u64::from(cpw)),
                     // A workgroup per item of the stage before that the cores touch.
-                    None => {
-                        let nl = u64::from(s.blocks[last][0]);
-                        (lo + items - 1) / nl - lo / nl + 1
-                    }
+                    None => parents(lo, items, u64::from(s.blocks[last][0])),
                 };
                 ds.push(Dispatch {
                     entry: Entry::Last,

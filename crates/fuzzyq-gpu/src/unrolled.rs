@@ -46,7 +46,7 @@ pub(crate) const MAX_TERMS: usize = 16_384;
 
 /// The kernel's layout for a last block of `pl` product actions before it over `lanes`
 /// lanes: `(JC, NCH)`.
-fn columns(pl: u32, lanes: u32) -> (u32, u32) {
+fn lane_columns(pl: u32, lanes: u32) -> (u32, u32) {
     let jc = pl.div_ceil(lanes).clamp(1, MAX_JC);
     (jc, pl.div_ceil(lanes * jc))
 }
@@ -94,7 +94,7 @@ pub(crate) fn source(
     subgroups: bool,
     before: Option<Before>,
 ) -> Option<String> {
-    let (jc, nch) = columns(pl, lanes);
+    let (jc, nch) = lane_columns(pl, lanes);
     if table.col.len() * nch as usize > MAX_TERMS {
         return None;
     }
@@ -305,24 +305,12 @@ impl Gen<'_, '_> {
             return;
         }
         let vf = self.vf();
-        for k in self.columns_of(c) {
+        for k in read_columns(self.t, c) {
             if defined.insert(k) {
                 let parts: Vec<String> = (0..self.jc).map(|j| format!("xs(r{j}, {k}u)")).collect();
                 let _ = writeln!(s, "{ind}let x{k} = {vf}({});", parts.join(", "));
             }
         }
-    }
-
-    /// The columns core `c`'s rows read, in order.
-    fn columns_of(&self, c: usize) -> Vec<u32> {
-        let t = self.t;
-        let na = t.n_actions;
-        let mut cols: Vec<u32> = (c * na..(c + 1) * na)
-            .flat_map(|r| t.col[t.ptr[r] as usize..t.ptr[r + 1] as usize].to_vec())
-            .collect();
-        cols.sort_unstable();
-        cols.dedup();
-        cols
     }
 
     /// Cores `cores` of the item: their largest values over the lane's columns, reduced over
@@ -358,12 +346,10 @@ impl Gen<'_, '_> {
     /// `n{c}`.
     fn core(&self, s: &mut String, c: usize, vf: &str, vu: &str) {
         let t = self.t;
-        let na = t.n_actions;
-        let rows = (c * na..(c + 1) * na).map(|r| t.ptr[r] as usize..t.ptr[r + 1] as usize);
         s.push_str("            {\n");
         // Read from the stage before's output, once per core (the joined kernel has them).
         if self.before.is_none() {
-            for k in self.columns_of(c) {
+            for k in read_columns(self.t, c) {
                 let parts: Vec<String> = (0..self.jc)
                     .map(|j| format!("src[{} + {}u]", self.comp("q", j), k * self.pl))
                     .collect();
@@ -374,7 +360,7 @@ impl Gen<'_, '_> {
             s,
             "                var bv = {vf}(ninf);\n                var bk = {vu}(NONE);"
         );
-        for (a, e) in rows.enumerate() {
+        for (a, e) in rows(t, c).enumerate() {
             s.push_str("                {\n                    var s = z;\n");
             for i in e {
                 let _ = writeln!(
@@ -500,42 +486,32 @@ pub(crate) fn stage_source(
         return None;
     }
     let mut s = String::from(
-        "@compute @workgroup_size(64)
-         fn stage_u(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
-                    @builtin(num_workgroups) nwg: vec3<u32>) {
-             let o = linear(gid, wid, nwg);
-             let items = prm.count / (SR * SA * SP);
-             let base = (prm.lo / SN + o / (SR * SP)) * SN;
-             let r = (o % (SR * SP)) / SP;
-             let p = o % SP;
-             let lo = max(prm.lo, base) - base;
-             let hi = min(prm.lo + items, base + SN);
-             if hi <= base {
-        return;
-    }
-             let z = bitcast<f32>(prm.zero);
-",
+        "@compute @workgroup_size(64)\n\
+         fn stage_u(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,\n\
+         \x20          @builtin(num_workgroups) nwg: vec3<u32>) {\n\
+         \x20   let o = linear(gid, wid, nwg);\n\
+         \x20   let items = prm.count / (SR * SA * SP);\n\
+         \x20   let base = (prm.lo / SN + o / (SR * SP)) * SN;\n\
+         \x20   let r = (o % (SR * SP)) / SP;\n\
+         \x20   let p = o % SP;\n\
+         \x20   let lo = max(prm.lo, base) - base;\n\
+         \x20   let hi = min(prm.lo + items, base + SN);\n\
+         \x20   if hi <= base {\n\
+         \x20       return;\n\
+         \x20   }\n\
+         \x20   let z = bitcast<f32>(prm.zero);\n",
     );
-    let na = table.n_actions;
     for c in 0..table.n_cores {
-        let rows = (c * na..(c + 1) * na).map(|r| table.ptr[r] as usize..table.ptr[r + 1] as usize);
-        let mut cols: Vec<u32> = rows.clone().flat_map(|e| table.col[e].to_vec()).collect();
-        cols.sort_unstable();
-        cols.dedup();
         let _ = writeln!(s, "    if {c}u >= lo && base + {c}u < hi {{");
-        for k in &cols {
-            let _ = writeln!(s, "        let x{k} = {};", at(*k));
+        for k in read_columns(table, c) {
+            let _ = writeln!(s, "        let x{k} = {};", at(k));
         }
         let _ = writeln!(
             s,
             "        let out = ((base + {c}u - prm.lo) * SR + r) * (SA * SP) + p;"
         );
-        for (a, e) in rows.enumerate() {
-            s.push_str(
-                "        {
-            var s = z;
-",
-            );
+        for (a, e) in rows(table, c).enumerate() {
+            s.push_str("        {\n            var s = z;\n");
             for i in e {
                 let _ = writeln!(
                     s,
@@ -544,22 +520,29 @@ pub(crate) fn stage_source(
                     table.col[i]
                 );
             }
-            let _ = writeln!(
-                s,
-                "            put(out + {a}u * SP, s);
-        }}"
-            );
+            let _ = writeln!(s, "            put(out + {a}u * SP, s);\n        }}");
         }
-        s.push_str(
-            "    }
-",
-        );
+        s.push_str("    }\n");
     }
-    s.push_str(
-        "}
-",
-    );
+    s.push_str("}\n");
     Some(s)
+}
+
+/// The entries of block core `c`'s rows in `table`, one range per action.
+fn rows<'t>(
+    table: &'t PlanTable<'_, f32>,
+    c: usize,
+) -> impl Iterator<Item = core::ops::Range<usize>> + 't {
+    let na = table.n_actions;
+    (c * na..(c + 1) * na).map(|r| table.ptr[r] as usize..table.ptr[r + 1] as usize)
+}
+
+/// The columns block core `c`'s rows in `table` read, in order, each once.
+fn read_columns(table: &PlanTable<'_, f32>, c: usize) -> Vec<u32> {
+    let mut cols: Vec<u32> = rows(table, c).flat_map(|e| table.col[e].to_vec()).collect();
+    cols.sort_unstable();
+    cols.dedup();
+    cols
 }
 
 #[cfg(test)]
@@ -568,12 +551,12 @@ mod tests {
 
     #[test]
     fn the_columns_cover_the_product_actions() {
-        assert_eq!(columns(125, 32), (4, 1));
-        assert_eq!(columns(243, 32), (4, 2));
-        assert_eq!(columns(5, 32), (1, 1));
-        assert_eq!(columns(3125, 32), (4, 25));
+        assert_eq!(lane_columns(125, 32), (4, 1));
+        assert_eq!(lane_columns(243, 32), (4, 2));
+        assert_eq!(lane_columns(5, 32), (1, 1));
+        assert_eq!(lane_columns(3125, 32), (4, 25));
         for (pl, lanes) in [(125, 32), (243, 32), (5, 8), (3125, 64), (64, 16)] {
-            let (jc, nch) = columns(pl, lanes);
+            let (jc, nch) = lane_columns(pl, lanes);
             assert!(lanes * jc * nch >= pl);
             assert!(
                 lanes * jc * (nch - 1) < pl,
