@@ -145,6 +145,20 @@ for kern in $GPU_CHECK_KERNELS; do
   row "GPU full backup, kernels $kern" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
     "$(grep -E '^(backup|profile)' "$log" | sed -e 's/  */ /g' -e 's/^profile //' | paste -sd ';' -)"
 done
+# Policy evaluation split at each of GPU_CHECK_EVALS (FUZZYQ_GPU_EVAL: nested, every block per
+# core over V; stages:K, the first K stages of a full backup for every action, then the other
+# blocks per core; auto, the least estimated work), the stages with the kernels
+# GPU_CHECK_EVAL_STAGES (FUZZYQ_GPU_STAGES, default unrolled: auto then runs two stages).
+GPU_CHECK_EVALS=${GPU_CHECK_EVALS:-nested stages:1 stages:2 auto}
+want 2 || GPU_CHECK_EVALS=
+for ev in $GPU_CHECK_EVALS; do
+  log="$OUT/bench-gpu-eval-$(echo "$ev" | tr ':' '-').log"
+  FUZZYQ_GPU_EVAL=$ev FUZZYQ_GPU_STAGES=${GPU_CHECK_EVAL_STAGES:-unrolled} timeout "$(limit 120)" "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" \
+    --device gpu --backups 1 --evaluations 5 --peak-seconds 0.1 --json "${log%.log}.json" >"$log" 2>&1
+  rc=$?
+  row "GPU evaluation sweep, split $ev" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+    "$(grep -E '^evaluate' "$log" | sed -e 's/  */ /g' -e 's/^evaluate //')"
+done
 # The robots' grid on the GPU, profiled.
 if want 2 && [ -z "${GPU_CHECK_BENCH_ENV:-}" ]; then
   FUZZYQ_GPU_PROFILE=1 timeout "$(limit 120)" "$BIN" bench --env khepera --device gpu --backups 4 --peak-seconds 0.2 \
@@ -250,6 +264,14 @@ if want 4 && [ -n "$THREE" ]; then
   row "train $THREE (three point masses)" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
     "gpu ${wall} s wall; ${sweeps}; ${reach}"
   row "  its seconds on the gpu" "" "$(phases "$OUT/three.json")"
+  # Its evaluation sweeps nested per core (as before) and split by least work.
+  for ev in nested auto; do
+    FUZZYQ_GPU_EVAL=$ev timeout "$(limit 90)" "$BIN" bench --config "$THREE" --device gpu --backups 1 --evaluations 3 \
+      --peak-seconds 0.1 >"$OUT/bench-three-eval-$ev.log" 2>&1
+    rc=$?
+    row "  its evaluation sweeps, split $ev" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+      "$(grep -E '^(evaluate|backup)' "$OUT/bench-three-eval-$ev.log" | sed 's/  */ /g' | paste -sd ';' -)"
+  done
   # The same grid with the paper's 5 force levels per axis: one full backup.
   sed 's/^force_levels = .*/force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]/' "$THREE" >"$OUT/three-5.toml"
   timeout "$(limit 150)" "$BIN" bench --config "$OUT/three-5.toml" --device gpu --backups 1 --peak-seconds 0.2 \

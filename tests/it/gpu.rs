@@ -11,7 +11,7 @@ use fuzzyq_core::solver::{
     self, Buf, Device, Grid, Operator, Precision, Scheme, Solution, SolverConfig, Sweeps,
 };
 use fuzzyq_gpu::reference::{HostSweeps, Rounding};
-use fuzzyq_gpu::{Gpu, GpuError, GpuSweeps, LastStage};
+use fuzzyq_gpu::{Evaluation, Gpu, GpuError, GpuSweeps, LastStage};
 use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
 use fuzzyq_sim::model::EnvKind;
 
@@ -337,6 +337,63 @@ fn three_point_masses(shaped: bool) -> TrainConfig {
         p.reward = fuzzyq_sim::model::pointmass::RewardShape::Shaped;
     }
     c
+}
+
+#[test]
+fn policy_evaluation_through_every_split_gives_the_same_bits() {
+    let Some(g) = gpu() else { return };
+    // An evaluation sweep runs the first `k` stages of a full backup for every action, then a
+    // thread per core nests its own action's rows of the other blocks over the last of them
+    // (`k = 0`: every block over `V`). Every `k`, with batches of whole slabs and the
+    // smallest (below fixed blocks), and `V` in parts, against the reference, bit for bit.
+    for (c, expected) in [
+        (pointmass_small(), 2),
+        (three_point_masses(false), 3),
+        (khepera_small(), 1),
+    ] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let op = operator(&model, &grid, &config);
+        let plan = op.block_plan().unwrap();
+        assert!(plan.can_evaluate);
+        let n = op.n_cores();
+        let v = values(n, 7, -3.0, 5.0);
+        let policy: Vec<u32> = values::<f64>(n, 13, 0.0, op.joint().n_joint() as f64)
+            .into_iter()
+            .map(|x| x as u32)
+            .collect();
+        let mut hs = HostSweeps::new(&op, rounding(g)).unwrap();
+        hs.load(Buf(0), &v).unwrap();
+        hs.load_policy(&policy).unwrap();
+        hs.evaluate(Buf(0), Buf(1)).unwrap();
+        let want = bits(&hs.values(Buf(1)).unwrap());
+        let nb = plan.tables.len();
+        for k in 0..nb {
+            let split = g.clone().with_evaluation(Evaluation::Stages(k as u32));
+            for (gk, what) in [
+                (split.clone(), "default batches"),
+                (split.clone().with_batch_bytes(1), "the smallest batches"),
+                (split.with_part_bytes(1), "V in parts"),
+            ] {
+                let mut gs = GpuSweeps::new(&gk, &op).unwrap();
+                assert_eq!(gs.evaluation_stages(), k);
+                gs.load(Buf(0), &v).unwrap();
+                gs.load_policy(&policy).unwrap();
+                gs.evaluate(Buf(0), Buf(1)).unwrap();
+                let got = bits(&gs.values(Buf(1)).unwrap());
+                assert!(got == want, "{n} cores, {k} stages, {what}");
+            }
+        }
+        // The default: the split with the least estimated work.
+        let auto = GpuSweeps::new(g, &op).unwrap().evaluation_stages();
+        eprintln!("{n} cores in {nb} blocks: evaluation runs {auto} stage(s) first");
+        assert_eq!(auto, expected, "{n} cores");
+    }
+    assert_eq!(Evaluation::parse("nested"), Some(Evaluation::Stages(0)));
+    assert_eq!(Evaluation::parse("stages:2"), Some(Evaluation::Stages(2)));
+    assert_eq!(Evaluation::parse("auto"), Some(Evaluation::Auto));
+    assert_eq!(Evaluation::parse("stages"), None);
 }
 
 /// The batch levels of `op`'s passes under stage budgets from 1 byte to the default, each

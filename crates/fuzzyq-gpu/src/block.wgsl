@@ -34,7 +34,7 @@ struct Params {
     n_blocks: u32,
     // Elements of the buffers a generic pass covers (a part's cores).
     len: u32,
-    // The part's first slab (`evaluate.wgsl`).
+    // The part's first slab (policy evaluation, `kernels::evaluation_source`).
     part_c0: u32,
     // Per block (contraction order): (cores, actions, R, P).
     blocks: array<vec4<u32>, MAX_BLOCKS>,

@@ -29,6 +29,43 @@ pub struct Gpu {
     pub(crate) merged_stages: bool,
     /// Whether the stages before it have their block's rows compiled in.
     pub(crate) unrolled_stages: bool,
+    /// How policy evaluation splits the contraction.
+    pub(crate) evaluation: Evaluation,
+}
+
+/// How a policy-evaluation sweep splits the block contraction ([`Gpu::with_evaluation`], or
+/// `FUZZYQ_GPU_EVAL`: `auto`, `nested` or `stages:K`). A core's expected value under its
+/// action is the nested sum over its action's rows, block 0 innermost; the first stages of a
+/// full backup compute the inner sums for every action at once, shared by every core below
+/// each item. Every split computes the same sums in the same order, so the same bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Evaluation {
+    /// The split with the least work, estimated from each block's mean row length, a
+    /// multiply-add of a stage with its rows compiled in ([`Gpu::with_unrolled_stages`])
+    /// counted as a third of a nested one (the default). On the paper's cores, rows of 3.66
+    /// entries on average, with the rows compiled in: the paper's grid (four blocks) runs two
+    /// stages, half the multiply-adds of nested per core; three point masses (six blocks)
+    /// three, 16 times fewer with 3 forces per axis and 5 times fewer with 5.
+    Auto,
+    /// The first `stages` stages of a full backup for every action, in its batches, then a
+    /// thread per core nests its own action's rows of the other blocks over the output of the
+    /// last of them (`0`: every block per core over `V`, `nested`). Where that output is cut
+    /// into parts, or `stages` is not below the blocks, the largest split below it that
+    /// reads one buffer.
+    Stages(u32),
+}
+
+impl Evaluation {
+    /// `auto`, `nested` (`Stages(0)`) or `stages:K` (`None` for anything else).
+    #[must_use]
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.split_once(':') {
+            None if s == "auto" => Some(Evaluation::Auto),
+            None if s == "nested" => Some(Evaluation::Stages(0)),
+            Some(("stages", k)) => k.parse().ok().map(Evaluation::Stages),
+            _ => None,
+        }
+    }
 }
 
 /// How the fused last stage of a full backup takes a core's rows (its block actions)
@@ -231,6 +268,10 @@ impl Gpu {
                 .unwrap_or(LastStage::for_adapter(ctx.summary.software)),
             merged_stages: stages.as_deref() != Some("rows"),
             unrolled_stages: stages.map_or(ctx.summary.software, |v| v == "unrolled"),
+            evaluation: std::env::var("FUZZYQ_GPU_EVAL")
+                .ok()
+                .and_then(|v| Evaluation::parse(&v))
+                .unwrap_or(Evaluation::Auto),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
         })
@@ -353,6 +394,14 @@ impl Gpu {
     #[must_use]
     pub fn with_unrolled_stages(mut self, on: bool) -> Self {
         self.unrolled_stages = on;
+        self
+    }
+
+    /// This GPU with policy evaluation split as `evaluation` says (the default
+    /// [`Evaluation::Auto`], or `FUZZYQ_GPU_EVAL`). All give the same bits.
+    #[must_use]
+    pub fn with_evaluation(mut self, evaluation: Evaluation) -> Self {
+        self.evaluation = evaluation;
         self
     }
 

@@ -62,8 +62,8 @@ pub(crate) enum Entry {
     /// The fused last stage, `last1.wgsl` or `lastm.wgsl`, compiled per problem (not in
     /// [`Entry::ALL`]).
     Last,
-    /// `evaluate.wgsl`: compiled once ([`Kernels::evaluate`]) for a `V` in one part, else per
-    /// problem with its parts (not in [`Entry::ALL`]).
+    /// Policy evaluation, generated and compiled per problem ([`evaluation_source`]; not in
+    /// [`Entry::ALL`]).
     Evaluate,
 }
 
@@ -96,10 +96,9 @@ impl Entry {
 pub(crate) struct Kernels {
     pub layout: wgpu::BindGroupLayout,
     pipelines: Vec<wgpu::ComputePipeline>,
-    /// Group 1's layout for a `V` in one part, and policy evaluation over it (`evaluate.wgsl`
-    /// with [`crate::parts::ONE_PART`]): the same for every such problem.
+    /// Group 1's layout for a `V` in one part ([`crate::parts::ONE_PART`]): the same for
+    /// every such problem.
     pub one_part: wgpu::BindGroupLayout,
-    pub evaluate: wgpu::ComputePipeline,
     /// `diff.wgsl`, where the adapter has `f64`.
     pub diff: Option<(wgpu::BindGroupLayout, wgpu::ComputePipeline)>,
 }
@@ -228,21 +227,6 @@ impl Kernels {
             .map(|e| pipeline(device, &[&layout], &module, e.name()))
             .collect();
         let one_part = parts_layout(gpu, 1);
-        let source = [
-            include_str!("block.wgsl"),
-            crate::parts::ONE_PART,
-            include_str!("evaluate.wgsl"),
-        ]
-        .concat();
-        let evaluate = pipeline(
-            device,
-            &[&layout, &one_part],
-            &device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("evaluate.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            }),
-            "evaluate",
-        );
         let diff = gpu.summary.f64.then(|| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
                 label: Some("diff.wgsl"),
@@ -269,7 +253,6 @@ impl Kernels {
             layout,
             pipelines,
             one_part,
-            evaluate,
             diff,
         })
     }
@@ -281,6 +264,97 @@ impl Kernels {
             .expect("every entry");
         &self.pipelines[i]
     }
+}
+
+/// Policy evaluation's kernel (`evaluate`) for a sweep over `blocks` (`[cores, actions, R, P]`
+/// in contraction order) that runs their first `stages` stages of a full backup first: a
+/// thread per core sums its action's rows of blocks `stages..`, nested as the stages nest
+/// them (block `stages` innermost, each level a chain of `fma`s from 0 over its row's entries
+/// in order, the depth written out), then `finish`es. With no stages the innermost sums read
+/// `V` through its parts (`v_at`, group 1, `parts.rs`); else the output of the last stage run
+/// (`src`), which holds the sums over the blocks before for every action of the core's item
+/// `q` of that stage: read at the column of the innermost block, the later blocks' columns
+/// `off` and the product of the core's action's earlier blocks' actions `pp`. The dispatch
+/// covers `prm.count` cores from `prm.out_lo` in its part of the per-core buffers, from
+/// `prm.lo` counted from the first core below the source's first item (0 and the part's cores
+/// without stages: `c_0` then comes from the part's first slab).
+pub(crate) fn evaluation_source(blocks: &[[u32; 4]], stages: usize) -> String {
+    let (nb, first) = (blocks.len(), stages);
+    let mut s = String::from(
+        "@compute @workgroup_size(64)
+fn evaluate(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>,
+            @builtin(num_workgroups) nwg: vec3<u32>) {
+    let t = linear(gid, wid, nwg);
+    if t >= prm.count {
+        return;
+    }
+    let core = prm.out_lo + t;
+    let pol = aux[core];
+    var rest = prm.lo + t;
+",
+    );
+    // Each block's core (the last fastest) and its action's row.
+    for b in (first..nb).rev() {
+        let [n, a, r, p] = blocks[b];
+        if b == 0 {
+            s += &format!("    let c0 = prm.part_c0 + core / {r}u;\n");
+        } else {
+            s += &format!("    let c{b} = rest % {n}u;\n    rest = rest / {n}u;\n");
+        }
+        s += &format!(
+            "    let row{b} = prm.rows[{b}u].x + c{b} * {a}u + (pol / {p}u) % {a}u;
+    let s{b} = row_ptr[row{b}];
+    let n{b} = row_ptr[row{b} + 1u];
+"
+        );
+    }
+    // The innermost read at the outer levels' offset.
+    let off = if first + 1 < nb {
+        format!("o{}", first + 1)
+    } else {
+        "0u".to_owned()
+    };
+    let at = if first == 0 {
+        format!("v_at(col[e], {off})")
+    } else {
+        let [n, _, r, p] = blocks[first];
+        s += &format!("    let q = rest;\n    let pp = pol % {p}u;\n");
+        format!("src[((q * {n}u + col[e]) * {r}u + {off}) * {p}u + pp]")
+    };
+    let mut pad = String::from("    ");
+    for b in (first + 1..nb).rev() {
+        let outer = if b + 1 < nb {
+            format!("o{} + ", b + 1)
+        } else {
+            String::new()
+        };
+        let r = blocks[b][2];
+        s += &format!(
+            "{pad}var a{b} = 0.0;
+{pad}for (var e{b} = s{b}; e{b} < n{b}; e{b}++) {{
+{pad}    let o{b} = {outer}col[e{b}] * {r}u;
+"
+        );
+        pad += "    ";
+    }
+    s += &format!(
+        "{pad}var a{first} = 0.0;
+{pad}for (var e = s{first}; e < n{first}; e++) {{
+{pad}    a{first} = fma(weight[e], {at}, a{first});
+{pad}}}
+"
+    );
+    for b in first + 1..nb {
+        pad.truncate(pad.len() - 4);
+        s += &format!(
+            "{pad}    a{b} = fma(weight[e{b}], a{}, a{b});
+{pad}}}
+",
+            b - 1
+        );
+    }
+    s += &format!("    dst[core] = finish(core, a{});\n}}\n", nb - 1);
+    s
 }
 
 /// The text of a kernel of `template` ([`specialized`]): the constants `consts`, then
@@ -469,4 +543,47 @@ pub(crate) fn params_bytes(params: &[Params]) -> Vec<u8> {
         out[at..at + size_of::<Params>()].copy_from_slice(bytemuck::bytes_of(p));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn policy_evaluation_is_valid_wgsl_for_every_split() {
+        // Three blocks of 4 cores and 2 actions: nested over `V` (one part and several), and
+        // from the first and second stages' outputs.
+        let blocks = [[4, 2, 16, 1], [4, 2, 4, 2], [4, 2, 1, 4]];
+        let parts = crate::parts::Parts::new(4, 16, 128, 128, 100).unwrap();
+        assert_eq!(parts.count(), 2);
+        for (stages, reader) in [
+            (0, Some(crate::parts::ONE_PART.to_owned())),
+            (0, Some(parts.reader())),
+            (1, None),
+            (2, None),
+        ] {
+            let text = source_text(
+                &evaluation_source(&blocks, stages),
+                &[],
+                &[],
+                reader.as_deref(),
+            );
+            check_wgsl(&text).unwrap_or_else(|e| panic!("{stages} stages: {e}\n{text}"));
+        }
+        // Two levels nested over the second stage's output: its item, column, the outer
+        // level's offset and the first two blocks' actions.
+        let text = evaluation_source(&blocks, 1);
+        assert!(
+            text.contains("a1 = fma(weight[e], src[((q * 4u + col[e]) * 4u + o2) * 2u + pp], a1);"),
+            "{text}"
+        );
+        assert!(text.contains("a2 = fma(weight[e2], a1, a2);"), "{text}");
+        assert!(!text.contains("c0"), "{text}");
+        let text = evaluation_source(&blocks, 0);
+        assert!(
+            text.contains("let c0 = prm.part_c0 + core / 16u;"),
+            "{text}"
+        );
+        assert!(text.contains("v_at(col[e], o1)"), "{text}");
+    }
 }

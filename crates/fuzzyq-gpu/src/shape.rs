@@ -5,6 +5,7 @@
 
 use crate::batches::{Batches, Tree};
 use crate::error::GpuError;
+use crate::gpu::Evaluation;
 use crate::kernels::{MAX_BLOCKS, Params};
 use crate::parts::Parts;
 
@@ -17,6 +18,8 @@ pub(crate) struct Shape {
     pub(crate) blocks: Vec<[u32; 4]>,
     /// Per block: the index of its first row start in the joint `row_ptr` buffer.
     pub(crate) row_base: Vec<u32>,
+    /// Per block: its rows' entries, every core and action.
+    pub(crate) entries: Vec<u64>,
     /// Joint actions.
     pub(crate) n_joint: u32,
     /// Product actions (`P` of the last block times its actions).
@@ -66,6 +69,7 @@ impl Shape {
             stage_parts: Vec::new(),
             blocks,
             row_base,
+            entries: plan.tables.iter().map(|t| t.col.len() as u64).collect(),
             n_joint: plan.n_joint as u32,
             n_product,
             fused,
@@ -163,6 +167,25 @@ impl Shape {
         Parts::new(bytes / 4 / unit, unit, max_binding, max_binding, u64::MAX).map(Some)
     }
 
+    /// The stages a policy-evaluation sweep runs for every action before a thread per core
+    /// nests its own action's rows of the other blocks ([`Evaluation`]): among those whose
+    /// last output is one buffer (none reads `V`), the least work ([`evaluation_work`], with
+    /// the stages whose kernels have their rows compiled in: `compiled_in`), or the most up
+    /// to the number asked for.
+    pub(crate) fn evaluation_stages(&self, evaluation: Evaluation, compiled_in: &[bool]) -> usize {
+        let whole = |k: usize| k == 0 || self.stage_parts.get(k - 1).is_some_and(Option::is_none);
+        let mut splits = (0..self.n_blocks()).filter(|&k| whole(k));
+        let fmas =
+            |k: usize| evaluation_multiply_adds(&self.blocks, &self.entries, self.n as f64, k);
+        let work = |k: usize| evaluation_work(fmas(k), compiled_in);
+        match evaluation {
+            Evaluation::Stages(k) => splits.rfind(|&s| s <= k as usize).unwrap_or(0),
+            Evaluation::Auto => splits
+                .min_by(|&a, &b| work(a).total_cmp(&work(b)))
+                .unwrap_or(0),
+        }
+    }
+
     /// Bytes of the buffer of stage `b`'s output for one batch.
     pub(crate) fn stage_bytes(&self, b: usize) -> u64 {
         self.tree.stage_bytes(b, &self.batches)
@@ -201,5 +224,122 @@ impl Shape {
             rows,
             ..Params::default()
         }
+    }
+}
+
+/// Multiply-adds of a policy-evaluation sweep over `n` cores of `blocks` (`[cores, actions,
+/// R, P]` in contraction order, with `entries` row entries each) that runs the first `stages`
+/// stages of a full backup for every action (each block's row entries times the elements each
+/// feeds), then per core the sums over its action's rows of the other blocks, nested (the
+/// products of their mean row lengths from the innermost block out, summed): `(each stage's,
+/// nested)`.
+pub(crate) fn evaluation_multiply_adds(
+    blocks: &[[u32; 4]],
+    entries: &[u64],
+    n: f64,
+    stages: usize,
+) -> (Vec<f64>, f64) {
+    let mut staged = Vec::new();
+    // Items of the stage before `b`.
+    let mut items = 1.0;
+    for (&[cores, _, r, p], &e) in blocks.iter().zip(entries).take(stages) {
+        staged.push(items * f64::from(r) * f64::from(p) * e as f64);
+        items *= f64::from(cores);
+    }
+    let (mut nested, mut product) = (0.0, 1.0);
+    for (&[cores, a, _, _], &e) in blocks.iter().zip(entries).skip(stages).rev() {
+        product *= e as f64 / (f64::from(cores) * f64::from(a));
+        nested += n * product;
+    }
+    (staged, nested)
+}
+
+/// What a multiply-add of a stage whose block rows are compiled into its kernel costs, in
+/// nested ones: a nested multiply-add loads its row entry's weight and column and gathers its
+/// value, as a stage's does where it reads its rows from the tables, but the compiled-in ones
+/// hold the weights and columns as constants. On lavapipe a nested multiply-add takes about 12
+/// times as long as a full backup's (rows compiled in); 1/4 to 1/2 pick the fastest split of
+/// each problem measured there (the paper's grid, reduced grids of two and three point masses),
+/// so 1/3. Khepera's blocks, too large to compile in, run nested (2.2 entries per row: 2.6e8
+/// multiply-adds nested, 4.1e8 from one stage, which took 11% longer).
+const COMPILED_IN_COST: f64 = 1.0 / 3.0;
+
+/// The work of a split whose multiply-adds are `(each stage's, nested)`
+/// ([`evaluation_multiply_adds`]), in nested multiply-adds: those of the stages with their rows
+/// compiled in (`compiled_in[b]`) count [`COMPILED_IN_COST`] each.
+pub(crate) fn evaluation_work((staged, nested): (Vec<f64>, f64), compiled_in: &[bool]) -> f64 {
+    let stage = |(b, f): (usize, &f64)| {
+        if compiled_in.get(b).copied().unwrap_or(false) {
+            f * COMPILED_IN_COST
+        } else {
+            *f
+        }
+    };
+    staged.iter().enumerate().map(stage).sum::<f64>() + nested
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `agents` point masses (two blocks each) of `n` cores and `a` actions per block, rows of
+    /// `per_row` entries: blocks, entries and cores.
+    fn masses(agents: u32, n: u32, a: u32, per_row: f64) -> (Vec<[u32; 4]>, Vec<u64>, f64) {
+        let nb = 2 * agents;
+        let blocks: Vec<[u32; 4]> = (0..nb)
+            .map(|b| [n, a, n.pow(nb - 1 - b), a.pow(b)])
+            .collect();
+        let entries = vec![(f64::from(n * a) * per_row) as u64; nb as usize];
+        (blocks, entries, f64::from(n).powi(nb as i32))
+    }
+
+    /// The split with the least work, every stage compiled in or none, and how many times
+    /// fewer multiply-adds it takes than nested per core.
+    fn least(m: &(Vec<[u32; 4]>, Vec<u64>, f64), compiled: bool) -> (usize, f64) {
+        let fmas = |k| evaluation_multiply_adds(&m.0, &m.1, m.2, k);
+        let work = |k| evaluation_work(fmas(k), &vec![compiled; m.0.len()]);
+        let sum = |k| {
+            let (s, n) = fmas(k);
+            s.iter().sum::<f64>() + n
+        };
+        let best = (0..m.0.len())
+            .min_by(|&a, &b| work(a).total_cmp(&work(b)))
+            .unwrap();
+        (best, sum(0) / sum(best))
+    }
+
+    #[test]
+    fn evaluation_runs_the_stages_that_save_work() {
+        // Nested per core over V: every block's mean row length multiplied out, summed.
+        let one = masses(1, 4, 2, 2.0);
+        let fmas = |k| evaluation_multiply_adds(&one.0, &one.1, one.2, k);
+        assert_eq!(fmas(0), (vec![], 16.0 * (4.0 + 2.0)));
+        // One stage: block 0's 16 entries feed the 4 cores of block 1, then 2 per core.
+        assert_eq!(fmas(1), (vec![64.0], 16.0 * 2.0));
+        assert_eq!(evaluation_work(fmas(1), &[false, false]), 64.0 + 32.0);
+        assert_eq!(evaluation_work(fmas(1), &[true, true]), 64.0 / 3.0 + 32.0);
+        // On the paper's cores (rows of 3.66 entries on average), as measured on lavapipe for
+        // the paper's grid: two stages, 2.0 times fewer multiply-adds than nested; one where
+        // the stages read their rows from the tables.
+        let paper = masses(2, 45, 5, 3.66);
+        let (k, gain) = least(&paper, true);
+        assert_eq!(k, 2);
+        assert!((1.9..2.1).contains(&gain), "{gain}");
+        assert_eq!(least(&paper, false).0, 1);
+        // Three masses: three stages, with 3 forces per axis 16 times fewer multiply-adds,
+        // with 5 (more actions per element of the later stages) 5 times fewer.
+        for (a, gains) in [(3, 15.0..17.0), (5, 5.0..5.5)] {
+            let (k, gain) = least(&masses(3, 45, a, 3.66), true);
+            assert_eq!(k, 3, "{a}");
+            assert!(gains.contains(&gain), "{a}: {gain}");
+        }
+        // Khepera's blocks (6,137 cores, 4 actions, 2.19 entries per row), too large to
+        // compile in: nested.
+        let khepera = (
+            vec![[6137, 4, 6137, 1], [6137, 4, 1, 4]],
+            vec![53718, 53718],
+            6137.0 * 6137.0,
+        );
+        assert_eq!(least(&khepera, false).0, 0);
     }
 }

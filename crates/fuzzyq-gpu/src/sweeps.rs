@@ -96,9 +96,11 @@ pub struct GpuSweeps {
     /// The fused last stage compiled for this problem (`last1.wgsl` or `lastm.wgsl`), where
     /// it applies.
     last: Option<Last>,
-    /// Policy evaluation compiled with the parts of `V` (`evaluate.wgsl`), where the run
-    /// can evaluate and `V` takes several parts (else [`Kernels::evaluate`]).
+    /// Policy evaluation compiled for this problem ([`kernels::evaluation_source`]), where
+    /// the run can evaluate.
     evaluate: Option<wgpu::ComputePipeline>,
+    /// The stages policy evaluation runs for every action first ([`Shape::evaluation_stages`]).
+    eval_stages: usize,
     shape: Shape,
     table: [wgpu::Buffer; 3],
     /// The rewards per core, a buffer per part (or the reward table, one buffer).
@@ -338,6 +340,7 @@ struct Compiled {
     stages: Vec<Stage>,
     last: Option<Last>,
     evaluate: Option<wgpu::ComputePipeline>,
+    eval_stages: usize,
 }
 
 /// Stage `b`'s kernel compiled with the problem's sizes as constants (`stagec.wgsl`, or
@@ -449,8 +452,8 @@ fn compile_stage(
 /// stage the passes run as a stage (the first, where several blocks contract, reading `V`'s
 /// parts through group 1, `parts`), the fused last stage (with the cores per workgroup) where
 /// the joint actions are the product's and the reward does not depend on the action, and
-/// policy evaluation where the run can evaluate over a `V` in several parts. `sg`: the
-/// subgroup size the last stage reduces with, if any.
+/// policy evaluation where the run can evaluate, reading a stage's output or a `V` in several
+/// parts. `sg`: the subgroup size the last stage reduces with, if any.
 fn compile(
     gpu: &Gpu,
     k: &Kernels,
@@ -489,17 +492,20 @@ fn compile(
     } else {
         None
     };
-    // One part: the kernel compiled once per GPU.
-    let evaluate = if shape.can_evaluate && shape.parts.count() > 1 {
-        let t = (include_str!("evaluate.wgsl"), "evaluate");
+    let compiled_in: Vec<bool> = stages.iter().map(|s| s.per_thread.is_none()).collect();
+    let eval_stages = shape.evaluation_stages(gpu.evaluation, &compiled_in);
+    let evaluate = if shape.can_evaluate {
         Some(kernels::specialized(
             &gpu.inner,
             k,
-            t,
+            (
+                &kernels::evaluation_source(&shape.blocks, eval_stages),
+                "evaluate",
+            ),
             &[],
             &[],
             false,
-            Some(parts),
+            (eval_stages == 0).then_some(parts),
         )?)
     } else {
         None
@@ -508,6 +514,7 @@ fn compile(
         stages,
         last,
         evaluate,
+        eval_stages,
     })
 }
 
@@ -651,6 +658,7 @@ impl GpuSweeps {
             stage_kernels: compiled.stages,
             last: compiled.last,
             evaluate: compiled.evaluate,
+            eval_stages: compiled.eval_stages,
             table: [
                 with_data(ctx, "row_ptr", &arrays.ptr),
                 with_data(ctx, "col", &arrays.col),
@@ -728,6 +736,14 @@ impl GpuSweeps {
     #[must_use]
     pub fn last_stage(&self) -> Option<&'static str> {
         self.last.as_ref().map(|l| l.name)
+    }
+
+    /// The stages of a full backup a policy-evaluation sweep runs for every action before a
+    /// thread per core nests its own action's rows of the other blocks (0: every block nested
+    /// over `V`; [`Gpu::with_evaluation`]).
+    #[must_use]
+    pub fn evaluation_stages(&self) -> usize {
+        self.eval_stages
     }
 
     /// Whether the last stage reduces a core's lanes by subgroup operations
@@ -869,7 +885,10 @@ impl GpuSweeps {
         match d.entry {
             Entry::StageConst => &self.stage_kernels[d.params.b as usize].pipeline,
             Entry::Last => &self.last.as_ref().expect("compiled where used").pipeline,
-            Entry::Evaluate => self.evaluate.as_ref().unwrap_or(&self.k.evaluate),
+            Entry::Evaluate => self
+                .evaluate
+                .as_ref()
+                .expect("compiled where it can evaluate"),
             e => self.k.pipeline(e),
         }
     }
@@ -960,6 +979,106 @@ impl GpuSweeps {
         }
     }
 
+    /// The dispatch of stage `b` (one before the last) over `items` of its items from `lo`
+    /// (counted from the first child of the source's first item), the first stage reading
+    /// per-core buffer `input`.
+    fn stage_dispatch(&self, b: usize, lo: u64, items: u64, input: PerCore) -> Dispatch {
+        let s = &self.shape;
+        let count = items * s.tree.item_len(b);
+        let params = Params {
+            b: b as u32,
+            lo: index(lo),
+            count: index(count),
+            ..self.base()
+        };
+        // The first stage reads `V` through its parts; a stage output in parts is read and
+        // written through group 1.
+        let parts_in = b > 0 && s.stage_parts[b - 1].is_some();
+        let parts_out = s.stage_parts[b].is_some();
+        let v = (b == 0).then_some(input);
+        let group1 = if parts_in || parts_out {
+            Some(Group1::Stage(b, v))
+        } else {
+            v.map(Group1::V)
+        };
+        let src = if b == 0 || parts_in {
+            Slot::DummyRead
+        } else {
+            Slot::Stage(b - 1)
+        };
+        let dst = if parts_out {
+            Slot::DummyWrite
+        } else {
+            Slot::Stage(b)
+        };
+        let slots = [
+            src,
+            dst,
+            Slot::DummyWrite,
+            Slot::DummyRead,
+            Slot::Part(PerCore::Rewards, 0),
+        ];
+        Dispatch {
+            entry: Entry::StageConst,
+            params,
+            slots,
+            group1,
+            groups: self.stage_grid(b, lo, count),
+        }
+    }
+
+    /// The dispatches of a policy-evaluation sweep from `input` into `out` that runs the
+    /// first `eval_stages` stages of a full backup (at least one), batch by batch, and after
+    /// each batch's stages a thread per core of the batch through the other blocks
+    /// (`kernels::evaluation_source`), reading the last of them.
+    fn evaluation_pass(&self, input: PerCore, out: PerCore) -> Vec<Dispatch> {
+        let s = &self.shape;
+        let (k, last) = (self.eval_stages, s.n_blocks() - 1);
+        // The first item stage `k - 1`'s buffer holds, and its cores below one item.
+        let mut held = 0;
+        let below = u64::from(s.blocks[k - 1][2]);
+        let mut ds = Vec::new();
+        for step in s.tree.steps(&s.batches) {
+            let (b, lo, items) = (step.stage, step.lo, step.items);
+            if b < k {
+                let rel = lo - step.src_lo * u64::from(s.blocks[b][0]);
+                ds.push(self.stage_dispatch(b, rel, items, input));
+                if b + 1 == k {
+                    held = lo;
+                }
+                continue;
+            }
+            if b < last {
+                continue;
+            }
+            // The batch's cores: within one part.
+            let part = s.parts.of_core(lo);
+            let base = Params {
+                lo: index(lo - held * below),
+                ..self.base()
+            };
+            let params = Params {
+                count: index(items),
+                ..self.in_part(base, part, lo - s.parts.cores(part).start)
+            };
+            let at = |b: PerCore| Slot::Part(b, part as u32);
+            ds.push(Dispatch {
+                entry: Entry::Evaluate,
+                params,
+                slots: [
+                    Slot::Stage(k - 1),
+                    at(out),
+                    at(PerCore::Policy),
+                    Slot::DummyRead,
+                    at(PerCore::Rewards),
+                ],
+                group1: None,
+                groups: kernels::grid(items),
+            });
+        }
+        ds
+    }
+
     /// The dispatches of one full pass of the last stage reducing as `mode` says, reading
     /// `input` and writing `out` (values, if any) and the policy (actions), batch by batch
     /// ([`Tree::steps`](crate::batches::Tree::steps)).
@@ -995,6 +1114,10 @@ impl GpuSweeps {
             } else {
                 lo - src_lo * u64::from(s.blocks[b][0])
             };
+            if b < last {
+                ds.push(self.stage_dispatch(b, lo, items, input));
+                continue;
+            }
             let p = Params {
                 b: b as u32,
                 lo: index(lo),
@@ -1002,51 +1125,9 @@ impl GpuSweeps {
             };
             let src = match b {
                 0 => Slot::Part(input, 0),
-                b if join && b == last => Slot::Stage(b - 2),
+                b if join => Slot::Stage(b - 2),
                 b => Slot::Stage(b - 1),
             };
-            if b < last {
-                let count = items * s.tree.item_len(b);
-                let p = Params {
-                    count: index(count),
-                    ..p
-                };
-                // The first stage reads `V` through its parts; a stage output in parts is
-                // read and written through group 1.
-                let parts_in = b > 0 && s.stage_parts[b - 1].is_some();
-                let parts_out = s.stage_parts[b].is_some();
-                let v = (b == 0).then_some(input);
-                let group1 = if parts_in || parts_out {
-                    Some(Group1::Stage(b, v))
-                } else {
-                    v.map(Group1::V)
-                };
-                let src = if b == 0 || parts_in {
-                    Slot::DummyRead
-                } else {
-                    src
-                };
-                let dst = if parts_out {
-                    Slot::DummyWrite
-                } else {
-                    Slot::Stage(b)
-                };
-                let slots = [
-                    src,
-                    dst,
-                    Slot::DummyWrite,
-                    Slot::DummyRead,
-                    Slot::Part(PerCore::Rewards, 0),
-                ];
-                ds.push(Dispatch {
-                    entry: Entry::StageConst,
-                    params: p,
-                    slots,
-                    group1,
-                    groups: self.stage_grid(b, lo, count),
-                });
-                continue;
-            }
             // The batch's cores: within one part.
             let first = step.lo;
             let k = s.parts.of_core(first);
@@ -1127,6 +1208,10 @@ impl GpuSweeps {
         let ds: Vec<Dispatch> = (0..self.shape.parts.count())
             .map(|k| {
                 let params = self.in_part(base, k, 0);
+                let params = Params {
+                    count: params.len,
+                    ..params
+                };
                 Dispatch {
                     entry,
                     params,
@@ -1287,6 +1372,10 @@ impl Sweeps<f32> for GpuSweeps {
             return Err(fuzzyq_core::solver::SolveError::PolicyEvaluation.into());
         }
         let out = Self::v_of(out);
+        if self.eval_stages > 0 {
+            let ds = self.evaluation_pass(Self::v_of(v), out);
+            return self.run(&ds);
+        }
         let slots = |k| {
             [
                 Slot::DummyRead,

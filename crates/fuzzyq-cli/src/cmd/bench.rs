@@ -386,6 +386,9 @@ struct GpuReport {
     /// `FUZZYQ_GPU_STAGES`).
     stage_kernels: Vec<&'static str>,
     evaluation_seconds: Vec<f64>,
+    /// The stages of a full backup an evaluation sweep runs for every action before a thread
+    /// per core nests the other blocks (`FUZZYQ_GPU_EVAL`).
+    evaluation_stages: usize,
     /// Seconds reading `V` and the greedy actions back to the host (a run's last step).
     readback_seconds: f64,
     backup_seconds: Vec<f64>,
@@ -394,22 +397,33 @@ struct GpuReport {
     fraction_of_peak: Option<f64>,
 }
 
-/// One more full backup from `v` into `out` with every dispatch timed on its own
-/// (`FUZZYQ_GPU_PROFILE`), printed per kernel.
-fn profile_backup(
+/// One more full backup from `v` into `out`, and where `evaluate` one more evaluation sweep
+/// from `out` into `v` (under the greedy actions the timed sweeps left), with every dispatch
+/// timed on its own (`FUZZYQ_GPU_PROFILE`), printed per kernel.
+fn profile_passes(
     sweeps: &mut fuzzyq_gpu::GpuSweeps,
     v: fuzzyq_core::solver::Buf,
     out: fuzzyq_core::solver::Buf,
+    evaluate: bool,
 ) -> anyhow::Result<()> {
     use fuzzyq_core::solver::Sweeps;
+    let print = |sweeps: &fuzzyq_gpu::GpuSweeps, pass: &str| {
+        for (kernel, seconds, n) in sweeps.profile() {
+            println!(
+                "profile    {pass}{kernel}: {:.3} ms in {n} dispatches",
+                1e3 * seconds
+            );
+        }
+    };
     sweeps.set_profiling(true);
     sweeps.backup(v, out)?;
-    for (kernel, seconds, n) in sweeps.profile() {
-        println!(
-            "profile    {kernel}: {:.3} ms in {n} dispatches",
-            1e3 * seconds
-        );
+    print(sweeps, "");
+    if evaluate {
+        sweeps.set_profiling(true);
+        sweeps.evaluate(out, v)?;
+        print(sweeps, "evaluation: ");
     }
+    sweeps.set_profiling(false);
     Ok(())
 }
 
@@ -479,10 +493,18 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             sweeps.evaluate(out, v)?;
             evaluation.push(t.elapsed().as_secs_f64());
         }
+        let nb = op.block_plan().map_or(0, |p| p.tables.len());
         println!(
-            "evaluate   {:.4} s median of {} evaluation sweeps{}",
+            "evaluate   {:.4} s median of {} evaluation sweeps ({}){}",
             median(&evaluation),
             evaluation.len(),
+            match sweeps.evaluation_stages() {
+                0 => "every block nested per core".to_string(),
+                k => format!(
+                    "{k} stage(s) for every action, then {} block(s) per core",
+                    nb - k
+                ),
+            },
             if sweeps.uses_subgroups() {
                 "; the last stage reduces by subgroup shuffles"
             } else {
@@ -497,7 +519,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     let readback_seconds = t.elapsed().as_secs_f64();
     println!("read back  {readback_seconds:.4} s for V and the greedy actions");
     if std::env::var("FUZZYQ_GPU_PROFILE").is_ok_and(|v| !v.is_empty() && v != "0") {
-        profile_backup(&mut sweeps, v, out)?;
+        profile_passes(&mut sweeps, v, out, !evaluation.is_empty())?;
     }
     println!(
         "problem    {}: {cores} cores x {joint} joint actions{}; {}{}{}; {:.3} GB on the GPU; \
@@ -549,6 +571,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             last_stage: sweeps.last_stage(),
             stage_kernels: sweeps.stage_kernels(),
             evaluation_seconds: evaluation,
+            evaluation_stages: sweeps.evaluation_stages(),
             readback_seconds,
             backup_seconds: times,
             median_backup_seconds: median_seconds,
