@@ -414,7 +414,10 @@ pub(crate) fn specialized(
     let _ = subgroups;
     let source = source_text(template, consts, replace, parts.map(|p| p.1));
     let device = &gpu.device;
-    let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    // Error scopes are the calling thread's, and kernels compile on threads of their own
+    // (`sweeps.rs`): both kinds are caught here.
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(entry),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -422,7 +425,8 @@ pub(crate) fn specialized(
     let layouts: Vec<&wgpu::BindGroupLayout> =
         [&k.layout].into_iter().chain(parts.map(|p| p.0)).collect();
     let p = pipeline(device, &layouts, &module, entry);
-    if let Some(e) = pollster::block_on(scope.pop()) {
+    let memory = pollster::block_on(memory.pop());
+    if let Some(e) = pollster::block_on(validation.pop()).or(memory) {
         return Err(GpuError::Failed(format!(
             "the kernel {entry} did not compile: {e}"
         )));
