@@ -20,6 +20,16 @@ pub enum GpuError {
         /// The adapters found.
         found: String,
     },
+    /// A `FUZZYQ_GPU_*` environment variable holds a value its setting does not take.
+    #[error("{name}={value} is not a setting of the GPU path: it takes {expected}")]
+    Setting {
+        /// The variable.
+        name: &'static str,
+        /// Its value.
+        value: String,
+        /// What it takes, in words.
+        expected: &'static str,
+    },
     /// The adapter refused the device the solver asks for.
     #[error("the GPU adapter {adapter} refused a device: {}", one_line(why))]
     Device {

@@ -203,6 +203,8 @@ impl Gpu {
     /// its name, `WGPU_BACKEND` the API), compiles the generic kernels and runs the start-up
     /// probes (is `fma` fused; do subgroup shuffles reduce as the last stage needs).
     pub fn new() -> Result<Self, GpuError> {
+        // Read before the adapter opens, so that a mistyped setting fails at once.
+        let settings = Settings::from_env()?;
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = wgpu::Backends::from_env()
             .unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::METAL | wgpu::Backends::DX12);
@@ -252,26 +254,21 @@ impl Gpu {
             Some(s) if crate::probe::subgroups_work(&ctx, &kernels, s)? => Some(s),
             _ => None,
         };
-        // The stages before the last: `rows`, `merged` or `unrolled` (the rows compiled in:
-        // the default on a software adapter, as measured on lavapipe).
-        let stages = std::env::var("FUZZYQ_GPU_STAGES").ok();
+        // The stages before the last: merged, and on a software adapter with their rows
+        // compiled in (as measured on lavapipe), unless a setting says otherwise.
+        let software = ctx.summary.software;
+        let (merged_stages, unrolled_stages) = settings.stages.unwrap_or((true, software));
         Ok(Self {
             max_binding: ctx.summary.max_binding,
             memory: ctx.summary.memory,
-            batch_bytes: default_batch_bytes(),
-            part_bytes: env_kib("FUZZYQ_GPU_PART_KB").unwrap_or(u64::MAX),
+            batch_bytes: settings.batch_kib.map_or(256 << 20, |k| k << 10),
+            part_bytes: settings.part_kib.map_or(u64::MAX, |k| k << 10),
             read_bytes: 256 << 20,
-            subgroups: std::env::var("FUZZYQ_GPU_SUBGROUPS").map_or(true, |v| v != "0"),
-            last: std::env::var("FUZZYQ_GPU_LAST")
-                .ok()
-                .and_then(|v| LastStage::parse(&v))
-                .unwrap_or(LastStage::for_adapter(ctx.summary.software)),
-            merged_stages: stages.as_deref() != Some("rows"),
-            unrolled_stages: stages.map_or(ctx.summary.software, |v| v == "unrolled"),
-            evaluation: std::env::var("FUZZYQ_GPU_EVAL")
-                .ok()
-                .and_then(|v| Evaluation::parse(&v))
-                .unwrap_or(Evaluation::Auto),
+            subgroups: settings.subgroups.unwrap_or(true),
+            last: settings.last.unwrap_or(LastStage::for_adapter(software)),
+            merged_stages,
+            unrolled_stages,
+            evaluation: settings.evaluation.unwrap_or(Evaluation::Auto),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
         })
@@ -442,19 +439,88 @@ impl Gpu {
     }
 }
 
-/// 256 MiB, or `FUZZYQ_GPU_BATCH_MB` mebibytes.
-fn default_batch_bytes() -> u64 {
-    env_kib("FUZZYQ_GPU_BATCH_MB").map_or(256 << 20, |k| k << 10)
+/// The kernels and sizes a process's environment chooses (`FUZZYQ_GPU_*`), each `None` where
+/// its variable is unset or empty.
+struct Settings {
+    /// `FUZZYQ_GPU_STAGES`: `rows`, `merged` or `unrolled`, as (merged, rows compiled in).
+    stages: Option<(bool, bool)>,
+    /// `FUZZYQ_GPU_LAST` ([`LastStage::parse`]).
+    last: Option<LastStage>,
+    /// `FUZZYQ_GPU_EVAL` ([`Evaluation::parse`]).
+    evaluation: Option<Evaluation>,
+    /// `FUZZYQ_GPU_SUBGROUPS`: `1` or `0`.
+    subgroups: Option<bool>,
+    /// `FUZZYQ_GPU_BATCH_MB` and `FUZZYQ_GPU_PART_KB`, in kibibytes.
+    batch_kib: Option<u64>,
+    part_kib: Option<u64>,
 }
 
-/// The positive whole number in environment variable `name`, times 1,024 (`None` where it is
-/// unset or not one).
-fn env_kib(name: &str) -> Option<u64> {
-    std::env::var(name)
-        .ok()
-        .and_then(|s| s.parse::<u64>().ok())
-        .filter(|&m| m > 0)
-        .and_then(|m| m.checked_mul(1 << 10))
+impl Settings {
+    /// The settings of the environment; a variable set to anything its setting does not
+    /// take is refused ([`GpuError::Setting`]) rather than ignored, so that a mistyped
+    /// kernel name is not silently timed as the default.
+    fn from_env() -> Result<Self, GpuError> {
+        let count = |s: &str| s.parse::<u64>().ok().filter(|&n| n > 0);
+        Ok(Self {
+            stages: setting(
+                "FUZZYQ_GPU_STAGES",
+                "rows, merged or unrolled",
+                |s| match s {
+                    "rows" => Some((false, false)),
+                    "merged" => Some((true, false)),
+                    "unrolled" => Some((true, true)),
+                    _ => None,
+                },
+            )?,
+            last: setting(
+                "FUZZYQ_GPU_LAST",
+                "rows, merged, merged:CORES, tile, tile:THREADS (32 to 256, a power of two), \
+                 unrolled or joined",
+                LastStage::parse,
+            )?,
+            evaluation: setting(
+                "FUZZYQ_GPU_EVAL",
+                "auto, nested or stages:K",
+                Evaluation::parse,
+            )?,
+            subgroups: setting("FUZZYQ_GPU_SUBGROUPS", "1 or 0", |s| match s {
+                "1" => Some(true),
+                "0" => Some(false),
+                _ => None,
+            })?,
+            batch_kib: setting(
+                "FUZZYQ_GPU_BATCH_MB",
+                "a positive whole number of MiB",
+                |s| count(s).and_then(|m| m.checked_mul(1 << 10)),
+            )?,
+            part_kib: setting(
+                "FUZZYQ_GPU_PART_KB",
+                "a positive whole number of KiB",
+                count,
+            )?,
+        })
+    }
+}
+
+/// The setting in environment variable `name` (`None` where it is unset or empty), or
+/// [`GpuError::Setting`] where `parse` does not take its value (`expected`: what it takes).
+fn setting<T>(
+    name: &'static str,
+    expected: &'static str,
+    parse: impl Fn(&str) -> Option<T>,
+) -> Result<Option<T>, GpuError> {
+    let Some(value) = std::env::var_os(name).filter(|v| !v.is_empty()) else {
+        return Ok(None);
+    };
+    let value = value.to_string_lossy().into_owned();
+    match parse(&value) {
+        Some(t) => Ok(Some(t)),
+        None => Err(GpuError::Setting {
+            name,
+            value,
+            expected,
+        }),
+    }
 }
 
 /// Chains of `peak.wgsl` per thread.

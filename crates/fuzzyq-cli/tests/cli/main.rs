@@ -1356,6 +1356,41 @@ fn training_without_a_gpu_fails_on_one_line() {
     }
 }
 
+/// A `FUZZYQ_GPU_*` setting its variable does not take (a mistyped kernel name, say): one
+/// line naming the variable, its value and what it takes, exit code 2, nothing written, and
+/// before any adapter is looked for (so on any machine), instead of a run on the default.
+#[test]
+fn a_mistyped_gpu_setting_fails_on_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (var, value, takes) in [
+        ("FUZZYQ_GPU_LAST", "unroled", "joined"),
+        ("FUZZYQ_GPU_STAGES", "merge", "rows, merged or unrolled"),
+        ("FUZZYQ_GPU_EVAL", "stages", "auto, nested or stages:K"),
+        ("FUZZYQ_GPU_SUBGROUPS", "no", "1 or 0"),
+        ("FUZZYQ_GPU_BATCH_MB", "0", "a positive whole number of MiB"),
+    ] {
+        let before = snapshot(d);
+        let o = Command::new(env!("CARGO_BIN_EXE_fuzzyq"))
+            .args(["train", "--env", "dcmotor", "--device", "gpu", "--quiet"])
+            .args(["--precision", "f32", "--out", "g.fzq"])
+            .env(var, value)
+            .env("FUZZYQ_GPU_ADAPTER", "no-such-adapter")
+            .current_dir(d)
+            .output()
+            .unwrap();
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{var}: {err}");
+        assert_eq!(err.lines().count(), 1, "{var}: {err}");
+        assert!(
+            err.starts_with(&format!("error: {var}={value} ")),
+            "{var}: {err}"
+        );
+        assert!(err.contains(takes), "{var}: {err}");
+        assert!(changed(&before, &snapshot(d)).is_empty(), "{var}");
+    }
+}
+
 /// `--device gpu`: a small run on whatever adapter opens (CI's lavapipe; skipped, with a
 /// message, where none does), and its refusals as one line each.
 #[test]
