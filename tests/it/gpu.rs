@@ -339,6 +339,33 @@ fn three_point_masses(shaped: bool) -> TrainConfig {
     c
 }
 
+/// Policy evaluation of random values under a random policy on the GPU `g` (its split, and
+/// the values' bits) and on the reference (the values' bits).
+fn evaluation_bits<M: Model<f32> + Sync>(
+    g: &Gpu,
+    op: &Operator<'_, f32, M>,
+) -> ((usize, Vec<u32>), Vec<u32>) {
+    let n = op.n_cores();
+    let v = values(n, 7, -3.0, 5.0);
+    let policy: Vec<u32> = values::<f64>(n, 13, 0.0, op.joint().n_joint() as f64)
+        .into_iter()
+        .map(|x| x as u32)
+        .collect();
+    let mut hs = HostSweeps::new(op, rounding(g)).unwrap();
+    hs.load(Buf(0), &v).unwrap();
+    hs.load_policy(&policy).unwrap();
+    hs.evaluate(Buf(0), Buf(1)).unwrap();
+    let mut gs = GpuSweeps::new(g, op).unwrap();
+    gs.load(Buf(0), &v).unwrap();
+    gs.load_policy(&policy).unwrap();
+    gs.evaluate(Buf(0), Buf(1)).unwrap();
+    let got = bits(&gs.values(Buf(1)).unwrap());
+    (
+        (gs.evaluation_stages(), got),
+        bits(&hs.values(Buf(1)).unwrap()),
+    )
+}
+
 #[test]
 fn policy_evaluation_through_every_split_gives_the_same_bits() {
     let Some(g) = gpu() else { return };
@@ -357,18 +384,7 @@ fn policy_evaluation_through_every_split_gives_the_same_bits() {
         let op = operator(&model, &grid, &config);
         let plan = op.block_plan().unwrap();
         assert!(plan.can_evaluate);
-        let n = op.n_cores();
-        let v = values(n, 7, -3.0, 5.0);
-        let policy: Vec<u32> = values::<f64>(n, 13, 0.0, op.joint().n_joint() as f64)
-            .into_iter()
-            .map(|x| x as u32)
-            .collect();
-        let mut hs = HostSweeps::new(&op, rounding(g)).unwrap();
-        hs.load(Buf(0), &v).unwrap();
-        hs.load_policy(&policy).unwrap();
-        hs.evaluate(Buf(0), Buf(1)).unwrap();
-        let want = bits(&hs.values(Buf(1)).unwrap());
-        let nb = plan.tables.len();
+        let (n, nb) = (op.n_cores(), plan.tables.len());
         for k in 0..nb {
             let split = g.clone().with_evaluation(Evaluation::Stages(k as u32));
             for (gk, what) in [
@@ -376,12 +392,8 @@ fn policy_evaluation_through_every_split_gives_the_same_bits() {
                 (split.clone().with_batch_bytes(1), "the smallest batches"),
                 (split.with_part_bytes(1), "V in parts"),
             ] {
-                let mut gs = GpuSweeps::new(&gk, &op).unwrap();
-                assert_eq!(gs.evaluation_stages(), k);
-                gs.load(Buf(0), &v).unwrap();
-                gs.load_policy(&policy).unwrap();
-                gs.evaluate(Buf(0), Buf(1)).unwrap();
-                let got = bits(&gs.values(Buf(1)).unwrap());
+                let ((stages, got), want) = evaluation_bits(&gk, &op);
+                assert_eq!(stages, k);
                 assert!(got == want, "{n} cores, {k} stages, {what}");
             }
         }
@@ -389,6 +401,21 @@ fn policy_evaluation_through_every_split_gives_the_same_bits() {
         let auto = GpuSweeps::new(g, &op).unwrap().evaluation_stages();
         eprintln!("{n} cores in {nb} blocks: evaluation runs {auto} stage(s) first");
         assert_eq!(auto, expected, "{n} cores");
+    }
+    // A stage output cut into parts (three point masses under a binding of 4 KB: the first
+    // four, `stage_outputs_over_a_binding_in_parts_give_the_same_bits`) is never read per
+    // core: a split asked for that would read one takes the largest below it that reads
+    // one buffer (or `V`), with the same bits.
+    let c = three_point_masses(false);
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let op = operator(&model, &grid, &c.solver.solver_config());
+    let cut = g.clone().with_binding_limit(4 << 10);
+    for (k, taken) in [(2, 0), (4, 0), (5, 5), (9, 5)] {
+        let split = cut.clone().with_evaluation(Evaluation::Stages(k));
+        let ((stages, got), want) = evaluation_bits(&split, &op);
+        assert_eq!(stages, taken, "stages:{k}");
+        assert!(got == want, "stages:{k}");
     }
     assert_eq!(Evaluation::parse("nested"), Some(Evaluation::Stages(0)));
     assert_eq!(Evaluation::parse("stages:2"), Some(Evaluation::Stages(2)));
