@@ -6,6 +6,8 @@ where no adapter opens, unless FUZZYQ_REQUIRE_GPU is set."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 
 import numpy as np
 import numpy.typing as npt
@@ -81,3 +83,22 @@ def test_what_the_gpu_does_not_run_is_a_config_error() -> None:
     with pytest.raises(fuzzyq.ConfigError, match="sync"):
         fuzzyq.solve(fuzzyq.PointMass(agents=1), fuzzyq.PointMass(agents=1).paper_grid(),
                      device="gpu", sweep="async")
+
+
+def test_a_mistyped_gpu_setting_is_a_config_error() -> None:
+    # `FUZZYQ_GPU_*` settings are read when a process first opens the GPU (before any adapter
+    # is looked for, so on any machine): in a process of its own.
+    code = (
+        "import fuzzyq\n"
+        "m = fuzzyq.PointMass(agents=1)\n"
+        "try:\n"
+        "    fuzzyq.solve(m, m.paper_grid(), device='gpu')\n"
+        "except fuzzyq.ConfigError as e:\n"
+        "    print('ConfigError:', e)\n"
+    )
+    env = dict(os.environ, FUZZYQ_GPU_EVAL="stages")
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith("ConfigError: FUZZYQ_GPU_EVAL=stages "), run.stdout + run.stderr
+    assert "auto, nested or stages:K" in run.stdout

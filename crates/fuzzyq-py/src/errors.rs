@@ -235,11 +235,13 @@ pub(crate) fn sim_error(py: Python<'_>, e: &SimError) -> PyErr {
         SimError::Eval(_) => error(py, Kind::Input, e.to_string()),
         SimError::Grid(_) => error(py, Kind::Config, e.to_string()),
         SimError::PolicyFile(f) => policy_file_error(py, f),
-        // A run the GPU path does not take, or one too large for the adapter: the settings'.
+        // A run the GPU path does not take, one too large for the adapter, or a mistyped
+        // `FUZZYQ_GPU_*` setting: the settings'.
         SimError::Gpu(
             fuzzyq_gpu::GpuError::Unsupported(_)
             | fuzzyq_gpu::GpuError::TooLarge { .. }
-            | fuzzyq_gpu::GpuError::OutOfMemory { .. },
+            | fuzzyq_gpu::GpuError::OutOfMemory { .. }
+            | fuzzyq_gpu::GpuError::Setting { .. },
         ) => error(py, Kind::Config, e.to_string()),
         _ => error(py, Kind::Solver, e.to_string()),
     }
