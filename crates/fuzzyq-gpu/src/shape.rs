@@ -175,15 +175,20 @@ impl Shape {
     pub(crate) fn evaluation_stages(&self, evaluation: Evaluation, compiled_in: &[bool]) -> usize {
         let whole = |k: usize| k == 0 || self.stage_parts.get(k - 1).is_some_and(Option::is_none);
         let mut splits = (0..self.n_blocks()).filter(|&k| whole(k));
-        let fmas =
-            |k: usize| evaluation_multiply_adds(&self.blocks, &self.entries, self.n as f64, k);
-        let work = |k: usize| evaluation_work(fmas(k), compiled_in);
+        let least = |splits| {
+            least_work(
+                &self.blocks,
+                &self.entries,
+                self.n as f64,
+                compiled_in,
+                splits,
+            )
+        };
         match evaluation {
-            Evaluation::Stages(k) => splits.rfind(|&s| s <= k as usize).unwrap_or(0),
-            Evaluation::Auto => splits
-                .min_by(|&a, &b| work(a).total_cmp(&work(b)))
-                .unwrap_or(0),
+            Evaluation::Stages(k) => splits.rfind(|&s| s <= k as usize),
+            Evaluation::Auto => least(splits),
         }
+        .unwrap_or(0)
     }
 
     /// Bytes of the buffer of stage `b`'s output for one batch.
@@ -278,6 +283,20 @@ pub(crate) fn evaluation_work((staged, nested): (Vec<f64>, f64), compiled_in: &[
     staged.iter().enumerate().map(stage).sum::<f64>() + nested
 }
 
+/// Among `splits`, the one with the least [`evaluation_work`] over `n` cores of `blocks`
+/// (`entries` row entries each; `compiled_in`: the stages whose rows are compiled in), the
+/// first of equals.
+pub(crate) fn least_work(
+    blocks: &[[u32; 4]],
+    entries: &[u64],
+    n: f64,
+    compiled_in: &[bool],
+    splits: impl Iterator<Item = usize>,
+) -> Option<usize> {
+    let work = |k| evaluation_work(evaluation_multiply_adds(blocks, entries, n, k), compiled_in);
+    splits.min_by(|&a, &b| work(a).total_cmp(&work(b)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -296,15 +315,12 @@ mod tests {
     /// The split with the least work, every stage compiled in or none, and how many times
     /// fewer multiply-adds it takes than nested per core.
     fn least(m: &(Vec<[u32; 4]>, Vec<u64>, f64), compiled: bool) -> (usize, f64) {
-        let fmas = |k| evaluation_multiply_adds(&m.0, &m.1, m.2, k);
-        let work = |k| evaluation_work(fmas(k), &vec![compiled; m.0.len()]);
         let sum = |k| {
-            let (s, n) = fmas(k);
+            let (s, n) = evaluation_multiply_adds(&m.0, &m.1, m.2, k);
             s.iter().sum::<f64>() + n
         };
-        let best = (0..m.0.len())
-            .min_by(|&a, &b| work(a).total_cmp(&work(b)))
-            .unwrap();
+        let compiled_in = vec![compiled; m.0.len()];
+        let best = least_work(&m.0, &m.1, m.2, &compiled_in, 0..m.0.len()).unwrap();
         (best, sum(0) / sum(best))
     }
 
