@@ -48,6 +48,7 @@ LAYERS = {
         {"gpu"},
         {"last"},
         {"shape"},
+        {"compile"},
         {"sweeps"},
     ],
     "fuzzyq-cli": [

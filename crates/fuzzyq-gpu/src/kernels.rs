@@ -415,7 +415,7 @@ pub(crate) fn specialized(
     let source = source_text(template, consts, replace, parts.map(|p| p.1));
     let device = &gpu.device;
     // Error scopes are the calling thread's, and kernels compile on threads of their own
-    // (`sweeps.rs`): both kinds are caught here.
+    // (`compile.rs`): both kinds are caught here.
     let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {

@@ -103,6 +103,7 @@
 
 mod batches;
 mod buffers;
+mod compile;
 mod context;
 mod error;
 mod gpu;

@@ -1,4 +1,4 @@
-// Stage SB of a full backup with the problem's constants (`sweeps.rs`: SB, SN cores, SA
+// Stage SB of a full backup with the problem's constants (`compile.rs`: SB, SN cores, SA
 // actions, SR, SP), so that every index is arithmetic on constants. The first stage of a
 // contraction of several blocks reads `V` through `v_at` (its parts, `parts.rs`): SRC_AT is
 // `v_at(col[e], r)` there and `src[...]` (the stage before) elsewhere, or `s_at(...)` where the
