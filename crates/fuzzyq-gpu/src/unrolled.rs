@@ -44,6 +44,16 @@ const CHUNK: usize = 16;
 /// stays within what a driver compiles quickly (the paper's grid: 824 entries).
 pub(crate) const MAX_TERMS: usize = 16_384;
 
+/// Most cores of a block compiled in: each is a branch of the kernel, and a compiler's time
+/// grows faster than their count (Khepera's coarse start, 1,089 cores in under 16,384 terms:
+/// minutes on lavapipe and on NVIDIA's driver, against 0.04 s for the kernels reading tables).
+pub(crate) const MAX_CORES: usize = 128;
+
+/// Whether `table`'s rows, `chunks` times over, are small enough to compile in.
+fn compiles_in(table: &PlanTable<'_, f32>, chunks: usize) -> bool {
+    table.n_cores <= MAX_CORES && table.col.len() * chunks <= MAX_TERMS
+}
+
 /// The kernel's layout for a last block of `pl` product actions before it over `lanes`
 /// lanes: `(JC, NCH)`.
 fn lane_columns(pl: u32, lanes: u32) -> (u32, u32) {
@@ -86,7 +96,7 @@ impl Before {
 /// `AL`, `PL`), for the last block's `table`, `pl` product actions before it, a workgroup of
 /// `lanes` threads exchanging by subgroup shuffles (`subgroups`) or through workgroup memory,
 /// reading the stage before's output (`lastu`) or computing it (`before`, `lastj`); `None`
-/// where the table holds more terms than [`MAX_TERMS`].
+/// where the table holds more terms than [`MAX_TERMS`] or more cores than [`MAX_CORES`].
 pub(crate) fn source(
     table: &PlanTable<'_, f32>,
     pl: u32,
@@ -95,7 +105,7 @@ pub(crate) fn source(
     before: Option<Before>,
 ) -> Option<String> {
     let (jc, nch) = lane_columns(pl, lanes);
-    if table.col.len() * nch as usize > MAX_TERMS {
+    if !compiles_in(table, nch as usize) {
         return None;
     }
     let g = Gen {
@@ -396,8 +406,8 @@ impl Gen<'_, '_> {
         s.push_str("            }\n");
     }
 
-    /// The chunk's cores reduced over the lanes by halving, then written by the lane that
-    /// holds each.
+    /// The chunk's cores reduced over the lanes by halving ([`halving`]), then written by the
+    /// lane that holds each.
     fn reduce(&self, s: &mut String, cores: core::ops::Range<usize>) {
         let c0 = cores.start;
         let n = cores.len();
@@ -411,16 +421,20 @@ impl Gen<'_, '_> {
             .clone()
             .map(|c| (format!("v{c}"), format!("n{c}")))
             .collect();
-        s.push_str("        var off = 0u;\n");
+        // `off`: the chunk's core at the lane's first held place; `live`: how many of its
+        // held places are cores (the others padding, which must not be written: a padded
+        // place's `off` can name a core that another lane holds).
+        let _ = writeln!(s, "        var off = 0u;\n        var live = {n}u;");
         let mut copies = 0u32;
-        let mut m = self.lanes / 2;
-        let mut step = 0;
-        while m > 0 {
+        for (step, &(m, half)) in halving(n, self.lanes).iter().enumerate() {
             let _ = writeln!(s, "        let u{step} = (lane & {m}u) != 0u;");
             let mut next = Vec::new();
-            if held.len() > 1 {
-                let h = held.len().div_ceil(2);
-                let _ = writeln!(s, "        off += select(0u, {h}u, u{step});");
+            if let Some(h) = half {
+                let _ = writeln!(
+                    s,
+                    "        off += select(0u, {h}u, u{step});\n\
+                     \x20       live = select(min(live, {h}u), max(live, {h}u) - {h}u, u{step});"
+                );
                 for i in 0..h {
                     let (lv, li) = &held[i];
                     let (hv, hi) = held
@@ -456,19 +470,36 @@ impl Gen<'_, '_> {
                 next.push((kv, ki));
             }
             held = next;
-            m /= 2;
-            step += 1;
         }
-        // Lanes past the chunk's cores (there are more lanes than cores) hold padding.
         assert_eq!(held.len(), 1, "a chunk of at most one core per lane");
         let (v, i) = &held[0];
         let _ = writeln!(
             s,
             "        let g = item * NL + {c0}u + off;\n\
-             \x20       if off < {n}u && (lane & {copies}u) == 0u && g >= c_lo && g < c_hi {{\n\
+             \x20       if live > 0u && (lane & {copies}u) == 0u && g >= c_lo && g < c_hi {{\n\
              \x20           write_best(prm.out_lo + (g - prm.lo), {v}, {i});\n        }}"
         );
     }
+}
+
+/// The steps that reduce a chunk of `n` cores (at most `lanes`) over `lanes` lanes, one per
+/// lane bit `m` from the highest: `(m, Some(h))` where a lane keeps `h` of its held places
+/// (the first `h` where bit `m` is clear, the rest, padded to `h`, where it is set) and its
+/// partner `lane ^ m` the others; `(m, None)` where one place is left, which partners share.
+fn halving(n: usize, lanes: u32) -> Vec<(u32, Option<usize>)> {
+    let mut steps = Vec::new();
+    let (mut held, mut m) = (n, lanes / 2);
+    while m > 0 {
+        if held > 1 {
+            let h = held.div_ceil(2);
+            steps.push((m, Some(h)));
+            held = h;
+        } else {
+            steps.push((m, None));
+        }
+        m /= 2;
+    }
+    steps
 }
 
 /// The text of a stage before the last with its block's rows compiled in (`stage_u`, after
@@ -477,12 +508,12 @@ impl Gen<'_, '_> {
 /// block that the dispatch covers below that item, and for each, the values its rows read
 /// (`at(k)`: the expression of column `k`'s value at the thread's `(r, p)`) loaded once and
 /// each row a chain of `fma`s with constant weights, written as `stagec.wgsl` writes it.
-/// `None` where the table holds more than [`MAX_TERMS`] entries.
+/// `None` where the table holds more than [`MAX_TERMS`] entries or [`MAX_CORES`] cores.
 pub(crate) fn stage_source(
     table: &PlanTable<'_, f32>,
     at: impl Fn(u32) -> String,
 ) -> Option<String> {
-    if table.col.len() > MAX_TERMS {
+    if !compiles_in(table, 1) {
         return None;
     }
     let mut s = String::from(
@@ -676,6 +707,84 @@ mod tests {
         assert_eq!(text.matches("write_best(").count(), 2);
     }
 
+    /// Each lane's places through [`halving`] as the kernel moves them (`Some(core)` or
+    /// padding), then which lanes write which core, as the kernel decides from `off` and
+    /// `live`.
+    fn writers(n: usize, lanes: u32) -> Vec<Vec<u32>> {
+        let steps = halving(n, lanes);
+        let mut held: Vec<Vec<Option<usize>>> = vec![(0..n).map(Some).collect(); lanes as usize];
+        let (mut off, mut live) = (vec![0; lanes as usize], vec![n; lanes as usize]);
+        let mut copies = 0;
+        for &(m, half) in &steps {
+            let before = held.clone();
+            for l in 0..lanes as usize {
+                let u = l as u32 & m != 0;
+                let partner = &before[l ^ m as usize];
+                let Some(h) = half else {
+                    copies |= m;
+                    assert_eq!(before[l][0], partner[0], "a butterfly shares its core");
+                    continue;
+                };
+                let at = |v: &Vec<Option<usize>>, i: usize| v.get(i).copied().flatten();
+                let kept: Vec<Option<usize>> = (0..h)
+                    .map(|i| {
+                        let (own, theirs) = if u {
+                            (at(&before[l], h + i), at(partner, h + i))
+                        } else {
+                            (at(&before[l], i), at(partner, i))
+                        };
+                        assert_eq!(own, theirs, "partners merge the same core");
+                        own
+                    })
+                    .collect();
+                held[l] = kept;
+                if u {
+                    off[l] += h;
+                    live[l] = live[l].max(h) - h;
+                } else {
+                    live[l] = live[l].min(h);
+                }
+            }
+        }
+        let mut by_core = vec![Vec::new(); n];
+        for l in 0..lanes as usize {
+            assert_eq!(held[l].len(), 1);
+            assert_eq!(
+                live[l] > 0,
+                held[l][0].is_some(),
+                "lane {l}: live counts its core"
+            );
+            if live[l] > 0 && l as u32 & copies == 0 {
+                assert_eq!(
+                    held[l][0],
+                    Some(off[l]),
+                    "lane {l} holds the core it writes"
+                );
+                by_core[off[l]].push(l as u32);
+            }
+        }
+        by_core
+    }
+
+    /// Regression: a chunk of cores not a power of two (9 of a block of 9 over 32 lanes,
+    /// 13 of the paper's 45) left lanes holding only padding whose `off` named another
+    /// lane's core; they wrote `-inf` over it, which NVIDIA's warps (not lavapipe's lanes of
+    /// 8, taking chunks of 8) let win.
+    #[test]
+    fn every_core_of_a_chunk_is_written_by_one_lane() {
+        for lanes in [8u32, 16, 32, 64] {
+            for n in 1..=CHUNK.min(lanes as usize) {
+                for (core, w) in writers(n, lanes).iter().enumerate() {
+                    assert_eq!(
+                        w.len(),
+                        1,
+                        "{n} cores over {lanes} lanes: core {core} by {w:?}"
+                    );
+                }
+            }
+        }
+    }
+
     #[test]
     fn a_table_too_large_is_not_compiled_in() {
         let n = MAX_TERMS / 4 + 1;
@@ -683,6 +792,15 @@ mod tests {
         let t = plan(&tab, 5);
         assert!(source(&t, 5, 32, true, None).is_none());
         assert!(stage_source(&t, |k| format!("v{k}")).is_none());
+        // Regression: too many cores, within the terms (Khepera's coarse start: 1,089 cores,
+        // minutes to compile).
+        let tab = table(MAX_CORES + 1);
+        let t = plan(&tab, 5);
+        assert!(4 * t.n_cores <= MAX_TERMS);
+        assert!(source(&t, 5, 32, true, None).is_none());
+        assert!(stage_source(&t, |k| format!("v{k}")).is_none());
+        let tab = table(MAX_CORES);
+        assert!(stage_source(&plan(&tab, 5), |k| format!("v{k}")).is_some());
     }
 
     #[test]
