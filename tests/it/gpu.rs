@@ -374,9 +374,9 @@ fn policy_evaluation_through_every_split_gives_the_same_bits() {
     // (`k = 0`: every block over `V`). Every `k`, with batches of whole slabs and the
     // smallest (below fixed blocks), and `V` in parts, against the reference, bit for bit.
     for (c, expected) in [
-        (pointmass_small(), 2),
-        (three_point_masses(false), 3),
-        (khepera_small(), 1),
+        (pointmass_small(), [2, 1]),
+        (three_point_masses(false), [3, 2]),
+        (khepera_small(), [1, 0]),
     ] {
         let model = c.build_model().unwrap();
         let grid = c.grid::<f32>().unwrap();
@@ -397,10 +397,15 @@ fn policy_evaluation_through_every_split_gives_the_same_bits() {
                 assert!(got == want, "{n} cores, {k} stages, {what}");
             }
         }
-        // The default: the split with the least estimated work.
-        let auto = GpuSweeps::new(g, &op).unwrap().evaluation_stages();
-        eprintln!("{n} cores in {nb} blocks: evaluation runs {auto} stage(s) first");
-        assert_eq!(auto, expected, "{n} cores");
+        // The default: the split with the least estimated work, which depends on whether
+        // the stages' rows are compiled in (the default on lavapipe) or read from the tables
+        // (on a GPU).
+        let auto = [true, false].map(|compiled_in| {
+            let g = g.clone().with_unrolled_stages(compiled_in);
+            GpuSweeps::new(&g, &op).unwrap().evaluation_stages()
+        });
+        eprintln!("{n} cores in {nb} blocks: evaluation runs {auto:?} stage(s) first");
+        assert_eq!(auto, expected, "{n} cores: stages compiled in, read");
     }
     // A stage output cut into parts (three point masses under a binding of 4 KB: the first
     // four, `stage_outputs_over_a_binding_in_parts_give_the_same_bits`) is never read per
@@ -835,23 +840,35 @@ fn kernels_by_rows_or_merged_give_the_same_bits() {
     let a = fuzzyq_gpu::solve_from(&rows, &model, &grid, &config, None, false, noop).unwrap();
     let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
     assert_same(&a, &b, "rows against the adapter's default");
-    // The default kernels: the rows compiled in on a software adapter (lavapipe), merged
-    // stages and the last one row at a time on a GPU (`LastStage::for_adapter`, as
-    // measured).
+    // The default kernels: the rows compiled in for every problem on a software adapter
+    // (lavapipe); on a GPU from `COMPILE_IN_FROM` multiply-adds per full backup, below which
+    // (this problem) the stages are merged and the last stage takes one row at a time. The
+    // rule itself on any adapter: a threshold at this problem's size and one above it; and a
+    // choice made explicitly holds for every size.
     let op = operator(&model, &grid, &config);
-    let default = GpuSweeps::new(g, &op).unwrap();
-    let want = if g.summary().software {
-        ("stage_u", "lastu")
-    } else {
-        ("stage_m", "last1")
+    let kernels = |g: &Gpu| {
+        let s = GpuSweeps::new(g, &op).unwrap();
+        (s.stage_kernels()[0], s.last_stage())
     };
+    let (compiled_in, read) = (("stage_u", Some("lastu")), ("stage_m", Some("last1")));
+    let size = op.multiply_adds_per_sweep().unwrap();
+    assert!(size < fuzzyq_gpu::COMPILE_IN_FROM);
+    let want = if g.summary().software {
+        compiled_in
+    } else {
+        read
+    };
+    assert_eq!(kernels(g), want, "{:?}", g.summary());
     assert_eq!(
-        (default.stage_kernels()[0], default.last_stage()),
-        (want.0, Some(want.1)),
-        "{:?}",
-        g.summary()
+        kernels(&g.clone().with_rows_compiled_in_from(size)),
+        compiled_in
     );
-    drop(default);
+    let above = g.clone().with_rows_compiled_in_from(size * 1.5);
+    assert_eq!(kernels(&above), read);
+    let chosen = above
+        .with_unrolled_stages(true)
+        .with_last_stage(LastStage::Unrolled);
+    assert_eq!(kernels(&chosen), compiled_in);
     // Every pass of either kernel, cores in turn or not, lanes reduced by subgroups or in
     // memory (the adapter's default in the tests above).
     let variants = [

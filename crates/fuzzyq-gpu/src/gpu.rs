@@ -29,9 +29,20 @@ pub struct Gpu {
     pub(crate) merged_stages: bool,
     /// Whether the stages before it have their block's rows compiled in.
     pub(crate) unrolled_stages: bool,
+    /// The kernels of a problem whose full backup costs fewer multiply-adds than
+    /// `compile_in_from`: whether the stages compile their rows in, and the last stage
+    /// ([`Gpu::with_rows_compiled_in_from`]).
+    pub(crate) small: (bool, LastStage),
+    pub(crate) compile_in_from: f64,
     /// How policy evaluation splits the contraction.
     pub(crate) evaluation: Evaluation,
 }
+
+/// Multiply-adds of a full backup from which a GPU's default kernels compile the block's
+/// rows in ([`Gpu::with_rows_compiled_in_from`]): about 0.25 s of full backup with the rows
+/// read from the tables on an H200, so that a run of ten full backups repays a compilation
+/// on the driver's first sight of the kernels.
+pub const COMPILE_IN_FROM: f64 = 1e11;
 
 /// How a policy-evaluation sweep splits the block contraction ([`Gpu::with_evaluation`], or
 /// `FUZZYQ_GPU_EVAL`: `auto`, `nested` or `stages:K`). A core's expected value under its
@@ -92,7 +103,8 @@ pub enum LastStage {
     /// item's values (the last block's cores times the product actions before it: 22.5 KB on
     /// the paper's grid) loaded once into workgroup memory, which its cores' lanes then read,
     /// one row at a time; where they do not fit the adapter's workgroup memory,
-    /// [`LastStage::Rows`]. Not a default: the next GPU measurement decides.
+    /// [`LastStage::Rows`]. Not a default: on an H200 the paper grid's last stage took
+    /// 48.6 ms so, against 23.1 ms one row at a time.
     Tile {
         /// Threads per workgroup (a power of two from 32 to 256).
         threads: u32,
@@ -103,8 +115,8 @@ pub enum LastStage {
     /// chain of `fma`s with constant weights; the cores' maxima then reduce over the lanes a
     /// chunk of cores at a time, each exchange halving the cores a lane holds. Where the
     /// table is too large to compile in, [`LastStage::MERGED`] on a software adapter and
-    /// [`LastStage::Rows`] on a GPU. The default on a software adapter
-    /// ([`LastStage::for_adapter`]); on a GPU the next measurement there decides.
+    /// [`LastStage::Rows`] on a GPU. The default ([`LastStage::for_adapter`]; on a GPU for
+    /// problems from [`COMPILE_IN_FROM`] multiply-adds per full backup).
     Unrolled,
     /// [`LastStage::Unrolled`] with the stage before it joined in (`lastj`): the workgroup
     /// of an item computes the item's values itself, each lane those of its own columns where
@@ -112,7 +124,8 @@ pub enum LastStage {
     /// the tables), so the stage before the last is neither dispatched nor written (on the
     /// paper's grid, 2 GB written and read again per full backup). Where there is no such
     /// stage (two blocks or fewer), its output is cut into parts, or its rows hold more than
-    /// 16 entries, [`LastStage::Unrolled`]. Not a default: the next GPU measurement decides.
+    /// 16 entries, [`LastStage::Unrolled`]. Not a default: on an H200, the paper's grid, it
+    /// took 15.2 ms where [`LastStage::Unrolled`] and the stage before it took 5.8 and 3.1 ms.
     Joined,
 }
 
@@ -120,19 +133,17 @@ impl LastStage {
     /// Merged rows, 4 cores in turn (`merged`).
     pub const MERGED: LastStage = LastStage::Merged { cores: 4 };
 
-    /// The default on an adapter, as measured: one row at a time on a GPU (an H200: the last
-    /// stage of a full backup of the paper's grid 21.6 ms, against 25.3-29.8 ms merged with
-    /// 1-16 cores in turn; the rows compiled in are not measured there yet), the rows
-    /// compiled in on a software adapter (`software`: Mesa's lavapipe, where that last stage
-    /// is 9.5-19 times faster than merged rows with 4 cores in turn and 6-8.6 times faster
-    /// than one row at a time).
+    /// The default on an adapter, as measured: the rows compiled in on both kinds. On an
+    /// H200 the last stage of a full backup of the paper's grid takes 5.8 ms so, against
+    /// 23.1 ms one row at a time (the default there before) and 48.6 ms in tiles; on a
+    /// software adapter (`software`: Mesa's lavapipe) it is 9.5-19 times faster than merged
+    /// rows with 4 cores in turn and 6-8.6 times faster than one row at a time. Where the
+    /// table is too large to compile in, the kernel falls back to merged rows on a software
+    /// adapter and to one row at a time on a GPU.
     #[must_use]
     pub fn for_adapter(software: bool) -> LastStage {
-        if software {
-            LastStage::Unrolled
-        } else {
-            LastStage::Rows
-        }
+        let _ = software;
+        LastStage::Unrolled
     }
 
     /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads),
@@ -254,10 +265,16 @@ impl Gpu {
             Some(s) if crate::probe::subgroups_work(&ctx, &kernels, s)? => Some(s),
             _ => None,
         };
-        // The stages before the last: merged, and on a software adapter with their rows
-        // compiled in (as measured on lavapipe), unless a setting says otherwise.
+        // The stages before the last: merged, and with their rows compiled in (as measured
+        // on lavapipe and an H200), unless a setting says otherwise; on a GPU, only for
+        // problems large enough to repay the compiler's time.
         let software = ctx.summary.software;
-        let (merged_stages, unrolled_stages) = settings.stages.unwrap_or((true, software));
+        let (merged_stages, unrolled_stages) = settings.stages.unwrap_or((true, true));
+        let last = settings.last.unwrap_or(LastStage::for_adapter(software));
+        let small = (
+            settings.stages.is_some_and(|s| s.1),
+            settings.last.unwrap_or(LastStage::Rows),
+        );
         Ok(Self {
             max_binding: ctx.summary.max_binding,
             memory: ctx.summary.memory,
@@ -265,9 +282,11 @@ impl Gpu {
             part_bytes: settings.part_kib.map_or(u64::MAX, |k| k << 10),
             read_bytes: 256 << 20,
             subgroups: settings.subgroups.unwrap_or(true),
-            last: settings.last.unwrap_or(LastStage::for_adapter(software)),
+            last,
             merged_stages,
             unrolled_stages,
+            small,
+            compile_in_from: if software { 0.0 } else { COMPILE_IN_FROM },
             evaluation: settings.evaluation.unwrap_or(Evaluation::Auto),
             kernels: Arc::new(kernels),
             inner: Arc::new(ctx),
@@ -360,11 +379,42 @@ impl Gpu {
     }
 
     /// This GPU with the fused last stage taking a core's rows as `last` says (the default
-    /// [`LastStage::for_adapter`], or `FUZZYQ_GPU_LAST`). All give the same bits.
+    /// [`LastStage::for_adapter`], or `FUZZYQ_GPU_LAST`), for every problem. All give the
+    /// same bits.
     #[must_use]
     pub fn with_last_stage(mut self, last: LastStage) -> Self {
         self.last = last;
+        self.small.1 = last;
         self
+    }
+
+    /// This GPU compiling the block's rows into the kernels by default only for problems
+    /// whose full backup costs at least `multiply_adds`; below that, the stages before the
+    /// last read their rows from the tables (merged by column) and the last stage takes one
+    /// row at a time, unless [`Gpu::with_unrolled_stages`] or [`Gpu::with_last_stage`] (or
+    /// their settings) choose for every problem. The same bits either way.
+    ///
+    /// The default on a GPU is [`COMPILE_IN_FROM`]: NVIDIA's driver took 0.4 s (2.4 s on its
+    /// first sight of the kernels) to compile the paper's grid with its rows in, more than the
+    /// 0.18 s that saved in the default point-mass run's 9 full backups (29.5 against 7.3 ms
+    /// each on an H200), while three point masses on 3 x 3 cores per axis (3.2e11
+    /// multiply-adds per full backup) trained in 10.6 s instead of 24.5 s. On a software
+    /// adapter it is 0 (always: lavapipe compiles the paper's grid in 0.34 s and runs its
+    /// full backups 5-10 times faster).
+    #[must_use]
+    pub fn with_rows_compiled_in_from(mut self, multiply_adds: f64) -> Self {
+        self.compile_in_from = multiply_adds;
+        self
+    }
+
+    /// The GPU's kernel choices for a problem of `multiply_adds` per full backup (`None`:
+    /// not known, taken as large).
+    pub(crate) fn for_problem(&self, multiply_adds: Option<f64>) -> Gpu {
+        let mut g = self.clone();
+        if multiply_adds.is_some_and(|m| m < self.compile_in_from) {
+            (g.unrolled_stages, g.last) = self.small;
+        }
+        g
     }
 
     /// This GPU with the stages of a full backup before the last taking a block core's rows
@@ -386,11 +436,13 @@ impl Gpu {
     /// taking every core of the block below it, the values each core's rows read loaded once
     /// and each row a chain of `fma`s with constant weights. A block whose table is too
     /// large to compile in takes [`Gpu::with_merged_stages`]'s choice. The same bits. The
-    /// default on a software adapter (lavapipe: 2.7-3.5 times faster than merged rows), not yet
-    /// on a GPU, where it is not measured (`FUZZYQ_GPU_STAGES=merged` or `rows` chooses).
+    /// default (lavapipe: 2.7-3.5 times faster than merged rows; an H200: the three stages
+    /// before the last of a full backup of the paper's grid 6.6 ms against 10.0-10.3 ms
+    /// merged); `FUZZYQ_GPU_STAGES=merged` or `rows` chooses the others.
     #[must_use]
     pub fn with_unrolled_stages(mut self, on: bool) -> Self {
         self.unrolled_stages = on;
+        self.small.0 = on;
         self
     }
 

@@ -21,16 +21,20 @@
 //! Each stage before the last writes its output for the batch, by one of three kernels:
 //! - a thread per element and every action of its block, the block core's rows merged by
 //!   column so that each value of the stage before is read once per step (`stagem.wgsl`,
-//!   [`Gpu::with_merged_stages`]; the default on GPUs);
+//!   [`Gpu::with_merged_stages`]; the default on GPUs for problems below
+//!   [`COMPILE_IN_FROM`] multiply-adds per full backup);
 //! - a thread per element and action (`stagec.wgsl`);
 //! - a thread per element of an item of the stage before, taking every core of the block
 //!   below it, with the block's rows compiled into the kernel as constants (`unrolled.rs`,
-//!   [`Gpu::with_unrolled_stages`]; the default on software adapters).
+//!   [`Gpu::with_unrolled_stages`]; the default on software adapters, and on GPUs from
+//!   [`COMPILE_IN_FROM`] multiply-adds per full backup, where it repays the driver's
+//!   compiler: [`Gpu::with_rows_compiled_in_from`]).
 //!
 //! The last stage is fused with the maximum over actions ([`LastStage`]; the default
 //! [`LastStage::for_adapter`], as measured on an H200 and on lavapipe):
 //! - one row at a time, up to 32 lanes per core, each taking several of the core's columns
-//!   so that a weight feeds several multiply-adds (`last1.wgsl`; the default on GPUs);
+//!   so that a weight feeds several multiply-adds (`last1.wgsl`; the default on GPUs below
+//!   [`COMPILE_IN_FROM`]);
 //! - the core's rows merged by column, so that each value of the stage before is read once
 //!   per core and feeds every action whose row has its column, several neighbouring cores in
 //!   turn (`lastm.wgsl`);
@@ -38,7 +42,9 @@
 //!   once (`lastw.wgsl`);
 //! - a workgroup per item with the last block's rows compiled in, each lane taking a few of
 //!   the item's columns for every core, the cores' maxima reduced over the lanes by halving
-//!   (`unrolled.rs`; the default on software adapters);
+//!   (`unrolled.rs`; the default on software adapters, and on GPUs from
+//!   [`COMPILE_IN_FROM`]: an H200 runs the paper grid's last stage in 5.8 ms so, 23.1 ms
+//!   one row at a time);
 //! - the same computing the stage before it too, each lane the values of its own columns
 //!   where a core first reads them, so that stage is neither dispatched nor written
 //!   ([`LastStage::Joined`]).
@@ -125,7 +131,7 @@ use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
 pub use batches::Batches;
 pub use context::AdapterSummary;
 pub use error::GpuError;
-pub use gpu::{Evaluation, Gpu, LastStage, Opening};
+pub use gpu::{COMPILE_IN_FROM, Evaluation, Gpu, LastStage, Opening};
 pub use sweeps::GpuSweeps;
 
 /// Runs fuzzy Q-iteration on `model` over `grid` on `gpu`, continued from `resume` or afresh:

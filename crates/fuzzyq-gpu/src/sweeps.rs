@@ -355,6 +355,8 @@ impl GpuSweeps {
             return Err(GpuError::Unsupported("runs models of at most 8 blocks"));
         }
         let n = op.n_cores();
+        // The kernels for a problem of this size (the rows compiled in where that repays).
+        let gpu = &gpu.for_problem(op.multiply_adds_per_sweep());
         let max_binding = gpu.max_binding;
         let check = |what: &'static str, bytes: u64| -> Result<(), GpuError> {
             if bytes > max_binding {
