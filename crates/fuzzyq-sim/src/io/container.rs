@@ -62,8 +62,8 @@ where
     let start = sum.inner.stream_position()?;
     sum.inner.write_all(&[0; HEADER_LEN])?;
     // Postcard writes a value at a time: buffered, the checksum runs over large chunks.
-    let buffered = std::io::BufWriter::with_capacity(1 << 20, sum);
-    let buffered = postcard::to_io(value, buffered).map_err(std::io::Error::other)?;
+    let mut buffered = std::io::BufWriter::with_capacity(1 << 20, sum);
+    to_writer(value, &mut buffered)?;
     let sum = buffered.into_inner().map_err(|e| e.into_error())?;
     let mut out = sum.inner;
     out.seek(SeekFrom::Start(start))?;
@@ -71,6 +71,65 @@ where
     out.seek(SeekFrom::Start(start + HEADER_LEN as u64 + sum.len))?;
     out.flush()?;
     Ok(out)
+}
+
+/// The postcard flavor of [`write_postcard`]: postcard's own writer flavor, but a write error
+/// is kept (postcard's would report a full disk as a full buffer) and ends the encoding.
+struct KeepError<W> {
+    out: W,
+    error: Option<std::io::Error>,
+}
+
+impl<W: std::io::Write> KeepError<W> {
+    #[inline(always)]
+    fn kept(&mut self, written: std::io::Result<()>) -> postcard::Result<()> {
+        match written {
+            Ok(()) => Ok(()),
+            Err(e) => self.keep(e),
+        }
+    }
+
+    #[cold]
+    fn keep(&mut self, e: std::io::Error) -> postcard::Result<()> {
+        self.error = Some(e);
+        Err(postcard::Error::SerializeBufferFull)
+    }
+}
+
+impl<W: std::io::Write> postcard::ser_flavors::Flavor for KeepError<W> {
+    type Output = ();
+
+    #[inline(always)]
+    fn try_push(&mut self, byte: u8) -> postcard::Result<()> {
+        let written = self.out.write_all(&[byte]);
+        self.kept(written)
+    }
+
+    #[inline(always)]
+    fn try_extend(&mut self, bytes: &[u8]) -> postcard::Result<()> {
+        let written = self.out.write_all(bytes);
+        self.kept(written)
+    }
+
+    fn finalize(self) -> postcard::Result<()> {
+        Ok(())
+    }
+}
+
+/// `value`'s postcard serialisation written to `out`, a value at a time (buffer `out`); a
+/// write error is the writer's own.
+fn to_writer<T: serde::Serialize + ?Sized>(
+    value: &T,
+    out: impl std::io::Write,
+) -> std::io::Result<()> {
+    let mut ser = postcard::Serializer {
+        output: KeepError { out, error: None },
+    };
+    let encoded = value.serialize(&mut ser);
+    match ser.output.error {
+        Some(e) => Err(e),
+        None => encoded.map_err(std::io::Error::other),
+    }
 }
 
 /// A writer or reader that counts and checksums what passes through it.
@@ -395,9 +454,15 @@ mod tests {
     #[test]
     fn built_in_place_is_the_container_of_the_serialised_payload() {
         let magic = *b"\x89TESTFQ\n";
-        let values: Vec<f32> = (0..100_000u32).map(|i| i as f32 * 0.37 - 5.0).collect();
-        let cases: [(&str, &[f32]); 3] =
-            [("empty", &[]), ("short", &values[..3]), ("long", &values)];
+        // Longer than the buffer it is written through, and a name longer than it.
+        let values: Vec<f32> = (0..700_000u32).map(|i| i as f32 * 0.37 - 5.0).collect();
+        let long_name = "n".repeat((1 << 20) + 17);
+        let cases: [(&str, &[f32]); 4] = [
+            ("empty", &[]),
+            ("short", &values[..3]),
+            ("long", &values),
+            (&long_name, &values[..1000]),
+        ];
         for (name, v) in cases {
             let payload = postcard::to_stdvec(&(name, v)).unwrap();
             let built = encode_postcard(&magic, 3, &(name, v)).unwrap();
@@ -418,5 +483,33 @@ mod tests {
             assert_eq!(written[..40], [7; 40], "{name}");
             assert_eq!(written[40..], built, "{name}: written as encoded");
         }
+    }
+
+    /// Regression: a disk that fills while a policy is written was reported as postcard's
+    /// "Serialize Buffer Full"; the writer's own error comes back (its kind and message).
+    #[test]
+    fn a_failed_write_keeps_its_error() {
+        #[derive(Debug)]
+        struct Full(std::io::Cursor<Vec<u8>>);
+        impl std::io::Write for Full {
+            fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+                if self.0.position() + buf.len() as u64 > 3 << 20 {
+                    return Err(std::io::ErrorKind::StorageFull.into());
+                }
+                self.0.write(buf)
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                Ok(())
+            }
+        }
+        impl std::io::Seek for Full {
+            fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+                self.0.seek(to)
+            }
+        }
+        let values = vec![1.5f32; 2 << 20];
+        let out = Full(std::io::Cursor::new(Vec::new()));
+        let e = write_postcard(out, b"\x89TESTFQ\n", 1, &values).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::StorageFull);
     }
 }
