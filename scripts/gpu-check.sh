@@ -123,7 +123,8 @@ for mb in $GPU_CHECK_BATCHES; do
   rc=$?
   line=$(grep -E '^(backup|evaluate|read back|problem)' "$OUT/bench-gpu-$mb.log" | sed 's/  */ /g' | paste -sd ';' -)
   peak=$(grep -E '^FMA peak' "$OUT/bench-gpu-$mb.log" | sed 's/^FMA peak *//')
-  row "GPU full backup, batch ${mb} MiB" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "${line:-see log}; peak ${peak}"
+  opened=$(grep -oE 'opened in [^)]*\)' "$OUT/bench-gpu-$mb.log")
+  row "GPU full backup, batch ${mb} MiB" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" "${line:-see log}; peak ${peak}; GPU ${opened}"
   prof=$(grep -E '^profile' "$OUT/bench-gpu-$mb.log" | sed 's/^profile *//' | paste -sd ';' -)
   [ -n "$prof" ] && row "  its dispatches, one at a time" "" "$prof"
 done
@@ -146,7 +147,7 @@ for kern in $GPU_CHECK_KERNELS; do
     --device gpu --backups 6 --evaluations 0 --peak-seconds 0.1 --json "${log%.log}.json" >"$log" 2>&1
   rc=$?
   row "GPU full backup, kernels $kern" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
-    "$(grep -E '^(backup|profile)' "$log" | sed -e 's/  */ /g' -e 's/^profile //' | paste -sd ';' -)"
+    "$(grep -E '^(backup|profile)' "$log" | sed -e 's/  */ /g' -e 's/^profile //' | paste -sd ';' -);$(grep -oE 'set-up [0-9.]+ s \(compiling kernels [0-9.]+ s\)' "$log")"
 done
 # Policy evaluation split at each of GPU_CHECK_EVALS (FUZZYQ_GPU_EVAL: nested, every block per
 # core over V; stages:K, the first K stages of a full backup for every action, then the other

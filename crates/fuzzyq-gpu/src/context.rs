@@ -37,8 +37,24 @@ pub struct AdapterSummary {
     /// needs (checked at start-up); the last stage then reduces a core's lanes with them.
     pub subgroup_size: Option<u32>,
     /// Whether the adapter is software on the host's CPU (wgpu's `DeviceType::Cpu`: Mesa's
-    /// lavapipe, WARP); the fused last stage's default differs ([`crate::LastStage::for_adapter`]).
+    /// lavapipe, WARP); the kernels' defaults differ: the rows compiled in for every problem
+    /// ([`crate::Gpu::with_rows_compiled_in_from`]), and where they are too large, the last
+    /// stage merged.
     pub software: bool,
+    /// Where the time to open the GPU went.
+    pub opening: OpeningSeconds,
+}
+
+/// Where the time to open a GPU went ([`AdapterSummary::opening`]), in seconds: on a short
+/// run (the paper's point masses) the open is on the critical path.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OpeningSeconds {
+    /// wgpu's instance, the adapters listed and the device requested.
+    pub device: f64,
+    /// The generic kernels compiled.
+    pub kernels: f64,
+    /// The start-up probes: is `fma` fused, do subgroup shuffles reduce as needed.
+    pub probes: f64,
 }
 
 /// wgpu's device and queue, and the adapter's summary.

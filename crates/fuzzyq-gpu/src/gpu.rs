@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use crate::context::{AdapterSummary, Context};
+use crate::context::{AdapterSummary, Context, OpeningSeconds};
 use crate::error::GpuError;
 
 /// One GPU: wgpu's device and queue, shared by every run that uses it (cheap to clone).
@@ -216,6 +216,7 @@ impl Gpu {
     pub fn new() -> Result<Self, GpuError> {
         // Read before the adapter opens, so that a mistyped setting fails at once.
         let settings = Settings::from_env()?;
+        let start = std::time::Instant::now();
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
         desc.backends = wgpu::Backends::from_env()
             .unwrap_or(wgpu::Backends::VULKAN | wgpu::Backends::METAL | wgpu::Backends::DX12);
@@ -252,18 +253,26 @@ impl Gpu {
                 && (4..=64).contains(&info.subgroup_min_size))
             .then_some(info.subgroup_min_size),
             software: info.device_type == wgpu::DeviceType::Cpu,
+            opening: OpeningSeconds::default(),
         };
         let mut ctx = Context {
             device,
             queue,
             summary,
         };
+        let opened = start.elapsed().as_secs_f64();
         // The generic kernels, compiled once for every run on this GPU, and the probes.
         let kernels = crate::kernels::Kernels::new(&ctx)?;
+        let compiled = start.elapsed().as_secs_f64();
         ctx.summary.fused_fma = crate::probe::fused_fma(&ctx, &kernels)?;
         ctx.summary.subgroup_size = match ctx.summary.subgroup_size {
             Some(s) if crate::probe::subgroups_work(&ctx, &kernels, s)? => Some(s),
             _ => None,
+        };
+        ctx.summary.opening = OpeningSeconds {
+            device: opened,
+            kernels: compiled - opened,
+            probes: start.elapsed().as_secs_f64() - compiled,
         };
         // The stages before the last: merged, and with their rows compiled in (as measured
         // on lavapipe and an H200), unless a setting says otherwise; on a GPU, only for

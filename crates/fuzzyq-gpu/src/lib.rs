@@ -129,7 +129,7 @@ use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
 
 pub use batches::Batches;
-pub use context::AdapterSummary;
+pub use context::{AdapterSummary, OpeningSeconds};
 pub use error::GpuError;
 pub use gpu::{COMPILE_IN_FROM, Evaluation, Gpu, LastStage, Opening};
 pub use sweeps::GpuSweeps;

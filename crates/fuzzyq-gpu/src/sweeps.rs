@@ -102,6 +102,8 @@ pub struct GpuSweeps {
     evaluate: Option<wgpu::ComputePipeline>,
     /// The stages policy evaluation runs for every action first ([`Shape::evaluation_stages`]).
     eval_stages: usize,
+    /// Seconds the driver took to compile this problem's kernels ([`Self::compile_seconds`]).
+    compile_seconds: f64,
     shape: Shape,
     table: [wgpu::Buffer; 3],
     /// The rewards per core, a buffer per part (or the reward table, one buffer).
@@ -446,6 +448,7 @@ impl GpuSweeps {
             kernels::parts_layout(ctx, parts.count())
         };
         let sg = ctx.summary.subgroup_size.filter(|_| gpu.subgroups);
+        let compile_start = std::time::Instant::now();
         let compiled = compile(
             gpu,
             &k,
@@ -455,8 +458,10 @@ impl GpuSweeps {
             &arrays.merged,
             &plan.tables,
         )?;
+        let compile_seconds = compile_start.elapsed().as_secs_f64();
         let sweeps = Self {
             gpu: gpu.clone(),
+            compile_seconds,
             stage_kernels: compiled.stages,
             last: compiled.last,
             evaluate: compiled.evaluate,
@@ -553,6 +558,14 @@ impl GpuSweeps {
     #[must_use]
     pub fn uses_subgroups(&self) -> bool {
         self.last.as_ref().is_some_and(|l| l.subgroups)
+    }
+
+    /// Seconds of the set-up spent compiling this problem's kernels (each compiled with the
+    /// problem's sizes as constants, side by side; the rows compiled in take the driver
+    /// longest: [`Gpu::with_rows_compiled_in_from`]).
+    #[must_use]
+    pub fn compile_seconds(&self) -> f64 {
+        self.compile_seconds
     }
 
     /// The batches a full pass runs in (the stage buffers hold one batch).

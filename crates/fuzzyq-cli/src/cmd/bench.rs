@@ -358,6 +358,8 @@ struct GpuReport {
     backend: String,
     driver: String,
     fused_fma: bool,
+    /// Seconds to open the GPU: the device, the generic kernels, the probes.
+    opening_seconds: [f64; 3],
     /// The adapter's memory for a run's buffers, where the API reports it.
     memory_bytes: Option<u64>,
     /// What the timed run's buffers took on the device.
@@ -376,6 +378,8 @@ struct GpuReport {
     /// binding (1 unless `V` exceeds a binding).
     v_parts: usize,
     setup_seconds: f64,
+    /// Of the set-up, the seconds the driver took to compile the problem's kernels.
+    compile_seconds: f64,
     subgroups: bool,
     /// The fused last stage's kernel (`last1`: rows one at a time, `lastm`: merged, `lastw`:
     /// from workgroup memory, `lastu`: the rows compiled in), if the problem has one
@@ -436,13 +440,18 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     let gpu = fuzzyq_gpu::Gpu::shared()?;
     let a = gpu.summary().clone();
     println!(
-        "gpu        {} ({}, {}); fma {}; f64 in shaders: {}; {}",
+        "gpu        {} ({}, {}); fma {}; f64 in shaders: {}; {}; opened in {:.3} s (device \
+         {:.3} s, generic kernels {:.3} s, probes {:.3} s)",
         a.name,
         a.backend,
         a.driver,
         if a.fused_fma { "fused" } else { "not fused" },
         if a.f64 { "yes" } else { "no" },
-        gpu_memory(a.memory)
+        gpu_memory(a.memory),
+        a.opening.device + a.opening.kernels + a.opening.probes,
+        a.opening.device,
+        a.opening.kernels,
+        a.opening.probes
     );
     let peak = gpu.fma_peak(args.peak_seconds)?;
     println!(
@@ -523,7 +532,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
     }
     println!(
         "problem    {}: {cores} cores x {joint} joint actions{}; {}{}{}; {:.3} GB on the GPU; \
-         set-up {:.3} s",
+         set-up {:.3} s (compiling kernels {:.3} s)",
         config.env.name(),
         fma.map_or(String::new(), |f| format!(
             ", {f:.3e} multiply-adds per full backup"
@@ -537,7 +546,8 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             .last_stage()
             .map_or(String::new(), |k| format!("; last stage {k}")),
         sweeps.device_bytes() as f64 / 1e9,
-        setup
+        setup,
+        sweeps.compile_seconds()
     );
     let (lo, hi) = min_max(&times);
     println!(
@@ -555,6 +565,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             backend: a.backend,
             driver: a.driver,
             fused_fma: a.fused_fma,
+            opening_seconds: [a.opening.device, a.opening.kernels, a.opening.probes],
             memory_bytes: a.memory,
             run_bytes: sweeps.device_bytes(),
             peak_gfma_per_second: peak,
@@ -567,6 +578,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             batches_per_pass: sweeps.batches().count,
             v_parts: sweeps.parts(),
             setup_seconds: setup,
+            compile_seconds: sweeps.compile_seconds(),
             subgroups: sweeps.uses_subgroups(),
             last_stage: sweeps.last_stage(),
             stage_kernels: sweeps.stage_kernels(),

@@ -191,4 +191,17 @@ fn bench_on_the_gpu_batches_three_point_masses() {
     assert!(j["batch_level"].as_u64().unwrap() >= 1, "{j}");
     assert!(j["batches_per_pass"].as_u64().unwrap() > 1, "{j}");
     assert!(j["run_bytes"].as_u64().unwrap() > 4 * 6u64.pow(6), "{j}");
+    // Where the set-up and the device's opening went.
+    let (setup, compile) = (j["setup_seconds"].as_f64(), j["compile_seconds"].as_f64());
+    assert!(
+        matches!((setup, compile), (Some(s), Some(c)) if 0.0 < c && c <= s),
+        "{j}"
+    );
+    let opening = j["opening_seconds"].as_array().unwrap();
+    assert_eq!(opening.len(), 3, "{j}");
+    assert!(
+        opening.iter().all(|x| x.as_f64().is_some_and(|x| x >= 0.0)),
+        "{j}"
+    );
+    assert!(out.contains("(compiling kernels "), "{out}");
 }
