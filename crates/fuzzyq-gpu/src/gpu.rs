@@ -82,7 +82,7 @@ impl Evaluation {
 /// How the fused last stage of a full backup takes a core's rows (its block actions)
 /// ([`Gpu::with_last_stage`], or `FUZZYQ_GPU_LAST`: `rows`, `merged`, `merged:CORES`, `tile`,
 /// `tile:THREADS`, `unrolled` or `joined`; the
-/// default [`LastStage::for_adapter`]). Every
+/// default [`LastStage::default`]). Every
 /// choice gives the same bits; they differ in how often the stage before is read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LastStage {
@@ -115,7 +115,7 @@ pub enum LastStage {
     /// chain of `fma`s with constant weights; the cores' maxima then reduce over the lanes a
     /// chunk of cores at a time, each exchange halving the cores a lane holds. Where the
     /// table is too large to compile in, [`LastStage::MERGED`] on a software adapter and
-    /// [`LastStage::Rows`] on a GPU. The default ([`LastStage::for_adapter`]; on a GPU for
+    /// [`LastStage::Rows`] on a GPU. The default ([`LastStage::default`]; on a GPU for
     /// problems from [`COMPILE_IN_FROM`] multiply-adds per full backup).
     Unrolled,
     /// [`LastStage::Unrolled`] with the stage before it joined in (`lastj`): the workgroup
@@ -129,22 +129,21 @@ pub enum LastStage {
     Joined,
 }
 
+/// The default, as measured: the rows compiled in ([`LastStage::Unrolled`]). On an H200 the
+/// last stage of a full backup of the paper's grid takes 5.4-5.8 ms so, against 23.1 ms one
+/// row at a time and 48.6 ms in tiles; on a software adapter (Mesa's lavapipe) it is 9.5-19
+/// times faster than merged rows with 4 cores in turn and 6-8.6 times faster than one row at
+/// a time. On a GPU a problem below [`COMPILE_IN_FROM`] multiply-adds per full backup takes
+/// [`LastStage::Rows`] instead ([`Gpu::with_rows_compiled_in_from`]).
+impl Default for LastStage {
+    fn default() -> Self {
+        LastStage::Unrolled
+    }
+}
+
 impl LastStage {
     /// Merged rows, 4 cores in turn (`merged`).
     pub const MERGED: LastStage = LastStage::Merged { cores: 4 };
-
-    /// The default on an adapter, as measured: the rows compiled in on both kinds. On an
-    /// H200 the last stage of a full backup of the paper's grid takes 5.8 ms so, against
-    /// 23.1 ms one row at a time (the default there before) and 48.6 ms in tiles; on a
-    /// software adapter (`software`: Mesa's lavapipe) it is 9.5-19 times faster than merged
-    /// rows with 4 cores in turn and 6-8.6 times faster than one row at a time. Where the
-    /// table is too large to compile in, the kernel falls back to merged rows on a software
-    /// adapter and to one row at a time on a GPU.
-    #[must_use]
-    pub fn for_adapter(software: bool) -> LastStage {
-        let _ = software;
-        LastStage::Unrolled
-    }
 
     /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads),
     /// `tile:THREADS`, `unrolled` or `joined` (`None` for anything else).
@@ -279,7 +278,7 @@ impl Gpu {
         // problems large enough to repay the compiler's time.
         let software = ctx.summary.software;
         let (merged_stages, unrolled_stages) = settings.stages.unwrap_or((true, true));
-        let last = settings.last.unwrap_or(LastStage::for_adapter(software));
+        let last = settings.last.unwrap_or_default();
         let small = (
             settings.stages.is_some_and(|s| s.1),
             settings.last.unwrap_or(LastStage::Rows),
@@ -388,7 +387,7 @@ impl Gpu {
     }
 
     /// This GPU with the fused last stage taking a core's rows as `last` says (the default
-    /// [`LastStage::for_adapter`], or `FUZZYQ_GPU_LAST`), for every problem. All give the
+    /// [`LastStage::default`], or `FUZZYQ_GPU_LAST`), for every problem. All give the
     /// same bits.
     #[must_use]
     pub fn with_last_stage(mut self, last: LastStage) -> Self {

@@ -31,7 +31,7 @@
 //!   compiler: [`Gpu::with_rows_compiled_in_from`]).
 //!
 //! The last stage is fused with the maximum over actions ([`LastStage`]; the default
-//! [`LastStage::for_adapter`], as measured on an H200 and on lavapipe):
+//! [`LastStage::default`], as measured on an H200 and on lavapipe):
 //! - one row at a time, up to 32 lanes per core, each taking several of the core's columns
 //!   so that a weight feeds several multiply-adds (`last1.wgsl`; the default on GPUs below
 //!   [`COMPILE_IN_FROM`]);
