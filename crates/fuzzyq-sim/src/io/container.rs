@@ -486,7 +486,8 @@ mod tests {
     }
 
     /// Regression: a disk that fills while a policy is written was reported as postcard's
-    /// "Serialize Buffer Full"; the writer's own error comes back (its kind and message).
+    /// "The serialize buffer is full"; the writer's own error comes back (its kind and
+    /// message).
     #[test]
     fn a_failed_write_keeps_its_error() {
         #[derive(Debug)]
