@@ -402,13 +402,14 @@ impl Gpu {
     /// row at a time, unless [`Gpu::with_unrolled_stages`] or [`Gpu::with_last_stage`] (or
     /// their settings) choose for every problem. The same bits either way.
     ///
-    /// The default on a GPU is [`COMPILE_IN_FROM`]: NVIDIA's driver took 0.4 s (2.4 s on its
-    /// first sight of the kernels) to compile the paper's grid with its rows in, more than the
-    /// 0.18 s that saved in the default point-mass run's 9 full backups (29.5 against 7.3 ms
-    /// each on an H200), while three point masses on 3 x 3 cores per axis (3.2e11
-    /// multiply-adds per full backup) trained in 10.6 s instead of 24.5 s. On a software
-    /// adapter it is 0 (always: lavapipe compiles the paper's grid in 0.34 s and runs its
-    /// full backups 5-10 times faster).
+    /// The default on a GPU is [`COMPILE_IN_FROM`]: on an H200 the default point-mass run's
+    /// set-up took 0.49 s with the paper's grid's rows compiled in (2.4 s on the driver's
+    /// first sight of the kernels) against 0.12 s with the tables read, more than the 0.18 s
+    /// its 9 full backups saved (7.3 against 29.5 ms each), while three point masses
+    /// (`examples/three-point-masses.toml`, 3.2e11 multiply-adds per full backup) trained in
+    /// 10.6 s instead of 24.5 s. On a software adapter it is 0 (always: lavapipe compiles the
+    /// paper grid's last stage in 0.34 s and runs its full backup 10 times faster, 5.4
+    /// against 52.6 s).
     #[must_use]
     pub fn with_rows_compiled_in_from(mut self, multiply_adds: f64) -> Self {
         self.compile_in_from = multiply_adds;
