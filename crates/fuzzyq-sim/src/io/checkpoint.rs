@@ -14,7 +14,7 @@ use std::path::Path;
 use fuzzyq_core::solver::SolverState;
 use serde::{Deserialize, Serialize};
 
-use super::container::{self, Damage};
+use super::container::{self, Damage, Encoder, Float};
 pub use crate::error::CheckpointError;
 use crate::learn::fql::FqlState;
 
@@ -97,7 +97,35 @@ impl Checkpoint<'_> {
     #[must_use]
     pub fn to_bytes(&self) -> Vec<u8> {
         // Postcard cannot fail on these types (no maps, no unsized sequences).
-        container::encode_postcard(&MAGIC, FORMAT_VERSION, self).unwrap_or_default()
+        container::write_encoded(
+            std::io::Cursor::new(Vec::new()),
+            &MAGIC,
+            FORMAT_VERSION,
+            |e| self.encode(e),
+        )
+        .map(std::io::Cursor::into_inner)
+        .unwrap_or_default()
+    }
+
+    /// The payload as its derived serialisation encodes it, `V` and the policy in bulk
+    /// ([`Encoder`]): `postcard::to_stdvec(self)`'s bytes, as
+    /// `written_as_serde_encodes_it` checks.
+    fn encode<W: std::io::Write>(&self, e: &mut Encoder<W>) -> std::io::Result<()> {
+        e.value(&self.settings)?;
+        let RunState::Fqi(fqi) = &self.state else {
+            return e.value(&self.state);
+        };
+        e.variant(0)?;
+        match fqi {
+            FqiState::F32(s) => {
+                e.variant(0)?;
+                encode_state(s, e)
+            }
+            FqiState::F64(s) => {
+                e.variant(1)?;
+                encode_state(s, e)
+            }
+        }
     }
 
     /// Writes the checkpoint atomically (a temporary file beside `path`, then a rename),
@@ -105,7 +133,7 @@ impl Checkpoint<'_> {
     /// three point masses on the paper's cores holds 66 GB of `V` and policy).
     pub fn save(&self, path: &Path) -> Result<(), CheckpointError> {
         super::write_atomically_with(path, |file| {
-            container::write_postcard(file, &MAGIC, FORMAT_VERSION, self).map(|_| ())
+            container::write_encoded(file, &MAGIC, FORMAT_VERSION, |e| self.encode(e)).map(|_| ())
         })
         .map_err(|error| CheckpointError::Write {
             path: path.to_path_buf(),
@@ -238,6 +266,27 @@ fn wrong_version(path: &Path, version: u32) -> CheckpointError {
     )
 }
 
+/// A solver's state as its derived serialisation encodes it (its fields in order), `V`, the
+/// `V` before it and the policy in bulk.
+fn encode_state<T: Float, W: std::io::Write>(
+    s: &SolverState<'_, T>,
+    e: &mut Encoder<W>,
+) -> std::io::Result<()> {
+    e.value(&s.scheme)?;
+    e.floats(&s.v)?;
+    e.floats(&s.v_prev)?;
+    e.u32s(&s.policy)?;
+    e.value(&(
+        s.shift,
+        s.evaluations_left,
+        s.evaluation_tolerance,
+        s.final_delta,
+        s.sweep_seconds,
+        s.evaluation_seconds,
+        &s.records,
+    ))
+}
+
 /// The error of a damaged checkpoint at `path`: it `reason` (`"is truncated (...)"`).
 fn damaged_because(path: &Path, reason: String) -> CheckpointError {
     CheckpointError::Damaged {
@@ -299,6 +348,75 @@ mod tests {
         assert_eq!(bytes, checkpoint().to_bytes());
         assert_eq!(decode(&bytes).unwrap(), checkpoint());
         assert_eq!(Checkpoint::load(&path).unwrap(), checkpoint());
+    }
+
+    /// `V`, the `V` before it and the policy written in bulk give serde's bytes: single and
+    /// double precision, policies of one to five varint bytes, arrays longer than the
+    /// encoder's buffer, and records.
+    #[test]
+    fn written_as_serde_encodes_it() {
+        use fuzzyq_core::solver::{Delta, SweepRecord};
+
+        let n = 70_000;
+        let policy: Vec<u32> = (0..n as u32)
+            .map(|i| i.wrapping_mul(2_654_435_761) >> (i % 32))
+            .collect();
+        let records = vec![
+            SweepRecord {
+                sweep: 2,
+                delta: Delta {
+                    lower: 0.5,
+                    upper: 0.75,
+                },
+                delta_v: 0.7,
+                seconds: 1.25,
+                extrapolated: true,
+                evaluation: false,
+            };
+            3
+        ];
+        let FqiState::F32(base) = (match checkpoint().state {
+            RunState::Fqi(s) => s,
+            RunState::Fql(_) => unreachable!(),
+        }) else {
+            unreachable!()
+        };
+        let narrow = SolverState {
+            scheme: Scheme::ModifiedPolicy,
+            v: Cow::Owned((0..n).map(|i| (i as f32).sin()).collect()),
+            v_prev: Cow::Owned(vec![2.5; 3]),
+            policy: Cow::Owned(policy.clone()),
+            shift: 0.25,
+            evaluations_left: 4,
+            records: Cow::Owned(records),
+            ..base
+        };
+        let wide = SolverState {
+            scheme: narrow.scheme,
+            v: Cow::Owned((0..n).map(|i| (i as f64).cos()).collect()),
+            v_prev: Cow::Owned(Vec::new()),
+            policy: Cow::Owned(policy),
+            shift: 1.0,
+            evaluations_left: 1,
+            evaluation_tolerance: 0.125,
+            final_delta: 3.0,
+            sweep_seconds: 7.5,
+            evaluation_seconds: 1.5,
+            records: narrow.records.clone(),
+        };
+        for state in [
+            RunState::Fqi(FqiState::F32(narrow)),
+            RunState::Fqi(FqiState::F64(wide)),
+            checkpoint().state,
+        ] {
+            let c = Checkpoint {
+                settings: Cow::Borrowed("gamma = 0.9\nxi = 0.05\n"),
+                state,
+            };
+            let serde = container::encode_postcard(&MAGIC, FORMAT_VERSION, &c).unwrap();
+            assert_eq!(c.to_bytes(), serde, "{}", c.state.progress());
+            assert_eq!(decode(&serde).unwrap(), c);
+        }
     }
 
     /// Damage gives the same one-line error whether the file is decoded in memory or as it

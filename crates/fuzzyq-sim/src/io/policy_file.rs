@@ -33,6 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, PolicyFileError, SimError, require};
 use crate::io::config::{TomlDoc, TrainConfig};
+use crate::io::container::Encoder;
 use crate::learn::additive::AdditiveQ;
 use crate::learn::fql::{FqlConfig, FqlOutcome};
 use crate::learn::tasks::khepera as khepera_task;
@@ -82,6 +83,20 @@ impl Values {
         match self {
             Self::F32(_) => Precision::F32,
             Self::F64(_) => Precision::F64,
+        }
+    }
+
+    /// The values as their derived serialisation encodes them, in bulk.
+    fn encode<W: std::io::Write>(&self, e: &mut Encoder<W>) -> std::io::Result<()> {
+        match self {
+            Self::F32(v) => {
+                e.variant(0)?;
+                e.floats(v)
+            }
+            Self::F64(v) => {
+                e.variant(1)?;
+                e.floats(v)
+            }
         }
     }
 
@@ -225,6 +240,17 @@ struct FqiPayloadRef<'a> {
     summary: &'a TrainSummary,
 }
 
+impl FqiPayloadRef<'_> {
+    /// The payload as its derived serialisation encodes it, `V` and the greedy actions in
+    /// bulk.
+    fn encode<W: std::io::Write>(&self, e: &mut Encoder<W>) -> std::io::Result<()> {
+        e.value(&self.config_toml)?;
+        self.values.encode(e)?;
+        e.u32s(self.greedy)?;
+        e.value(self.summary)
+    }
+}
+
 /// What a version 2 or 3 payload holds: `F` is [`FqiPayload`] and `L` [`BlockTables`] when
 /// reading, [`FqiPayloadRef`] and a reference when writing. Variants are only ever added at
 /// the end (postcard encodes the variant's index).
@@ -240,6 +266,34 @@ enum Content<F, L> {
     LearnedFqi(F, L),
     /// Fuzzy Q-iteration on a model defined outside fuzzyq (version 5).
     Tabulated(Box<TabulatedArtifact>),
+}
+
+impl Content<FqiPayloadRef<'_>, &BlockTables> {
+    /// The payload as its derived serialisation encodes it (the variant's index, then its
+    /// fields), the per-core arrays in bulk: `postcard::to_stdvec(self)`'s bytes, as
+    /// `every_payload_is_written_as_serde_encodes_it` checks.
+    fn encode<W: std::io::Write>(&self, e: &mut Encoder<W>) -> std::io::Result<()> {
+        match self {
+            Self::Fqi(p) => {
+                e.variant(0)?;
+                p.encode(e)
+            }
+            Self::LearnedFqi(p, tables) => {
+                e.variant(3)?;
+                p.encode(e)?;
+                e.value(tables)
+            }
+            Self::Tabulated(t) => {
+                e.variant(4)?;
+                let t = &**t;
+                e.value(&(&t.cores, &t.membership, &t.actions, &t.blocks))?;
+                t.values.encode(e)?;
+                e.u32s(&t.greedy)?;
+                e.value(&(t.gamma, t.xi, t.absorbing_goal, &t.summary))
+            }
+            Self::PointMass(_) | Self::Khepera(_) => e.value(self),
+        }
+    }
 }
 
 /// Payloads of at least this many bytes are decoded as they are read
@@ -727,17 +781,34 @@ impl PolicyFile {
 
     /// Encodes the file with its header.
     pub fn to_bytes(&self) -> Result<Vec<u8>, SimError> {
+        let out = std::io::Cursor::new(Vec::with_capacity(self.size_hint()));
         self.with_payload(|version, payload| {
-            super::container::encode_postcard(&MAGIC, version, payload)
-                .expect("a policy always serialises")
+            super::container::write_encoded(out, &MAGIC, version, |e| payload.encode(e))
+                .expect("a policy always serialises, and a vector takes every byte")
+                .into_inner()
         })
+    }
+
+    /// About how many bytes the file takes: exact for single-precision values and fewer than
+    /// 128 joint actions (the greedy actions then take a byte each).
+    fn size_hint(&self) -> usize {
+        let (values, greedy) = match self {
+            Self::Fqi(a) => (&a.values, a.greedy.len()),
+            Self::Tabulated(t) => (&t.values, t.greedy.len()),
+            Self::PointMass(_) | Self::Khepera(_) => return 1 << 16,
+        };
+        let each = match values {
+            Values::F32(_) => 4,
+            Values::F64(_) => 8,
+        };
+        HEADER_LEN + (1 << 16) + each * values.len() + greedy
     }
 
     /// Writes the file ([`Self::to_bytes`]'s bytes) to `out` as it is encoded, so that no copy
     /// of a large policy is held: the caller makes it atomic (a temporary file, then a rename).
     pub fn write_to<W: std::io::Write + std::io::Seek>(&self, out: W) -> std::io::Result<W> {
         self.with_payload(|version, payload| {
-            super::container::write_postcard(out, &MAGIC, version, payload)
+            super::container::write_encoded(out, &MAGIC, version, |e| payload.encode(e))
         })
         .map_err(|e| std::io::Error::other(e.to_string()))?
     }
@@ -1068,6 +1139,75 @@ mod tests {
             back.is_ok() || !back.unwrap_err().to_string().contains("wrong kind"),
             "decodes"
         );
+    }
+
+    /// The per-core arrays written in bulk ([`Content::encode`]) give serde's bytes, for
+    /// every payload that has them: values in either precision, greedy actions of one to five
+    /// varint bytes through each of the encoder's ways, arrays longer than its buffer, a
+    /// learned model's tables and a model defined outside fuzzyq.
+    #[test]
+    fn every_payload_is_written_as_serde_encodes_it() {
+        use crate::train::{ModelLearning, train_learned};
+
+        let serde = |file: &PolicyFile| {
+            file.with_payload(|version, payload| {
+                super::super::container::encode_postcard(&MAGIC, version, payload).unwrap()
+            })
+            .unwrap()
+        };
+        // Runs of the encoder's buffer (2^16 values) of one to five bytes each: below 128,
+        // below 16,384 (the bounds of one and two bytes among them), any, and a short last run.
+        let n = 200_000;
+        let greedy: Vec<u32> = (0..n as u32)
+            .map(|i| match (i >> 16, i % 5) {
+                (0, _) => i % 128,
+                (1, 0) => 127,
+                (1, 1) => 128,
+                (1, 2) => 16_383,
+                (1, _) => i % 16_384,
+                (2, 0) => 1 << 20,
+                (2, 1) => u32::MAX - i,
+                (2, _) => 128 + i,
+                _ => i % 200,
+            })
+            .collect();
+        let mut a = tiny();
+        a.values = Values::F32((0..n).map(|i| (i as f32).sin() * 1e3).collect());
+        a.greedy = greedy.clone();
+        let mut wide = a.clone();
+        wide.values = Values::F64((0..n).map(|i| (i as f64).cos() / 7.0).collect());
+        let mut config = tiny().config;
+        config.grid.position_cores = vec![-1.0, 0.0, 1.0];
+        let learned = train_learned(&config, &ModelLearning::new(500, 1), |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap()
+        .artifact;
+        let tabulated = TabulatedArtifact {
+            cores: vec![vec![-1.0, 1.0]; 2],
+            membership: fuzzyq_core::Membership::Crisp,
+            actions: vec![(vec![-1.0, 1.0], 1)],
+            blocks: vec![(vec![0, 1], vec![0])],
+            values: Values::F64(vec![0.5; n]),
+            greedy,
+            gamma: 0.9,
+            xi: 0.01,
+            absorbing_goal: true,
+            summary: tiny().summary,
+        };
+        let files = [
+            PolicyFile::Fqi(a),
+            PolicyFile::Fqi(wide),
+            PolicyFile::Fqi(learned),
+            PolicyFile::Fqi(tiny()),
+            PolicyFile::Tabulated(Box::new(tabulated)),
+        ];
+        for (k, file) in files.iter().enumerate() {
+            let bytes = file.to_bytes().unwrap();
+            assert_eq!(bytes, serde(file), "file {k}");
+            let written = file.write_to(std::io::Cursor::new(Vec::new())).unwrap();
+            assert_eq!(written.into_inner(), bytes, "file {k}, written as encoded");
+        }
     }
 
     /// Files of format version 1 (fuzzy Q-iteration only, no payload kind) still load.
