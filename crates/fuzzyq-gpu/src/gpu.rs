@@ -288,7 +288,7 @@ impl Gpu {
             memory: ctx.summary.memory,
             batch_bytes: settings.batch_kib.map_or(256 << 20, |k| k << 10),
             part_bytes: settings.part_kib.map_or(u64::MAX, |k| k << 10),
-            read_bytes: 256 << 20,
+            read_bytes: crate::buffers::STAGING_BYTES,
             subgroups: settings.subgroups.unwrap_or(true),
             last,
             merged_stages,
@@ -478,10 +478,10 @@ impl Gpu {
     }
 
     /// This GPU reading a run's result (`V` and the greedy actions, at the end) back in pieces
-    /// of about `bytes` (whole slabs, at least one; default 256 MiB), each put in grid order
-    /// as it arrives: the host holds the result and one piece, never `V` twice (three point
-    /// masses on the paper's cores: 33 GB of `V`, 33 GB of greedy actions). Any pieces give
-    /// the same result.
+    /// of about `bytes` (whole slabs, at least one; default 32 MiB), each put in grid order
+    /// as it arrives while the device copies the next: the host holds the result and two
+    /// pieces, never `V` twice (three point masses on the paper's cores: 33 GB of `V`, 33 GB
+    /// of greedy actions). Any pieces give the same result.
     #[must_use]
     pub fn with_read_bytes(mut self, bytes: u64) -> Self {
         self.read_bytes = bytes;

@@ -233,7 +233,7 @@ fn reward_buffers<M: Model<f32> + Sync + ?Sized>(
         parts
             .split(data, width)
             .map(|d| {
-                let b = with_data(&gpu.inner, label, d);
+                let b = buffers::filled(&gpu.inner, label, d)?;
                 if parts.count() > 1 {
                     buffers::settle(&gpu.inner)?;
                 }
@@ -1138,7 +1138,7 @@ impl GpuSweeps {
         let parts = self.shape.parts;
         for (buf, d) in self.parts_of(b).iter().zip(parts.split(data, 1)) {
             let gpu = &self.gpu.inner;
-            gpu.queue.write_buffer(buf, 0, bytemuck::cast_slice(d));
+            buffers::write_pieces(gpu, buf, d, buffers::staged::<T>())?;
             if parts.count() > 1 {
                 buffers::settle(gpu)?;
             }
