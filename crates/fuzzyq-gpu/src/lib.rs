@@ -9,7 +9,9 @@
 //! ([`BlockPlan`](fuzzyq_core::solver::BlockPlan)), `V`'s buffers and the policy live on
 //! the device, and only scalars come back between passes (the range of a sweep's change, the
 //! exact delta); `V` and the greedy actions come back at the end, a few slabs at a time put
-//! in grid order as they arrive ([`Gpu::with_read_bytes`]: the host never holds `V` twice),
+//! in grid order as they arrive, through two staging buffers that take turns (the device
+//! copies one piece while the host places the other; [`Gpu::with_read_bytes`]: the host
+//! never holds `V` twice),
 //! and when an observer asks for the run's state (a checkpoint).
 //!
 //! A full backup runs the block contraction a batch at a time ([`Batches`]: a run of slabs, or
