@@ -1071,3 +1071,105 @@ fn gpu_runs_continue_from_their_checkpoints_bit_for_bit() {
         }
     }
 }
+
+/// A model that says when its reward is first asked for (the operator's preparation computes
+/// the rewards), and is otherwise `inner`.
+struct Announcing<M> {
+    inner: M,
+    first_reward: std::sync::Mutex<Option<std::sync::mpsc::Sender<()>>>,
+}
+
+impl<M: Model<f32>> Model<f32> for Announcing<M> {
+    fn state_dim(&self) -> usize {
+        self.inner.state_dim()
+    }
+    fn n_agents(&self) -> usize {
+        self.inner.n_agents()
+    }
+    fn action_set(&self, agent: usize) -> fuzzyq_core::ActionSet<'_, f32> {
+        self.inner.action_set(agent)
+    }
+    fn state_bounds(&self, dim: usize) -> (f32, f32) {
+        self.inner.state_bounds(dim)
+    }
+    fn step(&self, x: &[f32], u: &[f32], next: &mut [f32]) {
+        self.inner.step(x, u, next);
+    }
+    fn reward(&self, x: &[f32], u: &[f32]) -> f32 {
+        if let Some(tx) = self.first_reward.lock().unwrap().take() {
+            let _ = tx.send(());
+        }
+        self.inner.reward(x, u)
+    }
+    fn reward_depends_on_action(&self) -> bool {
+        self.inner.reward_depends_on_action()
+    }
+    fn is_goal(&self, x: &[f32]) -> bool {
+        self.inner.is_goal(x)
+    }
+    fn is_terminal(&self, x: &[f32]) -> bool {
+        self.inner.is_terminal(x)
+    }
+    fn has_terminal_states(&self) -> bool {
+        self.inner.has_terminal_states()
+    }
+    fn n_blocks(&self) -> usize {
+        self.inner.n_blocks()
+    }
+    fn tabulated(&self) -> Option<fuzzyq_core::Tabulated<'_, f32>> {
+        self.inner.tabulated()
+    }
+    fn reward_table(&self) -> Option<&[f32]> {
+        self.inner.reward_table()
+    }
+    fn block_rows(&self, b: usize) -> Option<fuzzyq_core::BlockRows<'_, f32>> {
+        self.inner.block_rows(b)
+    }
+    fn block(&self, b: usize) -> fuzzyq_core::Block<'_> {
+        self.inner.block(b)
+    }
+}
+
+/// Regression: `train --device gpu` opens the process's GPU on a thread of its own so that
+/// the open overlaps the run's set-up on the host, but the solve waited for the GPU
+/// (`Gpu::shared`) before preparing its operator, so the open preceded the set-up instead (on
+/// the H200's host: 0.17-0.3 s added to every run). `solve_shared` waits for it only to make
+/// the backend: here the open's last step waits for the model's first reward, which the
+/// preparation computes; before the fix the solve waited for the open, which gave up waiting
+/// after 30 s.
+#[test]
+fn the_gpu_opened_in_the_background_overlaps_the_set_up() {
+    use std::sync::mpsc;
+    let Some(g) = gpu() else { return };
+    let c = pointmass_small();
+    let (tx, rx) = mpsc::channel();
+    let model = Announcing {
+        inner: c.build_model().expect("model"),
+        first_reward: std::sync::Mutex::new(Some(tx)),
+    };
+    let grid = c.grid::<f32>().expect("grid");
+    let config = c.solver.solver_config();
+    let (seen_tx, seen) = mpsc::channel();
+    let opening = Gpu::open_shared_in_background(move |_| {
+        let _ = seen_tx.send(rx.recv_timeout(std::time::Duration::from_secs(30)).is_ok());
+    });
+    // The run as `train` makes it.
+    let shared = <f32 as fuzzyq_sim::train::DeviceReal>::solve_on_device(
+        Device::Gpu,
+        &model,
+        &grid,
+        &config,
+        None,
+        false,
+        noop,
+    )
+    .unwrap();
+    opening.wait().unwrap();
+    assert!(
+        seen.recv().unwrap(),
+        "the run's operator was prepared while the GPU opened"
+    );
+    // The same run as on the GPU given.
+    let given = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(&shared, &given, "the shared GPU against the one given");
+}

@@ -152,6 +152,54 @@ pub fn solve_from<M>(
 where
     M: Model<f32> + Sync + ?Sized,
 {
+    solve_on(
+        || Ok(gpu.clone()),
+        model,
+        grid,
+        config,
+        (resume, show_state),
+        observer,
+    )
+}
+
+/// [`solve_from`] on the process's GPU ([`Gpu::shared`]), waited for only once the run's
+/// operator is prepared (the rewards, the block tables: the CPU's part of the set-up), so
+/// that an open begun beforehand ([`Gpu::open_shared_in_background`]) overlaps that
+/// preparation instead of preceding it.
+pub fn solve_shared<M>(
+    model: &M,
+    grid: &Grid<f32>,
+    config: &SolverConfig,
+    resume: Option<SolverState<'_, f32>>,
+    show_state: bool,
+    observer: impl FnMut(&Progress, Option<&SolverState<'_, f32>>) -> ControlFlow<()>,
+) -> Result<Solution<f32>, GpuError>
+where
+    M: Model<f32> + Sync + ?Sized,
+{
+    solve_on(
+        Gpu::shared,
+        model,
+        grid,
+        config,
+        (resume, show_state),
+        observer,
+    )
+}
+
+/// [`solve_from`] on the GPU `gpu()` gives when each backend is made (the run's, and its
+/// coarse start's).
+fn solve_on<M>(
+    gpu: impl Fn() -> Result<Gpu, GpuError>,
+    model: &M,
+    grid: &Grid<f32>,
+    config: &SolverConfig,
+    (resume, show_state): (Option<SolverState<'_, f32>>, bool),
+    observer: impl FnMut(&Progress, Option<&SolverState<'_, f32>>) -> ControlFlow<()>,
+) -> Result<Solution<f32>, GpuError>
+where
+    M: Model<f32> + Sync + ?Sized,
+{
     if config.sweep != fuzzyq_core::solver::SweepMode::Synchronous {
         return Err(GpuError::Unsupported(
             "runs synchronous sweeps only (solver.sweep = \"sync\")",
@@ -163,7 +211,7 @@ where
         config,
         resume,
         show_state,
-        &mut |op, scheme| GpuSweeps::for_scheme(gpu, op, scheme),
+        &mut |op, scheme| GpuSweeps::for_scheme(&gpu()?, op, scheme),
         observer,
     )
 }

@@ -215,12 +215,11 @@ impl DeviceReal for f32 {
     ) -> Result<Solution<f32>, SimError> {
         match device {
             Device::Cpu => Ok(solver::solve_from(model, grid, config, resume, observer)?),
-            Device::Gpu => {
-                let gpu = fuzzyq_gpu::Gpu::shared()?;
-                Ok(fuzzyq_gpu::solve_from(
-                    &gpu, model, grid, config, resume, show_state, observer,
-                )?)
-            }
+            // The GPU waited for once the operator is prepared: an open the command line began
+            // in the background overlaps that preparation.
+            Device::Gpu => Ok(fuzzyq_gpu::solve_shared(
+                model, grid, config, resume, show_state, observer,
+            )?),
         }
     }
 }
