@@ -404,11 +404,13 @@ impl Gpu {
     ///
     /// The default on a GPU is [`COMPILE_IN_FROM`]: on an H200 the default point-mass run's
     /// set-up took 0.49 s with the paper's grid's rows compiled in (2.4 s on the driver's
-    /// first sight of the kernels) against 0.12 s with the tables read, more than the 0.18 s
+    /// first sight of the kernels; measured before each core's rows became a function of
+    /// their own, which cut Naga's share by 0.14 s of a Zen 4 core) against 0.12 s with the
+    /// tables read, more than the 0.18 s
     /// its 9 full backups saved (7.3 against 29.5 ms each), while three point masses
     /// (`examples/three-point-masses.toml`, 3.2e11 multiply-adds per full backup) trained in
     /// 10.6 s instead of 24.5 s. On a software adapter it is 0 (always: lavapipe compiles the
-    /// paper grid's last stage in 0.34 s and runs its full backup 10 times faster, 5.4
+    /// paper grid's kernels in 0.29-0.31 s and runs its full backup 10 times faster, 5.4
     /// against 52.6 s).
     #[must_use]
     pub fn with_rows_compiled_in_from(mut self, multiply_adds: f64) -> Self {

@@ -382,9 +382,9 @@ pub(crate) fn source_text(
 
 /// Whether `text` is a valid WGSL module (naga's parser and validator, as wgpu runs them,
 /// with subgroup operations and `f64`): for the tests of generated kernels, without an
-/// adapter.
+/// adapter. The most expressions one of its functions holds.
 #[cfg(test)]
-pub(crate) fn check_wgsl(text: &str) -> Result<(), String> {
+pub(crate) fn check_wgsl(text: &str) -> Result<usize, String> {
     use wgpu::naga;
     let module = naga::front::wgsl::parse_str(text).map_err(|e| e.emit_to_string(text))?;
     naga::valid::Validator::new(
@@ -392,8 +392,14 @@ pub(crate) fn check_wgsl(text: &str) -> Result<(), String> {
         naga::valid::Capabilities::all(),
     )
     .validate(&module)
-    .map(|_| ())
-    .map_err(|e| e.emit_to_string(text))
+    .map_err(|e| e.emit_to_string(text))?;
+    let functions = module.functions.iter().map(|(_, f)| f);
+    let entries = module.entry_points.iter().map(|e| &e.function);
+    Ok(functions
+        .chain(entries)
+        .map(|f| f.expressions.len())
+        .max()
+        .unwrap_or(0))
 }
 
 /// A kernel of `template` compiled with the problem's constants `consts` (prepended, with
@@ -572,7 +578,7 @@ mod tests {
                 &[],
                 reader.as_deref(),
             );
-            check_wgsl(&text).unwrap_or_else(|e| panic!("{stages} stages: {e}\n{text}"));
+            let _ = check_wgsl(&text).unwrap_or_else(|e| panic!("{stages} stages: {e}\n{text}"));
         }
         // Two levels nested over the second stage's output: its item, column, the outer
         // level's offset and the first two blocks' actions.

@@ -123,7 +123,7 @@ mod tests {
                 &SG_PROBE_REPLACE,
                 None,
             );
-            crate::kernels::check_wgsl(&text).unwrap();
+            let _ = crate::kernels::check_wgsl(&text).unwrap();
         }
     }
 }
