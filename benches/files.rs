@@ -3,7 +3,8 @@
 //! the disk is the host's), on the shapes of the paper's point masses (4,100,625 cores,
 //! greedy joint actions below 625: one or two bytes each) and of the paper's Khepera robots
 //! (37,662,769 cores, 16 joint actions: a byte each). `V` and the greedy actions are
-//! seeded pseudo-random: the bytes of a trained policy take the same time.
+//! seeded pseudo-random: the bytes of a trained policy take the same time. And the same
+//! files loaded again from memory (`policy_read`: decoded and checked).
 #![allow(missing_docs)]
 
 use std::hint::black_box;
@@ -12,6 +13,7 @@ use std::io::{Seek, SeekFrom, Write};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use fuzzyq_benches::values;
 use fuzzyq_sim::io::policy_file::{PolicyFile, Values};
+use fuzzyq_sim::model::EnvKind;
 use fuzzyq_sim::{PolicyArtifact, TrainConfig};
 
 /// A writer that counts what it is given and keeps nothing.
@@ -66,6 +68,24 @@ fn bench_files(c: &mut Criterion) {
         g.throughput(Throughput::Bytes(bytes));
         g.bench_function(name, |b| {
             b.iter(|| black_box(file.write_to(Discard(0)).unwrap().0));
+        });
+    }
+    g.finish();
+    // Loading it again from memory: decoded and checked.
+    let mut g = c.benchmark_group("policy_read");
+    g.sample_size(10);
+    let path = std::path::Path::new("policy.fzq");
+    for (name, env, m) in [
+        ("paper", EnvKind::Pointmass, 625),
+        ("khepera", EnvKind::Khepera, 16),
+    ] {
+        // The environment's own configuration, so that the file checks out.
+        let mut own = small.clone();
+        own.config = TrainConfig::default_for(env).unwrap();
+        let bytes = policy(&own, own.config.n_cores(), m).to_bytes().unwrap();
+        g.throughput(Throughput::Bytes(bytes.len() as u64));
+        g.bench_function(name, |b| {
+            b.iter(|| black_box(PolicyFile::from_bytes(&bytes, path).unwrap()));
         });
     }
     g.finish();

@@ -104,7 +104,10 @@ pub(crate) struct Encoder<W> {
 }
 
 /// The floating-point types whose values postcard encodes as their little-endian bytes.
-pub(crate) trait Float: bytemuck::Pod + serde::Serialize {}
+pub(crate) trait Float:
+    bytemuck::Pod + serde::Serialize + serde::de::DeserializeOwned
+{
+}
 impl Float for f32 {}
 impl Float for f64 {}
 
@@ -283,9 +286,18 @@ fn header(magic: &[u8; 8], version: u32, len: u64, crc: u32) -> [u8; HEADER_LEN]
 /// words what is wrong (postcard's own messages, such as "Found a bool that wasn't 0 or 1",
 /// name its internals, not the file).
 pub(crate) fn decode_postcard<T: serde::de::DeserializeOwned>(payload: &[u8]) -> Result<T, String> {
-    match postcard::take_from_bytes(payload) {
-        Ok((value, [])) => Ok(value),
-        Ok((_, rest)) => Err(left_over(rest.len() as u64)),
+    decode_payload::<Serde<T>>(payload).map(|s| s.0)
+}
+
+/// [`decode_postcard`] of a payload decoded by `T`'s own [`Decode`] (the per-core arrays in
+/// bulk).
+pub(crate) fn decode_payload<T: Decode>(payload: &[u8]) -> Result<T, String> {
+    let mut d = Decoder {
+        src: Cursor { rest: payload },
+    };
+    match T::decode(&mut d) {
+        Ok(value) if d.src.rest.is_empty() => Ok(value),
+        Ok(_) => Err(left_over(d.src.rest.len() as u64)),
         Err(e) => Err(undecodable(&e)),
     }
 }
@@ -326,17 +338,37 @@ pub(crate) fn decode_streamed<T: serde::de::DeserializeOwned>(
     len: u64,
     crc: u32,
 ) -> Result<T, Streamed> {
+    decode_streamed_as::<Serde<T>>(file, len, crc).map(|s| s.0)
+}
+
+/// [`decode_streamed`] of a payload decoded by `T`'s own [`Decode`].
+pub(crate) fn decode_streamed_as<T: Decode>(
+    file: impl std::io::Read,
+    len: u64,
+    crc: u32,
+) -> Result<T, Streamed> {
+    decode_streamed_in(file, len, crc, 1 << 20)
+}
+
+/// [`decode_streamed_as`] through a buffer of `capacity` bytes (the tests' small ones split
+/// values between two reads).
+pub(crate) fn decode_streamed_in<T: Decode>(
+    file: impl std::io::Read,
+    len: u64,
+    crc: u32,
+    capacity: usize,
+) -> Result<T, Streamed> {
     let summed = Summed {
         inner: file.take(len),
         crc: crc32fast::Hasher::new(),
         len: 0,
     };
     let mut flavor = Stream {
-        reader: std::io::BufReader::with_capacity(1 << 20, summed),
+        reader: std::io::BufReader::with_capacity(capacity, summed),
         left: len,
         temp: Vec::new(),
     };
-    let decoded = T::deserialize(&mut postcard::Deserializer::from_flavor(&mut flavor));
+    let decoded = T::decode(&mut Decoder { src: &mut flavor });
     // The rest of the payload, read through the checksum: what the content left over.
     let rest = std::io::copy(&mut flavor.reader, &mut std::io::sink()).map_err(Streamed::Io)?;
     let summed = flavor.reader.into_inner();
@@ -424,6 +456,194 @@ impl<'s: 'de, 'de, R: std::io::Read + 'de> postcard::de_flavors::Flavor<'de> for
     fn finalize(self) -> postcard::Result<()> {
         Ok(())
     }
+}
+
+/// A payload's content decoded field by field ([`Decoder`]), the mirror of what an
+/// [`Encoder`] writes.
+pub(crate) trait Decode: Sized {
+    /// The value at the front of `d`'s payload.
+    fn decode<S: Source>(d: &mut Decoder<S>) -> postcard::Result<Self>;
+}
+
+/// A value decoded whole by serde ([`Decoder::value`]).
+pub(crate) struct Serde<T>(pub(crate) T);
+
+impl<T: serde::de::DeserializeOwned> Decode for Serde<T> {
+    fn decode<S: Source>(d: &mut Decoder<S>) -> postcard::Result<Self> {
+        d.value().map(Serde)
+    }
+}
+
+/// Where a [`Decoder`] reads: a payload in memory ([`Cursor`]) or read from a file as it is
+/// decoded ([`Stream`]).
+pub(crate) trait Source {
+    /// The next value as serde and postcard decode it.
+    fn value<T: serde::de::DeserializeOwned>(&mut self) -> postcard::Result<T>;
+    /// The payload's next bytes that are at hand (none only at its end).
+    fn at_hand(&mut self) -> postcard::Result<&[u8]>;
+    /// Moves past `n` bytes of [`Source::at_hand`]'s.
+    fn consume(&mut self, n: usize);
+    /// Bytes of the payload not yet decoded (as its header announces, for a stream).
+    fn left(&self) -> u64;
+}
+
+/// A payload in memory.
+pub(crate) struct Cursor<'a> {
+    rest: &'a [u8],
+}
+
+impl Source for Cursor<'_> {
+    fn value<T: serde::de::DeserializeOwned>(&mut self) -> postcard::Result<T> {
+        let mut de = postcard::Deserializer::from_bytes(self.rest);
+        let value = T::deserialize(&mut de)?;
+        self.rest = de.finalize()?;
+        Ok(value)
+    }
+
+    fn at_hand(&mut self) -> postcard::Result<&[u8]> {
+        Ok(self.rest)
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.rest = &self.rest[n..];
+    }
+
+    fn left(&self) -> u64 {
+        self.rest.len() as u64
+    }
+}
+
+impl<R: std::io::BufRead> Source for &mut Stream<R> {
+    fn value<T: serde::de::DeserializeOwned>(&mut self) -> postcard::Result<T> {
+        T::deserialize(&mut postcard::Deserializer::from_flavor(&mut **self))
+    }
+
+    fn at_hand(&mut self) -> postcard::Result<&[u8]> {
+        let left = self.left;
+        let buf = self
+            .reader
+            .fill_buf()
+            .map_err(|_| postcard::Error::DeserializeUnexpectedEnd)?;
+        Ok(&buf[..buf.len().min(usize::try_from(left).unwrap_or(usize::MAX))])
+    }
+
+    fn consume(&mut self, n: usize) {
+        self.reader.consume(n);
+        self.left -= n as u64;
+    }
+
+    fn left(&self) -> u64 {
+        self.left
+    }
+}
+
+/// Reads a payload as postcard encodes it ([`Encoder`]), the small fields through serde
+/// ([`Self::value`]) and the arrays of a value per core in bulk ([`Self::floats`],
+/// [`Self::u32s`]), where serde would make a call per number (the robots' policy: 75
+/// million of them). Every error is postcard's for the same bytes, or one of the same kind
+/// (the payload ending early, or a value out of range), which is all a file's error names.
+pub(crate) struct Decoder<S> {
+    src: S,
+}
+
+impl<S: Source> Decoder<S> {
+    /// The next value as serde and postcard decode it.
+    pub(crate) fn value<T: serde::de::DeserializeOwned>(&mut self) -> postcard::Result<T> {
+        self.src.value()
+    }
+
+    /// The index of an enum's variant ([`Encoder::variant`]).
+    pub(crate) fn variant(&mut self) -> postcard::Result<u32> {
+        self.value()
+    }
+
+    /// A `Vec` of `n` values that take at least `size` bytes each, its room reserved at
+    /// once where the payload can hold them (so a damaged length allocates nothing it would
+    /// not fill, and one that fits no memory falls back on growing as values arrive).
+    fn room<T>(&self, n: usize, size: u64) -> Vec<T> {
+        let mut out = Vec::new();
+        if (n as u64).saturating_mul(size) <= self.src.left() {
+            let _ = out.try_reserve_exact(n);
+        }
+        out
+    }
+
+    /// A `Vec` of `f32` or `f64` ([`Encoder::floats`]): its length, then the values'
+    /// little-endian bytes, copied as they are at hand.
+    pub(crate) fn floats<T: Float>(&mut self) -> postcard::Result<Vec<T>> {
+        if cfg!(target_endian = "big") {
+            return self.value();
+        }
+        let n: usize = self.value()?;
+        let size = std::mem::size_of::<T>();
+        let mut out = self.room(n, size as u64);
+        while out.len() < n {
+            let buf = self.src.at_hand()?;
+            let k = (buf.len() / size).min(n - out.len());
+            if k == 0 {
+                // The payload's end, or a value split between two reads.
+                out.push(self.value()?);
+                continue;
+            }
+            let start = out.len();
+            out.resize(start + k, T::zeroed());
+            bytemuck::cast_slice_mut::<T, u8>(&mut out[start..]).copy_from_slice(&buf[..k * size]);
+            self.src.consume(k * size);
+        }
+        Ok(out)
+    }
+
+    /// A `Vec` of `u32` ([`Encoder::u32s`]): its length, then each value's varint, decoded
+    /// in one loop over the bytes at hand, as postcard decodes it (at most 5 bytes, the last
+    /// of which holds at most 4 bits).
+    pub(crate) fn u32s(&mut self) -> postcard::Result<Vec<u32>> {
+        let n: usize = self.value()?;
+        let mut out = self.room(n, 1);
+        while out.len() < n {
+            let buf = self.src.at_hand()?;
+            let mut at = 0;
+            while out.len() < n && at < buf.len() {
+                let b = buf[at];
+                if b < 0x80 {
+                    out.push(u32::from(b));
+                    at += 1;
+                    continue;
+                }
+                match varint_u32(&buf[at..]) {
+                    Some(Ok((x, len))) => {
+                        out.push(x);
+                        at += len;
+                    }
+                    Some(Err(e)) => return Err(e),
+                    None => break,
+                }
+            }
+            self.src.consume(at);
+            if at == 0 {
+                // The payload's end, or a value split between two reads.
+                out.push(self.value()?);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// The `u32` varint at the front of `bytes` and its length, postcard's error where it is
+/// not one, or `None` where `bytes` end inside it.
+fn varint_u32(bytes: &[u8]) -> Option<postcard::Result<(u32, usize)>> {
+    let mut x = 0u32;
+    for i in 0..5 {
+        let b = *bytes.get(i)?;
+        x |= u32::from(b & 0x7f) << (7 * i);
+        if b & 0x80 == 0 {
+            return Some(if i == 4 && b > 0x0f {
+                Err(postcard::Error::DeserializeBadVarint)
+            } else {
+                Ok((x, i + 1))
+            });
+        }
+    }
+    Some(Err(postcard::Error::DeserializeBadVarint))
 }
 
 /// Writes the header of the container whose payload follows `HEADER_LEN` placeholder bytes

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, PolicyFileError, SimError, require};
 use crate::io::config::{TomlDoc, TrainConfig};
-use crate::io::container::Encoder;
+use crate::io::container::{Decode, Decoder, Encoder, Source};
 use crate::learn::additive::AdditiveQ;
 use crate::learn::fql::{FqlConfig, FqlOutcome};
 use crate::learn::tasks::khepera as khepera_task;
@@ -223,6 +223,7 @@ pub struct PolicyArtifact {
 /// the configuration travels as its TOML text (postcard cannot encode the config's internally
 /// tagged enums, and TOML keeps it readable and stable across versions).
 #[derive(Deserialize)]
+#[cfg_attr(test, derive(PartialEq))]
 struct FqiPayload {
     config_toml: String,
     values: Values,
@@ -255,6 +256,7 @@ impl FqiPayloadRef<'_> {
 /// reading, [`FqiPayloadRef`] and a reference when writing. Variants are only ever added at
 /// the end (postcard encodes the variant's index).
 #[derive(Serialize, Deserialize)]
+#[cfg_attr(test, derive(PartialEq))]
 enum Content<F, L> {
     /// Fuzzy Q-iteration.
     Fqi(F),
@@ -296,6 +298,58 @@ impl Content<FqiPayloadRef<'_>, &BlockTables> {
     }
 }
 
+impl<L: serde::de::DeserializeOwned> Decode for Content<FqiPayload, L> {
+    /// The payload as its derived deserialisation decodes it, the per-core arrays in bulk
+    /// (the mirror of [`Content::encode`]; `every_payload_is_read_as_serde_decodes_it`).
+    fn decode<S: Source>(d: &mut Decoder<S>) -> postcard::Result<Self> {
+        Ok(match d.variant()? {
+            0 => Self::Fqi(FqiPayload::decode(d)?),
+            1 => Self::PointMass(d.value()?),
+            2 => Self::Khepera(d.value()?),
+            3 => Self::LearnedFqi(FqiPayload::decode(d)?, d.value()?),
+            4 => {
+                let (cores, membership, actions, blocks) = d.value()?;
+                let (values, greedy) = (Values::decode(d)?, d.u32s()?);
+                let (gamma, xi, absorbing_goal, summary) = d.value()?;
+                Self::Tabulated(Box::new(TabulatedArtifact {
+                    cores,
+                    membership,
+                    actions,
+                    blocks,
+                    values,
+                    greedy,
+                    gamma,
+                    xi,
+                    absorbing_goal,
+                    summary,
+                }))
+            }
+            _ => return Err(postcard::Error::DeserializeBadEnum),
+        })
+    }
+}
+
+impl Decode for FqiPayload {
+    fn decode<S: Source>(d: &mut Decoder<S>) -> postcard::Result<Self> {
+        Ok(Self {
+            config_toml: d.value()?,
+            values: Values::decode(d)?,
+            greedy: d.u32s()?,
+            summary: d.value()?,
+        })
+    }
+}
+
+impl Decode for Values {
+    fn decode<S: Source>(d: &mut Decoder<S>) -> postcard::Result<Self> {
+        match d.variant()? {
+            0 => d.floats().map(Self::F32),
+            1 => d.floats().map(Self::F64),
+            _ => Err(postcard::Error::DeserializeBadEnum),
+        }
+    }
+}
+
 /// Payloads of at least this many bytes are decoded as they are read
 /// ([`PolicyFile::load`]): the values and greedy actions are then held once, not also as the
 /// file's bytes (three point masses on the paper's cores: a 48 GB file).
@@ -314,15 +368,15 @@ enum Payload<'a> {
 
 impl Payload<'_> {
     /// The payload's content as a `T`; `path` names the file in errors.
-    fn decode<T: serde::de::DeserializeOwned>(self, path: &Path) -> Result<T, PolicyFileError> {
+    fn decode<T: Decode>(self, path: &Path) -> Result<T, PolicyFileError> {
         use super::container::Streamed;
         let (file, len, crc) = match self {
             Self::Bytes(b) => {
-                return super::container::decode_postcard(b).map_err(|e| malformed(path, e));
+                return super::container::decode_payload(b).map_err(|e| malformed(path, e));
             }
             Self::Stream { file, len, crc } => (file, len, crc),
         };
-        super::container::decode_streamed(file, len, crc).map_err(|e| match e {
+        super::container::decode_streamed_as(file, len, crc).map_err(|e| match e {
             Streamed::Io(error) => PolicyFileError::Read {
                 path: path.to_path_buf(),
                 error,
@@ -961,20 +1015,12 @@ mod trained_tests {
     use super::*;
     use crate::learn::tasks::pointmass as pt;
 
-    /// The per-core arrays written in bulk ([`Content::encode`]) give serde's bytes, for
-    /// every payload that has them: values in either precision, greedy actions of one to five
-    /// varint bytes through each of the encoder's ways, arrays longer than its buffer, a
-    /// learned model's tables and a model defined outside fuzzyq.
-    #[test]
-    fn every_payload_is_written_as_serde_encodes_it() {
+    /// Files with every payload that has per-core arrays: values in either precision,
+    /// greedy actions of one to five varint bytes through each of the encoder's ways, arrays
+    /// longer than its buffer, a learned model's tables and a model defined outside fuzzyq.
+    fn payload_files() -> Vec<PolicyFile> {
         use crate::train::{ModelLearning, train_learned};
 
-        let serde = |file: &PolicyFile| {
-            file.with_payload(|version, payload| {
-                super::super::container::encode_postcard(&MAGIC, version, payload).unwrap()
-            })
-            .unwrap()
-        };
         // Runs of the encoder's buffer (2^16 values) of one to five bytes each: below 128,
         // below 16,384 (the bounds of one and two bytes among them), any, and a short last run.
         let n = 200_000;
@@ -1015,18 +1061,72 @@ mod trained_tests {
             absorbing_goal: true,
             summary: tiny().summary,
         };
-        let files = [
+        vec![
             PolicyFile::Fqi(a),
             PolicyFile::Fqi(wide),
             PolicyFile::Fqi(learned),
             PolicyFile::Fqi(tiny()),
             PolicyFile::Tabulated(Box::new(tabulated)),
-        ];
-        for (k, file) in files.iter().enumerate() {
+        ]
+    }
+
+    /// The per-core arrays written in bulk ([`Content::encode`]) give serde's bytes, for
+    /// every payload that has them ([`payload_files`]).
+    #[test]
+    fn every_payload_is_written_as_serde_encodes_it() {
+        let serde = |file: &PolicyFile| {
+            file.with_payload(|version, payload| {
+                super::super::container::encode_postcard(&MAGIC, version, payload).unwrap()
+            })
+            .unwrap()
+        };
+        for (k, file) in payload_files().iter().enumerate() {
             let bytes = file.to_bytes().unwrap();
             assert_eq!(bytes, serde(file), "file {k}");
             let written = file.write_to(std::io::Cursor::new(Vec::new())).unwrap();
             assert_eq!(written.into_inner(), bytes, "file {k}, written as encoded");
+        }
+    }
+
+    /// The per-core arrays read in bulk ([`Decode`]) give serde's values, and for a damaged
+    /// payload serde's error: every payload ([`payload_files`]) whole, cut short and with a
+    /// byte changed, in memory and streamed through buffers small enough to split values
+    /// between two reads.
+    #[test]
+    fn every_payload_is_read_as_serde_decodes_it() {
+        use super::super::container::{Streamed, decode_payload, decode_postcard};
+        type Read = Content<FqiPayload, BlockTables>;
+        let streamed = |payload: &[u8], capacity| {
+            let crc = crc32fast::hash(payload);
+            let len = payload.len() as u64;
+            super::super::container::decode_streamed_in::<Read>(payload, len, crc, capacity)
+                .map_err(|e| match e {
+                    Streamed::Content(words) => words,
+                    e => panic!("an intact stream read as damaged: {e:?}"),
+                })
+        };
+        let check = |payload: &[u8], what: &str, capacities: &[usize]| {
+            let want = decode_postcard::<Read>(payload);
+            assert!(decode_payload::<Read>(payload) == want, "{what}");
+            for &c in capacities {
+                assert!(streamed(payload, c) == want, "{what}, streamed by {c}");
+            }
+        };
+        for (k, file) in payload_files().iter().enumerate() {
+            let bytes = file.to_bytes().unwrap();
+            let payload = &bytes[HEADER_LEN..];
+            check(payload, &format!("file {k}"), &[1 << 20, 4093, 7]);
+            // Cut short, and a byte changed, at places through the whole payload.
+            let n = payload.len();
+            let places: Vec<usize> = (0..32.min(n)).chain((0..n).step_by(n / 31 + 1)).collect();
+            for &at in &places {
+                check(&payload[..at], &format!("file {k} cut at {at}"), &[13]);
+                for flip in [0x80u8, 0x7f, 0xff] {
+                    let mut damaged = payload.to_vec();
+                    damaged[at] ^= flip;
+                    check(&damaged, &format!("file {k}, byte {at} ^ {flip:#x}"), &[13]);
+                }
+            }
         }
     }
 
