@@ -11,10 +11,10 @@
 
 use std::path::Path;
 
-use fuzzyq_core::solver::SolverState;
+use fuzzyq_core::solver::{SolverState, SweepRecord};
 use serde::{Deserialize, Serialize};
 
-use super::container::{self, Damage, Encoder, Float};
+use super::container::{self, Damage, Decode, Decoder, Encoder, Float, Source};
 pub use crate::error::CheckpointError;
 use crate::learn::fql::FqlState;
 
@@ -221,7 +221,7 @@ impl Checkpoint<'static> {
                 Err(e) => Err(error(e)),
             };
         }
-        container::decode_streamed(file, len, crc).map_err(error)
+        container::decode_streamed_as(file, len, crc).map_err(error)
     }
 
     /// Decodes a checkpoint's bytes (`path` names it in errors).
@@ -236,7 +236,7 @@ impl Checkpoint<'static> {
         if version != FORMAT_VERSION {
             return Err(wrong_version(path, version));
         }
-        container::decode_postcard(payload)
+        container::decode_payload(payload)
             .map_err(|e| damaged_because(path, format!("cannot be decoded: {e}")))
     }
 }
@@ -285,6 +285,51 @@ fn encode_state<T: Float, W: std::io::Write>(
         s.evaluation_seconds,
         &s.records,
     ))
+}
+
+impl Decode for Checkpoint<'static> {
+    /// The payload as its derived deserialisation decodes it, `V`, the `V` before it and the
+    /// policy in bulk (the mirror of [`Checkpoint::encode`]; `read_as_serde_decodes_it`).
+    fn decode<S: Source>(d: &mut Decoder<S>) -> postcard::Result<Self> {
+        let settings: String = d.value()?;
+        let state = match d.variant()? {
+            0 => RunState::Fqi(match d.variant()? {
+                0 => FqiState::F32(decode_state(d)?),
+                1 => FqiState::F64(decode_state(d)?),
+                _ => return Err(postcard::Error::DeserializeBadEnum),
+            }),
+            1 => RunState::Fql(d.value()?),
+            _ => return Err(postcard::Error::DeserializeBadEnum),
+        };
+        Ok(Checkpoint {
+            settings: settings.into(),
+            state,
+        })
+    }
+}
+
+/// A solver's state as [`encode_state`] writes it.
+fn decode_state<T: Float, S: Source>(
+    d: &mut Decoder<S>,
+) -> postcard::Result<SolverState<'static, T>> {
+    let scheme = d.value()?;
+    let (v, v_prev, policy) = (d.floats()?, d.floats()?, d.u32s()?);
+    // The fields after the arrays, as `encode_state` writes them: one tuple.
+    type Tail = (f64, usize, f64, f64, f64, f64, Vec<SweepRecord>);
+    let (shift, left, tolerance, delta, sweep_s, eval_s, records): Tail = d.value()?;
+    Ok(SolverState {
+        scheme,
+        v: v.into(),
+        v_prev: v_prev.into(),
+        policy: policy.into(),
+        shift,
+        evaluations_left: left,
+        evaluation_tolerance: tolerance,
+        final_delta: delta,
+        sweep_seconds: sweep_s,
+        evaluation_seconds: eval_s,
+        records: records.into(),
+    })
 }
 
 /// The error of a damaged checkpoint at `path`: it `reason` (`"is truncated (...)"`).
@@ -350,11 +395,9 @@ mod tests {
         assert_eq!(Checkpoint::load(&path).unwrap(), checkpoint());
     }
 
-    /// `V`, the `V` before it and the policy written in bulk give serde's bytes: single and
-    /// double precision, policies of one to five varint bytes, arrays longer than the
-    /// encoder's buffer, and records.
-    #[test]
-    fn written_as_serde_encodes_it() {
+    /// Checkpoints of single and double precision, policies of one to five varint bytes,
+    /// arrays longer than the encoder's buffer, and records.
+    fn checkpoints() -> Vec<Checkpoint<'static>> {
         use fuzzyq_core::solver::{Delta, SweepRecord};
 
         let n = 70_000;
@@ -404,18 +447,72 @@ mod tests {
             evaluation_seconds: 1.5,
             records: narrow.records.clone(),
         };
-        for state in [
+        [
             RunState::Fqi(FqiState::F32(narrow)),
             RunState::Fqi(FqiState::F64(wide)),
             checkpoint().state,
-        ] {
-            let c = Checkpoint {
-                settings: Cow::Borrowed("gamma = 0.9\nxi = 0.05\n"),
-                state,
-            };
+        ]
+        .into_iter()
+        .map(|state| Checkpoint {
+            settings: Cow::Borrowed("gamma = 0.9\nxi = 0.05\n"),
+            state,
+        })
+        .collect()
+    }
+
+    /// `V`, the `V` before it and the policy written in bulk give serde's bytes
+    /// ([`checkpoints`]).
+    #[test]
+    fn written_as_serde_encodes_it() {
+        for c in checkpoints() {
             let serde = container::encode_postcard(&MAGIC, FORMAT_VERSION, &c).unwrap();
             assert_eq!(c.to_bytes(), serde, "{}", c.state.progress());
             assert_eq!(decode(&serde).unwrap(), c);
+        }
+    }
+
+    /// Read in bulk ([`Decode`]), every checkpoint ([`checkpoints`]) gives serde's state,
+    /// and a damaged one serde's error: whole, cut short and with a byte changed, in memory
+    /// and streamed through buffers small enough to split values between two reads.
+    #[test]
+    fn read_as_serde_decodes_it() {
+        use container::{Streamed, decode_payload, decode_postcard, decode_streamed_in};
+        type Read = Checkpoint<'static>;
+        let check = |payload: &[u8], what: &str, capacities: &[usize]| {
+            let want = decode_postcard::<Read>(payload);
+            assert_eq!(decode_payload::<Read>(payload), want, "{what}");
+            let crc = crc32fast::hash(payload);
+            for &c in capacities {
+                let got = decode_streamed_in::<Read>(payload, payload.len() as u64, crc, c)
+                    .map_err(|e| match e {
+                        Streamed::Content(words) => words,
+                        e => panic!("an intact stream read as damaged: {e:?}"),
+                    });
+                assert_eq!(got, want, "{what}, streamed by {c}");
+            }
+        };
+        for (k, c) in checkpoints().iter().enumerate() {
+            let bytes = c.to_bytes();
+            let payload = &bytes[container::HEADER_LEN..];
+            check(payload, &format!("checkpoint {k}"), &[1 << 20, 4093, 7]);
+            let n = payload.len();
+            let places: Vec<usize> = (0..32.min(n)).chain((0..n).step_by(n / 31 + 1)).collect();
+            for &at in &places {
+                check(
+                    &payload[..at],
+                    &format!("checkpoint {k} cut at {at}"),
+                    &[13],
+                );
+                for flip in [0x80u8, 0x7f, 0xff, 0x01] {
+                    let mut damaged = payload.to_vec();
+                    damaged[at] ^= flip;
+                    check(
+                        &damaged,
+                        &format!("checkpoint {k}, byte {at} ^ {flip:#x}"),
+                        &[13],
+                    );
+                }
+            }
         }
     }
 

@@ -281,16 +281,17 @@ fn header(magic: &[u8; 8], version: u32, len: u64, crc: u32) -> [u8; HEADER_LEN]
     h
 }
 
-/// The value of a whole payload: postcard decodes a value from the front of its input and
-/// would ignore bytes after it, so a payload with any left over is refused. The error says in
-/// words what is wrong (postcard's own messages, such as "Found a bool that wasn't 0 or 1",
-/// name its internals, not the file).
+/// [`decode_payload`] of a value decoded whole by serde: the tests' reference for the
+/// payloads decoded in bulk.
+#[cfg(test)]
 pub(crate) fn decode_postcard<T: serde::de::DeserializeOwned>(payload: &[u8]) -> Result<T, String> {
     decode_payload::<Serde<T>>(payload).map(|s| s.0)
 }
 
-/// [`decode_postcard`] of a payload decoded by `T`'s own [`Decode`] (the per-core arrays in
-/// bulk).
+/// The value of a whole payload, as `T` decodes it ([`Decode`]): postcard decodes a value
+/// from the front of its input and would ignore bytes after it, so a payload with any left
+/// over is refused. The error says in words what is wrong (postcard's own messages, such as
+/// "Found a bool that wasn't 0 or 1", name its internals, not the file).
 pub(crate) fn decode_payload<T: Decode>(payload: &[u8]) -> Result<T, String> {
     let mut d = Decoder {
         src: Cursor { rest: payload },
@@ -324,11 +325,11 @@ pub(crate) enum Streamed {
     Io(std::io::Error),
     /// The container is damaged (found in the order [`split`] checks).
     Damage(Damage),
-    /// The payload is intact but does not decode ([`decode_postcard`]'s words).
+    /// The payload is intact but does not decode ([`decode_payload`]'s words).
     Content(String),
 }
 
-/// [`split`] and [`decode_postcard`] of a container read as it is decoded: `file` is just past
+/// [`split`] and [`decode_payload`] of a container read as it is decoded: `file` is just past
 /// a header announcing a payload of `len` bytes with CRC-32 `crc`. The payload is never held
 /// whole (a policy of three point masses on the paper's cores is 48 GB), and the damage is
 /// found and named as [`split`] would: a short file, bytes after the payload, a checksum
