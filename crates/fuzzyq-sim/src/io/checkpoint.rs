@@ -170,11 +170,11 @@ impl Checkpoint<'_> {
 
 impl Checkpoint<'static> {
     /// Reads and checks the checkpoint at `path` (read once: a pipe works; never more than
-    /// its header announces). A payload of 1 GiB or more is decoded as it is read, so that
+    /// its header announces). A payload of 1 MiB or more is decoded as it is read, so that
     /// the state is held once, not also as the file's bytes; the checks and their messages
     /// are [`Self::from_bytes`]'s.
     pub fn load(path: &Path) -> Result<Self, CheckpointError> {
-        Self::load_streaming_from(path, STREAM_FROM)
+        Self::load_streaming_from(path, container::STREAM_FROM)
     }
 
     /// [`Self::load`], decoding a payload of at least `stream_from` bytes as it is read.
@@ -240,9 +240,6 @@ impl Checkpoint<'static> {
             .map_err(|e| damaged_because(path, format!("cannot be decoded: {e}")))
     }
 }
-
-/// Payloads of at least this many bytes are decoded as they are read ([`Checkpoint::load`]).
-const STREAM_FROM: u64 = 1 << 30;
 
 /// The error of a checkpoint at `path` whose container has `damage`.
 fn damaged(path: &Path, damage: Damage) -> CheckpointError {
@@ -517,7 +514,7 @@ mod tests {
     }
 
     /// Damage gives the same one-line error whether the file is decoded in memory or as it
-    /// is read (checkpoints of 1 GiB or more).
+    /// is read (checkpoints of 1 MiB or more).
     #[test]
     fn damage_is_named_alike_in_memory_and_as_read() {
         let bytes = checkpoint().to_bytes();

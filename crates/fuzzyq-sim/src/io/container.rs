@@ -288,6 +288,13 @@ pub(crate) fn decode_postcard<T: serde::de::DeserializeOwned>(payload: &[u8]) ->
     decode_payload::<Serde<T>>(payload).map(|s| s.0)
 }
 
+/// Payloads of at least this many bytes are decoded as they are read
+/// ([`decode_streamed_as`], policy files and checkpoints), smaller ones read whole first. The
+/// content is then held once, not also as the file's bytes (three point masses on the
+/// paper's cores: a 48 GB policy), and with the arrays decoded in bulk a file loads faster
+/// so (Zen 4: the robots' 188 MB policy in 0.22 s against 0.35 s read whole).
+pub(crate) const STREAM_FROM: u64 = 1 << 20;
+
 /// The value of a whole payload, as `T` decodes it ([`Decode`]): postcard decodes a value
 /// from the front of its input and would ignore bytes after it, so a payload with any left
 /// over is refused. The error says in words what is wrong (postcard's own messages, such as

@@ -350,11 +350,6 @@ impl Decode for Values {
     }
 }
 
-/// Payloads of at least this many bytes are decoded as they are read
-/// ([`PolicyFile::load`]): the values and greedy actions are then held once, not also as the
-/// file's bytes (three point masses on the paper's cores: a 48 GB file).
-const STREAM_FROM: u64 = 1 << 30;
-
 /// A container's payload to decode: in memory, its length and checksum checked, or the rest
 /// of a file, checked as it is read.
 enum Payload<'a> {
@@ -664,7 +659,7 @@ impl PolicyFile {
     /// without the container's tag is read as TOML text of at most
     /// [`MAX_TEXT_BYTES`](crate::fs::MAX_TEXT_BYTES) (so `/dev/zero` is refused, not read forever).
     pub fn load(path: &Path) -> Result<Self, PolicyFileError> {
-        Self::load_streaming_from(path, STREAM_FROM)
+        Self::load_streaming_from(path, super::container::STREAM_FROM)
     }
 
     /// [`Self::load`], decoding a payload of at least `stream_from` bytes as it is read.
