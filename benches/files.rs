@@ -4,7 +4,9 @@
 //! greedy joint actions below 625: one or two bytes each) and of the paper's Khepera robots
 //! (37,662,769 cores, 16 joint actions: a byte each). `V` and the greedy actions are
 //! seeded pseudo-random: the bytes of a trained policy take the same time. And the same
-//! files loaded again from memory (`policy_read`: decoded and checked).
+//! files loaded again (`policy_read`: decoded and checked), from memory, from a file as
+//! `PolicyFile::load` reads it (`_load`: decoded as it is read), and from the file read
+//! whole first (`_load_whole`).
 #![allow(missing_docs)]
 
 use std::hint::black_box;
@@ -71,10 +73,11 @@ fn bench_files(c: &mut Criterion) {
         });
     }
     g.finish();
-    // Loading it again from memory: decoded and checked.
+    // Loading it again, decoded and checked: from memory; from a file (page-cached) as
+    // `PolicyFile::load` reads it, decoded as it is read; and from the file read whole first.
     let mut g = c.benchmark_group("policy_read");
     g.sample_size(10);
-    let path = std::path::Path::new("policy.fzq");
+    let path = std::env::temp_dir().join(format!("fuzzyq-bench-{}.fzq", std::process::id()));
     for (name, env, m) in [
         ("paper", EnvKind::Pointmass, 625),
         ("khepera", EnvKind::Khepera, 16),
@@ -82,12 +85,24 @@ fn bench_files(c: &mut Criterion) {
         // The environment's own configuration, so that the file checks out.
         let mut own = small.clone();
         own.config = TrainConfig::default_for(env).unwrap();
-        let bytes = policy(&own, own.config.n_cores(), m).to_bytes().unwrap();
+        let file = policy(&own, own.config.n_cores(), m);
+        let bytes = file.to_bytes().unwrap();
+        file.save(&path).unwrap();
         g.throughput(Throughput::Bytes(bytes.len() as u64));
         g.bench_function(name, |b| {
-            b.iter(|| black_box(PolicyFile::from_bytes(&bytes, path).unwrap()));
+            b.iter(|| black_box(PolicyFile::from_bytes(&bytes, &path).unwrap()));
+        });
+        g.bench_function(format!("{name}_load"), |b| {
+            b.iter(|| black_box(PolicyFile::load(&path).unwrap()));
+        });
+        g.bench_function(format!("{name}_load_whole"), |b| {
+            b.iter(|| {
+                let bytes = std::fs::read(&path).unwrap();
+                black_box(PolicyFile::from_bytes(&bytes, &path).unwrap())
+            });
         });
     }
+    let _ = std::fs::remove_file(&path);
     g.finish();
 }
 

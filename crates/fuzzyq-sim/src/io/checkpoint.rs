@@ -367,17 +367,9 @@ mod tests {
     /// `bytes` decoded in memory, after checking that a file of them decoded as it is read
     /// gives the same checkpoint or the same error.
     fn decode(bytes: &[u8]) -> Result<Checkpoint<'static>, CheckpointError> {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("c.ckpt");
-        std::fs::write(&path, bytes).unwrap();
-        let in_memory = Checkpoint::from_bytes(bytes, &path);
-        let streamed = Checkpoint::load_streaming_from(&path, 0);
-        assert_eq!(
-            format!("{streamed:?}"),
-            format!("{in_memory:?}"),
-            "decoded as read against in memory"
-        );
-        in_memory
+        container::read_both_ways(bytes, Checkpoint::from_bytes, |path| {
+            Checkpoint::load_streaming_from(path, 0)
+        })
     }
 
     /// Saved as it is encoded: the bytes of `to_bytes`, which both ways of reading give back.
@@ -469,47 +461,15 @@ mod tests {
     }
 
     /// Read in bulk ([`Decode`]), every checkpoint ([`checkpoints`]) gives serde's state,
-    /// and a damaged one serde's error: whole, cut short and with a byte changed, in memory
-    /// and streamed through buffers small enough to split values between two reads.
+    /// and a damaged one serde's error (the checks: `container::assert_decoded_as_serde`).
     #[test]
     fn read_as_serde_decodes_it() {
-        use container::{Streamed, decode_payload, decode_postcard, decode_streamed_in};
-        type Read = Checkpoint<'static>;
-        let check = |payload: &[u8], what: &str, capacities: &[usize]| {
-            let want = decode_postcard::<Read>(payload);
-            assert_eq!(decode_payload::<Read>(payload), want, "{what}");
-            let crc = crc32fast::hash(payload);
-            for &c in capacities {
-                let got = decode_streamed_in::<Read>(payload, payload.len() as u64, crc, c)
-                    .map_err(|e| match e {
-                        Streamed::Content(words) => words,
-                        e => panic!("an intact stream read as damaged: {e:?}"),
-                    });
-                assert_eq!(got, want, "{what}, streamed by {c}");
-            }
-        };
         for (k, c) in checkpoints().iter().enumerate() {
             let bytes = c.to_bytes();
-            let payload = &bytes[container::HEADER_LEN..];
-            check(payload, &format!("checkpoint {k}"), &[1 << 20, 4093, 7]);
-            let n = payload.len();
-            let places: Vec<usize> = (0..32.min(n)).chain((0..n).step_by(n / 31 + 1)).collect();
-            for &at in &places {
-                check(
-                    &payload[..at],
-                    &format!("checkpoint {k} cut at {at}"),
-                    &[13],
-                );
-                for flip in [0x80u8, 0x7f, 0xff, 0x01] {
-                    let mut damaged = payload.to_vec();
-                    damaged[at] ^= flip;
-                    check(
-                        &damaged,
-                        &format!("checkpoint {k}, byte {at} ^ {flip:#x}"),
-                        &[13],
-                    );
-                }
-            }
+            container::assert_decoded_as_serde::<Checkpoint<'static>>(
+                &bytes[container::HEADER_LEN..],
+                &format!("checkpoint {k}"),
+            );
         }
     }
 

@@ -48,17 +48,9 @@ pub(super) fn tiny() -> PolicyArtifact {
 /// `bytes` decoded in memory, after checking that a file of them decoded as it is read
 /// gives the same file or the same error.
 pub(super) fn decode(bytes: &[u8]) -> Result<PolicyFile, PolicyFileError> {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("p.fzq");
-    std::fs::write(&path, bytes).unwrap();
-    let in_memory = PolicyFile::from_bytes(bytes, &path);
-    let streamed = PolicyFile::load_streaming_from(&path, 0);
-    assert_eq!(
-        format!("{streamed:?}"),
-        format!("{in_memory:?}"),
-        "decoded as read against in memory"
-    );
-    in_memory
+    crate::io::container::read_both_ways(bytes, PolicyFile::from_bytes, |path| {
+        PolicyFile::load_streaming_from(path, 0)
+    })
 }
 
 /// The same run gives the same bytes: the timings, which differ between identical runs,
@@ -202,12 +194,7 @@ fn version_1_files_still_load() {
         summary: &a.summary,
     })
     .unwrap();
-    let mut v1 = Vec::new();
-    v1.extend_from_slice(&MAGIC);
-    v1.extend_from_slice(&1u32.to_le_bytes());
-    v1.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-    v1.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
-    v1.extend_from_slice(&payload);
+    let v1 = crate::io::container::encode(&MAGIC, 1, &payload);
     assert_eq!(decode(&v1).unwrap(), PolicyFile::Fqi(a));
     // Version 2 is the same payload behind its kind.
     let v2 = PolicyFile::Fqi(tiny()).to_bytes().unwrap();
