@@ -2,13 +2,15 @@
 //! [`Scheme::value_buffers`] names, and the exact delta only where
 //! [`Scheme::uses_exact_delta`] says. A GPU run holds just those buffers (three point masses on
 //! the paper's cores fit one H200 under modified policy iteration because it holds `V` twice),
-//! so a driver that asked for more would make a run fail, or allocate, mid-way.
+//! so a driver that asked for more would make a run fail, or allocate, mid-way. And a coarse
+//! start, which `solve_with` solves on a thread of its own beside the run's preparation,
+//! gives the run the CPU's bits.
 
 use std::borrow::Cow;
-use std::cell::RefCell;
 use std::collections::BTreeSet;
 use std::ops::ControlFlow;
-use std::rc::Rc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 
 use fuzzyq_core::solver::{self, Buf, DiffStats, Scheme, Sweeps};
 use fuzzyq_gpu::reference::{HostSweeps, Rounding};
@@ -25,13 +27,14 @@ struct Asked {
 /// A backend that passes every call to `inner` and notes the buffers and passes asked for.
 struct Recording<S> {
     inner: S,
-    asked: Rc<RefCell<Asked>>,
+    asked: Arc<Mutex<Asked>>,
 }
 
 impl<S> Recording<S> {
     fn saw(&self, bufs: &[Buf]) {
         self.asked
-            .borrow_mut()
+            .lock()
+            .unwrap()
             .bufs
             .extend(bufs.iter().map(|b| b.0));
     }
@@ -70,7 +73,7 @@ impl<S: Sweeps<f32>> Sweeps<f32> for Recording<S> {
     }
     fn exact_delta(&mut self, a: Buf, b: Buf) -> Result<f64, S::Error> {
         self.saw(&[a, b]);
-        self.asked.borrow_mut().exact_delta = true;
+        self.asked.lock().unwrap().exact_delta = true;
         self.inner.exact_delta(a, b)
     }
     fn greedy(&mut self, v: Buf) -> Result<(), S::Error> {
@@ -95,7 +98,7 @@ impl<S: Sweeps<f32>> Sweeps<f32> for Recording<S> {
 
 /// Every backend a run of `c` makes (its coarse start's too): its scheme and what it was
 /// asked for.
-fn asked_of(c: &TrainConfig) -> Vec<(Scheme, Rc<RefCell<Asked>>)> {
+fn asked_of(c: &TrainConfig) -> Vec<(Scheme, Arc<Mutex<Asked>>)> {
     let model = c.build_model().unwrap();
     let grid = c.grid::<f32>().unwrap();
     let config = c.solver.solver_config();
@@ -107,7 +110,7 @@ fn asked_of(c: &TrainConfig) -> Vec<(Scheme, Rc<RefCell<Asked>>)> {
         None,
         true,
         &mut |op, scheme| {
-            let asked = Rc::new(RefCell::new(Asked::default()));
+            let asked = Arc::new(Mutex::new(Asked::default()));
             made.push((scheme, asked.clone()));
             let inner = HostSweeps::new(op, Rounding::Fused)?;
             Ok(Recording { inner, asked })
@@ -135,7 +138,7 @@ fn each_scheme_asks_only_for_the_buffers_it_names() {
         TrainConfig::default_for(EnvKind::Dcmotor).unwrap(),
     ] {
         for (scheme, asked) in asked_of(&c) {
-            let asked = asked.borrow();
+            let asked = asked.lock().unwrap();
             let buffers = scheme.value_buffers();
             assert!(
                 asked.bufs.iter().all(|&b| b < buffers),
@@ -156,4 +159,49 @@ fn each_scheme_asks_only_for_the_buffers_it_names() {
     }
     let seen: Vec<_> = seen.into_iter().collect();
     assert_eq!(seen, ["ModifiedPolicy false", "Value true"]);
+}
+
+/// `solve_with` solves a fresh run's coarse start on a thread of its own while it prepares the
+/// run's operator: the point masses take it and give the bits of the CPU's run, which solves
+/// it first. The DC motor's reward depends on the action, so its operator cannot evaluate a
+/// policy and takes no coarse start: the coarse solve begun beside its preparation is dropped,
+/// and the run starts from `V = 0` as on the CPU.
+#[test]
+fn a_coarse_start_beside_the_set_up_gives_the_cpu_bits() {
+    let mut pointmass = TrainConfig::default_for(EnvKind::Pointmass).unwrap();
+    pointmass.grid.position_cores = vec![-6.0, -2.0, -0.5, 0.0, 0.5, 2.0, 6.0];
+    pointmass.grid.velocity_cores = vec![-3.0, 0.0, 3.0];
+    pointmass.solver.coarse_start = true;
+    let mut dcmotor = TrainConfig::default_for(EnvKind::Dcmotor).unwrap();
+    dcmotor.solver.extrapolate = true;
+    dcmotor.solver.evaluation_sweeps = 5;
+    dcmotor.solver.coarse_start = true;
+    for (c, takes) in [(pointmass, true), (dcmotor, false)] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let config = c.solver.solver_config();
+        let made = AtomicUsize::new(0);
+        let beside = solver::solve_with(
+            &model,
+            &grid,
+            &config,
+            None,
+            false,
+            &mut |op, _| {
+                made.fetch_add(1, Ordering::Relaxed);
+                HostSweeps::new(op, Rounding::Fused)
+            },
+            |_, _| ControlFlow::Continue(()),
+        )
+        .unwrap();
+        let cpu = solver::solve(&model, &grid, &config, |_| ControlFlow::Continue(())).unwrap();
+        let what = format!("{:?}", c.env.kind());
+        // The coarse start's backend and the run's.
+        assert_eq!(made.into_inner(), 2, "{what}");
+        let coarse = |s: &solver::Solution<f32>| s.coarse.map(|c| (c.cores, c.sweeps));
+        assert_eq!(coarse(&beside).is_some(), takes, "{what}");
+        assert_eq!(coarse(&beside), coarse(&cpu), "{what}");
+        assert_eq!(beside.sweeps.len(), cpu.sweeps.len(), "{what}");
+        fuzzyq_tests::assert_same_bits(&[cpu, beside]);
+    }
 }

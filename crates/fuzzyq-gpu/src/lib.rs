@@ -5,7 +5,8 @@
 //! The iteration itself (sweep records, the stopping rule, MacQueen's extrapolation,
 //! modified policy iteration's evaluation budget, the coarse start) stays in
 //! `fuzzyq-core`'s driver, which asks a [`Sweeps`](fuzzyq_core::solver::Sweeps) backend for
-//! every pass over `V`. [`GpuSweeps`] is that backend on a GPU: the block tables
+//! every pass over `V` (a fresh run's coarse start on the GPU while the host prepares the
+//! run's operator: [`fuzzyq_core::solver::solve_with`]). [`GpuSweeps`] is that backend on a GPU: the block tables
 //! ([`BlockPlan`](fuzzyq_core::solver::BlockPlan)), `V`'s buffers and the policy live on
 //! the device, and only scalars come back between passes (the range of a sweep's change, the
 //! exact delta); `V` and the greedy actions come back at the end, a few slabs at a time put
@@ -190,7 +191,7 @@ where
 /// [`solve_from`] on the GPU `gpu()` gives when each backend is made (the run's, and its
 /// coarse start's).
 fn solve_on<M>(
-    gpu: impl Fn() -> Result<Gpu, GpuError>,
+    gpu: impl Fn() -> Result<Gpu, GpuError> + Sync,
     model: &M,
     grid: &Grid<f32>,
     config: &SolverConfig,

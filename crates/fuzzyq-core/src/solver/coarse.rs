@@ -35,7 +35,9 @@ pub struct CoarseStart {
     pub cores: usize,
     /// Its sweeps (full backups and evaluation sweeps).
     pub sweeps: usize,
-    /// Seconds of its solve and of the interpolation onto the full grid.
+    /// Seconds of its solve and of the interpolation onto the full grid; where it was
+    /// solved beside the run's preparation ([`solve_with`](super::solve_with)), the seconds
+    /// the run waited for it beyond that preparation, and the interpolation.
     pub seconds: f64,
 }
 

@@ -132,8 +132,9 @@ impl Scheme {
 
 /// Builds a [`Sweeps`] backend for a prepared operator and the scheme the run will iterate
 /// by ([`solve_with`]; [`Scheme::value_buffers`] says what the scheme asks of a backend).
+/// `Send`: a coarse start's backend is made on a thread of its own.
 pub type MakeSweeps<'m, T, M, S> =
-    dyn FnMut(&super::Operator<'_, T, M>, Scheme) -> Result<S, <S as Sweeps<T>>::Error> + 'm;
+    dyn FnMut(&super::Operator<'_, T, M>, Scheme) -> Result<S, <S as Sweeps<T>>::Error> + Send + 'm;
 
 /// [`solve_from`] with the passes over `V` run by a backend that `make` builds from the run's
 /// operator (a GPU holding its own copy of the block tables, say): the operator is prepared
@@ -141,6 +142,13 @@ pub type MakeSweeps<'m, T, M, S> =
 /// builds for the coarse grid's operator. The result is [`solve_from`]'s, bit for bit, when
 /// every backend computes each pass as [`Local`] does. With `show_state` false the observer
 /// is never shown a state (which would read every value of the backend after each sweep).
+///
+/// A fresh run that may take a coarse start solves it on a thread of its own while this one
+/// prepares the run's operator (the rewards and block tables: the CPU's part of the set-up),
+/// so that a backend on a device runs the coarse sweeps beside that preparation instead of
+/// after it; `make` builds the run's own backend once the coarse start is over. Where the
+/// operator turns out to take no coarse start (it cannot evaluate a policy), the coarse
+/// solve is dropped.
 pub fn solve_with<T, M, S>(
     model: &M,
     grid: &Grid<T>,
@@ -154,18 +162,42 @@ where
     T: Real,
     M: Model<T> + Sync + ?Sized,
     S: Sweeps<T>,
+    S::Error: Send,
 {
     config.validate()?;
     let start = Instant::now();
-    let run = prepare(model, grid, config)?;
+    let coarse_grid = (resume.is_none() && may_start_coarse(model, config))
+        .then(|| grid.coarsened())
+        .flatten();
+    let (run, beside) = std::thread::scope(|scope| {
+        let job = coarse_grid.as_ref().map(|coarse| {
+            let make = &mut *make;
+            scope.spawn(move || solve_coarse(model, coarse, config, make))
+        });
+        let run = prepare(model, grid, config);
+        let waited = Instant::now();
+        let beside = job.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+        (run, beside.map(|b| (b, waited.elapsed().as_secs_f64())))
+    });
+    let run = run?;
     let mut sweeps = make(&run.op, run.scheme)?;
-    // The coarse grid's backend made by `make` too. A function pointer for its observer, not
-    // a closure: the recursive call instantiates this function once more, not once per nesting.
-    let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
-        |_, _| ControlFlow::Continue(());
-    let coarse = coarse_start(&run, (grid, config), &resume, &mut sweeps, |g, c| {
-        solve_with(model, g, c, None, false, make, noop)
-    })?;
+    let coarse = match beside {
+        Some((solved, waited)) if run.coarse.is_some() => {
+            let solved = solved?;
+            // Its seconds: those the run waited for it beyond the preparation, and its
+            // interpolation.
+            coarse_start(&run, (grid, config), &resume, &mut sweeps, |_, _| {
+                Ok(solved)
+            })?
+            .map(|c| CoarseStart {
+                seconds: c.seconds + waited,
+                ..c
+            })
+        }
+        _ => coarse_start(&run, (grid, config), &resume, &mut sweeps, |g, c| {
+            solve_coarse(model, g, c, make)
+        })?,
+    };
     drive(
         &run,
         config,
@@ -176,6 +208,31 @@ where
         show_state,
         observer,
     )
+}
+
+/// The coarse start's solve on `coarse` ([`solve_with`] without a coarse start of its own),
+/// by a backend `make` builds.
+fn solve_coarse<T, M, S>(
+    model: &M,
+    coarse: &Grid<T>,
+    config: &SolverConfig,
+    make: &mut MakeSweeps<'_, T, M, S>,
+) -> Result<Solution<T>, S::Error>
+where
+    T: Real,
+    M: Model<T> + Sync + ?Sized,
+    S: Sweeps<T>,
+    S::Error: Send,
+{
+    let config = SolverConfig {
+        coarse_start: false,
+        ..*config
+    };
+    // A function pointer for its observer, not a closure: the recursive call instantiates
+    // `solve_with` once more, not once per nesting.
+    let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
+        |_, _| ControlFlow::Continue(());
+    solve_with(model, coarse, &config, None, false, make, noop)
 }
 
 /// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): the same scheme
@@ -671,6 +728,25 @@ struct Prepared<'a, T: Real, M: ?Sized> {
     coarse: Option<Grid<T>>,
 }
 
+/// Whether `config` runs modified policy iteration on `model` where its operator can
+/// evaluate a policy.
+fn policy_iteration<T: Real, M: Model<T> + ?Sized>(model: &M, config: &SolverConfig) -> bool {
+    config.evaluation_sweeps > 0
+        && config.extrapolate
+        && config.sweep == SweepMode::Synchronous
+        && !config.absorbing_goal
+        && !model.has_terminal_states()
+        && config.gamma > 0.0
+}
+
+/// Whether a fresh run of `config` on `model` starts from a coarse grid's solve where its
+/// operator can evaluate a policy (and its grid has a coarser one).
+fn may_start_coarse<T: Real, M: Model<T> + ?Sized>(model: &M, config: &SolverConfig) -> bool {
+    config.coarse_start
+        && policy_iteration(model, config)
+        && !super::coarse::known_only_on_its_grid(model)
+}
+
 fn prepare<'a, T, M>(
     model: &'a M,
     grid: &'a Grid<T>,
@@ -689,13 +765,7 @@ where
         op = op.with_kernel(k)?;
     }
     let bound = config.sweep_bound(op.reward_bound());
-    let mpi = config.evaluation_sweeps > 0
-        && config.extrapolate
-        && config.sweep == SweepMode::Synchronous
-        && !config.absorbing_goal
-        && !model.has_terminal_states()
-        && config.gamma > 0.0
-        && op.can_evaluate();
+    let mpi = policy_iteration(model, config) && op.can_evaluate();
     let extrapolate = config.extrapolate
         && !config.absorbing_goal
         && !model.has_terminal_states()
@@ -704,7 +774,7 @@ where
         op,
         bound,
         extrapolate,
-        coarse: if mpi && config.coarse_start && !super::coarse::known_only_on_its_grid(model) {
+        coarse: if mpi && may_start_coarse(model, config) {
             grid.coarsened()
         } else {
             None
