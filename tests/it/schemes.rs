@@ -3,7 +3,7 @@
 //! [`Scheme::uses_exact_delta`] says. A GPU run holds just those buffers (three point masses on
 //! the paper's cores fit one H200 under modified policy iteration because it holds `V` twice),
 //! so a driver that asked for more would make a run fail, or allocate, mid-way. And a coarse
-//! start, which `solve_with` solves on a thread of its own beside the run's preparation,
+//! start, which `solve_with` solves on another thread beside the run's preparation,
 //! gives the run the CPU's bits.
 
 use std::borrow::Cow;
@@ -161,7 +161,7 @@ fn each_scheme_asks_only_for_the_buffers_it_names() {
     assert_eq!(seen, ["ModifiedPolicy false", "Value true"]);
 }
 
-/// `solve_with` solves a fresh run's coarse start on a thread of its own while it prepares the
+/// `solve_with` solves a fresh run's coarse start on another thread while it prepares the
 /// run's operator: the point masses take it and give the bits of the CPU's run, which solves
 /// it first. The DC motor's reward depends on the action, so its operator cannot evaluate a
 /// policy and takes no coarse start: the coarse solve begun beside its preparation is dropped,

@@ -132,7 +132,7 @@ impl Scheme {
 
 /// Builds a [`Sweeps`] backend for a prepared operator and the scheme the run will iterate
 /// by ([`solve_with`]; [`Scheme::value_buffers`] says what the scheme asks of a backend).
-/// `Send`: a coarse start's backend is made on a thread of its own.
+/// `Send`: a coarse start's backend is made on another thread of the pool.
 pub type MakeSweeps<'m, T, M, S> =
     dyn FnMut(&super::Operator<'_, T, M>, Scheme) -> Result<S, <S as Sweeps<T>>::Error> + Send + 'm;
 
@@ -143,12 +143,12 @@ pub type MakeSweeps<'m, T, M, S> =
 /// every backend computes each pass as [`Local`] does. With `show_state` false the observer
 /// is never shown a state (which would read every value of the backend after each sweep).
 ///
-/// A fresh run that may take a coarse start solves it on a thread of its own while this one
-/// prepares the run's operator (the rewards and block tables: the CPU's part of the set-up),
-/// so that a backend on a device runs the coarse sweeps beside that preparation instead of
-/// after it; `make` builds the run's own backend once the coarse start is over. Where the
-/// operator turns out to take no coarse start (it cannot evaluate a policy), the coarse
-/// solve is dropped.
+/// A fresh run that may take a coarse start solves it on another thread of the caller's pool
+/// while this one prepares the run's operator (the rewards and block tables: the CPU's part
+/// of the set-up), so that a backend on a device runs the coarse sweeps beside that
+/// preparation instead of after it; `make` builds the run's own backend once the coarse
+/// start is over. Where the operator turns out to take no coarse start (it cannot evaluate a
+/// policy), the coarse solve is dropped.
 pub fn solve_with<T, M, S>(
     model: &M,
     grid: &Grid<T>,
@@ -169,16 +169,23 @@ where
     let coarse_grid = (resume.is_none() && may_start_coarse(model, config))
         .then(|| grid.coarsened())
         .flatten();
-    let (run, beside) = std::thread::scope(|scope| {
-        let job = coarse_grid.as_ref().map(|coarse| {
-            let make = &mut *make;
-            scope.spawn(move || solve_coarse(model, coarse, config, make))
-        });
-        let run = prepare(model, grid, config);
-        let waited = Instant::now();
-        let beside = job.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
-        (run, beside.map(|b| (b, waited.elapsed().as_secs_f64())))
-    });
+    // The preparation here, the coarse solve taken by another thread of the pool; each
+    // notes when it ended.
+    let make_coarse = &mut *make;
+    let ((run, prepared), beside) = super::par::join(
+        || (prepare(model, grid, config), Instant::now()),
+        || {
+            coarse_grid.as_ref().map(|coarse| {
+                (
+                    solve_coarse(model, coarse, config, make_coarse),
+                    Instant::now(),
+                )
+            })
+        },
+    );
+    // The coarse start and the seconds the run waited for it beyond its preparation.
+    let beside =
+        beside.map(|(solved, at)| (solved, at.saturating_duration_since(prepared).as_secs_f64()));
     let run = run?;
     let mut sweeps = make(&run.op, run.scheme)?;
     let coarse = match beside {

@@ -116,6 +116,27 @@ where
     }
 }
 
+/// `(a(), b())`, `b` taken by another thread of the current pool while this one runs `a` where
+/// one is free (in turn without feature `parallel`): the pool the caller runs in, never a
+/// thread of its own, so that a caller's pool (the Python extension's, which must survive
+/// `fork`) keeps all the work.
+pub(super) fn join<A, B, RA, RB>(a: A, b: B) -> (RA, RB)
+where
+    A: FnOnce() -> RA + Send,
+    B: FnOnce() -> RB + Send,
+    RA: Send,
+    RB: Send,
+{
+    #[cfg(feature = "parallel")]
+    {
+        rayon::join(a, b)
+    }
+    #[cfg(not(feature = "parallel"))]
+    {
+        (a(), b())
+    }
+}
+
 /// `f()` on every thread of the pool at once (one call without feature `parallel`), for
 /// measurements of the whole machine.
 pub(super) fn broadcast<R, F>(f: F) -> Vec<R>
