@@ -34,7 +34,7 @@ fn odometer<T>(tables: &[BlockTable<T>], mut f: impl FnMut(usize, usize)) {
 const TILE: usize = 64;
 
 /// The short side of the tiles: the values taken a stride apart before the next contiguous
-/// one. 8 against 64 (square tiles) makes the robots' reorderings 1.5-1.7 times faster
+/// one. 8 against 64 (square tiles) makes the robots' reorderings 1.7-1.8 times faster
 /// (`cargo bench -p fuzzyq-benches --bench orders`, Zen 4).
 const NARROW: usize = 8;
 

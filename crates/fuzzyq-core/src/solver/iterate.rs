@@ -169,41 +169,46 @@ where
     let coarse_grid = (resume.is_none() && may_start_coarse(model, config))
         .then(|| grid.coarsened())
         .flatten();
-    // The preparation here, the coarse solve taken by another thread of the pool; each
-    // notes when it ended.
+    // The preparation here, the coarse solve (without a coarse start of its own) taken by
+    // another thread of the pool; each notes when it ended.
     let make_coarse = &mut *make;
     let ((run, prepared), beside) = super::par::join(
         || (prepare(model, grid, config), Instant::now()),
         || {
             coarse_grid.as_ref().map(|coarse| {
-                (
-                    solve_coarse(model, coarse, config, make_coarse),
-                    Instant::now(),
-                )
+                let config = SolverConfig {
+                    coarse_start: false,
+                    ..*config
+                };
+                // A function pointer for its observer, not a closure: the recursive call
+                // instantiates this function once more, not once per nesting.
+                let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
+                    |_, _| ControlFlow::Continue(());
+                let solved = solve_with(model, coarse, &config, None, false, make_coarse, noop);
+                (solved, Instant::now())
             })
         },
     );
-    // The coarse start and the seconds the run waited for it beyond its preparation.
-    let beside =
-        beside.map(|(solved, at)| (solved, at.saturating_duration_since(prepared).as_secs_f64()));
     let run = run?;
     let mut sweeps = make(&run.op, run.scheme)?;
+    // A run that takes a coarse start had it solved beside its preparation (`run.coarse` is
+    // `Some` only where `coarse_grid` is, the same grid); its seconds are those the run
+    // waited for it beyond the preparation, and its interpolation.
     let coarse = match beside {
-        Some((solved, waited)) if run.coarse.is_some() => {
-            let solved = solved?;
-            // Its seconds: those the run waited for it beyond the preparation, and its
-            // interpolation.
-            coarse_start(&run, (grid, config), &resume, &mut sweeps, |_, _| {
-                Ok(solved)
-            })?
-            .map(|c| CoarseStart {
-                seconds: c.seconds + waited,
-                ..c
-            })
+        Some((solved, at)) => coarse_start(&run, (grid, config), &resume, &mut sweeps, |_, _| {
+            solved
+        })?
+        .map(|c| CoarseStart {
+            seconds: c.seconds + at.saturating_duration_since(prepared).as_secs_f64(),
+            ..c
+        }),
+        None => {
+            debug_assert!(
+                run.coarse.is_none() || resume.is_some(),
+                "a coarse start unsolved"
+            );
+            None
         }
-        _ => coarse_start(&run, (grid, config), &resume, &mut sweeps, |g, c| {
-            solve_coarse(model, g, c, make)
-        })?,
     };
     drive(
         &run,
@@ -215,31 +220,6 @@ where
         show_state,
         observer,
     )
-}
-
-/// The coarse start's solve on `coarse` ([`solve_with`] without a coarse start of its own),
-/// by a backend `make` builds.
-fn solve_coarse<T, M, S>(
-    model: &M,
-    coarse: &Grid<T>,
-    config: &SolverConfig,
-    make: &mut MakeSweeps<'_, T, M, S>,
-) -> Result<Solution<T>, S::Error>
-where
-    T: Real,
-    M: Model<T> + Sync + ?Sized,
-    S: Sweeps<T>,
-    S::Error: Send,
-{
-    let config = SolverConfig {
-        coarse_start: false,
-        ..*config
-    };
-    // A function pointer for its observer, not a closure: the recursive call instantiates
-    // `solve_with` once more, not once per nesting.
-    let noop: fn(&Progress, Option<&SolverState<'_, T>>) -> ControlFlow<()> =
-        |_, _| ControlFlow::Continue(());
-    solve_with(model, coarse, &config, None, false, make, noop)
 }
 
 /// The coarse start of a fresh run of `run` ([`SolverConfig::coarse_start`]): the same scheme
