@@ -2,10 +2,11 @@
 //! deterministic pseudo-random tables.
 #![allow(missing_docs)] // benchmark support
 
-use fuzzyq_core::Real;
 use fuzzyq_core::solver::Grid;
+use fuzzyq_core::{Backup, Real};
 use fuzzyq_sim::PointMass;
 use fuzzyq_sim::io::config::TrainConfig;
+use fuzzyq_sim::model::{EnvKind, EnvModel};
 
 /// The paper's initial state.
 pub const X0: [f64; 8] = [-4.0, -6.0, -2.0, 2.0, 5.0, 3.0, 2.0, -1.0];
@@ -21,6 +22,26 @@ pub fn model() -> PointMass {
 pub fn paper_grid<T: Real>() -> Grid<T> {
     TrainConfig::default().grid().expect("paper grid")
 }
+
+/// The default problems of the benches over a whole grid on the block path, by name: the
+/// paper's point masses (`paper`) and Khepera robots (`khepera`), each its model and grid.
+#[must_use]
+pub fn default_problems() -> Vec<(&'static str, EnvModel, Grid<f32>)> {
+    [("paper", EnvKind::Pointmass), ("khepera", EnvKind::Khepera)]
+        .into_iter()
+        .map(|(name, env)| {
+            let config = TrainConfig::default_for(env).expect("default config");
+            let model = config.build_model().expect("default model");
+            (name, model, config.grid().expect("default grid"))
+        })
+        .collect()
+}
+
+/// The backup of [`default_problems`]' benches.
+pub const BACKUP: Backup<f32> = Backup {
+    gamma: 0.9,
+    absorbing_goal: false,
+};
 
 /// A reduced two-agent grid: 5 position and 3 velocity cores (50,625 cores).
 #[must_use]

@@ -9,24 +9,14 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use fuzzyq_benches::values;
-use fuzzyq_core::Backup;
+use fuzzyq_benches::{BACKUP, default_problems, values};
 use fuzzyq_core::solver::{BackupPath, Operator};
-use fuzzyq_sim::TrainConfig;
-use fuzzyq_sim::model::EnvKind;
 
 fn bench_orders(c: &mut Criterion) {
     let mut g = c.benchmark_group("reorder");
     g.sample_size(10);
-    for (name, env) in [("paper", EnvKind::Pointmass), ("khepera", EnvKind::Khepera)] {
-        let config = TrainConfig::default_for(env).unwrap();
-        let model = config.build_model().unwrap();
-        let grid = config.grid::<f32>().unwrap();
-        let backup = Backup {
-            gamma: 0.9,
-            absorbing_goal: false,
-        };
-        let op = Operator::new(&model, grid.view(), backup, BackupPath::Block).unwrap();
+    for (name, model, grid) in default_problems() {
+        let op = Operator::new(&model, grid.view(), BACKUP, BackupPath::Block).unwrap();
         let v = values::<f32>(grid.n_cores(), 30.0);
         g.throughput(Throughput::Bytes(4 * v.len() as u64));
         g.bench_function(format!("{name}_to_grid"), |b| {

@@ -302,6 +302,9 @@ impl<T: Real, M: Model<T>, F: Fn(&[T]) -> bool> Model<T> for WithTerminals<M, F>
     fn reward_depends_on_action(&self) -> bool {
         self.inner.reward_depends_on_action()
     }
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        self.inner.reward_depends_on_state(dim)
+    }
     fn is_goal(&self, x: &[T]) -> bool {
         self.inner.is_goal(x)
     }

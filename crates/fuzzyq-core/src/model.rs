@@ -112,6 +112,20 @@ pub trait Model<T: Real> {
         true
     }
 
+    /// Whether `reward` reads state variable `dim` (`0 <= dim < state_dim()`). A model whose
+    /// reward depends on the state alone ([`reward_depends_on_action`] false) and ignores
+    /// some variables (the robots' reward reads their positions, not their headings) says so
+    /// here, and the block path evaluates it once per class of cores that agree on the
+    /// variables it reads, copying the value to the others. The default, `true` for every
+    /// variable, evaluates it at every core. A reward that does read a variable declared
+    /// unread gets the value of one core of its class for all of them.
+    ///
+    /// [`reward_depends_on_action`]: Self::reward_depends_on_action
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        let _ = dim;
+        true
+    }
+
     /// Whether `x` is a goal state. With the absorbing-goal option of the solver, a goal state
     /// collects its reward and then nothing (zero future value). Rollout metrics also use it.
     ///

@@ -29,6 +29,68 @@ fn odometer<T>(tables: &[BlockTable<T>], mut f: impl FnMut(usize, usize)) {
     }
 }
 
+/// Calls `f(i, x)` for every index `i` in `range` of the product of the blocks' points (the
+/// first block slowest), `x` holding point `i`'s coordinates. Block `b` is `points[b] = (dims,
+/// coords)`: its points' coordinates on the state variables `dims`, `dims.len()` per point.
+/// Steps the points like an odometer, copying a block's coordinates when its point changes.
+fn for_each_point<T: Copy>(
+    points: &[(&[usize], &[T])],
+    range: core::ops::Range<usize>,
+    x: &mut [T],
+    mut f: impl FnMut(usize, &[T]),
+) {
+    let count = |b: usize| points[b].1.len() / points[b].0.len();
+    let place = |b: usize, p: usize, x: &mut [T]| {
+        let (dims, coords) = points[b];
+        for (&d, &v) in dims.iter().zip(&coords[p * dims.len()..]) {
+            x[d] = v;
+        }
+    };
+    // Per block: the product of the later blocks' point counts.
+    let mut later = vec![1usize; points.len()];
+    for b in (0..points.len().saturating_sub(1)).rev() {
+        later[b] = later[b + 1] * count(b + 1);
+    }
+    let mut digit: Vec<usize> = (0..points.len())
+        .map(|b| (range.start / later[b]) % count(b))
+        .collect();
+    for (b, &p) in digit.iter().enumerate() {
+        place(b, p, x);
+    }
+    for i in range {
+        f(i, x);
+        for b in (0..digit.len()).rev() {
+            digit[b] += 1;
+            let carry = digit[b] == count(b);
+            if carry {
+                digit[b] = 0;
+            }
+            place(b, digit[b], x);
+            if !carry {
+                break;
+            }
+        }
+    }
+}
+
+/// One block's cores grouped by the state variables a function reads
+/// ([`BlockOperator::core_classes`]).
+pub(in crate::solver) struct CoreClasses<T> {
+    /// Each block core's class.
+    class: Vec<u32>,
+    /// Each class's first core's coordinates on the block's variables.
+    coords: Vec<T>,
+    /// Number of classes.
+    n_classes: usize,
+}
+
+impl<T> CoreClasses<T> {
+    /// Number of classes.
+    pub(in crate::solver) fn n_classes(&self) -> usize {
+        self.n_classes
+    }
+}
+
 /// The long side of the tiles a reordering steps through: the values it reads or writes
 /// contiguously, and the slabs or rows of a band one thread fills.
 const TILE: usize = 64;
@@ -198,34 +260,121 @@ impl<T: Real> BlockOperator<T> {
         coords: &[Vec<T>],
         range: core::ops::Range<usize>,
         x: &mut [T],
-        mut f: impl FnMut(usize, &[T]),
+        f: impl FnMut(usize, &[T]),
     ) {
-        let place = |b: usize, c: usize, x: &mut [T]| {
-            let dims = &self.tables[b].dims;
-            for (&d, &v) in dims.iter().zip(&coords[b][c * dims.len()..]) {
-                x[d] = v;
-            }
-        };
-        let mut digit: Vec<usize> = (0..self.tables.len())
-            .map(|b| (range.start / self.r_len[b]) % self.tables[b].n_cores)
+        self.for_each_point(coords.iter().map(|c| &c[..]), range, x, f);
+    }
+
+    /// The block cores grouped by the state variables `reads` keeps: per block, each block
+    /// core's class (block cores that agree on every kept variable of their block share one,
+    /// numbered in order of first appearance) and the coordinates (`coords` from
+    /// [`Self::block_coords`]) of each class's first core. A function of the kept variables
+    /// alone takes one value per product of classes ([`Self::for_each_class_state`]), which
+    /// [`Self::spread`] copies to every core.
+    pub(in crate::solver) fn core_classes(
+        &self,
+        coords: &[Vec<T>],
+        reads: impl Fn(usize) -> bool,
+    ) -> Vec<CoreClasses<T>> {
+        self.tables
+            .iter()
+            .zip(coords)
+            .map(|(t, coords)| {
+                let kept: Vec<usize> = (0..t.dims.len()).filter(|&k| reads(t.dims[k])).collect();
+                let mut first = std::collections::BTreeMap::new();
+                let mut classes = CoreClasses {
+                    class: Vec::with_capacity(t.n_cores),
+                    coords: Vec::new(),
+                    n_classes: 0,
+                };
+                for point in coords.chunks_exact(t.dims.len()) {
+                    let key: Vec<u64> = kept.iter().map(|&k| point[k].to_f64().to_bits()).collect();
+                    let n = first.len() as u32;
+                    let class = *first.entry(key).or_insert_with(|| {
+                        classes.coords.extend_from_slice(point);
+                        n
+                    });
+                    classes.class.push(class);
+                }
+                classes.n_classes = first.len();
+                classes
+            })
+            .collect()
+    }
+
+    /// Calls `f(k, x)` for every product `k` in `range` of [`Self::core_classes`]' classes
+    /// (the first block slowest, as the cores), `x` the state of its first core.
+    pub(in crate::solver) fn for_each_class_state(
+        &self,
+        classes: &[CoreClasses<T>],
+        range: core::ops::Range<usize>,
+        x: &mut [T],
+        f: impl FnMut(usize, &[T]),
+    ) {
+        self.for_each_point(classes.iter().map(|c| &c.coords[..]), range, x, f);
+    }
+
+    /// [`for_each_point`] over the points of each block whose coordinates on the block's
+    /// variables `coords` gives.
+    fn for_each_point<'c>(
+        &self,
+        coords: impl Iterator<Item = &'c [T]>,
+        range: core::ops::Range<usize>,
+        x: &mut [T],
+        f: impl FnMut(usize, &[T]),
+    ) {
+        let points: Vec<_> = self
+            .tables
+            .iter()
+            .map(|t| &t.dims[..])
+            .zip(coords)
             .collect();
-        for (b, &c) in digit.iter().enumerate() {
-            place(b, c, x);
-        }
-        for i in range {
-            f(i, x);
-            for b in (0..digit.len()).rev() {
-                digit[b] += 1;
-                let carry = digit[b] == self.tables[b].n_cores;
-                if carry {
-                    digit[b] = 0;
+        for_each_point(&points, range, x, f);
+    }
+
+    /// `out[i] = by_class[k]` for every core `i` (internal order), `k` its product of
+    /// [`Self::core_classes`]' classes: on every thread, whole rows of the last block's cores
+    /// at a time, one division per row.
+    pub(in crate::solver) fn spread<U: Copy + Send + Sync>(
+        &self,
+        classes: &[CoreClasses<T>],
+        by_class: &[U],
+        out: &mut [U],
+    ) {
+        // Per block: each block core's offset in `by_class` (its class times the product of
+        // the later blocks' class counts).
+        let mut stride = 1;
+        let mut offsets: Vec<Vec<usize>> = classes
+            .iter()
+            .rev()
+            .map(|c| {
+                let o = c.class.iter().map(|&k| k as usize * stride).collect();
+                stride *= c.n_classes();
+                o
+            })
+            .collect();
+        offsets.reverse();
+        let (last, rest) = offsets.split_last().expect("at least one block");
+        let row = last.len();
+        let rows_per_task = (1usize << 16).div_ceil(row);
+        super::par::for_each_chunk_mut(
+            out,
+            rows_per_task * row,
+            || (),
+            |_, t, chunk| {
+                for (r, out) in chunk.chunks_mut(row).enumerate() {
+                    let r = t * rows_per_task + r;
+                    let base: usize = rest
+                        .iter()
+                        .zip(&self.r_len)
+                        .map(|(o, &len)| o[(r / (len / row)) % o.len()])
+                        .sum();
+                    for (o, &k) in out.iter_mut().zip(last) {
+                        *o = by_class[base + k];
+                    }
                 }
-                place(b, digit[b], x);
-                if !carry {
-                    break;
-                }
-            }
-        }
+            },
+        );
     }
 
     /// Internal index (contraction order, first block slowest) -> row-major grid index.

@@ -248,6 +248,9 @@ struct Masses<T> {
     comps: Vec<[usize; 1]>,
     terminal: bool,
     action_reward: bool,
+    /// A reward of these state variables alone (a smooth function of them), declared through
+    /// `reward_depends_on_state` when the flag is set.
+    reward_reads: Option<(Vec<usize>, bool)>,
 }
 
 impl<T: Real> Masses<T> {
@@ -279,6 +282,7 @@ impl<T: Real> Masses<T> {
             comps,
             terminal: false,
             action_reward: false,
+            reward_reads: None,
         }
     }
 
@@ -330,6 +334,12 @@ impl<T: Real> Model<T> for Masses<T> {
         }
     }
     fn reward(&self, x: &[T], u: &[T]) -> T {
+        if let Some((reads, _)) = &self.reward_reads {
+            return reads
+                .iter()
+                .map(|&d| T::from_f64(0.37 * (d + 1) as f64) * x[d] * x[d] + x[d])
+                .sum();
+        }
         let goal = if self.is_goal(x) {
             T::from_f64(5.0)
         } else {
@@ -343,6 +353,12 @@ impl<T: Real> Model<T> for Masses<T> {
     }
     fn reward_depends_on_action(&self) -> bool {
         self.action_reward
+    }
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        match &self.reward_reads {
+            Some((reads, true)) => reads.contains(&dim),
+            _ => true,
+        }
     }
     fn is_goal(&self, x: &[T]) -> bool {
         x.iter().map(|&v| v * v).sum::<T>() < T::from_f64(0.5)
@@ -590,4 +606,56 @@ fn core_states_and_reorders_match_the_per_core_maps() {
             }
         });
     }
+}
+
+/// A reward that declares the state variables it ignores is evaluated once per class of
+/// cores that agree on the others and copied to the rest (`rewards_by_class`): the rewards
+/// and bound of an evaluation at every core, bit for bit, one and two agents, blocks in and
+/// out of the radix order, none to all but one of the variables read.
+#[test]
+fn rewards_by_class_are_the_rewards_of_every_core() {
+    for (agents, reversed) in [(1, false), (2, false), (2, true)] {
+        let e = 4 * agents;
+        for reads in [
+            vec![],
+            vec![0],
+            vec![0, 1],
+            vec![2, 3],
+            vec![0, 1, 4, 5],
+            vec![1, 2, 3, 6, 7],
+        ] {
+            if reads.iter().any(|&d| d >= e) {
+                continue;
+            }
+            let rewards = |declared: bool| {
+                let mut m = Masses::<f32>::new(agents, reversed);
+                m.reward_reads = Some((reads.clone(), declared));
+                on_block_path(&m, false, |_, op| {
+                    let mut out = vec![0.0f32; op.n_cores()];
+                    let pooled = op.rewards_by_class(&op.block_coords(), &mut out);
+                    assert_eq!(pooled.is_some(), declared, "reads {reads:?}");
+                    let bits: Vec<u32> = op
+                        .rewards
+                        .as_ref()
+                        .unwrap()
+                        .iter()
+                        .map(|r| r.to_bits())
+                        .collect();
+                    (bits, op.reward_bound)
+                })
+            };
+            assert_eq!(
+                rewards(true),
+                rewards(false),
+                "{agents} agents, reads {reads:?}, reversed {reversed}"
+            );
+        }
+    }
+    // A reward that reads every variable is evaluated at every core.
+    let mut m = Masses::<f32>::new(1, false);
+    m.reward_reads = Some(((0..4).collect(), true));
+    on_block_path(&m, false, |_, op| {
+        let mut out = vec![0.0f32; op.n_cores()];
+        assert!(op.rewards_by_class(&op.block_coords(), &mut out).is_none());
+    });
 }

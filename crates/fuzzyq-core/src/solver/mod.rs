@@ -94,6 +94,7 @@ mod iterate;
 mod par;
 mod plan;
 mod qiter;
+mod rewards;
 pub(crate) mod simd;
 mod slabs;
 mod state;
@@ -997,112 +998,6 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
             }),
             Path::Generic(_) => Vec::new(),
         }
-    }
-
-    /// Whether each core (internal order) is a goal, on every thread (`coords` from
-    /// [`Self::block_coords`]).
-    fn goal_flags(&self, coords: &[Vec<T>]) -> Vec<bool> {
-        let e = self.state_dim();
-        let mut goal = vec![false; self.n_cores()];
-        par::for_each_chunk_mut(
-            &mut goal,
-            STATE_CHUNK,
-            || vec![T::ZERO; e],
-            |x, ci, chunk| {
-                let first = ci * STATE_CHUNK;
-                self.for_each_core_state(coords, first..first + chunk.len(), x, |i, x| {
-                    chunk[i - first] = self.model.is_goal(x);
-                });
-            },
-        );
-        goal
-    }
-
-    fn prepare_rewards(&mut self) -> Result<(), SolveError> {
-        let n = self.n_cores();
-        let e = self.state_dim();
-        let a = self.joint.dim();
-        let absorbing = self.backup.absorbing_goal;
-        if let Some(t) = &self.reward_table {
-            if t.iter().any(|r| !r.is_finite()) {
-                return Err(SolveError::NonFinite { what: "reward" });
-            }
-            self.reward_bound = t.iter().fold(0.0, |m, r| m.max(r.to_f64().abs()));
-            if absorbing {
-                self.goal = self.goal_flags(&self.block_coords());
-            }
-            return Ok(());
-        }
-        let depends = self.model.reward_depends_on_action();
-        // Straight into the per-core reward vector (state-only rewards; none otherwise, only
-        // the bound), each task reducing its own bound and finiteness: no per-core tuples
-        // (24 bytes a core, 0.9 GB on the robots' 37.7M cores).
-        let this = &*self;
-        let coords = self.block_coords();
-        let mut rewards = vec![T::ZERO; if depends { 0 } else { n }];
-        let m = if depends { self.joint.n_joint() } else { 1 };
-        // The rewards of the cores `range` to `out` (if given), and their bound and finiteness.
-        let rewards_of = |(x, u): &mut (Vec<T>, Vec<T>),
-                          range: core::ops::Range<usize>,
-                          mut out: Option<&mut [T]>| {
-            let (mut rmax, mut finite) = (0.0f64, true);
-            let first = range.start;
-            // A state-only reward sees joint action 0, set once.
-            this.joint.vector_unchecked(0, u);
-            this.for_each_core_state(&coords, range, x, |i, x| {
-                for j in 0..m {
-                    if depends {
-                        this.joint.vector_unchecked(j, u);
-                    }
-                    let r = this.model.reward(x, u);
-                    finite &= r.is_finite();
-                    if j == 0
-                        && let Some(o) = out.as_deref_mut()
-                    {
-                        o[i - first] = r;
-                    }
-                    rmax = rmax.max(r.to_f64().abs());
-                }
-            });
-            (rmax, finite)
-        };
-        let init = || (vec![T::ZERO; e], vec![T::ZERO; a]);
-        let both = |l: (f64, bool), r: (f64, bool)| (l.0.max(r.0), l.1 && r.1);
-        let (bound, finite) = if depends {
-            par::map_reduce(
-                n,
-                STATE_CHUNK,
-                (0.0, true),
-                |range| rewards_of(&mut init(), range, None),
-                both,
-            )
-        } else {
-            par::map_reduce_chunks_mut(
-                &mut rewards,
-                STATE_CHUNK,
-                init,
-                |w, ci, chunk| {
-                    let range = ci * STATE_CHUNK..ci * STATE_CHUNK + chunk.len();
-                    rewards_of(w, range, Some(chunk))
-                },
-                (0.0, true),
-                both,
-            )
-        };
-        let goal = if absorbing {
-            self.goal_flags(&coords)
-        } else {
-            Vec::new()
-        };
-        if !finite {
-            return Err(SolveError::NonFinite { what: "reward" });
-        }
-        self.reward_bound = bound;
-        self.goal = goal;
-        if !depends {
-            self.rewards = Some(rewards);
-        }
-        Ok(())
     }
 
     fn is_goal(&self, internal: usize) -> bool {

@@ -621,6 +621,11 @@ impl Dynamics for KheperaModel {
         false
     }
 
+    /// The positions only: not the headings (`x[3 i + 2]`).
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        dim % 3 != 2
+    }
+
     fn is_goal(&self, x: &[f64]) -> bool {
         self.in_region(x)
     }
@@ -725,6 +730,27 @@ mod tests {
         assert_eq!(m.reward_f64(&[1.0, 0.0, 0.0, -0.1, 0.0, 0.0]), 0.0);
         // Touching a wall.
         assert_eq!(m.reward_f64(&[6.0, 0.0, 0.0, -0.1, 0.0, 0.0]), -5.0);
+    }
+
+    proptest::proptest! {
+        /// The reward ignores the headings, as `reward_depends_on_state` declares (the
+        /// solver evaluates it once per position and copies it across the headings): any
+        /// headings give the same bits, at poses near each other, the walls and the goal.
+        #[test]
+        fn the_reward_ignores_the_headings(
+            p in proptest::collection::vec(-6.2f64..6.2, 4),
+            near in proptest::bool::ANY,
+            h in proptest::collection::vec(-PI..PI, 4),
+        ) {
+            let m = KheperaModel::new(KheperaConfig::default()).unwrap();
+            let s = if near { 0.05 } else { 1.0 };
+            let pose = |h1: f64, h2: f64| [s * p[0], s * p[1], h1, s * p[2], s * p[3], h2];
+            let r = m.reward_f64(&pose(h[0], h[1]));
+            proptest::prop_assert_eq!(r.to_bits(), m.reward_f64(&pose(h[2], h[3])).to_bits());
+            for d in 0..6 {
+                proptest::prop_assert_eq!(Dynamics::reward_depends_on_state(&m, d), d % 3 != 2);
+            }
+        }
     }
 
     #[test]

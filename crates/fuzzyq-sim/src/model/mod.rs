@@ -340,6 +340,11 @@ pub trait Dynamics {
     fn reward_depends_on_action(&self) -> bool {
         true
     }
+    /// See [`Model::reward_depends_on_state`].
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        let _ = dim;
+        true
+    }
     /// See [`Model::is_goal`].
     fn is_goal(&self, x: &[f64]) -> bool {
         let _ = x;
@@ -519,6 +524,9 @@ macro_rules! impl_model {
             fn reward_depends_on_action(&self) -> bool {
                 $crate::model::Dynamics::reward_depends_on_action(self)
             }
+            fn reward_depends_on_state(&self, dim: usize) -> bool {
+                $crate::model::Dynamics::reward_depends_on_state(self, dim)
+            }
             fn is_goal(&self, x: &[T]) -> bool {
                 T::widened(x, |x| $crate::model::Dynamics::is_goal(self, x))
             }
@@ -639,6 +647,9 @@ impl Dynamics for EnvModel {
     }
     fn reward_depends_on_action(&self) -> bool {
         dispatch!(self, m => Dynamics::reward_depends_on_action(m))
+    }
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        dispatch!(self, m => Dynamics::reward_depends_on_state(m, dim))
     }
     fn is_goal(&self, x: &[f64]) -> bool {
         dispatch!(self, m => Dynamics::is_goal(m, x))

@@ -393,6 +393,9 @@ impl<S: Benchmark> Dynamics for Classic<S> {
     fn reward_depends_on_action(&self) -> bool {
         self.dynamics.reward_depends_on_action()
     }
+    fn reward_depends_on_state(&self, dim: usize) -> bool {
+        self.dynamics.reward_depends_on_state(dim)
+    }
     fn is_goal(&self, x: &[f64]) -> bool {
         x.len() == S::STATE_DIM && self.dynamics.is_goal(x)
     }
