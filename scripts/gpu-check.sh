@@ -27,7 +27,7 @@
 # paper's cores with the paper's 5 forces per axis (15,625 joint actions; the H200's kernels
 # of November 2026 would take about half an hour), "paper-train" trains three point masses
 # on the paper's cores with forces of -0.2, 0 and 0.2 N per axis (729 joint actions) to the
-# paper's xi on the GPU (about 108 GB of the host's memory; the policy, about 48 GB, goes to
+# paper's xi on the GPU after a coarse start (every other core: 11.4M cores) (about 108 GB of the host's memory; the policy, about 48 GB, goes to
 # GPU_CHECK_SCRATCH, default /tmp, not $OUT), and "paper-rollout" rolls that policy out from
 # 20 starts and removes it.
 set -uo pipefail
@@ -299,7 +299,8 @@ fi
 # call of at most 10 minutes), which is then removed.
 scratch=${GPU_CHECK_SCRATCH:-/tmp}
 if [[ " ${GPU_CHECK_SECTIONS:-} " == *" paper-train "* ]]; then
-  "$BIN" config --env pointmass | sed 's/^agents = 2 /agents = 3 /; s/^force_levels = .*/force_levels = [-0.2, 0.0, 0.2]/' \
+  "$BIN" config --env pointmass \
+    | sed 's/^agents = 2 /agents = 3 /; s/^force_levels = .*/force_levels = [-0.2, 0.0, 0.2]/; s/^coarse_start = false /coarse_start = true /' \
     >"$OUT/paper-three-3f.toml"
   timed_train 560 "$OUT/paper-three-3f.toml" "$scratch/paper-three.fzq" paper-three
   sweeps=$(grep -E 'converged|sweeps|error' "$OUT/train-paper-three.log" | tail -1 | cut -c1-160)
