@@ -124,7 +124,7 @@ impl<T: Real> BlockOperator<T> {
     ) -> Vec<U> {
         let mut out = vec![U::default(); v.len()];
         if to_grid {
-            self.place_slabs(0, v, &mut out);
+            self.slab_placer().place(0, v, &mut out);
         } else {
             self.gather(v, &mut out);
         }
@@ -140,76 +140,29 @@ impl<T: Real> BlockOperator<T> {
         (first, g_rest)
     }
 
-    /// Places `piece`, the values of the whole slabs from `first_slab` on in internal order,
-    /// at their grid indices in `out` (every core's); the other values of `out` are left.
-    ///
-    /// Internal index `c0 * slab_len + j` (`c0` a core of the first contracted block, `j`
-    /// the odometer over the others) is grid index `grid_offset[c0] + rest[j]`. The first
-    /// contracted block is the grid's *fastest* variables, so the conversion is a transpose
-    /// (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
-    /// each stay within a few cache lines, instead of one strided write per core. Where each
-    /// grid row holds one `j` (the usual layout) bands of rows fill on every thread. A backend
-    /// that holds `V` elsewhere hands it over a few slabs at a time, so the caller holds one
-    /// copy of it (`sweeps::grid_order`).
-    ///
-    /// # Panics
-    /// If `piece` is not whole slabs within the grid's.
-    pub(in crate::solver) fn place_slabs<U: Copy + Send + Sync>(
-        &self,
-        first_slab: usize,
-        piece: &[U],
-        out: &mut [U],
-    ) {
-        if piece.is_empty() {
-            return;
-        }
-        let slab_len = self.slab_len();
-        let (first, g_rest) = self.slab_offsets();
-        let g0 = &first.grid_offset;
+    /// Where whole slabs' values go in grid order, for every piece of a result
+    /// ([`SlabPlacer::place`]).
+    pub(in crate::solver) fn slab_placer(&self) -> SlabPlacer<'_, T> {
+        let first = &self.tables[0];
         let n0 = first.n_cores;
-        assert!(
-            slab_len > 0 && piece.len().is_multiple_of(slab_len),
-            "a piece of whole slabs"
-        );
-        let c0s = first_slab..first_slab + piece.len() / slab_len;
-        assert!(c0s.end <= n0, "slabs within the grid's");
-        let at = |c0: usize, j: usize| piece[(c0 - first_slab) * slab_len + j];
-        // The usual layout (the robots', the point masses'): the first block's offsets lie
-        // in `0..n0` and the rest's are `j * n0`, so grid row `j` is `out[j n0..(j + 1) n0]`
-        // and bands of rows fill on every thread.
-        let rows_apart =
-            g0.iter().all(|&g| g < n0) && g_rest.iter().enumerate().all(|(j, &g)| g == j * n0);
+        // The usual layout (the robots'): the first block's offsets lie in `0..n0` and the
+        // rest's are `j * n0`, so grid row `j` is `out[j n0..(j + 1) n0]`.
+        let mut rows_apart = first.grid_offset.iter().all(|&g| g < n0);
         if rows_apart {
-            super::par::for_each_chunk_mut(
-                out,
-                TILE * n0,
-                || (),
-                |_, t, band| {
-                    let js = t * TILE..t * TILE + band.len() / n0;
-                    for c0s in tiles(c0s.clone(), NARROW) {
-                        for (j, row) in js.clone().zip(band.chunks_mut(n0)) {
-                            for c0 in c0s.clone() {
-                                row[g0[c0]] = at(c0, j);
-                            }
-                        }
-                    }
-                },
-            );
-        } else {
-            for band in tiles(c0s, NARROW) {
-                for js in tiles(0..slab_len, TILE) {
-                    for c0 in band.clone() {
-                        for j in js.clone() {
-                            out[g0[c0] + g_rest[j]] = at(c0, j);
-                        }
-                    }
-                }
-            }
+            odometer(&self.tables[1..], |j, g| rows_apart &= g == j * n0);
+        }
+        SlabPlacer {
+            op: self,
+            g_rest: if rows_apart {
+                Vec::new()
+            } else {
+                self.slab_offsets().1
+            },
         }
     }
 
     /// `v` (grid order) in internal order in `out`: on every thread, a band of first-block
-    /// cores each, in tiles ([`Self::place_slabs`]).
+    /// cores each, in tiles ([`SlabPlacer::place`]).
     fn gather<U: Copy + Send + Sync>(&self, v: &[U], out: &mut [U]) {
         let slab_len = self.slab_len();
         let (first, g_rest) = self.slab_offsets();
@@ -385,5 +338,82 @@ impl<T: Real> BlockOperator<T> {
             g += t.grid_offset[c];
         }
         g
+    }
+}
+
+/// Where whole slabs' values go in grid order ([`BlockOperator::slab_placer`]).
+pub(in crate::solver) struct SlabPlacer<'b, T: 'static> {
+    op: &'b BlockOperator<T>,
+    /// The grid offsets of a slab's cores (`g_rest[j]` for the core `j` of the later
+    /// blocks); empty where grid row `j` is `out[j n0..(j + 1) n0]`.
+    g_rest: Vec<usize>,
+}
+
+impl<T: Real> SlabPlacer<'_, T> {
+    /// Places `piece`, the values of the whole slabs from `first_slab` on in internal order,
+    /// at their grid indices in `out` (every core's); the other values of `out` are left.
+    ///
+    /// Internal index `c0 * slab_len + j` (`c0` a core of the first contracted block, `j`
+    /// the odometer over the others) is grid index `grid_offset[c0] + rest[j]`. The first
+    /// contracted block is often the grid's *fastest* variables, so the conversion is a
+    /// transpose (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
+    /// each stay within a few cache lines, instead of one strided write per core. Where each
+    /// grid row holds one `j` (the usual layout) bands of rows fill on every thread. A backend
+    /// that holds `V` elsewhere hands it over a few slabs at a time, so the caller holds one
+    /// copy of it (`sweeps::grid_order`); the slabs' grid offsets are found once for all its
+    /// pieces (for three point masses on the paper's cores, 184.5M of them, 1.5 GB).
+    ///
+    /// # Panics
+    /// If `piece` is not whole slabs within the grid's.
+    pub(in crate::solver) fn place<U: Copy + Send + Sync>(
+        &self,
+        first_slab: usize,
+        piece: &[U],
+        out: &mut [U],
+    ) {
+        if piece.is_empty() {
+            return;
+        }
+        let slab_len = self.op.slab_len();
+        let first = &self.op.tables[0];
+        let g_rest = &self.g_rest;
+        let g0 = &first.grid_offset;
+        let n0 = first.n_cores;
+        assert!(
+            slab_len > 0 && piece.len().is_multiple_of(slab_len),
+            "a piece of whole slabs"
+        );
+        let c0s = first_slab..first_slab + piece.len() / slab_len;
+        assert!(c0s.end <= n0, "slabs within the grid's");
+        let at = |c0: usize, j: usize| piece[(c0 - first_slab) * slab_len + j];
+        // Grid row `j` is `out[j n0..(j + 1) n0]` (the robots'): bands of rows fill on every
+        // thread.
+        if g_rest.is_empty() {
+            super::par::for_each_chunk_mut(
+                out,
+                TILE * n0,
+                || (),
+                |_, t, band| {
+                    let js = t * TILE..t * TILE + band.len() / n0;
+                    for c0s in tiles(c0s.clone(), NARROW) {
+                        for (j, row) in js.clone().zip(band.chunks_mut(n0)) {
+                            for c0 in c0s.clone() {
+                                row[g0[c0]] = at(c0, j);
+                            }
+                        }
+                    }
+                },
+            );
+        } else {
+            for band in tiles(c0s, NARROW) {
+                for js in tiles(0..slab_len, TILE) {
+                    for c0 in band.clone() {
+                        for j in js.clone() {
+                            out[g0[c0] + g_rest[j]] = at(c0, j);
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -595,12 +595,13 @@ fn core_states_and_reorders_match_the_per_core_maps() {
             assert_eq!(blk.reorder(&g, false), v, "back to internal order");
             // Placed a few slabs at a time, in any order: the same grid order.
             let (slab, slabs) = (blk.slab_len(), blk.n_slabs());
+            let placer = blk.slab_placer();
             for per in [1, 2, 3, slabs] {
                 let mut pieced = vec![u32::MAX; n];
                 let firsts: Vec<usize> = (0..slabs).step_by(per).collect();
                 for &s0 in firsts.iter().rev() {
                     let end = (s0 + per).min(slabs);
-                    blk.place_slabs(s0, &v[s0 * slab..end * slab], &mut pieced);
+                    placer.place(s0, &v[s0 * slab..end * slab], &mut pieced);
                 }
                 assert_eq!(pieced, g, "pieces of {per} slabs, reversed {reversed}");
             }

@@ -192,12 +192,15 @@ where
     U: Copy + Default + Send + Sync,
 {
     let mut out = vec![U::default(); op.n_cores()];
-    fill(&mut |first, piece| match &op.path {
-        super::Path::Generic(_) => out[first..first + piece.len()].copy_from_slice(piece),
-        super::Path::Block(b) => {
-            let slab_len = b.slab_len();
-            assert!(first.is_multiple_of(slab_len), "pieces of whole slabs");
-            b.place_slabs(first / slab_len, piece, &mut out);
+    let placer = match &op.path {
+        super::Path::Block(b) => Some((b.slab_placer(), b.slab_len())),
+        super::Path::Generic(_) => None,
+    };
+    fill(&mut |first, piece| match &placer {
+        None => out[first..first + piece.len()].copy_from_slice(piece),
+        Some((placer, slab_len)) => {
+            assert!(first.is_multiple_of(*slab_len), "pieces of whole slabs");
+            placer.place(first / slab_len, piece, &mut out);
         }
     })?;
     Ok(out)
