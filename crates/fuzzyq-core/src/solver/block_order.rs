@@ -117,7 +117,7 @@ impl<T: Real> BlockOperator<T> {
     }
 
     /// `v` from internal to grid order (`to_grid`), or back.
-    pub(in crate::solver) fn reorder<U: Copy + Default + Send + Sync>(
+    pub(in crate::solver) fn reorder<U: bytemuck::Pod + Default + Send + Sync>(
         &self,
         v: &[U],
         to_grid: bool,
@@ -356,16 +356,18 @@ impl<T: Real> SlabPlacer<'_, T> {
     /// Internal index `c0 * slab_len + j` (`c0` a core of the first contracted block, `j`
     /// the odometer over the others) is grid index `grid_offset[c0] + rest[j]`. The first
     /// contracted block is often the grid's *fastest* variables, so the conversion is a
-    /// transpose (the robots': 6,137 x 6,137): stepped through in square tiles, whose reads and writes
-    /// each stay within a few cache lines, instead of one strided write per core. Where each
-    /// grid row holds one `j` (the usual layout) bands of rows fill on every thread. A backend
-    /// that holds `V` elsewhere hands it over a few slabs at a time, so the caller holds one
-    /// copy of it (`sweeps::grid_order`); the slabs' grid offsets are found once for all its
-    /// pieces (for three point masses on the paper's cores, 184.5M of them, 1.5 GB).
+    /// transpose (the robots': 6,137 x 6,137): stepped through in tiles whose reads and
+    /// writes each stay within a few cache lines, instead of one strided write per core.
+    /// Where each grid row holds one `j` (the usual layout) bands of rows fill on every
+    /// thread; elsewhere (the point masses') runs of a slab's cores do, each value stored
+    /// atomically ([`scatter`]), as the runs' grid indices interleave. A backend that holds
+    /// `V` elsewhere hands it over a few slabs at a time, so the caller holds one copy of it
+    /// (`sweeps::grid_order`); the slabs' grid offsets are found once for all its pieces (for
+    /// three point masses on the paper's cores, 184.5M of them, 1.5 GB).
     ///
     /// # Panics
     /// If `piece` is not whole slabs within the grid's.
-    pub(in crate::solver) fn place<U: Copy + Send + Sync>(
+    pub(in crate::solver) fn place<U: bytemuck::Pod + Send + Sync>(
         &self,
         first_slab: usize,
         piece: &[U],
@@ -404,7 +406,26 @@ impl<T: Real> SlabPlacer<'_, T> {
                     }
                 },
             );
-        } else {
+        } else if !scatter(out, |put| {
+            // Every thread a run of a slab's cores, for each of the piece's slabs.
+            super::par::map_reduce(
+                slab_len,
+                SCATTER_RUN,
+                (),
+                |run| {
+                    for band in tiles(c0s.clone(), NARROW) {
+                        for js in tiles(run.clone(), TILE) {
+                            for c0 in band.clone() {
+                                for j in js.clone() {
+                                    put(g0[c0] + g_rest[j], at(c0, j));
+                                }
+                            }
+                        }
+                    }
+                },
+                |(), ()| (),
+            );
+        }) {
             for band in tiles(c0s, NARROW) {
                 for js in tiles(0..slab_len, TILE) {
                     for c0 in band.clone() {
@@ -416,4 +437,41 @@ impl<T: Real> SlabPlacer<'_, T> {
             }
         }
     }
+}
+
+/// Slab cores per task of a scattered placing ([`scatter`]).
+const SCATTER_RUN: usize = 4096;
+
+/// Runs `fill` with `put(i, x)`, which stores `x` at `out[i]` from any thread (each index once;
+/// the stores are atomic, as the threads' indices interleave), and returns `true`; `false`
+/// (nothing run) for values of other than 4 or 8 bytes.
+#[cfg(feature = "parallel")]
+fn scatter<U: bytemuck::Pod + Send + Sync>(
+    out: &mut [U],
+    fill: impl FnOnce(&(dyn Fn(usize, U) + Sync)),
+) -> bool {
+    use core::sync::atomic::{AtomicU32, AtomicU64, Ordering::Relaxed};
+    match size_of::<U>() {
+        4 => {
+            let words: &mut [u32] = bytemuck::cast_slice_mut(out);
+            let atomic: &mut [AtomicU32] = zerocopy::transmute_mut!(words);
+            let atomic = &*atomic;
+            fill(&|i, x| atomic[i].store(bytemuck::cast(x), Relaxed));
+            true
+        }
+        8 => {
+            let words: &mut [u64] = bytemuck::cast_slice_mut(out);
+            let atomic: &mut [AtomicU64] = zerocopy::transmute_mut!(words);
+            let atomic = &*atomic;
+            fill(&|i, x| atomic[i].store(bytemuck::cast(x), Relaxed));
+            true
+        }
+        _ => false,
+    }
+}
+
+/// Without threads, nothing to scatter from: `false`.
+#[cfg(not(feature = "parallel"))]
+fn scatter<U>(_out: &mut [U], _fill: impl FnOnce(&(dyn Fn(usize, U) + Sync))) -> bool {
+    false
 }

@@ -1306,7 +1306,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     }
 
     /// Row-major grid order -> internal order.
-    fn to_internal<U: Copy + Default + Send + Sync>(&self, v: &[U]) -> Vec<U> {
+    fn to_internal<U: bytemuck::Pod + Default + Send + Sync>(&self, v: &[U]) -> Vec<U> {
         match &self.path {
             Path::Generic(_) => v.to_vec(),
             Path::Block(b) => b.reorder(v, false),
@@ -1314,7 +1314,7 @@ impl<'a, T: Real, M: Model<T> + Sync + ?Sized> Operator<'a, T, M> {
     }
 
     /// Internal order -> row-major grid order.
-    fn to_grid<U: Copy + Default + Send + Sync>(&self, v: &[U]) -> Vec<U> {
+    fn to_grid<U: bytemuck::Pod + Default + Send + Sync>(&self, v: &[U]) -> Vec<U> {
         match &self.path {
             Path::Generic(_) => v.to_vec(),
             Path::Block(b) => b.reorder(v, true),

@@ -196,7 +196,7 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
     }
 
     /// `v` (one value per core, row-major grid order) in the internal order of the slabs.
-    pub fn to_internal_order<U: Copy + Default + Send + Sync>(
+    pub fn to_internal_order<U: bytemuck::Pod + Default + Send + Sync>(
         &self,
         v: &[U],
     ) -> Result<Vec<U>, SolveError> {
@@ -205,7 +205,7 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
     }
 
     /// `v` (one value per core, internal order) in row-major grid order.
-    pub fn to_grid_order<U: Copy + Default + Send + Sync>(
+    pub fn to_grid_order<U: bytemuck::Pod + Default + Send + Sync>(
         &self,
         v: &[U],
     ) -> Result<Vec<U>, SolveError> {

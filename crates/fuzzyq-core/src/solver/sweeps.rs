@@ -189,7 +189,7 @@ pub(super) fn grid_order<T, M, U, E>(
 where
     T: Real,
     M: Model<T> + Sync + ?Sized,
-    U: Copy + Default + Send + Sync,
+    U: bytemuck::Pod + Default + Send + Sync,
 {
     let mut out = vec![U::default(); op.n_cores()];
     let placer = match &op.path {
