@@ -30,6 +30,9 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         goal
     }
 
+    /// Every core's reward where it depends on the state alone (else only the rewards'
+    /// bound, over every core and joint action), or the bound of the model's reward table;
+    /// and the goal flags with an absorbing goal. Errors on a reward that is not finite.
     pub(super) fn prepare_rewards(&mut self) -> Result<(), SolveError> {
         let n = self.n_cores();
         let e = self.state_dim();
