@@ -39,7 +39,9 @@ fn for_each_point<T: Copy>(
     x: &mut [T],
     mut f: impl FnMut(usize, &[T]),
 ) {
-    let count = |b: usize| points[b].1.len() / points[b].0.len();
+    // Per block: its points (counted once: no division per point).
+    let counts: Vec<usize> = points.iter().map(|(d, c)| c.len() / d.len()).collect();
+    let count = |b: usize| counts[b];
     let place = |b: usize, p: usize, x: &mut [T]| {
         let (dims, coords) = points[b];
         for (&d, &v) in dims.iter().zip(&coords[p * dims.len()..]) {

@@ -39,10 +39,11 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
         let a = self.joint.dim();
         let absorbing = self.backup.absorbing_goal;
         if let Some(t) = &self.reward_table {
-            if t.iter().any(|r| !r.is_finite()) {
+            let (bound, finite) = bound_and_finiteness(t);
+            if !finite {
                 return Err(SolveError::NonFinite { what: "reward" });
             }
-            self.reward_bound = t.iter().fold(0.0, |m, r| m.max(r.to_f64().abs()));
+            self.reward_bound = bound;
             if absorbing {
                 self.goal = self.goal_flags(&self.block_coords());
             }
@@ -150,10 +151,14 @@ impl<T: Real, M: Model<T> + Sync + ?Sized> Operator<'_, T, M> {
                 });
             },
         );
-        // Every class holds a core, so the classes' bound and finiteness are the cores'.
-        let bound = by_class.iter().fold(0.0f64, |m, r| m.max(r.to_f64().abs()));
-        let finite = by_class.iter().all(|r| r.is_finite());
         b.spread(&classes, &by_class, out);
-        Some((bound, finite))
+        // Every class holds a core, so the classes' bound and finiteness are the cores'.
+        Some(bound_and_finiteness(&by_class))
     }
+}
+
+/// The largest `|r|` of `rewards` and whether they are all finite.
+fn bound_and_finiteness<T: Real>(rewards: &[T]) -> (f64, bool) {
+    let bound = rewards.iter().fold(0.0f64, |m, r| m.max(r.to_f64().abs()));
+    (bound, rewards.iter().all(|r| r.is_finite()))
 }
