@@ -408,32 +408,27 @@ impl<T: Real> SlabPlacer<'_, T> {
                     }
                 },
             );
-        } else if !scatter(out, |put| {
-            // Every thread a run of a slab's cores, for each of the piece's slabs.
-            super::par::map_reduce(
+            return;
+        }
+        // Elsewhere runs of a slab's cores on every thread, where the values are words.
+        #[cfg(feature = "parallel")]
+        if scatter(
+            out,
+            piece,
+            &Runs {
+                first_slab,
                 slab_len,
-                SCATTER_RUN,
-                (),
-                |run| {
-                    for band in tiles(c0s.clone(), NARROW) {
-                        for js in tiles(run.clone(), TILE) {
-                            for c0 in band.clone() {
-                                for j in js.clone() {
-                                    put(g0[c0] + g_rest[j], at(c0, j));
-                                }
-                            }
-                        }
-                    }
-                },
-                |(), ()| (),
-            );
-        }) {
-            for band in tiles(c0s, NARROW) {
-                for js in tiles(0..slab_len, TILE) {
-                    for c0 in band.clone() {
-                        for j in js.clone() {
-                            out[g0[c0] + g_rest[j]] = at(c0, j);
-                        }
+                g0,
+                g_rest,
+            },
+        ) {
+            return;
+        }
+        for band in tiles(c0s, NARROW) {
+            for js in tiles(0..slab_len, TILE) {
+                for c0 in band.clone() {
+                    for j in js.clone() {
+                        out[g0[c0] + g_rest[j]] = at(c0, j);
                     }
                 }
             }
@@ -442,38 +437,93 @@ impl<T: Real> SlabPlacer<'_, T> {
 }
 
 /// Slab cores per task of a scattered placing ([`scatter`]).
+#[cfg(feature = "parallel")]
 const SCATTER_RUN: usize = 4096;
 
-/// Runs `fill` with `put(i, x)`, which stores `x` at `out[i]` from any thread (each index once;
-/// the stores are atomic, as the threads' indices interleave), and returns `true`; `false`
-/// (nothing run) for values of other than 4 or 8 bytes.
+/// Where a piece of whole slabs goes ([`SlabPlacer::place`]): slab core `j` of slab `c0`,
+/// `piece[(c0 - first_slab) slab_len + j]`, to grid index `g0[c0] + g_rest[j]`.
 #[cfg(feature = "parallel")]
-fn scatter<U: bytemuck::Pod + Send + Sync>(
-    out: &mut [U],
-    fill: impl FnOnce(&(dyn Fn(usize, U) + Sync)),
-) -> bool {
-    use core::sync::atomic::{AtomicU32, AtomicU64, Ordering::Relaxed};
+struct Runs<'a> {
+    first_slab: usize,
+    slab_len: usize,
+    g0: &'a [usize],
+    g_rest: &'a [usize],
+}
+
+/// Places `piece` in `out` as `runs` says, every thread a run of a slab's cores for each of
+/// the piece's slabs, each value stored atomically (the runs' grid indices interleave), and
+/// returns `true`; `false` (nothing done) for values of other than 4 or 8 bytes.
+#[cfg(feature = "parallel")]
+fn scatter<U: bytemuck::Pod + Send + Sync>(out: &mut [U], piece: &[U], runs: &Runs<'_>) -> bool {
+    use core::sync::atomic::{AtomicU32, AtomicU64};
     match size_of::<U>() {
         4 => {
-            let words: &mut [u32] = bytemuck::cast_slice_mut(out);
-            let atomic: &mut [AtomicU32] = zerocopy::transmute_mut!(words);
-            let atomic = &*atomic;
-            fill(&|i, x| atomic[i].store(bytemuck::cast(x), Relaxed));
+            let out: &mut [u32] = bytemuck::cast_slice_mut(out);
+            place_runs::<AtomicU32>(
+                bytemuck::cast_slice(piece),
+                zerocopy::transmute_mut!(out),
+                runs,
+            );
             true
         }
         8 => {
-            let words: &mut [u64] = bytemuck::cast_slice_mut(out);
-            let atomic: &mut [AtomicU64] = zerocopy::transmute_mut!(words);
-            let atomic = &*atomic;
-            fill(&|i, x| atomic[i].store(bytemuck::cast(x), Relaxed));
+            let out: &mut [u64] = bytemuck::cast_slice_mut(out);
+            place_runs::<AtomicU64>(
+                bytemuck::cast_slice(piece),
+                zerocopy::transmute_mut!(out),
+                runs,
+            );
             true
         }
         _ => false,
     }
 }
 
-/// Without threads, nothing to scatter from: `false`.
-#[cfg(not(feature = "parallel"))]
-fn scatter<U>(_out: &mut [U], _fill: impl FnOnce(&(dyn Fn(usize, U) + Sync))) -> bool {
-    false
+/// The atomic twin of a 4- or 8-byte word ([`scatter`]).
+#[cfg(feature = "parallel")]
+trait AtomicWord: Sync {
+    type Word: Copy + Sync;
+    fn put(&self, x: Self::Word);
+}
+
+/// [`AtomicWord`] for each atomic and its word.
+macro_rules! atomic_words {
+    ($($atomic:ident => $word:ty),*) => {$(
+        #[cfg(feature = "parallel")]
+        impl AtomicWord for core::sync::atomic::$atomic {
+            type Word = $word;
+            #[inline(always)]
+            fn put(&self, x: $word) {
+                self.store(x, core::sync::atomic::Ordering::Relaxed);
+            }
+        }
+    )*};
+}
+atomic_words!(AtomicU32 => u32, AtomicU64 => u64);
+
+/// [`scatter`]'s loops, generic over the word so that each store is inlined: with an
+/// indirect call per value the unit tests' three masses (11.4M cores) took 0.044-0.052 s to
+/// place whole on two threads, 0.020-0.033 s so.
+#[cfg(feature = "parallel")]
+fn place_runs<A: AtomicWord>(piece: &[A::Word], out: &[A], r: &Runs<'_>) {
+    let slabs = piece.len() / r.slab_len;
+    let c0s = r.first_slab..r.first_slab + slabs;
+    super::par::map_reduce(
+        r.slab_len,
+        SCATTER_RUN,
+        (),
+        |run| {
+            for band in tiles(c0s.clone(), NARROW) {
+                for js in tiles(run.clone(), TILE) {
+                    for c0 in band.clone() {
+                        let (g, from) = (r.g0[c0], (c0 - r.first_slab) * r.slab_len);
+                        for j in js.clone() {
+                            out[g + r.g_rest[j]].put(piece[from + j]);
+                        }
+                    }
+                }
+            }
+        },
+        |(), ()| (),
+    );
 }

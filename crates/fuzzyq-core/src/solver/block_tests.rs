@@ -605,6 +605,15 @@ fn core_states_and_reorders_match_the_per_core_maps() {
                 }
                 assert_eq!(pieced, g, "pieces of {per} slabs, reversed {reversed}");
             }
+            // Eight-byte values (`f64` values) take the other word of the scattered stores.
+            let v64: Vec<u64> = v.iter().map(|&x| u64::from(x) << 32 | 7).collect();
+            let g64: Vec<u64> = g.iter().map(|&x| u64::from(x) << 32 | 7).collect();
+            let mut pieced = vec![u64::MAX; n];
+            for s0 in (0..slabs).step_by(2) {
+                let end = (s0 + 2).min(slabs);
+                placer.place(s0, &v64[s0 * slab..end * slab], &mut pieced);
+            }
+            assert_eq!(pieced, g64, "eight-byte values, reversed {reversed}");
         });
     }
 }
