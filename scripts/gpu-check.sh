@@ -133,11 +133,13 @@ done
 # stage (FUZZYQ_GPU_LAST: rows; merged:N, N cores in turn; tile:T, a workgroup of T threads
 # per item of the stage before, its values in workgroup memory; unrolled, the last block's
 # rows compiled into the kernel; joined, that kernel computing the stage before it itself,
-# which is then not dispatched). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
+# which is then not dispatched; staged:T, a workgroup of T threads per item of the stage
+# before computing that item's values into workgroup memory, rows read from the tables, not
+# compiled in, first as it is not yet timed on a GPU). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
 # rows in. The rows above use the default on a GPU for a problem of this size (below 1e11
 # multiply-adds per full backup), merged/rows; rows/rows are the kernels before the merge.
 # A third field, STAGES/LAST/0, turns the reductions by subgroup off (FUZZYQ_GPU_SUBGROUPS=0).
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows unrolled/unrolled/0 merged/rows/0}
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-merged/staged unrolled/staged merged/staged:128 merged/staged:512 merged/staged:1024 unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows unrolled/unrolled/0 merged/rows/0}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"
@@ -218,30 +220,31 @@ for env in ${GPU_CHECK_ENVS:-pointmass khepera}; do
     row "train --env $env, GPU opened first" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
       "gpu ${wall} s wall (beside the set-up: ${wall_gpu} s); $(phases "$OUT/$env-first.json")"
   fi
-  # Every stage's rows compiled into its kernel (GPU_CHECK_TRAIN_KERNELS, STAGES/LAST; empty
-  # skips it): the wall time and the CPU's bytes.
-  kern=${GPU_CHECK_TRAIN_KERNELS-unrolled/unrolled}
-  if [ -n "$kern" ]; then
+  # Other kernels (GPU_CHECK_TRAIN_KERNELS, STAGES/LAST each; empty skips them): the stages
+  # merged and the last stage staged (no rows compiled in), then every stage's rows compiled
+  # into its kernel: the wall time and the CPU's bytes.
+  for kern in ${GPU_CHECK_TRAIN_KERNELS-merged/staged unrolled/unrolled}; do
+    tag=$(echo "$kern" | tr '/:' '--')
     t0=$(now)
     FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout "$(limit 180)" "$BIN" train --env "$env" --device gpu \
-      ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-kern.fzq" --json "$OUT/$env-kern.json" >"$OUT/train-$env-kern.log" 2>&1
+      ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-kern-$tag.fzq" --json "$OUT/$env-kern-$tag.json" >"$OUT/train-$env-kern-$tag.log" 2>&1
     rc=$?
     wall=$(secs "$t0" "$(now)")
-    [ $rc = 0 ] && "$BIN" export --policy "$OUT/$env-kern.fzq" --out "$OUT/$env-kern.bin" >/dev/null 2>&1
+    [ $rc = 0 ] && "$BIN" export --policy "$OUT/$env-kern-$tag.fzq" --out "$OUT/$env-kern-$tag.bin" >/dev/null 2>&1
     same="differ"
-    if [ -s "$OUT/$env-kern.bin" ] && cmp -s "$OUT/$env-kern.bin" "$OUT/$env-cpu.bin"; then same="identical"; fi
+    if [ -s "$OUT/$env-kern-$tag.bin" ] && cmp -s "$OUT/$env-kern-$tag.bin" "$OUT/$env-cpu.bin"; then same="identical"; fi
     row "train --env $env, kernels $kern" "$([ $rc = 0 ] && [ "$same" = identical ] && echo PASS || echo "FAIL (rc=$rc, exports $same)")" \
-      "gpu ${wall} s wall; exported V + greedy against the cpu's: $same; $(phases "$OUT/$env-kern.json")"
+      "gpu ${wall} s wall; exported V + greedy against the cpu's: $same; $(phases "$OUT/$env-kern-$tag.json")"
     # Once more, the driver's cache of compiled kernels now warm (a user's second run): the
     # set-up that decides whether compiling the rows in pays at this size (COMPILE_IN_FROM).
     t0=$(now)
     FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=${kern#*/} timeout "$(limit 180)" "$BIN" train --env "$env" --device gpu \
-      ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-kern2.fzq" --json "$OUT/$env-kern2.json" >"$OUT/train-$env-kern2.log" 2>&1
+      ${GPU_CHECK_TRAIN_ARGS:-} --out "$OUT/$env-kern2-$tag.fzq" --json "$OUT/$env-kern2-$tag.json" >"$OUT/train-$env-kern2-$tag.log" 2>&1
     rc=$?
     wall=$(secs "$t0" "$(now)")
     row "train --env $env, kernels $kern, again" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
-      "gpu ${wall} s wall; $(phases "$OUT/$env-kern2.json")"
-  fi
+      "gpu ${wall} s wall; $(phases "$OUT/$env-kern2-$tag.json")"
+  done
 done
 
 # The paper's three point masses: 45^6 cores, V in 23 parts on the card, one slab's first

@@ -127,6 +127,21 @@ pub enum LastStage {
     /// 16 entries, [`LastStage::Unrolled`]. Not a default: on an H200, the paper's grid, it
     /// took 15.2 ms where [`LastStage::Unrolled`] and the stage before it took 5.8 and 3.1 ms.
     Joined,
+    /// A workgroup of `threads` threads per item of the stage before, which computes that
+    /// item's values itself into workgroup memory (`lasts.wgsl`): each thread one column
+    /// of the stage before's block-core row, its entries held in registers, over the
+    /// item's cores of the last block; then each core of the item taken by a few lanes, its
+    /// rows' entries held in registers over the lane's columns read from workgroup memory,
+    /// and the lanes of a core folded once. The stage before the last is neither dispatched
+    /// nor written, and neither kernel compiles rows in (no compiler time that grows with
+    /// the tables). Where there is no such stage (two blocks or fewer), its output is cut
+    /// into parts, a row of either block holds more than 16 entries or the item's values do
+    /// not fit the adapter's workgroup memory (the paper's grid: 22.5 KB), [`LastStage::MERGED`]
+    /// on a software adapter and [`LastStage::Rows`] on a GPU. Not yet timed on a GPU.
+    Staged {
+        /// Threads per workgroup (a power of two from 32 to 1024).
+        threads: u32,
+    },
 }
 
 /// The default, as measured: the rows compiled in ([`LastStage::Unrolled`]). On an H200 the
@@ -146,7 +161,8 @@ impl LastStage {
     pub const MERGED: LastStage = LastStage::Merged { cores: 4 };
 
     /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads),
-    /// `tile:THREADS`, `unrolled` or `joined` (`None` for anything else).
+    /// `tile:THREADS`, `unrolled`, `joined`, `staged` (256 threads) or `staged:THREADS`
+    /// (`None` for anything else).
     #[must_use]
     pub fn parse(s: &str) -> Option<Self> {
         let n = |n: &str| n.parse::<u32>().ok();
@@ -156,12 +172,16 @@ impl LastStage {
             None if s == "tile" => Some(LastStage::Tile { threads: 128 }),
             None if s == "unrolled" => Some(LastStage::Unrolled),
             None if s == "joined" => Some(LastStage::Joined),
+            None if s == "staged" => Some(LastStage::Staged { threads: 256 }),
             Some(("merged", c)) => n(c)
                 .filter(|&c| c > 0)
                 .map(|cores| LastStage::Merged { cores }),
             Some(("tile", t)) => n(t)
                 .filter(|t| t.is_power_of_two() && (32..=256).contains(t))
                 .map(|threads| LastStage::Tile { threads }),
+            Some(("staged", t)) => n(t)
+                .filter(|t| t.is_power_of_two() && (32..=1024).contains(t))
+                .map(|threads| LastStage::Staged { threads }),
             _ => None,
         }
     }
@@ -538,7 +558,7 @@ impl Settings {
             last: setting(
                 "FUZZYQ_GPU_LAST",
                 "rows, merged, merged:CORES, tile, tile:THREADS (32 to 256, a power of two), \
-                 unrolled or joined",
+                 unrolled, joined, staged or staged:THREADS (32 to 1024, a power of two)",
                 LastStage::parse,
             )?,
             evaluation: setting(

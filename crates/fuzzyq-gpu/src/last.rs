@@ -1,7 +1,8 @@
 //! The fused last stage of a full backup: the last block's contraction with the maximum over
 //! joint actions, one row at a time (`last1.wgsl`), a core's rows merged by column
-//! (`lastm.wgsl`), an item's values from workgroup memory (`lastw.wgsl`) or the rows compiled
-//! into the kernel (`unrolled.rs`) ([`LastStage`]), compiled with the problem's sizes; and the
+//! (`lastm.wgsl`), an item's values from workgroup memory (`lastw.wgsl`), computed there
+//! from the stage before that (`lasts.wgsl`) or the rows compiled into the kernel
+//! (`unrolled.rs`) ([`LastStage`]), compiled with the problem's sizes; and the
 //! merged steps it and the merged stages (`stagem.wgsl`) read.
 
 use fuzzyq_core::solver::PlanTable;
@@ -17,18 +18,23 @@ const LAST_CHUNK: u32 = 8;
 /// Most sums a lane of the merged last stage keeps (`AL JC` in `lastm.wgsl`).
 const MERGED_SUMS: u32 = 40;
 
+/// Most entries of a last block's row that the staged last stage holds in registers
+/// (`lasts.wgsl`, `ML`).
+const STAGED_ENTRIES: u32 = 16;
+
 /// The fused last stage compiled for one problem ([`compile_last`]).
 pub(crate) struct Last {
-    /// `last1.wgsl`, `lastm.wgsl`, `lastw.wgsl` or `unrolled.rs`'s with the problem's
-    /// constants.
+    /// `last1.wgsl`, `lastm.wgsl`, `lastw.wgsl`, `lasts.wgsl` or `unrolled.rs`'s with the
+    /// problem's constants.
     pub pipeline: wgpu::ComputePipeline,
-    /// Cores a workgroup takes (`None`: a workgroup per item of the stage before, `lastw`).
+    /// Cores a workgroup takes (`None`: a workgroup per item of the stage before).
     pub cores_per_group: Option<u32>,
-    /// Its kernel (`last1`, `lastm`, `lastw`, `lastu` or `lastj`).
+    /// Its kernel (`last1`, `lastm`, `lastw`, `lasts`, `lastu` or `lastj`).
     pub name: &'static str,
     /// Whether it reduces a core's lanes by subgroup operations.
     pub subgroups: bool,
-    /// Whether it computes the stage before it itself (`lastj`), reading the one before that.
+    /// Whether it computes the stage before it itself (`lastj`, `lasts`), reading the one
+    /// before that.
     pub joined: bool,
 }
 
@@ -108,6 +114,11 @@ pub(crate) fn compile_last(
 ) -> Result<Last, GpuError> {
     let nb = blocks.len();
     let [nl, al, _, pl] = blocks[nb - 1];
+    if let (LastStage::Staged { threads }, Some(before)) = (gpu.last, before)
+        && let Some(last) = compile_staged(gpu, k, blocks, table, before, threads)?
+    {
+        return Ok(last);
+    }
     if matches!(gpu.last, LastStage::Unrolled | LastStage::Joined) {
         // A workgroup of one subgroup exchanging by shuffles, else of 32 threads exchanging
         // through workgroup memory; the stage before joined in where asked for and it can be.
@@ -139,10 +150,15 @@ pub(crate) fn compile_last(
             });
         }
     }
-    // Rows too many to compile in: merged on a software adapter, else one at a time.
+    // Rows too many to compile in (or no stage before to stage): merged on a software
+    // adapter, else one at a time.
     let choice = match gpu.last {
-        LastStage::Unrolled | LastStage::Joined if gpu.summary().software => LastStage::MERGED,
-        LastStage::Unrolled | LastStage::Joined => LastStage::Rows,
+        LastStage::Unrolled | LastStage::Joined | LastStage::Staged { .. }
+            if gpu.summary().software =>
+        {
+            LastStage::MERGED
+        }
+        LastStage::Unrolled | LastStage::Joined | LastStage::Staged { .. } => LastStage::Rows,
         other => other,
     };
     if let LastStage::Tile { threads } = choice {
@@ -225,6 +241,67 @@ fn lane_constants(blocks: &[[u32; 4]], wgs: u32, tpc: u32, jc: u32) -> Vec<(&'st
         ("CPW", wgs / tpc),
         ("WGS", wgs),
     ]
+}
+
+/// The fused last stage computing the stage before it into workgroup memory, a workgroup
+/// of `threads` per item of that stage (`lasts.wgsl`, [`LastStage::Staged`]; `before`: its
+/// block); `None` where the item's values and the lanes' fold do not fit the adapter's
+/// workgroup memory, `threads` its workgroups, or a row holds more than [`STAGED_ENTRIES`].
+fn compile_staged(
+    gpu: &Gpu,
+    k: &Kernels,
+    blocks: &[[u32; 4]],
+    table: &PlanTable<'_, f32>,
+    before: Before,
+    threads: u32,
+) -> Result<Option<Last>, GpuError> {
+    let [nl, al, _, pl] = blocks[blocks.len() - 1];
+    let limits = gpu.inner.device.limits();
+    let tile = u64::from(nl) * u64::from(pl);
+    let fits = 4 * (tile + 2 * u64::from(threads))
+        <= u64::from(limits.max_compute_workgroup_storage_size)
+        && threads <= limits.max_compute_invocations_per_workgroup
+        && threads <= limits.max_compute_workgroup_size_x;
+    if !fits {
+        return Ok(None);
+    }
+    let most_entries = table.ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    if most_entries > STAGED_ENTRIES {
+        return Ok(None);
+    }
+    // Lanes per core: as many as the workgroup holds for every core at once, at most the
+    // columns.
+    let j = (threads / nl).clamp(1, pl);
+    let cpw = threads / j;
+    // Threads per group of the stage before's columns, and groups over its cores.
+    let qt = pl.min(threads);
+    let consts = [
+        ("LAST", (blocks.len() - 1) as u32),
+        ("NL", nl),
+        ("AL", al),
+        ("PL", pl),
+        ("ML", most_entries.max(1)),
+        ("N1", before.n),
+        ("A1", before.a),
+        ("P1", before.p),
+        ("ME", before.max_entries),
+        ("WGS", threads),
+        ("TILE", tile as u32),
+        ("J", j),
+        ("CPW", cpw),
+        ("ROUNDS", nl.div_ceil(cpw)),
+        ("QT", qt),
+        ("KG", threads / qt),
+    ];
+    let t = (include_str!("lasts.wgsl"), "lasts");
+    let pipeline = kernels::specialized(&gpu.inner, k, t, &consts, &[], false, None)?;
+    Ok(Some(Last {
+        pipeline,
+        cores_per_group: None,
+        name: t.1,
+        subgroups: false,
+        joined: true,
+    }))
 }
 
 /// The fused last stage with a workgroup of `threads` per item of the stage before
