@@ -135,11 +135,12 @@ done
 # rows compiled into the kernel; joined, that kernel computing the stage before it itself,
 # which is then not dispatched; staged:T, a workgroup of T threads per item of the stage
 # before computing that item's values into workgroup memory, rows read from the tables, not
-# compiled in, first as it is not yet timed on a GPU). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
+# compiled in, first as it is not yet timed on a GPU; staged:T:C, C of the item's columns a
+# pass). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
 # rows in. The rows above use the default on a GPU for a problem of this size (below 1e11
 # multiply-adds per full backup), merged/rows; rows/rows are the kernels before the merge.
 # A third field, STAGES/LAST/0, turns the reductions by subgroup off (FUZZYQ_GPU_SUBGROUPS=0).
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-merged/staged unrolled/staged merged/staged:128 merged/staged:512 merged/staged:1024 unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows unrolled/unrolled/0 merged/rows/0}
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-merged/staged unrolled/staged merged/staged:128 merged/staged:512 merged/staged:1024 merged/staged:256:32 unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows unrolled/unrolled/0 merged/rows/0}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"
@@ -288,13 +289,20 @@ if want 4 && [ -n "$THREE" ]; then
     row "  its evaluation sweeps, split $ev" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
       "$(grep -E '^(evaluate|backup)' "$OUT/bench-three-eval-$ev.log" | sed 's/  */ /g' | paste -sd ';' -)"
   done
-  # The same grid with the paper's 5 force levels per axis: one full backup.
+  # The same grid with the paper's 5 force levels per axis: one full backup, with the default
+  # kernels (its last stage too large to compile in: one row at a time) and with the last
+  # stage staged (3,125 product columns per item, taken a few hundred at a time).
   sed 's/^force_levels = .*/force_levels = [-2.0, -0.2, 0.0, 0.2, 2.0]/' "$THREE" >"$OUT/three-5.toml"
-  timeout "$(limit 150)" "$BIN" bench --config "$OUT/three-5.toml" --device gpu --backups 1 --peak-seconds 0.2 \
-    --json "$OUT/bench-three-5.json" >"$OUT/bench-three-5.log" 2>&1
-  rc=$?
-  row "GPU full backup, three point masses, 5 forces per axis" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
-    "$(grep -E '^(backup|problem)' "$OUT/bench-three-5.log" | sed 's/  */ /g' | paste -sd ';' -)"
+  for kern in default unrolled/staged; do
+    tag=$(echo "$kern" | tr '/:' '--')
+    stages= last=
+    [ "$kern" = default ] || stages=${kern%%/*} last=${kern#*/}
+    FUZZYQ_GPU_PROFILE=1 FUZZYQ_GPU_STAGES=$stages FUZZYQ_GPU_LAST=$last timeout "$(limit 150)" "$BIN" bench --config "$OUT/three-5.toml" \
+      --device gpu --backups 1 --evaluations 0 --peak-seconds 0.2 --json "$OUT/bench-three-5-$tag.json" >"$OUT/bench-three-5-$tag.log" 2>&1
+    rc=$?
+    row "GPU full backup, three point masses, 5 forces per axis, kernels $kern" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \
+      "$(grep -E '^(backup|problem|profile)' "$OUT/bench-three-5-$tag.log" | sed -e 's/  */ /g' -e 's/^profile //' | paste -sd ';' -)"
+  done
 fi
 
 # The paper's three point masses trained on the GPU (opt-in: minutes), then rolled out from

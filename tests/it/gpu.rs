@@ -595,61 +595,91 @@ fn the_last_stage_staged_in_workgroup_memory_gives_the_same_bits() {
     // `LastStage::Staged`: a workgroup per item of the stage before, which computes that
     // item's values into workgroup memory from the stage before that (so the stage before
     // the last is not dispatched), then its cores a few lanes each. Every pass of every mode
-    // keeps the reference's bits with workgroups of 32 to 1024 threads (one lane per core
-    // and several rounds of cores, or several lanes per core), with batches of whole slabs
-    // and the smallest (items cut at a batch's ends, the stage before that held across
-    // batches); models of two blocks (Khepera) take the fallback; a whole run keeps the
+    // keeps the reference's bits with workgroups of 8 to 1024 threads (one lane per core
+    // and several rounds of cores, or several lanes per core), the item's columns in one
+    // pass or several (down to one column a pass, the last pass short), with batches of
+    // whole slabs and the smallest (items cut at a batch's ends, the stage before that held
+    // across batches); models of two blocks (Khepera) take the fallback; a whole run keeps the
     // default kernels' bits.
-    let staged = |threads| g.clone().with_last_stage(LastStage::Staged { threads });
+    let staged = |threads, columns| {
+        g.clone()
+            .with_last_stage(LastStage::Staged { threads, columns })
+    };
     let fallback = if g.summary().software {
         "lastm"
     } else {
         "last1"
     };
     for (c, threads) in [
-        (pointmass_small(), vec![32, 256, 1024]),
-        (pointmass_goal(), vec![64]),
-        (three_point_masses(false), vec![128, 512]),
-        (seven_forces(), vec![256]),
-        (khepera_small(), vec![256]),
+        (
+            pointmass_small(),
+            // 8 threads (below what the setting takes): one lane per core, cores in two
+            // rounds.
+            vec![
+                (32, None),
+                (256, None),
+                (1024, None),
+                (64, Some(7)),
+                (32, Some(1)),
+                (8, Some(5)),
+            ],
+        ),
+        (pointmass_goal(), vec![(64, None)]),
+        (
+            three_point_masses(false),
+            vec![(128, None), (512, Some(100))],
+        ),
+        (seven_forces(), vec![(256, None), (128, Some(50))]),
+        (khepera_small(), vec![(256, None)]),
     ] {
         let model = c.build_model().unwrap();
         let grid = c.grid::<f32>().unwrap();
         let config = c.solver.solver_config();
         let op = operator(&model, &grid, &config);
         let blocks = op.block_plan().unwrap().tables.len();
-        for t in threads {
-            let gs = GpuSweeps::new(&staged(t), &op).unwrap();
+        for (i, (t, columns)) in threads.into_iter().enumerate() {
+            let gs = GpuSweeps::new(&staged(t, columns), &op).unwrap();
             let name = gs.last_stage();
             eprintln!(
-                "{} cores, {blocks} blocks, {t} threads: {name:?}, {}",
+                "{} cores, {blocks} blocks, {t} threads, columns {columns:?}: {name:?}, {}",
                 op.n_cores(),
                 gs.batches()
             );
             let want = if blocks >= 3 { "lasts" } else { fallback };
             assert_eq!(name, Some(want));
             drop(gs);
-            passes_match(&staged(t), &op);
-            passes_match(&staged(t).with_batch_bytes(1), &op);
+            passes_match(&staged(t, columns), &op);
+            // Batches cut items apart whatever a workgroup does within them: the smallest
+            // with each problem's first workgroup.
+            if i == 0 {
+                passes_match(&staged(t, columns).with_batch_bytes(1), &op);
+            }
         }
     }
     let c = three_point_masses(false);
     let model = c.build_model().unwrap();
     let grid = c.grid::<f32>().unwrap();
     let config = c.solver.solver_config();
-    let a =
-        fuzzyq_gpu::solve_from(&staged(256), &model, &grid, &config, None, false, noop).unwrap();
-    let b = fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop).unwrap();
-    assert_same(&a, &b, "the last stage staged against the default");
-    assert_eq!(
-        LastStage::parse("staged"),
-        Some(LastStage::Staged { threads: 256 })
-    );
-    assert_eq!(
-        LastStage::parse("staged:1024"),
-        Some(LastStage::Staged { threads: 1024 })
-    );
-    for bad in ["staged:16", "staged:300", "staged:2048", "staged:"] {
+    let run = |g: &Gpu| fuzzyq_gpu::solve_from(g, &model, &grid, &config, None, false, noop);
+    let b = run(g).unwrap();
+    for columns in [None, Some(10)] {
+        let a = run(&staged(256, columns)).unwrap();
+        assert_same(&a, &b, "the last stage staged against the default");
+    }
+    let parsed = |threads, columns| Some(LastStage::Staged { threads, columns });
+    assert_eq!(LastStage::parse("staged"), parsed(256, None));
+    assert_eq!(LastStage::parse("staged:1024"), parsed(1024, None));
+    assert_eq!(LastStage::parse("staged:64:7"), parsed(64, Some(7)));
+    for bad in [
+        "staged:16",
+        "staged:300",
+        "staged:2048",
+        "staged:",
+        "staged:64:0",
+        "staged:64:",
+        "staged:64:x",
+        "staged:100:7",
+    ] {
         assert_eq!(LastStage::parse(bad), None, "{bad}");
     }
 }

@@ -128,19 +128,26 @@ pub enum LastStage {
     /// took 15.2 ms where [`LastStage::Unrolled`] and the stage before it took 5.8 and 3.1 ms.
     Joined,
     /// A workgroup of `threads` threads per item of the stage before, which computes that
-    /// item's values itself into workgroup memory (`lasts.wgsl`): each thread one column
-    /// of the stage before's block-core row, its entries held in registers, over the
-    /// item's cores of the last block; then each core of the item taken by a few lanes, its
-    /// rows' entries held in registers over the lane's columns read from workgroup memory,
-    /// and the lanes of a core folded once. The stage before the last is neither dispatched
-    /// nor written, and neither kernel compiles rows in (no compiler time that grows with
-    /// the tables). Where there is no such stage (two blocks or fewer), its output is cut
-    /// into parts, a row of either block holds more than 16 entries or the item's values do
-    /// not fit the adapter's workgroup memory (the paper's grid: 22.5 KB), [`LastStage::MERGED`]
-    /// on a software adapter and [`LastStage::Rows`] on a GPU. Not yet timed on a GPU.
+    /// item's values itself into workgroup memory (`lasts.wgsl`), a pass over a share of
+    /// the item's product-action columns at a time: each thread one column of the stage
+    /// before's block-core row, its entries held in registers, over the item's cores of the
+    /// last block; then each core of the item taken by a few lanes, its rows' entries held
+    /// in registers over the lane's columns read from workgroup memory, each lane keeping
+    /// its largest over the passes; the lanes of a core folded once at the end. The stage
+    /// before the last is neither dispatched nor written, and neither kernel compiles rows
+    /// in (no compiler time that grows with the tables). A pass takes as many columns as
+    /// the adapter's workgroup memory holds (all 125 of the paper's grid, 22.5 KB; about
+    /// 260 of the 3,125 of three masses with 5 forces per axis in 48 KB), at most `columns`
+    /// where given. Where there is no such stage (two blocks or fewer), its output is cut
+    /// into parts, a row of either block holds more than 16 entries or not one column of the
+    /// item fits the workgroup memory, [`LastStage::MERGED`] on a software adapter and
+    /// [`LastStage::Rows`] on a GPU. Not yet timed on a GPU.
     Staged {
-        /// Threads per workgroup (a power of two from 32 to 1024).
+        /// Threads per workgroup (at least 1, at most the adapter allows; the setting takes
+        /// a power of two from 32 to 1024).
         threads: u32,
+        /// Most product-action columns per pass (`None`: as many as fit; at least 1).
+        columns: Option<u32>,
     },
 }
 
@@ -161,8 +168,8 @@ impl LastStage {
     pub const MERGED: LastStage = LastStage::Merged { cores: 4 };
 
     /// `rows`, `merged` (4 cores in turn), `merged:CORES`, `tile` (128 threads),
-    /// `tile:THREADS`, `unrolled`, `joined`, `staged` (256 threads) or `staged:THREADS`
-    /// (`None` for anything else).
+    /// `tile:THREADS`, `unrolled`, `joined`, `staged` (256 threads), `staged:THREADS` or
+    /// `staged:THREADS:COLUMNS` (`None` for anything else).
     #[must_use]
     pub fn parse(s: &str) -> Option<Self> {
         let n = |n: &str| n.parse::<u32>().ok();
@@ -172,16 +179,24 @@ impl LastStage {
             None if s == "tile" => Some(LastStage::Tile { threads: 128 }),
             None if s == "unrolled" => Some(LastStage::Unrolled),
             None if s == "joined" => Some(LastStage::Joined),
-            None if s == "staged" => Some(LastStage::Staged { threads: 256 }),
+            None if s == "staged" => Some(LastStage::Staged {
+                threads: 256,
+                columns: None,
+            }),
             Some(("merged", c)) => n(c)
                 .filter(|&c| c > 0)
                 .map(|cores| LastStage::Merged { cores }),
             Some(("tile", t)) => n(t)
                 .filter(|t| t.is_power_of_two() && (32..=256).contains(t))
                 .map(|threads| LastStage::Tile { threads }),
-            Some(("staged", t)) => n(t)
-                .filter(|t| t.is_power_of_two() && (32..=1024).contains(t))
-                .map(|threads| LastStage::Staged { threads }),
+            Some(("staged", t)) => {
+                let (t, columns) = match t.split_once(':') {
+                    Some((t, c)) => (t, Some(n(c).filter(|&c| c > 0)?)),
+                    None => (t, None),
+                };
+                n(t).filter(|t| t.is_power_of_two() && (32..=1024).contains(t))
+                    .map(|threads| LastStage::Staged { threads, columns })
+            }
             _ => None,
         }
     }
@@ -558,7 +573,8 @@ impl Settings {
             last: setting(
                 "FUZZYQ_GPU_LAST",
                 "rows, merged, merged:CORES, tile, tile:THREADS (32 to 256, a power of two), \
-                 unrolled, joined, staged or staged:THREADS (32 to 1024, a power of two)",
+                 unrolled, joined, staged, staged:THREADS (32 to 1024, a power of two) or \
+                 staged:THREADS:COLUMNS",
                 LastStage::parse,
             )?,
             evaluation: setting(

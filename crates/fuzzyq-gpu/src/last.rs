@@ -114,8 +114,8 @@ pub(crate) fn compile_last(
 ) -> Result<Last, GpuError> {
     let nb = blocks.len();
     let [nl, al, _, pl] = blocks[nb - 1];
-    if let (LastStage::Staged { threads }, Some(before)) = (gpu.last, before)
-        && let Some(last) = compile_staged(gpu, k, blocks, table, before, threads)?
+    if let (LastStage::Staged { threads, columns }, Some(before)) = (gpu.last, before)
+        && let Some(last) = compile_staged(gpu, k, blocks, table, before, (threads, columns))?
     {
         return Ok(last);
     }
@@ -244,37 +244,46 @@ fn lane_constants(blocks: &[[u32; 4]], wgs: u32, tpc: u32, jc: u32) -> Vec<(&'st
 }
 
 /// The fused last stage computing the stage before it into workgroup memory, a workgroup
-/// of `threads` per item of that stage (`lasts.wgsl`, [`LastStage::Staged`]; `before`: its
-/// block); `None` where the item's values and the lanes' fold do not fit the adapter's
-/// workgroup memory, `threads` its workgroups, or a row holds more than [`STAGED_ENTRIES`].
+/// of `threads` per item of that stage, at most `columns` of the item's product-action
+/// columns per pass (`lasts.wgsl`, [`LastStage::Staged`]; `before`: its block); `None`
+/// where not one column of the item's values fits the adapter's workgroup memory beside
+/// the lanes' fold, `threads` is 0 or exceeds its workgroups, or a row holds more than
+/// [`STAGED_ENTRIES`].
 fn compile_staged(
     gpu: &Gpu,
     k: &Kernels,
     blocks: &[[u32; 4]],
     table: &PlanTable<'_, f32>,
     before: Before,
-    threads: u32,
+    (threads, columns): (u32, Option<u32>),
 ) -> Result<Option<Last>, GpuError> {
     let [nl, al, _, pl] = blocks[blocks.len() - 1];
     let limits = gpu.inner.device.limits();
-    let tile = u64::from(nl) * u64::from(pl);
-    let fits = 4 * (tile + 2 * u64::from(threads))
-        <= u64::from(limits.max_compute_workgroup_storage_size)
+    // Columns per pass: as many of the item's as the workgroup memory holds beside the
+    // fold's two arrays, at most `columns`.
+    let room = (u64::from(limits.max_compute_workgroup_storage_size) / 4)
+        .saturating_sub(2 * u64::from(threads));
+    let mut pc = (room / u64::from(nl.max(1))).min(u64::from(pl.min(columns.unwrap_or(pl)))) as u32;
+    // Where the workgroup memory cuts the columns into passes of more than a column per
+    // thread, a whole number per thread, so that no thread computes one column more than
+    // the others in the passes' first phase.
+    if pc < pl && pc > threads && columns.is_none() {
+        pc -= pc % threads;
+    }
+    let fits = pc > 0
+        && threads > 0
         && threads <= limits.max_compute_invocations_per_workgroup
         && threads <= limits.max_compute_workgroup_size_x;
-    if !fits {
-        return Ok(None);
-    }
     let most_entries = table.ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
-    if most_entries > STAGED_ENTRIES {
+    if !fits || most_entries > STAGED_ENTRIES {
         return Ok(None);
     }
     // Lanes per core: as many as the workgroup holds for every core at once, at most the
-    // columns.
-    let j = (threads / nl).clamp(1, pl);
+    // pass's columns.
+    let j = (threads / nl).clamp(1, pc);
     let cpw = threads / j;
     // Threads per group of the stage before's columns, and groups over its cores.
-    let qt = pl.min(threads);
+    let qt = pc.min(threads);
     let consts = [
         ("LAST", (blocks.len() - 1) as u32),
         ("NL", nl),
@@ -286,7 +295,8 @@ fn compile_staged(
         ("P1", before.p),
         ("ME", before.max_entries),
         ("WGS", threads),
-        ("TILE", tile as u32),
+        ("PC", pc),
+        ("TILE", nl * pc),
         ("J", j),
         ("CPW", cpw),
         ("ROUNDS", nl.div_ceil(cpw)),

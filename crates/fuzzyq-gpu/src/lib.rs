@@ -54,8 +54,9 @@
 //! - a workgroup per item of the stage before that computes the item's values into
 //!   workgroup memory from the stage before that, each thread one column's row held in
 //!   registers, then takes each core with a few lanes, each action's row held in registers
-//!   over the lane's columns: that stage neither dispatched nor written, and no rows
-//!   compiled in (`lasts.wgsl`, [`LastStage::Staged`]).
+//!   over the lane's columns, as many of the item's columns a pass as the workgroup memory
+//!   holds: that stage neither dispatched nor written, and no rows compiled in
+//!   (`lasts.wgsl`, [`LastStage::Staged`]).
 //!
 //! The lanes reduce to the largest value at the lowest action by subgroup shuffles, or in
 //! workgroup memory where the adapter has no single subgroup size or a start-up probe finds a
