@@ -136,9 +136,10 @@ pub enum LastStage {
     /// its largest over the passes; the lanes of a core folded once at the end. The stage
     /// before the last is neither dispatched nor written, and neither kernel compiles rows
     /// in (no compiler time that grows with the tables). A pass takes as many columns as
-    /// the adapter's workgroup memory holds (all 125 of the paper's grid, 22.5 KB; about
-    /// 260 of the 3,125 of three masses with 5 forces per axis in 48 KB), at most `columns`
-    /// where given. Where there is no such stage (two blocks or fewer), its output is cut
+    /// the adapter's workgroup memory holds, rounded down to a whole number per thread
+    /// where a pass takes more than there are threads (all 125 of the paper's grid,
+    /// 22.5 KB; 256 of the 3,125 of three masses with 5 forces per axis in 48 KB with 256
+    /// threads), at most `columns` where given. Where there is no such stage (two blocks or fewer), its output is cut
     /// into parts, a row of either block holds more than 16 entries or not one column of the
     /// item fits the workgroup memory, [`LastStage::MERGED`] on a software adapter and
     /// [`LastStage::Rows`] on a GPU. Not yet timed on a GPU.
