@@ -139,10 +139,11 @@ pub enum LastStage {
     /// the adapter's workgroup memory holds, rounded down to a whole number per thread
     /// where a pass takes more than there are threads (all 125 of the paper's grid,
     /// 22.5 KB; 256 of the 3,125 of three masses with 5 forces per axis in 48 KB with 256
-    /// threads), at most `columns` where given. Where there is no such stage (two blocks or fewer), its output is cut
-    /// into parts, a row of either block holds more than 16 entries or not one column of the
-    /// item fits the workgroup memory, [`LastStage::MERGED`] on a software adapter and
-    /// [`LastStage::Rows`] on a GPU. Not yet timed on a GPU.
+    /// threads), at most `columns` where given. Where there is no such stage (two blocks
+    /// or fewer), its output is cut into parts, a row of either block holds more than 16
+    /// entries or not one column of the item fits the workgroup memory,
+    /// [`LastStage::MERGED`] on a software adapter and [`LastStage::Rows`] on a GPU. Not yet
+    /// timed on a GPU.
     Staged {
         /// Threads per workgroup (at least 1, at most the adapter allows; the setting takes
         /// a power of two from 32 to 1024).

@@ -274,7 +274,7 @@ fn compile_staged(
         && threads > 0
         && threads <= limits.max_compute_invocations_per_workgroup
         && threads <= limits.max_compute_workgroup_size_x;
-    let most_entries = table.ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    let most_entries = crate::unrolled::most_entries(table);
     if !fits || most_entries > STAGED_ENTRIES {
         return Ok(None);
     }

@@ -88,7 +88,7 @@ impl Before {
     /// The stage before the last of `table`'s block (`None` where a row holds more than
     /// [`MAX_BEFORE_ENTRIES`] entries).
     pub(crate) fn of(table: &PlanTable<'_, f32>) -> Option<Self> {
-        let max_entries = table.ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+        let max_entries = most_entries(table);
         (max_entries <= MAX_BEFORE_ENTRIES).then(|| Before {
             n: table.n_cores as u32,
             a: table.n_actions as u32,
@@ -96,6 +96,11 @@ impl Before {
             max_entries: max_entries.max(1),
         })
     }
+}
+
+/// The most entries a row of `table` holds (0 for a table without rows).
+pub(crate) fn most_entries(table: &PlanTable<'_, f32>) -> u32 {
+    table.ptr.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0)
 }
 
 /// The kernel's text (after `block.wgsl`'s declarations and the constants `LAST`, `NL`,
