@@ -139,14 +139,15 @@ done
 # pass). FUZZYQ_GPU_STAGES=unrolled compiles each earlier stage's
 # rows in. The rows above use the default on a GPU for a problem of this size (below 1e11
 # multiply-adds per full backup), merged/rows; rows/rows are the kernels before the merge.
-# A third field, STAGES/LAST/0, turns the reductions by subgroup off (FUZZYQ_GPU_SUBGROUPS=0).
-GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-merged/staged unrolled/staged merged/staged:128 merged/staged:512 merged/staged:1024 merged/staged:256:32 unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows unrolled/unrolled/0 merged/rows/0}
+# A third field, STAGES/LAST/0, turns the reductions by subgroup off (FUZZYQ_GPU_SUBGROUPS=0);
+# a fourth, STAGES/LAST//all, compiles the kernels with every one of wgpu's runtime checks
+# (FUZZYQ_GPU_CHECKS=all; by default none), to time what they cost.
+GPU_CHECK_KERNELS=${GPU_CHECK_KERNELS:-merged/staged unrolled/staged merged/staged:128 merged/staged:512 merged/staged:1024 merged/staged:256:32 unrolled/unrolled unrolled/joined merged/unrolled unrolled/rows rows/rows unrolled/unrolled/0 merged/rows/0 merged/rows//all unrolled/unrolled//all merged/staged//all}
 want 2 || GPU_CHECK_KERNELS=
 for kern in $GPU_CHECK_KERNELS; do
   log="$OUT/bench-gpu-kernels-$(echo "$kern" | tr '/:' '--').log"
-  rest=${kern#*/} sg=
-  [[ $rest == */* ]] && sg=${rest#*/} rest=${rest%%/*}
-  FUZZYQ_GPU_SUBGROUPS=$sg FUZZYQ_GPU_PROFILE=1 FUZZYQ_GPU_STAGES=${kern%%/*} FUZZYQ_GPU_LAST=$rest timeout "$(limit 120)" "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" \
+  IFS=/ read -r stages rest sg checks <<<"$kern"
+  FUZZYQ_GPU_CHECKS=$checks FUZZYQ_GPU_SUBGROUPS=$sg FUZZYQ_GPU_PROFILE=1 FUZZYQ_GPU_STAGES=$stages FUZZYQ_GPU_LAST=$rest timeout "$(limit 120)" "$BIN" bench --env "${GPU_CHECK_BENCH_ENV:-pointmass}" \
     --device gpu --backups 6 --evaluations 0 --peak-seconds 0.1 --json "${log%.log}.json" >"$log" 2>&1
   rc=$?
   row "GPU full backup, kernels $kern" "$([ $rc = 0 ] && echo ok || echo "FAIL rc=$rc")" \

@@ -11,7 +11,7 @@ use fuzzyq_core::solver::{
     self, Buf, Device, Grid, Operator, Precision, Scheme, Solution, SolverConfig, Sweeps,
 };
 use fuzzyq_gpu::reference::{HostSweeps, Rounding};
-use fuzzyq_gpu::{Evaluation, Gpu, GpuError, GpuSweeps, LastStage};
+use fuzzyq_gpu::{Checks, Evaluation, Gpu, GpuError, GpuSweeps, LastStage};
 use fuzzyq_sim::io::config::{EnvConfig, TrainConfig};
 use fuzzyq_sim::model::EnvKind;
 
@@ -906,6 +906,73 @@ fn lanes_reduced_in_memory_or_by_subgroups_give_the_same_bits() {
         // Every pass too, with the lanes reduced in memory.
         passes_match(&memory, &op);
     }
+}
+
+#[test]
+fn wgpus_runtime_checks_change_no_bit() {
+    let Some(g) = gpu() else { return };
+    // The kernels compiled with every one of wgpu's runtime checks (workgroup memory zeroed,
+    // loops counted, divisions guarded, indices clamped; the other tests run them without,
+    // the default): every kind of stage and last stage, every pass, the reference's bits. A
+    // check that changed a result would mean a kernel reads memory it never wrote or indexes
+    // past an array.
+    assert_eq!(Checks::parse("all"), Some(Checks::ALL));
+    assert_eq!(Checks::parse("none"), Some(Checks::NONE));
+    assert_eq!(
+        Checks::parse("zero, bounds"),
+        Some(Checks {
+            zero_workgroup: true,
+            bounds: true,
+            ..Checks::NONE
+        })
+    );
+    for bad in ["", "al", "zero,,bounds", "loops;division"] {
+        assert_eq!(Checks::parse(bad), None, "{bad:?}");
+    }
+    for c in ["all", "none", "loops", "zero,division,bounds"] {
+        assert_eq!(Checks::parse(c).unwrap().to_string(), c);
+    }
+    let plain = g.clone().with_unrolled_stages(false);
+    let kernels = [
+        g.clone()
+            .with_unrolled_stages(true)
+            .with_last_stage(LastStage::Unrolled),
+        g.clone()
+            .with_unrolled_stages(true)
+            .with_last_stage(LastStage::Joined),
+        plain.clone().with_last_stage(LastStage::Rows),
+        plain
+            .clone()
+            .with_merged_stages(false)
+            .with_last_stage(LastStage::MERGED),
+        plain
+            .clone()
+            .with_last_stage(LastStage::Tile { threads: 64 }),
+        plain.clone().with_last_stage(LastStage::Staged {
+            threads: 64,
+            columns: Some(5),
+        }),
+    ];
+    for c in [pointmass_small(), khepera_small()] {
+        let model = c.build_model().unwrap();
+        let grid = c.grid::<f32>().unwrap();
+        let op = operator(&model, &grid, &c.solver.solver_config());
+        for k in &kernels {
+            let checked = k.clone().with_checks(Checks::ALL).unwrap();
+            assert_eq!(checked.checks(), Checks::ALL);
+            passes_match(&checked, &op);
+        }
+    }
+    // A whole run with the lanes reduced in workgroup memory.
+    let c = pointmass_small();
+    let model = c.build_model().unwrap();
+    let grid = c.grid::<f32>().unwrap();
+    let config = c.solver.solver_config();
+    let memory = g.clone().with_subgroups(false);
+    let checked = memory.clone().with_checks(Checks::ALL).unwrap();
+    let a = fuzzyq_gpu::solve_from(&checked, &model, &grid, &config, None, false, noop).unwrap();
+    let b = fuzzyq_gpu::solve_from(&memory, &model, &grid, &config, None, false, noop).unwrap();
+    assert_same(&a, &b, "every runtime check against the default's");
 }
 
 /// Two point masses on 2 positions x 2 velocities per axis (256 cores) with seven forces per

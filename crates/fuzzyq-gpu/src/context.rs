@@ -57,11 +57,91 @@ pub struct OpeningSeconds {
     pub probes: f64,
 }
 
-/// wgpu's device and queue, and the adapter's summary.
+/// wgpu's device and queue, the adapter's summary, and the runtime checks its kernels are
+/// compiled with.
 pub(crate) struct Context {
     pub(crate) device: wgpu::Device,
     pub(crate) queue: wgpu::Queue,
     pub(crate) summary: AdapterSummary,
+    pub(crate) checks: Checks,
+}
+
+/// Which of wgpu's runtime checks the kernels are compiled with (`FUZZYQ_GPU_CHECKS`:
+/// `all`, `none`, or a list of `zero`, `loops`, `division`, `bounds` joined by `,`).
+/// wgpu adds them to every kernel for code it cannot trust; these kernels index only within
+/// their buffers and arrays, bound every loop by a count, divide only by nonzero values and
+/// read workgroup memory only where they wrote it first (the crate docs, "Runtime checks"),
+/// so none of them changes a result: they cost instructions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Checks {
+    /// Workgroup memory zeroed before each workgroup starts (`zero`).
+    pub zero_workgroup: bool,
+    /// A 64-bit counter on every loop that stops it after 2^64 iterations (`loops`).
+    pub loops: bool,
+    /// Integer division and remainder guarded against a zero divisor (`division`).
+    pub division: bool,
+    /// Indices into arrays and buffers clamped to their length (`bounds`; buffers only
+    /// where the driver does not bound them itself).
+    pub bounds: bool,
+}
+
+impl Checks {
+    /// Every check wgpu adds by default.
+    pub const ALL: Checks = Checks {
+        zero_workgroup: true,
+        loops: true,
+        division: true,
+        bounds: true,
+    };
+    /// None of them.
+    pub const NONE: Checks = Checks {
+        zero_workgroup: false,
+        loops: false,
+        division: false,
+        bounds: false,
+    };
+
+    /// `all`, `none`, or checks named by `zero`, `loops`, `division` and `bounds` joined by
+    /// `,` (`None` for anything else).
+    #[must_use]
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "all" => return Some(Self::ALL),
+            "none" => return Some(Self::NONE),
+            _ => {}
+        }
+        let mut c = Self::NONE;
+        for name in s.split(',') {
+            let check = match name.trim() {
+                "zero" => &mut c.zero_workgroup,
+                "loops" => &mut c.loops,
+                "division" => &mut c.division,
+                "bounds" => &mut c.bounds,
+                _ => return None,
+            };
+            *check = true;
+        }
+        Some(c)
+    }
+}
+
+/// `all`, `none` or the checks' names joined by `,`, as [`Checks::parse`] reads them.
+impl core::fmt::Display for Checks {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Self::ALL => return f.write_str("all"),
+            Self::NONE => return f.write_str("none"),
+            _ => {}
+        }
+        let names = [
+            (self.zero_workgroup, "zero"),
+            (self.loops, "loops"),
+            (self.division, "division"),
+            (self.bounds, "bounds"),
+        ];
+        let on: Vec<&str> = names.iter().filter(|n| n.0).map(|n| n.1).collect();
+        f.write_str(&on.join(","))
+    }
 }
 
 /// The adapter named by `FUZZYQ_GPU_ADAPTER` (a part of its name), else the first of the

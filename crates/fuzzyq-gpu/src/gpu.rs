@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use crate::context::{AdapterSummary, Context, OpeningSeconds};
+use crate::context::{AdapterSummary, Checks, Context, OpeningSeconds};
 use crate::error::GpuError;
 
 /// One GPU: wgpu's device and queue, shared by every run that uses it (cheap to clone).
@@ -295,6 +295,7 @@ impl Gpu {
             device,
             queue,
             summary,
+            checks: settings.checks.unwrap_or(Checks::NONE),
         };
         let opened = start.elapsed().as_secs_f64();
         // The generic kernels, compiled once for every run on this GPU, and the probes.
@@ -391,6 +392,30 @@ impl Gpu {
     #[must_use]
     pub fn summary(&self) -> &AdapterSummary {
         &self.inner.summary
+    }
+
+    /// The runtime checks this GPU's kernels are compiled with.
+    #[must_use]
+    pub fn checks(&self) -> Checks {
+        self.inner.checks
+    }
+
+    /// This GPU with its kernels compiled with wgpu's runtime `checks` (by default none,
+    /// [`Checks`]; `FUZZYQ_GPU_CHECKS` at the open), the generic kernels compiled again. The
+    /// same device: every choice gives the same bits.
+    pub fn with_checks(mut self, checks: Checks) -> Result<Self, GpuError> {
+        if checks == self.inner.checks {
+            return Ok(self);
+        }
+        let ctx = Context {
+            device: self.inner.device.clone(),
+            queue: self.inner.queue.clone(),
+            summary: self.inner.summary.clone(),
+            checks,
+        };
+        self.kernels = Arc::new(crate::kernels::Kernels::new(&ctx)?);
+        self.inner = Arc::new(ctx);
+        Ok(self)
     }
 
     /// This GPU with runs limited to storage bindings of at most `bytes` (the adapter's limit
@@ -550,6 +575,8 @@ struct Settings {
     evaluation: Option<Evaluation>,
     /// `FUZZYQ_GPU_SUBGROUPS`: `1` or `0`.
     subgroups: Option<bool>,
+    /// `FUZZYQ_GPU_CHECKS` ([`Checks::parse`]).
+    checks: Option<Checks>,
     /// `FUZZYQ_GPU_BATCH_MB` and `FUZZYQ_GPU_PART_KB`, in kibibytes.
     batch_kib: Option<u64>,
     part_kib: Option<u64>,
@@ -589,6 +616,11 @@ impl Settings {
                 "0" => Some(false),
                 _ => None,
             })?,
+            checks: setting(
+                "FUZZYQ_GPU_CHECKS",
+                "all, none, or zero, loops, division and bounds joined by commas",
+                Checks::parse,
+            )?,
             batch_kib: setting(
                 "FUZZYQ_GPU_BATCH_MB",
                 "a positive whole number of MiB",

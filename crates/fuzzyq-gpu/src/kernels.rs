@@ -173,25 +173,58 @@ pub(crate) fn parts_group(
 }
 
 fn pipeline(
-    device: &wgpu::Device,
+    gpu: &Context,
     layouts: &[&wgpu::BindGroupLayout],
     module: &wgpu::ShaderModule,
     entry: &str,
 ) -> wgpu::ComputePipeline {
     let layouts: Vec<_> = layouts.iter().map(|&l| Some(l)).collect();
-    let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(entry),
-        bind_group_layouts: &layouts,
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(entry),
-        layout: Some(&pl),
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    })
+    let pl = gpu
+        .device
+        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(entry),
+            bind_group_layouts: &layouts,
+            immediate_size: 0,
+        });
+    gpu.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(&pl),
+            module,
+            entry_point: Some(entry),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                zero_initialize_workgroup_memory: gpu.checks.zero_workgroup,
+                ..Default::default()
+            },
+            cache: None,
+        })
+}
+
+/// The shader module of WGSL `source`, compiled with `gpu`'s runtime checks ([`Checks`](crate::Checks)).
+pub(crate) fn shader(gpu: &Context, label: &str, source: String) -> wgpu::ShaderModule {
+    let desc = wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    };
+    let c = gpu.checks;
+    if c.loops && c.division && c.bounds {
+        return gpu.device.create_shader_module(desc);
+    }
+    let checks = wgpu::ShaderRuntimeChecks {
+        bounds_checks: c.bounds,
+        force_loop_bounding: c.loops,
+        int_div_checks: c.division,
+        ..wgpu::ShaderRuntimeChecks::checked()
+    };
+    // SAFETY: wgpu's checks guard code it cannot trust; this crate's kernels need none of
+    // them (the crate docs, "Runtime checks", and `Checks`): every loop is counted to a
+    // bound, every divisor is a nonzero constant or size, and every index stays within its
+    // array or binding. The tests run every kernel without them (the default) and with them,
+    // and compare the results bit for bit.
+    #[allow(unsafe_code)]
+    unsafe {
+        gpu.device.create_shader_module_trusted(desc, checks)
+    }
 }
 
 impl Kernels {
@@ -199,10 +232,7 @@ impl Kernels {
     pub fn new(gpu: &Context) -> Result<Self, GpuError> {
         let device = &gpu.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("block.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("block.wgsl").into()),
-        });
+        let module = shader(gpu, "block.wgsl", include_str!("block.wgsl").into());
         let mut entries = vec![uniform(0, true)];
         for (b, read_only) in [
             (1, true),
@@ -224,14 +254,11 @@ impl Kernels {
         });
         let pipelines = Entry::ALL
             .iter()
-            .map(|e| pipeline(device, &[&layout], &module, e.name()))
+            .map(|e| pipeline(gpu, &[&layout], &module, e.name()))
             .collect();
         let one_part = parts_layout(gpu, 1);
         let diff = gpu.summary.f64.then(|| {
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("diff.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(include_str!("diff.wgsl").into()),
-            });
+            let module = shader(gpu, "diff.wgsl", include_str!("diff.wgsl").into());
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("diff"),
                 entries: &[
@@ -241,7 +268,7 @@ impl Kernels {
                     storage(3, false),
                 ],
             });
-            let p = pipeline(device, &[&layout], &module, "diff_range");
+            let p = pipeline(gpu, &[&layout], &module, "diff_range");
             (layout, p)
         });
         if let Some(e) = pollster::block_on(scope.pop()) {
@@ -424,13 +451,10 @@ pub(crate) fn specialized(
     // (`compile.rs`): both kinds are caught here.
     let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let memory = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(entry),
-        source: wgpu::ShaderSource::Wgsl(source.into()),
-    });
+    let module = shader(gpu, entry, source);
     let layouts: Vec<&wgpu::BindGroupLayout> =
         [&k.layout].into_iter().chain(parts.map(|p| p.0)).collect();
-    let p = pipeline(device, &layouts, &module, entry);
+    let p = pipeline(gpu, &layouts, &module, entry);
     let memory = pollster::block_on(memory.pop());
     if let Some(e) = pollster::block_on(validation.pop()).or(memory) {
         return Err(GpuError::Failed(format!(

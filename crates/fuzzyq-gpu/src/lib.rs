@@ -103,6 +103,23 @@
 //! passes run a part at a time, and a batch of the last stage never straddles two parts. Any
 //! parts give the same bits ([`Gpu::with_part_bytes`]).
 //!
+//! # Runtime checks
+//! wgpu compiles untrusted WGSL with runtime checks: workgroup memory zeroed before each
+//! workgroup starts, a 64-bit counter on every loop, integer division guarded against a zero
+//! divisor, and indices clamped to their array's length. These kernels need none of them, so
+//! they are compiled without ([`Checks`], [`Gpu::with_checks`], `FUZZYQ_GPU_CHECKS`):
+//! - every read of workgroup memory follows a write of the same element in the same
+//!   workgroup, behind a barrier (the reductions over lanes, the staged and per-item last
+//!   stages' tiles, the exchange of an unrolled stage's values, the change statistics);
+//! - every loop counts up by a positive step to a bound of a few thousand at most (a row's
+//!   entries, a block's cores, a pass's columns);
+//! - every divisor is a positive constant compiled in or a size checked on the host;
+//! - every index is a core, column or entry of a table that the host built and checked
+//!   against the buffer it indexes, or a lane's slot in an array of the workgroup's size.
+//!
+//! None of the checks changes a result; each costs instructions. The tests run every kind of
+//! stage and last stage with every check on and compare the bits with the default's.
+//!
 //! # Limits
 //! `f32` only; the block path only (a model that declares no blocks is refused, as are models
 //! with terminal states and asynchronous sweeps); one slab of `V`, one column's values of a
@@ -138,7 +155,7 @@ use fuzzyq_core::Model;
 use fuzzyq_core::solver::{Grid, Progress, Solution, SolverConfig, SolverState};
 
 pub use batches::Batches;
-pub use context::{AdapterSummary, OpeningSeconds};
+pub use context::{AdapterSummary, Checks, OpeningSeconds};
 pub use error::GpuError;
 pub use gpu::{COMPILE_IN_FROM, Evaluation, Gpu, LastStage, Opening};
 pub use sweeps::GpuSweeps;

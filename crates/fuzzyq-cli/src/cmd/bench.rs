@@ -389,6 +389,9 @@ struct GpuReport {
     /// block core's rows merged, `stage_u`: the block's rows compiled in;
     /// `FUZZYQ_GPU_STAGES`).
     stage_kernels: Vec<&'static str>,
+    /// wgpu's runtime checks the kernels were compiled with (`none` by default, `all`, or
+    /// some of `zero`, `loops`, `division` and `bounds`; `FUZZYQ_GPU_CHECKS`).
+    runtime_checks: String,
     evaluation_seconds: Vec<f64>,
     /// The stages of a full backup an evaluation sweep runs for every action before a thread
     /// per core nests the other blocks (`FUZZYQ_GPU_EVAL`).
@@ -531,7 +534,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         profile_passes(&mut sweeps, v, out, !evaluation.is_empty())?;
     }
     println!(
-        "problem    {}: {cores} cores x {joint} joint actions{}; {}{}{}; {:.3} GB on the GPU; \
+        "problem    {}: {cores} cores x {joint} joint actions{}; {}{}{}{}; {:.3} GB on the GPU; \
          set-up {:.3} s (compiling kernels {:.3} s)",
         config.env.name(),
         fma.map_or(String::new(), |f| format!(
@@ -545,6 +548,10 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
         sweeps
             .last_stage()
             .map_or(String::new(), |k| format!("; last stage {k}")),
+        match gpu.checks() {
+            fuzzyq_gpu::Checks::NONE => String::new(),
+            c => format!("; wgpu's runtime checks: {c}"),
+        },
         sweeps.device_bytes() as f64 / 1e9,
         setup,
         sweeps.compile_seconds()
@@ -582,6 +589,7 @@ fn run_gpu(args: &BenchArgs, config: fuzzyq_sim::io::config::TrainConfig) -> any
             subgroups: sweeps.uses_subgroups(),
             last_stage: sweeps.last_stage(),
             stage_kernels: sweeps.stage_kernels(),
+            runtime_checks: gpu.checks().to_string(),
             evaluation_seconds: evaluation,
             evaluation_stages: sweeps.evaluation_stages(),
             readback_seconds,

@@ -57,6 +57,11 @@ fn a_mistyped_gpu_setting_fails_on_one_line() {
         ("FUZZYQ_GPU_EVAL", "stages", "auto, nested or stages:K"),
         ("FUZZYQ_GPU_SUBGROUPS", "no", "1 or 0"),
         ("FUZZYQ_GPU_BATCH_MB", "0", "a positive whole number of MiB"),
+        (
+            "FUZZYQ_GPU_CHECKS",
+            "bound",
+            "zero, loops, division and bounds",
+        ),
     ] {
         let before = snapshot(d);
         let o = Command::new(env!("CARGO_BIN_EXE_fuzzyq"))
